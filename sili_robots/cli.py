@@ -1,0 +1,55 @@
+"""The ``sili`` command line: one sub-command per module in ``sili_robots.commands``.
+
+Every sub-command module exposes ``add_parser(subparsers)`` and ``run(args) -> int``. Bad input
+(``ConfigError`` or an argparse error) exits with code 2 and a one-line message, no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+from sili_robots.errors import ConfigError
+
+#: sub-commands, in the order ``sili --help`` lists them
+COMMANDS = ("rollout", "train", "eval", "preview", "sweep", "plot")
+
+
+def _available_commands() -> list:
+    modules = []
+    for name in COMMANDS:
+        try:
+            modules.append(importlib.import_module(f"sili_robots.commands.{name}"))
+        except ModuleNotFoundError as err:
+            if err.name != f"sili_robots.commands.{name}":
+                raise
+    return modules
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="sili", description="Stable Influencing of Latent Intent: train, evaluate, preview."
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for module in _available_commands():
+        module.add_parser(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.run(args) or 0)
+    except ConfigError as err:
+        print(f"sili {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"sili {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

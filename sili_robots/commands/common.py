@@ -1,0 +1,35 @@
+"""Argument types shared by sub-commands: each rejects bad values with the allowed ones."""
+
+from __future__ import annotations
+
+import argparse
+
+from sili_robots.errors import ConfigError
+from sili_robots.tasks import task_spec
+
+
+def positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer (need >= 1)") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not allowed: need an integer >= 1")
+    return value
+
+
+def unit_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number in [0, 1]") from None
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"{value} is outside the allowed range [0, 1]")
+    return value
+
+
+def task_name(text: str) -> str:
+    try:
+        return task_spec(text).name
+    except ConfigError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None

@@ -1,0 +1,38 @@
+"""``sili rollout``: play a scripted policy on a task and print per-interaction results."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from sili_robots.commands.common import positive_int, task_name
+from sili_robots.policies import SCRIPTED_KINDS, scripted_policy
+from sili_robots.rollout import run_interactions
+from sili_robots.tasks import make_task
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("rollout", help="play a scripted policy on a task")
+    p.add_argument("task", type=task_name, help="task name, e.g. circle-3")
+    p.add_argument("--policy", default="stabilizing", choices=SCRIPTED_KINDS)
+    p.add_argument("--interactions", type=positive_int, default=20)
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    env = make_task(args.task)
+    try:
+        summary = run_interactions(
+            env, scripted_policy(env, args.policy), args.interactions, seed=args.seed
+        )
+    finally:
+        env.close()
+    rewards = np.array([s.task_reward for s in summary])
+    stable = np.array([not s.strategy_changed for s in summary[1:]])
+    print(f"task={args.task} policy={args.policy} interactions={args.interactions}")
+    print(f"mean task reward per interaction: {rewards.mean():.3f}")
+    if stable.size:
+        print(f"fraction of interactions with the true strategy unchanged: {stable.mean():.3f}")
+    return 0

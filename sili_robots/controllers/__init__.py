@@ -1,0 +1,1 @@
+"""Controllers that turn end-effector commands into joint motion (see Sawyer-Reach)."""

@@ -1,0 +1,198 @@
+"""The repeated-interaction contract shared by every task.
+
+One gymnasium episode is one *interaction* of ``horizon`` steps. The opponent's hidden strategy
+z^j is fixed within interaction j (unless a task documents otherwise) and moves by the task's
+strategy dynamics T^z(z^{j+1} | z^j, tau^j) when ``reset()`` begins the next interaction. The
+repeated game itself restarts only on ``reset(seed=...)`` or ``reset(options={"restart": True})``.
+
+``info`` always carries the true strategy (``strategy``, ``strategy_id``), the interaction index
+(``interaction``) and whether the true strategy changed since the previous step
+(``strategy_changed``); none of it enters the observation unless the env was built with
+``oracle=True`` (appends ``strategy_encoding()``) or ``strategy_flag=True`` (appends the
+partial-observation flag "the opponent's strategy changed since the last step" as the *last*
+observation element).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from sili_robots.errors import ConfigError
+
+StrategyId = int | float
+
+
+class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
+    """Base class: subclasses describe one interaction; this class runs the repeated game."""
+
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
+    #: size of ``strategy_encoding()``; subclasses set it.
+    strategy_dim: ClassVar[int]
+    #: bounds of ``strategy_encoding()``.
+    strategy_low: ClassVar[float] = 0.0
+    strategy_high: ClassVar[float] = 1.0
+
+    def __init__(self, horizon: int, oracle: bool = False, strategy_flag: bool = False) -> None:
+        if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 1:
+            raise ConfigError(f"horizon must be an integer >= 1, got {horizon!r}")
+        self.horizon = int(horizon)
+        self.oracle = bool(oracle)
+        self.strategy_flag = bool(strategy_flag)
+        self.interaction = -1  # index of the current interaction; -1 before the first reset
+        self.t = 0
+        self._trajectory: list[dict[str, Any]] = []
+        self._started = False
+        self._last_strategy_id: StrategyId | None = None
+        self._changed_since_last_step = False
+        self.action_space = self._make_action_space()
+        base = self._base_observation_space()
+        lows = [base.low]
+        highs = [base.high]
+        if self.oracle:
+            lows.append(np.full(self.strategy_dim, self.strategy_low, np.float32))
+            highs.append(np.full(self.strategy_dim, self.strategy_high, np.float32))
+        if self.strategy_flag:
+            lows.append(np.zeros(1, np.float32))
+            highs.append(np.ones(1, np.float32))
+        self.observation_space = spaces.Box(
+            np.concatenate(lows).astype(np.float32), np.concatenate(highs).astype(np.float32)
+        )
+
+    # ----------------------------------------------------------------- subclass hooks
+    @abstractmethod
+    def _make_action_space(self) -> spaces.Box:
+        """The ego's action space."""
+
+    @abstractmethod
+    def _base_observation_space(self) -> spaces.Box:
+        """What the ego sees, without oracle encoding or strategy flag."""
+
+    @abstractmethod
+    def _initial_strategy(self) -> None:
+        """Draw z^1 with ``self.np_random`` when the repeated game (re)starts."""
+
+    @abstractmethod
+    def _advance_strategy(self, trajectory: list[dict[str, Any]]) -> None:
+        """Apply T^z: move to z^{j+1} given the finished interaction's trajectory."""
+
+    @abstractmethod
+    def _begin_interaction(self) -> None:
+        """Reset the ego (and any per-interaction state) at the start of an interaction."""
+
+    @abstractmethod
+    def _apply_action(self, action: np.ndarray) -> float:
+        """Advance one step under ``action`` (already validated); return the task reward."""
+
+    @abstractmethod
+    def _base_observation(self) -> np.ndarray:
+        """The ego's observation (no privileged information)."""
+
+    @abstractmethod
+    def strategy_id(self) -> StrategyId:
+        """A hashable identity of the current true strategy (equal ids = same strategy)."""
+
+    @abstractmethod
+    def strategy_encoding(self) -> np.ndarray:
+        """A fixed-size vector encoding of the true strategy (what Oracle observes)."""
+
+    def _step_record(self) -> dict[str, Any]:
+        """What the strategy dynamics may read about one step; subclasses may extend."""
+        return {}
+
+    def _within_interaction_update(self) -> None:
+        """Hook for strategies that may change between timesteps (e.g. Speaker-Listener)."""
+
+    # ----------------------------------------------------------------- gymnasium API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = set(options) - {"restart"}
+        if unknown:
+            raise ConfigError(f"unknown reset options {sorted(unknown)}; allowed: ['restart']")
+        restart = seed is not None or bool(options.get("restart", False)) or not self._started
+        if restart:
+            self.interaction = 0
+            self._initial_strategy()
+            self._last_strategy_id = None
+            self._started = True
+        else:
+            self._advance_strategy(self._trajectory)
+            self.interaction += 1
+        self._trajectory = []
+        self.t = 0
+        self._begin_interaction()
+        sid = self.strategy_id()
+        self._changed_since_last_step = self._last_strategy_id is not None and not _same(
+            sid, self._last_strategy_id
+        )
+        self._last_strategy_id = sid
+        return self._observation(), self._info()
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if not self._started:
+            raise RuntimeError("call reset() before step()")
+        if self.t >= self.horizon:
+            raise RuntimeError(
+                f"interaction {self.interaction} already ended after {self.horizon} steps; "
+                "call reset() to begin the next interaction"
+            )
+        action = self._validate_action(action)
+        reward = float(self._apply_action(action))
+        self.t += 1
+        record = {"t": self.t, "reward": reward, **self._step_record()}
+        self._trajectory.append(record)
+        self._within_interaction_update()
+        sid = self.strategy_id()
+        self._changed_since_last_step = not _same(sid, self._last_strategy_id)
+        self._last_strategy_id = sid
+        truncated = self.t >= self.horizon
+        return self._observation(), reward, False, truncated, self._info()
+
+    # ----------------------------------------------------------------- helpers
+    def _validate_action(self, action: Any) -> np.ndarray:
+        arr = np.asarray(action, dtype=np.float64)
+        shape = self.action_space.shape
+        if arr.shape != shape:
+            raise ConfigError(
+                f"action must have shape {shape} (bounds {self.action_space.low.tolist()} to "
+                f"{self.action_space.high.tolist()}), got shape {arr.shape}"
+            )
+        if not np.all(np.isfinite(arr)):
+            raise ConfigError(f"action must be finite, got {arr.tolist()}")
+        return np.clip(arr, self.action_space.low, self.action_space.high)
+
+    def _observation(self) -> np.ndarray:
+        parts = [np.asarray(self._base_observation(), np.float32)]
+        if self.oracle:
+            parts.append(np.asarray(self.strategy_encoding(), np.float32))
+        if self.strategy_flag:
+            parts.append(np.array([float(self._changed_since_last_step)], np.float32))
+        obs = np.concatenate(parts).astype(np.float32)
+        return np.clip(obs, self.observation_space.low, self.observation_space.high)
+
+    def _info(self) -> dict[str, Any]:
+        return {
+            "strategy": np.asarray(self.strategy_encoding(), np.float32),
+            "strategy_id": self.strategy_id(),
+            "interaction": self.interaction,
+            "t": self.t,
+            "strategy_changed": bool(self._changed_since_last_step),
+        }
+
+    @property
+    def time_fraction(self) -> float:
+        """Elapsed fraction of the interaction, part of every task's observation."""
+        return self.t / self.horizon
+
+
+def _same(a: StrategyId | None, b: StrategyId | None) -> bool:
+    if a is None or b is None:
+        return a is b
+    return bool(np.isclose(float(a), float(b), rtol=0.0, atol=1e-9))

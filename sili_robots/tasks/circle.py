@@ -1,0 +1,123 @@
+"""Circle point mass: the ego pursues an opponent it never sees, sitting on a circle.
+
+Geometry (documented choice; the paper gives none): circle of radius 1 centred at the origin,
+ego starts at the centre (Unequal: at (0, -0.5)), action is a velocity in [-1, 1]^2 scaled by
+0.1 per step, positions clipped to [-2, 2]^2, H = 50. Every location is 1 away from the centre
+(10 steps), so reaching it and then stepping just outside the circle (a stabilizing "detour" of a
+few hundredths) fits comfortably within H but costs a little reward.
+
+Strategy dynamics T^z: if the ego ends the interaction strictly inside the circle the opponent
+jumps counter-clockwise to the next location; ending on or outside keeps it.
+- ``3`` / ``8``: equally spaced locations, first at angle pi/2.
+- ``continuous``: any angle; inside moves it on by an angle drawn uniformly in [pi/3, pi].
+- ``unequal``: locations at 90, 210 and 330 degrees; the ego starts nearer the lower two, where
+  the opponent always moves on (cannot be held); only the farther top location is held by
+  ending outside.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, ClassVar
+
+import numpy as np
+from gymnasium import spaces
+
+from sili_robots.errors import check_choice
+from sili_robots.tasks.base import RepeatedInteractionEnv
+
+VARIANTS = ("3", "8", "continuous", "unequal")
+RADIUS = 1.0
+STEP = 0.1
+ARENA = 2.0
+
+
+class CircleEnv(RepeatedInteractionEnv):
+    """Point-mass pursuit of a hidden opponent on a circle (four variants)."""
+
+    strategy_dim: ClassVar[int] = 2  # the opponent's (x, y) position, what Oracle observes
+    strategy_low: ClassVar[float] = -RADIUS
+    strategy_high: ClassVar[float] = RADIUS
+
+    def __init__(
+        self,
+        variant: str = "3",
+        horizon: int = 50,
+        oracle: bool = False,
+        strategy_flag: bool = False,
+    ) -> None:
+        check_choice("Circle variant", variant, VARIANTS)
+        self.variant = variant
+        if variant == "unequal":
+            self.angles = np.deg2rad([90.0, 210.0, 330.0])
+            self.stable_locations = {0}
+            self.start = np.array([0.0, -0.5])
+        elif variant == "continuous":
+            self.angles = np.empty(0)
+            self.stable_locations = set()
+            self.start = np.zeros(2)
+        else:
+            n = int(variant)
+            self.angles = math.pi / 2 + 2 * math.pi * np.arange(n) / n
+            self.stable_locations = set(range(n))
+            self.start = np.zeros(2)
+        self.position = self.start.copy()
+        self.location = 0  # index into self.angles (discrete variants)
+        self.angle = math.pi / 2  # continuous variant
+        super().__init__(horizon=horizon, oracle=oracle, strategy_flag=strategy_flag)
+
+    # -- spaces
+    def _make_action_space(self) -> spaces.Box:
+        return spaces.Box(-1.0, 1.0, (2,), np.float32)
+
+    def _base_observation_space(self) -> spaces.Box:
+        return spaces.Box(
+            np.array([-ARENA, -ARENA, 0.0], np.float32), np.array([ARENA, ARENA, 1.0], np.float32)
+        )
+
+    # -- strategy
+    @property
+    def opponent_angle(self) -> float:
+        return self.angle if self.variant == "continuous" else float(self.angles[self.location])
+
+    @property
+    def opponent_position(self) -> np.ndarray:
+        a = self.opponent_angle
+        return RADIUS * np.array([math.cos(a), math.sin(a)])
+
+    def strategy_id(self) -> int | float:
+        return self.angle if self.variant == "continuous" else self.location
+
+    def strategy_encoding(self) -> np.ndarray:
+        return self.opponent_position.astype(np.float32)
+
+    def _initial_strategy(self) -> None:
+        if self.variant == "continuous":
+            self.angle = float(self.np_random.uniform(0.0, 2 * math.pi))
+        else:
+            self.location = int(self.np_random.integers(len(self.angles)))
+
+    def ends_inside(self, position: np.ndarray) -> bool:
+        """The strategy rule's test: strictly inside the circle."""
+        return float(np.linalg.norm(position)) < RADIUS
+
+    def _advance_strategy(self, trajectory: list[dict[str, Any]]) -> None:
+        inside = self.ends_inside(self.position)
+        if self.variant == "continuous":
+            if inside:
+                jump = self.np_random.uniform(math.pi / 3, math.pi)
+                self.angle = float((self.angle + jump) % (2 * math.pi))
+            return
+        if inside or self.location not in self.stable_locations:
+            self.location = (self.location + 1) % len(self.angles)
+
+    # -- dynamics
+    def _begin_interaction(self) -> None:
+        self.position = self.start.copy()
+
+    def _apply_action(self, action: np.ndarray) -> float:
+        self.position = np.clip(self.position + STEP * action, -ARENA, ARENA)
+        return -float(np.linalg.norm(self.position - self.opponent_position))
+
+    def _base_observation(self) -> np.ndarray:
+        return np.array([*self.position, self.time_fraction], np.float32)

@@ -1,0 +1,70 @@
+"""Detour Speaker-Listener: the visit rule and the speaker's change probability."""
+
+import numpy as np
+
+from sili_robots.policies import scripted_policy
+from sili_robots.rollout import run_interactions
+from sili_robots.tasks import make_task
+from sili_robots.tasks.speaker_listener import MAPPINGS, SPEAKER
+
+
+def test_change_probability_is_one_half_while_unvisited():
+    env = make_task("speaker-listener").unwrapped
+    env.reset(seed=0)
+    changes, steps = 0, 0
+    for _ in range(400):
+        for _ in range(env.horizon):
+            before = env.mapping
+            _, _, _, _, info = env.step(np.array([0.0, 0.5]))  # away from the speaker
+            if env.t < env.horizon:
+                changes += int(env.mapping != before)
+                steps += 1
+                assert info["strategy_changed"] == (env.mapping != before)
+        env.reset()
+    rate = changes / steps
+    assert abs(rate - 0.5) < 0.02, rate
+
+
+def test_visit_locks_mapping_for_rest_and_next_interaction():
+    env = make_task("speaker-listener", strategy_flag=True).unwrapped
+    env.reset(seed=1)
+    env.position = SPEAKER.copy()
+    obs, *_ = env.step(np.zeros(2))
+    assert env.visited_now
+    locked = env.mapping
+    for _ in range(env.horizon - 1):
+        obs, *_ = env.step(np.array([0.0, 1.0]))
+        assert env.mapping == locked and obs[-1] == 0.0
+    _, info = env.reset()
+    assert env.mapping == locked and not info["strategy_changed"]
+    for _ in range(env.horizon):  # held all of the next interaction, even without a visit
+        env.step(np.array([0.0, 1.0]))
+        assert env.mapping == locked
+    env.reset()
+    seen = set()
+    for _ in range(env.horizon):  # no visit last time: free to change again
+        env.step(np.array([0.0, 1.0]))
+        seen.add(env.mapping)
+    assert len(seen) > 1
+
+
+def test_message_follows_mapping_and_goal():
+    env = make_task("speaker-listener").unwrapped
+    for seed in range(20):
+        obs, _ = env.reset(seed=seed)
+        assert int(np.argmax(obs[2:5])) == MAPPINGS[env.mapping][env.goal]
+
+
+def test_stabilizing_policy_keeps_mapping_and_oracle_is_near_optimal():
+    env = make_task("speaker-listener")
+    stab = run_interactions(env, scripted_policy(env, "stabilizing"), 200, seed=0)
+    assert np.mean([not s.strategy_changed for s in stab[1:]]) >= 0.99
+    env = make_task("speaker-listener")
+    orc = run_interactions(env, scripted_policy(env, "oracle"), 50, seed=0)
+    env = make_task("speaker-listener")
+    rnd = run_interactions(env, scripted_policy(env, "random"), 50, seed=0)
+    oracle_mean = np.mean([s.task_reward for s in orc])
+    assert oracle_mean > -7.5  # 10 steps to any goal from the centre
+    assert (
+        oracle_mean > np.mean([s.task_reward for s in stab]) > np.mean([s.task_reward for s in rnd])
+    )

@@ -1,0 +1,127 @@
+"""The shared task contract, checked on every registered task."""
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+from sili_robots.errors import ConfigError
+from sili_robots.tasks import TASKS, make_task
+
+LIGHT_TASKS = [
+    n for n, s in TASKS.items() if not s.one_per_process and n.startswith(("circle", "speaker"))
+]
+
+
+def _rollout(env, seed, interactions=6):
+    obs, info = env.reset(seed=seed)
+    env.action_space.seed(seed)
+    trace = [(obs.copy(), info["strategy_id"])]
+    for j in range(interactions):
+        if j:
+            obs, info = env.reset()
+            trace.append((obs.copy(), info["strategy_id"]))
+        done = False
+        while not done:
+            obs, r, term, trunc, info = env.step(env.action_space.sample())
+            trace.append((obs.copy(), r, info["strategy_id"]))
+            done = term or trunc
+    return trace
+
+
+@pytest.mark.parametrize("name", LIGHT_TASKS)
+def test_check_env_passes(name):
+    for kwargs in ({}, {"oracle": True}, {"strategy_flag": True}):
+        env = make_task(name, **kwargs)
+        check_env(env.unwrapped, skip_render_check=True)
+        env.close()
+
+
+@pytest.mark.parametrize("name", LIGHT_TASKS)
+def test_registered_with_gymnasium(name):
+    spec = TASKS[name]
+    env = gym.make(spec.gym_id)
+    assert isinstance(env.observation_space, gym.spaces.Box)
+    assert env.observation_space.dtype == np.float32
+    env.close()
+
+
+@pytest.mark.parametrize("name", LIGHT_TASKS)
+def test_seed_reproduces_whole_repeated_game(name):
+    a = _rollout(make_task(name), seed=3)
+    b = _rollout(make_task(name), seed=3)
+    c = _rollout(make_task(name), seed=4)
+    assert len(a) == len(b)
+    for x, y in zip(a, b, strict=True):
+        for u, v in zip(x, y, strict=True):
+            np.testing.assert_array_equal(u, v)
+    assert any(not np.array_equal(x[0], y[0]) for x, y in zip(a, c, strict=False))
+
+
+@pytest.mark.parametrize("name", LIGHT_TASKS)
+def test_episode_is_one_interaction_truncated_at_horizon(name):
+    env = make_task(name)
+    env.reset(seed=0)
+    horizon = env.unwrapped.horizon
+    for t in range(1, horizon + 1):
+        _, _, term, trunc, info = env.step(env.action_space.sample())
+        assert not term
+        assert trunc == (t == horizon)
+        assert info["interaction"] == 0
+    _, info = env.reset()
+    assert info["interaction"] == 1
+    _, info = env.reset(options={"restart": True})
+    assert info["interaction"] == 0
+
+
+@pytest.mark.parametrize("name", LIGHT_TASKS)
+def test_oracle_exposes_strategy_and_plain_does_not(name):
+    plain = make_task(name).unwrapped
+    oracle = make_task(name, oracle=True).unwrapped
+    obs_p, _info_p = plain.reset(seed=1)
+    obs_o, info_o = oracle.reset(seed=1)
+    k = plain.strategy_dim
+    assert obs_o.shape[0] == obs_p.shape[0] + k
+    np.testing.assert_allclose(obs_o[-k:], info_o["strategy"], atol=1e-6)
+    np.testing.assert_allclose(obs_o[:-k], obs_p)
+    # The plain observation is the same whatever the strategy: it does not leak it.
+    first = {}
+    for seed in range(30):
+        obs, info = make_task(name).unwrapped.reset(seed=seed)
+        first.setdefault(info["strategy_id"], obs[:2].tolist())
+    assert len(first) >= 2
+    assert len({tuple(v) for v in first.values()}) == 1
+
+
+@pytest.mark.parametrize("name", LIGHT_TASKS)
+def test_strategy_flag_is_last_element(name):
+    env = make_task(name, strategy_flag=True).unwrapped
+    obs, info = env.reset(seed=0)
+    for _ in range(env.horizon):
+        obs, _, _, _, info = env.step(env.action_space.sample())
+        assert obs[-1] == float(info["strategy_changed"])
+
+
+def test_bad_arguments_are_named():
+    with pytest.raises(ConfigError, match=r"'7'.*allowed: 3, 8, continuous, unequal"):
+        make_task("circle-3", variant="7")
+    with pytest.raises(ConfigError, match="horizon must be an integer >= 1, got 0"):
+        make_task("circle-3", horizon=0)
+    with pytest.raises(ConfigError, match="unknown task 'nope'; allowed: circle-3"):
+        make_task("nope")
+    env = make_task("circle-3").unwrapped
+    env.reset(seed=0)
+    with pytest.raises(ConfigError, match=r"shape \(2,\).*got shape \(3,\)"):
+        env.step(np.zeros(3))
+    with pytest.raises(ConfigError, match="finite"):
+        env.step(np.array([np.nan, 0.0]))
+
+
+def test_vector_env_steps():
+    envs = gym.make_vec("sili/Circle3-v0", num_envs=2, vectorization_mode="sync")
+    obs, _ = envs.reset(seed=0)
+    assert obs.shape == (2, 3)
+    for _ in range(60):  # crosses an interaction boundary: autoreset begins the next one
+        obs, _r, _term, _trunc, _info = envs.step(envs.action_space.sample())
+    assert obs.shape == (2, 3)
+    envs.close()
