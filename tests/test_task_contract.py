@@ -125,3 +125,31 @@ def test_vector_env_steps():
         obs, _r, _term, _trunc, _info = envs.step(envs.action_space.sample())
     assert obs.shape == (2, 3)
     envs.close()
+
+
+@pytest.mark.parametrize("name", LIGHT_TASKS)
+def test_game_state_resumes_the_repeated_game(name):
+    env = make_task(name).unwrapped
+    env.reset(seed=5)
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, (8, env.horizon, 2))
+    for j in range(3):
+        for a in actions[j]:
+            env.step(a)
+        env.reset()
+    saved = env.game_state()
+    tail_a = []
+    for j in range(3, 8):
+        for a in actions[j]:
+            tail_a.append(env.step(a)[:2])
+        env.reset()
+    fresh = make_task(name).unwrapped
+    fresh.restore_game_state(saved)
+    tail_b = []
+    for j in range(3, 8):
+        for a in actions[j]:
+            tail_b.append(fresh.step(a)[:2])
+        fresh.reset()
+    for (oa, ra), (ob, rb) in zip(tail_a, tail_b, strict=True):
+        np.testing.assert_array_equal(oa, ob)
+        assert ra == rb

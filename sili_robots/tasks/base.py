@@ -36,6 +36,9 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     #: bounds of ``strategy_encoding()``.
     strategy_low: ClassVar[float] = 0.0
     strategy_high: ClassVar[float] = 1.0
+    #: attributes that hold the opponent's strategy between interactions; with the RNG state
+    #: they are what ``game_state()`` saves so a run can resume at an interaction boundary.
+    game_state_fields: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, horizon: int, oracle: bool = False, strategy_flag: bool = False) -> None:
         if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 1:
@@ -127,6 +130,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
             self.interaction += 1
         self._trajectory = []
         self.t = 0
+        self._boundary_state = self._capture_game_state()
         self._begin_interaction()
         sid = self.strategy_id()
         self._changed_since_last_step = self._last_strategy_id is not None and not _same(
@@ -154,6 +158,43 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         self._last_strategy_id = sid
         truncated = self.t >= self.horizon
         return self._observation(), reward, False, truncated, self._info()
+
+    # ----------------------------------------------------------------- resumable games
+    def _capture_game_state(self) -> dict[str, Any]:
+        return {
+            "fields": {k: _copy(getattr(self, k)) for k in self.game_state_fields},
+            "rng": self.np_random.bit_generator.state,
+            "interaction": self.interaction,
+            "last_strategy_id": self._last_strategy_id,
+        }
+
+    def game_state(self) -> dict[str, Any]:
+        """The repeated game's state at the start of the current interaction (picklable).
+
+        Valid right after ``reset()``; ``restore_game_state`` in a fresh env of the same kind
+        then continues the game exactly as this one would have.
+        """
+        if not self._started:
+            raise RuntimeError("call reset() before game_state()")
+        return dict(self._boundary_state)
+
+    def restore_game_state(self, state: dict[str, Any]) -> tuple[np.ndarray, dict[str, Any]]:
+        """Continue a saved game: start its current interaction again; returns reset's output."""
+        if not self._started:
+            self.reset(seed=0)
+        for k, v in state["fields"].items():
+            setattr(self, k, _copy(v))
+        self.np_random.bit_generator.state = state["rng"]
+        self.interaction = int(state["interaction"])
+        self._trajectory = []
+        self.t = 0
+        self._boundary_state = self._capture_game_state()
+        self._begin_interaction()
+        sid = self.strategy_id()
+        prev = state["last_strategy_id"]
+        self._changed_since_last_step = prev is not None and not _same(sid, prev)
+        self._last_strategy_id = sid
+        return self._observation(), self._info()
 
     # ----------------------------------------------------------------- helpers
     def _validate_action(self, action: Any) -> np.ndarray:
@@ -190,6 +231,10 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     def time_fraction(self) -> float:
         """Elapsed fraction of the interaction, part of every task's observation."""
         return self.t / self.horizon
+
+
+def _copy(value: Any) -> Any:
+    return value.copy() if isinstance(value, np.ndarray) else value
 
 
 def _same(a: StrategyId | None, b: StrategyId | None) -> bool:

@@ -38,6 +38,7 @@ class CircleEnv(RepeatedInteractionEnv):
     strategy_dim: ClassVar[int] = 2  # the opponent's (x, y) position, what Oracle observes
     strategy_low: ClassVar[float] = -RADIUS
     strategy_high: ClassVar[float] = RADIUS
+    game_state_fields: ClassVar[tuple[str, ...]] = ("location", "angle")
 
     def __init__(
         self,

@@ -38,6 +38,7 @@ class SpeakerListenerEnv(RepeatedInteractionEnv):
     """The listener navigates to the goal named by a speaker whose code may drift."""
 
     strategy_dim: ClassVar[int] = len(MAPPINGS)  # one-hot of the mapping, what Oracle observes
+    game_state_fields: ClassVar[tuple[str, ...]] = ("mapping", "visited_before")
 
     def __init__(self, horizon: int = 50, oracle: bool = False, strategy_flag: bool = False):
         self.position = np.zeros(2)
