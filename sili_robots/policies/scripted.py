@@ -59,12 +59,53 @@ def speaker_listener_stabilizing(env: RepeatedInteractionEnv, obs: np.ndarray) -
     return _toward(env.position, GOALS[goal], STEP)
 
 
+# -- Driving -------------------------------------------------------------------------------------
+def _lane_keeping(env: RepeatedInteractionEnv, lane: int) -> np.ndarray:
+    """Lateral action that drives the ego to the centre of ``lane`` as fast as allowed."""
+    from sili_robots.tasks.driving import DECISION_DT, EGO_LATERAL_SPEED
+    from sili_robots.tasks.sumo_scenario import CENTRE_LANE, LANE_WIDTH
+
+    target = (lane - CENTRE_LANE) * LANE_WIDTH
+    return _toward(np.array([env.ego_y]), np.array([target]), EGO_LATERAL_SPEED * DECISION_DT)
+
+
+def driving_stabilizing(env: RepeatedInteractionEnv, obs: np.ndarray) -> np.ndarray:
+    """Merge left at once (before the red line): the opponent learns to go right."""
+    from sili_robots.tasks.driving import LEFT
+
+    return _lane_keeping(env, LEFT)
+
+
+def driving_oracle(env: RepeatedInteractionEnv, obs: np.ndarray) -> np.ndarray:
+    """Knowing the opponent's intended lane, pass in the other outer lane."""
+    from sili_robots.tasks.driving import LEFT, RIGHT
+
+    return _lane_keeping(env, LEFT if env.target_lane == RIGHT else RIGHT)
+
+
+# -- Sawyer-Reach ------------------------------------------------------------------------------
+def sawyer_oracle(env: RepeatedInteractionEnv, obs: np.ndarray) -> np.ndarray:
+    """Reach the true goal and stay there."""
+    from sili_robots.tasks.sawyer_reach import action_toward
+
+    return action_toward(env, env.goal_position)
+
+
+def sawyer_stabilizing(env: RepeatedInteractionEnv, obs: np.ndarray) -> np.ndarray:
+    """Reach the true goal, then end the interaction just above the height plane."""
+    from sili_robots.tasks.sawyer_reach import action_toward, stabilizing_point
+
+    return action_toward(env, stabilizing_point(env))
+
+
 SCRIPTED_POLICIES: dict[str, dict[str, Policy]] = {
     "CircleEnv": {"stabilizing": circle_stabilizing, "oracle": circle_oracle},
     "SpeakerListenerEnv": {
         "stabilizing": speaker_listener_stabilizing,
         "oracle": speaker_listener_oracle,
     },
+    "DrivingEnv": {"stabilizing": driving_stabilizing, "oracle": driving_oracle},
+    "SawyerReachEnv": {"stabilizing": sawyer_stabilizing, "oracle": sawyer_oracle},
 }
 
 

@@ -83,3 +83,15 @@ register_task(
         default_latent="partial",
     )
 )
+register_task(
+    TaskSpec(
+        "driving",
+        "sili/Driving-v0",
+        "sili_robots.tasks.driving:DrivingEnv",
+        default_latent="discrete",
+        one_per_process=True,
+    )
+)
+register_task(
+    TaskSpec("sawyer-reach", "sili/SawyerReach-v0", "sili_robots.tasks.sawyer_reach:SawyerReachEnv")
+)

@@ -1,0 +1,252 @@
+"""Driving on real SUMO (libsumo), sharing one simulation per module as libsumo requires."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+from sili_robots.errors import ConfigError
+from sili_robots.policies import scripted_policy
+from sili_robots.tasks import make_task
+from sili_robots.tasks import sumo_scenario as sc
+from sili_robots.tasks.driving import (
+    LEFT,
+    RIGHT,
+    DrivingEnv,
+    lane_of,
+)
+
+Policy = Callable[[DrivingEnv, int], float]
+
+
+@pytest.fixture
+def make_env() -> Iterator[Callable[..., DrivingEnv]]:
+    """Build Driving envs one at a time (libsumo: one simulation per process); asking for
+    another closes the previous one, and the last is closed after the test."""
+    live: list[gym.Env] = []
+
+    def make(**kwargs) -> DrivingEnv:
+        while live:
+            live.pop().close()
+        env = make_task("driving", **kwargs)
+        live.append(env)
+        return env.unwrapped
+
+    yield make
+    while live:
+        live.pop().close()
+
+
+@pytest.fixture
+def env(make_env) -> DrivingEnv:
+    return make_env()
+
+
+def to_lane(lane: int) -> Policy:
+    def policy(env: DrivingEnv, t: int) -> float:
+        target = (lane - sc.CENTRE_LANE) * sc.LANE_WIDTH
+        return float(np.clip((target - env.ego_y) / 2.0, -1.0, 1.0))
+
+    return policy
+
+
+def late(lane: int, start: int = 2) -> Policy:
+    """Stay in the centre lane for ``start`` steps (past the red line), then merge."""
+    merge = to_lane(lane)
+    return lambda env, t: 0.0 if t < start else merge(env, t)
+
+
+def play(env: DrivingEnv, policy: Policy, interactions: int, seed: int | None = None):
+    """Per interaction: (strategy at its start, task return, collision partners, info)."""
+    out = []
+    for j in range(interactions):
+        _, info = env.reset(seed=seed) if j == 0 and seed is not None else env.reset()
+        z = info["strategy_id"]
+        total = 0.0
+        for t in range(env.horizon):
+            _, r, _, _, info = env.step(np.array([policy(env, t)], np.float32))
+            total += r
+        out.append((z, total, tuple(info["collision_partners"]), info))
+    return out
+
+
+def first_seed(env: DrivingEnv, lane: int) -> int:
+    """A seed whose first interaction has the opponent intending ``lane``."""
+    for seed in range(50):
+        if env.reset(seed=seed)[1]["strategy_id"] == lane:
+            return seed
+    raise AssertionError("no seed gives that first strategy")
+
+
+def test_stabilizing_policy_forms_the_convention_then_never_collides(env):
+    stabilizing = scripted_policy(env, "stabilizing")
+    runs = play(env, lambda e, t: float(stabilizing(e, None)[0]), 8, seed=first_seed(env, LEFT))
+    # First interaction: the opponent still cuts into the left lane and hits the ego ...
+    assert runs[0][0] == LEFT and runs[0][1] == -1.0 and runs[0][2] == ("opponent",)
+    assert runs[0][3]["left_before_red_line"]
+    # ... after which it goes right every time and nobody collides.
+    for z, total, partners, info in runs[1:]:
+        assert (z, total, partners) == (RIGHT, 0.0, ())
+        assert info["ego_lane"] == LEFT
+
+
+def test_oracle_never_collides_from_either_start(env):
+    oracle = scripted_policy(env, "oracle")
+    for lane in (LEFT, RIGHT):
+        runs = play(env, lambda e, t: float(oracle(e, None)[0]), 4, seed=first_seed(env, lane))
+        assert runs[0][0] == lane
+        assert [r[1] for r in runs] == [0.0] * 4
+
+
+@pytest.mark.parametrize("lane", [LEFT, RIGHT])
+def test_late_merge_gets_cut_off_every_time(env, lane):
+    other = LEFT if lane == RIGHT else RIGHT  # the first time, the opponent goes the other way
+    runs = play(env, late(lane), 5, seed=first_seed(env, other))
+    assert runs[0][1] == 0.0  # lucky once ...
+    for z, total, partners, info in runs[1:]:
+        # ... then it merges into the lane the ego passed in last time: a cut-off.
+        assert z == lane and total == -1.0 and partners == ("opponent",)
+        assert not info["left_before_red_line"]
+
+
+def test_centre_policy_hits_opponent_and_hazard(env):
+    runs = play(env, lambda e, t: 0.0, 3, seed=0)
+    for _, total, partners, _ in runs:
+        assert total == -1.0  # one collision per interaction at most is what the reward counts
+        assert partners == ("hazard", "opponent")
+
+
+def test_red_line_rule(env):
+    # Both merge left; A is across the left divider (1.6 m) when crossing the red line, B not.
+    just_before = lambda e, t: [0.0, 1.0][t] if t < 2 else to_lane(LEFT)(e, t)  # noqa: E731
+    just_after = lambda e, t: [0.0, 0.75][t] if t < 2 else to_lane(LEFT)(e, t)  # noqa: E731
+    for policy, convention in ((just_before, True), (just_after, False)):
+        runs = play(env, policy, 3, seed=0)
+        for _, _, _, info in runs:
+            assert info["left_before_red_line"] is convention
+            assert info["ego_lane"] == LEFT
+        expected_next = RIGHT if convention else LEFT
+        assert [r[0] for r in runs[1:]] == [expected_next] * 2
+    assert lane_of(1.61) == LEFT and lane_of(1.59) == sc.CENTRE_LANE and lane_of(-1.61) == RIGHT
+
+
+def test_collisions_are_sumos_and_match_geometry(env):
+    """SUMO checks collisions after the longitudinal move and again after the lateral one."""
+    rng = np.random.default_rng(0)
+    env.reset(seed=0)
+    length, width, eps = sc.VEHICLE_LENGTH, sc.VEHICLE_WIDTH, 1e-6
+    hazard_x = sc.HAZARD_POSITION - sc.EGO_START
+    seen = {True: 0, False: 0}
+    for _ in range(25):
+        env.reset()
+        for _ in range(env.horizon):
+            env.step(rng.uniform(-1, 1, size=1).astype(np.float32))
+        previous = env.substeps[0]
+        for step in env.substeps[1:]:
+            _, ex, ey, ox, oy, partners = step
+            _, _, pey, _, poy, _ = previous
+            overlap = (
+                abs(ex - ox) < length - eps and min(abs(ey - oy), abs(pey - poy)) < width - eps
+            )
+            assert ("opponent" in partners) == overlap, step
+            seen[overlap] += 1
+            hazard = abs(ex - hazard_x) < length - eps and min(abs(ey), abs(pey)) < width - eps
+            assert ("hazard" in partners) == hazard, step
+            previous = step
+        assert env.collided == any(s[5] for s in env.substeps)
+    assert seen[True] > 0 and seen[False] > 0
+
+
+def test_reset_restores_state_without_restarting_sumo(env):
+    env.reset(seed=0)
+    session = env.session
+    api = session.api
+    first, _ = env.reset()
+    start_time = api.simulation.getTime()
+    for _ in range(env.horizon):
+        env.step(np.array([1.0], np.float32))
+    assert api.simulation.getTime() == pytest.approx(start_time + env.horizon * 1.0)
+    again, _ = env.reset()
+    assert env.session is session  # the same running simulation
+    assert api.simulation.getTime() == pytest.approx(start_time)
+    np.testing.assert_array_equal(first, again)
+    # loadState rebuilt the vehicles; the settings it drops were applied again.
+    for vid in (sc.EGO_ID, sc.OPPONENT_ID, sc.HAZARD_ID):
+        assert api.vehicle.getSpeedMode(vid) == 0
+        assert api.vehicle.getLaneChangeMode(vid) == 0
+    # Fixed forward speeds: 20 m/s and 10 m/s, i.e. 0.2 and 0.1 observation units per step.
+    obs, *_ = env.step(np.array([0.0], np.float32))
+    np.testing.assert_allclose(obs[[0, 2]] - again[[0, 2]], [0.2, 0.1], atol=1e-5)
+
+
+def test_seeded_runs_are_reproducible(env):
+    def trace(seed):
+        rng = np.random.default_rng(seed)
+        obs, info = env.reset(seed=seed)
+        out = [obs, info["strategy_id"]]
+        for j in range(4):
+            if j:
+                obs, info = env.reset()
+                out += [obs, info["strategy_id"]]
+            for _ in range(env.horizon):
+                obs, r, *_ = env.step(rng.uniform(-1, 1, size=1).astype(np.float32))
+                out += [obs, r]
+        return out
+
+    a, b = trace(3), trace(3)
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x, y)
+    firsts = {env.reset(seed=s)[1]["strategy_id"] for s in range(10)}
+    assert firsts == {RIGHT, LEFT}  # the seed picks z^1
+
+
+def test_observation_space_and_intent_stays_hidden(make_env):
+    plain = make_env()
+    observations = {}
+    for seed in range(10):
+        obs, info = plain.reset(seed=seed)
+        assert obs.dtype == np.float32 and plain.observation_space.contains(obs)
+        observations[info["strategy_id"]] = obs
+    assert set(observations) == {RIGHT, LEFT}
+    np.testing.assert_array_equal(observations[RIGHT], observations[LEFT])
+    for t in range(1, plain.horizon + 1):
+        obs, _, term, trunc, _ = plain.step(np.array([0.3], np.float32))
+        assert obs[-1] == pytest.approx(t / plain.horizon)
+        assert (term, trunc) == (False, t == plain.horizon)
+    oracle = make_env(oracle=True)
+    obs, info = oracle.reset(seed=0)
+    assert obs.shape == (7,)
+    np.testing.assert_array_equal(obs[-2:], info["strategy"])
+    assert obs[-2:].tolist() == ([1.0, 0.0] if info["strategy_id"] == RIGHT else [0.0, 1.0])
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"oracle": True}, {"strategy_flag": True}])
+def test_check_env_passes(make_env, kwargs):
+    check_env(make_env(**kwargs), skip_render_check=True)
+
+
+def test_bad_arguments_are_named(env):
+    with pytest.raises(ConfigError, match=r"horizon must be an integer from 1 to 30.*got 31"):
+        DrivingEnv(horizon=31)
+    with pytest.raises(ConfigError, match=r"unknown SUMO backend 'sumo'; allowed: libsumo, traci"):
+        DrivingEnv(backend="sumo")
+    env.reset(seed=0)
+    with pytest.raises(ConfigError, match=r"shape \(1,\).*got shape \(2,\)"):
+        env.step(np.zeros(2))
+
+
+def test_traci_backend_runs_the_same_scenario(env):
+    """The socket client (the benchmark's reference) gives the very same interactions."""
+    policy = late(LEFT)
+    expected = play(env, policy, 2, seed=5)
+    traci_env = DrivingEnv(backend="traci")  # no libsumo slot needed next to `env`
+    try:
+        got = play(traci_env, policy, 2, seed=5)
+        assert traci_env.substeps == env.substeps
+    finally:
+        traci_env.close()
+    assert [g[:3] for g in got] == [e[:3] for e in expected]

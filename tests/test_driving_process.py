@@ -1,0 +1,160 @@
+"""Driving across processes: libsumo's one-simulation-per-process rule, subprocess vector envs,
+SUMO failures as Python errors, SUMO found from the wheel. Each scenario that could leave a
+simulation behind runs in its own Python process so this test process stays clean."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+import sili_robots  # noqa: F401  (registers the tasks)
+
+
+def _python(code: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=env,
+    )
+
+
+def test_second_live_simulation_in_a_process_is_refused_until_close():
+    out = _python(
+        """
+        import gc
+        import numpy as np
+        from sili_robots.errors import ConfigError
+        from sili_robots.tasks.driving import DrivingEnv
+
+        a = DrivingEnv()
+        a.reset(seed=0)
+        b = DrivingEnv()  # constructing is fine: SUMO starts at the first reset
+        try:
+            b.reset(seed=0)
+        except ConfigError as exc:
+            assert isinstance(exc, RuntimeError)
+            print("REFUSED:", exc)
+        a.step(np.array([0.5], np.float32))  # the first simulation is untouched
+        a.close()
+        b.reset(seed=0)  # the slot is free again
+        b.step(np.array([0.5], np.float32))
+        del b
+        gc.collect()  # a dropped environment releases its simulation too
+        c = DrivingEnv()
+        c.reset(seed=0)
+        c.close()
+        try:
+            c.reset()
+        except RuntimeError as exc:
+            print("CLOSED:", exc)
+        print("OK")
+        """
+    )
+    assert out.returncode == 0, out.stderr
+    assert "REFUSED: libsumo runs one SUMO simulation per process" in out.stdout
+    assert "call close() on that environment first" in out.stdout
+    assert "CLOSED: this Driving environment was closed" in out.stdout
+    assert out.stdout.strip().endswith("OK")
+
+
+def test_async_vector_env_of_two_steps_across_interactions():
+    import libsumo
+
+    envs = gym.make_vec("sili/Driving-v0", num_envs=2, vectorization_mode="async")
+    try:
+        obs, info = envs.reset(seed=[0, 1])
+        assert obs.shape == (2, 5) and obs.dtype == np.float32
+        rewards = []
+        for _ in range(23):  # crosses two interaction boundaries (autoreset)
+            obs, reward, _term, _trunc, info = envs.step(np.full((2, 1), 1.0, np.float32))
+            rewards.append(reward)
+        assert obs.shape == (2, 5)
+        assert set(info["interaction"].tolist()) == {2}
+        # Always merging left at once: the workers form the convention and stop colliding.
+        assert np.all(np.array(rewards[11:]) == 0.0)
+    finally:
+        envs.close()
+    assert not libsumo.isLoaded()  # the spaces came from a copy that never started SUMO
+
+
+def test_sumo_failures_become_python_errors(tmp_path: Path):
+    out = _python(
+        """
+        import os
+        from pathlib import Path
+        from sili_robots.tasks.driving import DrivingEnv
+        from sili_robots.tasks.sumo_scenario import ScenarioFiles
+        from sili_robots.tasks.sumo_session import SumoError, SumoSession
+
+        env = DrivingEnv()
+        env.reset(seed=0)
+        os.remove(env._state_file)
+        try:
+            env.reset()
+        except SumoError as exc:
+            print("RESET:", exc)
+        env.close()
+
+        bad = Path(os.environ["BAD_DIR"])
+        (bad / "bad.sumocfg").write_text(
+            '<configuration><input><net-file value="missing.net.xml"/></input></configuration>'
+        )
+        files = ScenarioFiles(bad, bad / "missing.net.xml", bad / "x", bad / "bad.sumocfg")
+        try:
+            SumoSession(files)
+        except SumoError as exc:
+            print("START:", exc)
+        env = DrivingEnv()  # a failed start leaves the process usable
+        env.reset(seed=0)
+        env.close()
+        print("OK")
+        """,
+        env={**os.environ, "BAD_DIR": str(tmp_path)},
+    )
+    assert out.returncode == 0, out.stderr
+    assert "RESET: SUMO failed while restoring the start state" in out.stdout
+    assert "start-state.xml" in out.stdout
+    assert "START: SUMO could not start (libsumo)" in out.stdout
+    assert "missing.net.xml" in out.stdout
+    assert out.stdout.strip().endswith("OK")
+
+
+def test_sumo_comes_from_the_wheel_and_netconvert_builds_the_network(tmp_path: Path):
+    env = {k: v for k, v in os.environ.items() if k not in ("SUMO_HOME", "PROJ_LIB", "PROJ_DATA")}
+    env["SILI_ROBOTS_CACHE"] = str(tmp_path)
+    env["PATH"] = "/usr/bin:/bin"
+    out = _python(
+        """
+        import numpy as np
+        from sili_robots.tasks.driving import DrivingEnv
+
+        env = DrivingEnv()
+        env.reset(seed=0)
+        for _ in range(env.horizon):
+            env.step(np.array([1.0], np.float32))
+        workdir = env.session.workdir
+        env.close()
+        print("WORKDIR LEFT:", workdir.exists())
+        """,
+        env=env,
+    )
+    assert out.returncode == 0, out.stderr
+    nets = list(tmp_path.glob("sumo/*/road.net.xml"))
+    assert len(nets) == 1
+    assert "by Eclipse SUMO netconvert 1.28" in nets[0].read_text()[:300]
+    assert "WORKDIR LEFT: False" in out.stdout  # the per-env state file is cleaned up
+    assert {p.name for p in nets[0].parent.iterdir()} == {
+        "road.nod.xml",
+        "road.edg.xml",
+        "road.net.xml",
+        "road.rou.xml",
+        "road.sumocfg",
+    }
