@@ -250,3 +250,31 @@ def test_traci_backend_runs_the_same_scenario(env):
     finally:
         traci_env.close()
     assert [g[:3] for g in got] == [e[:3] for e in expected]
+
+
+def test_game_state_resumes_in_a_fresh_environment(make_env):
+    env = make_env()
+    env.reset(seed=5)
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, (6, env.horizon, 1)).astype(np.float32)
+
+    def tail(e):
+        out = []
+        for j in range(3, 6):
+            out += [e.step(a)[:2] for a in actions[j]]
+            e.reset()
+        return out
+
+    for j in range(3):
+        for a in actions[j]:
+            env.step(a)
+        env.reset()
+    saved = env.game_state()
+    expected = tail(env)
+    fresh = make_env()  # closes `env`: one libsumo simulation at a time
+    fresh.restore_game_state(saved)
+    got = tail(fresh)
+    for (oa, ra), (ob, rb) in zip(expected, got, strict=True):
+        np.testing.assert_array_equal(oa, ob)
+        assert ra == rb
+    assert any(r < 0 for _, r in expected) and any(r == 0 for _, r in expected)

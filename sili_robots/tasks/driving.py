@@ -75,6 +75,8 @@ class DrivingEnv(RepeatedInteractionEnv):
     """Pass a reactive opponent without a collision; it cuts into the lane you passed in."""
 
     strategy_dim: ClassVar[int] = 2  # one-hot of the opponent's intended lane (right, left)
+    #: all the game carries between interactions (SUMO restarts from the same saved state)
+    game_state_fields: ClassVar[tuple[str, ...]] = ("target_lane",)
 
     def __init__(
         self,
