@@ -70,18 +70,13 @@ class SumoSession:
         self.backend = backend
         self.closed = False
         self._errors = _sumo_exceptions()
-        self.workdir = Path(tempfile.mkdtemp(prefix="sili-driving-"))
-        self.error_log = self.workdir / "sumo-errors.log"
-        cmd = [
-            str(sumo_binary("sumo")),
-            "-c",
-            str(files.config),
-            "--error-log",
-            str(self.error_log),
-        ]
+        binary = str(sumo_binary("sumo"))
         token = next(_TOKENS)
         if backend == "libsumo":
             _claim_libsumo(token)
+        self.workdir = Path(tempfile.mkdtemp(prefix="sili-driving-"))
+        self.error_log = self.workdir / "sumo-errors.log"
+        cmd = [binary, "-c", str(files.config), "--error-log", str(self.error_log)]
         connection = None
         try:
             if backend == "libsumo":
@@ -105,10 +100,12 @@ class SumoSession:
                     )
                 connection = traci.getConnection(label)
                 self.api = connection
-        except self._errors as exc:
+        except BaseException as exc:  # give the slot back whatever went wrong
             _shutdown(backend, connection, token, self.workdir, keep_workdir=True)
-            message = self._sumo_message(exc)
+            message = self._sumo_message(exc) if isinstance(exc, self._errors) else None
             shutil.rmtree(self.workdir, ignore_errors=True)
+            if message is None:
+                raise
             raise SumoError(f"SUMO could not start ({backend}): {message}") from None
         self._finalizer = weakref.finalize(
             self, _shutdown, backend, connection, token, self.workdir, False
