@@ -33,3 +33,19 @@ def task_name(text: str) -> str:
         return task_spec(text).name
     except ConfigError as err:
         raise argparse.ArgumentTypeError(str(err)) from None
+
+
+def parse_env_kwargs(items: list[str], flag: str) -> dict:
+    """``KEY=VALUE`` pairs with JSON values (bare words are taken as strings)."""
+    import json
+
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise ConfigError(f"{flag} takes KEY=VALUE, got {item!r}")
+        try:
+            out[key] = json.loads(value)
+        except json.JSONDecodeError:
+            out[key] = value
+    return out

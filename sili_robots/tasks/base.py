@@ -241,3 +241,9 @@ def _same(a: StrategyId | None, b: StrategyId | None) -> bool:
     if a is None or b is None:
         return a is b
     return bool(np.isclose(float(a), float(b), rtol=0.0, atol=1e-9))
+
+
+def resume_game(env: gym.Env, state: dict[str, Any]) -> tuple[np.ndarray, dict[str, Any]]:
+    """Restore a saved game through any wrappers (they see a reset first, as they require)."""
+    env.reset()
+    return env.unwrapped.restore_game_state(state)

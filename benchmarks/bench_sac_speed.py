@@ -1,0 +1,119 @@
+"""SAC gradient updates per second: this package's SAC against stable-baselines3's SAC.
+
+Same network sizes (2 x 256 actor and twin critics), same batch size and input width (a SILI
+policy on Circle: state 3 + two 10-d latents), one process, one after the other, same torch
+thread count. Also reports end-to-end interactions per second of ``sili train`` (SILI, Circle 3).
+
+    python benchmarks/bench_sac_speed.py [--updates 300] [--threads 1]
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+
+def time_ours(in_dim: int, act_dim: int, batch: int, updates: int) -> float:
+    from sili_robots.agent.sac import SAC
+
+    sac = SAC(in_dim, act_dim, hidden=256)
+    g = torch.Generator().manual_seed(0)
+    x = torch.randn(updates, batch, in_dim, generator=g)
+    a = torch.rand(updates, batch, act_dim, generator=g) * 2 - 1
+    r = torch.randn(updates, batch, generator=g)
+    x2 = torch.randn(updates, batch, in_dim, generator=g)
+    for u in range(10):
+        sac.update(x[u], a[u], r[u], x2[u])
+    t = time.perf_counter()
+    for u in range(updates):
+        sac.update(x[u], a[u], r[u], x2[u])
+    return updates / (time.perf_counter() - t)
+
+
+def time_sb3(in_dim: int, act_dim: int, batch: int, updates: int) -> float:
+    from stable_baselines3 import SAC as SB3SAC
+
+    class Dummy(gym.Env):
+        observation_space = gym.spaces.Box(-np.inf, np.inf, (in_dim,), np.float32)
+        action_space = gym.spaces.Box(-1, 1, (act_dim,), np.float32)
+
+        def reset(self, *, seed=None, options=None):
+            return np.zeros(in_dim, np.float32), {}
+
+        def step(self, action):
+            return np.zeros(in_dim, np.float32), 0.0, False, False, {}
+
+    model = SB3SAC(
+        "MlpPolicy",
+        Dummy(),
+        batch_size=batch,
+        learning_starts=0,
+        device="cpu",
+        policy_kwargs={"net_arch": [256, 256]},
+        seed=0,
+        buffer_size=10_000,
+    )
+    rng = np.random.default_rng(0)
+    for _ in range(5_000):
+        model.replay_buffer.add(
+            rng.normal(size=(1, in_dim)).astype(np.float32),
+            rng.normal(size=(1, in_dim)).astype(np.float32),
+            rng.uniform(-1, 1, (1, act_dim)).astype(np.float32),
+            rng.normal(size=1).astype(np.float32),
+            np.zeros(1),
+            [{}],
+        )
+    model._setup_learn(total_timesteps=1)
+    model.train(gradient_steps=10, batch_size=batch)
+    t = time.perf_counter()
+    model.train(gradient_steps=updates, batch_size=batch)
+    return updates / (time.perf_counter() - t)
+
+
+def time_train(interactions: int) -> float:
+    from sili_robots.agent import method_config
+    from sili_robots.runs import RunConfig
+    from sili_robots.training import train
+
+    out = Path(tempfile.mkdtemp())
+    cfg = RunConfig(
+        "circle-3",
+        "sili",
+        0,
+        interactions,
+        method_config("sili", "discrete", random_interactions=5),
+    )
+    t = time.perf_counter()
+    train(cfg, out, progress=False)
+    dt = time.perf_counter() - t
+    shutil.rmtree(out)
+    return interactions / dt
+
+
+def main() -> None:
+    p = argparse.ArgumentParser()
+    p.add_argument("--updates", type=int, default=300)
+    p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--interactions", type=int, default=30)
+    args = p.parse_args()
+    torch.set_num_threads(args.threads)
+    in_dim, act_dim, batch = 3 + 2 * 10, 2, 256
+    sb3 = time_sb3(in_dim, act_dim, batch, args.updates)
+    ours = time_ours(in_dim, act_dim, batch, args.updates)
+    print(f"torch threads: {args.threads}; batch {batch}; input {in_dim}; 2 x 256 networks")
+    print(f"stable-baselines3 SAC: {sb3:8.1f} updates/s ({1e3 / sb3:.2f} ms/update)")
+    print(f"sili_robots SAC:       {ours:8.1f} updates/s ({1e3 / ours:.2f} ms/update)")
+    print(f"ratio (ours / sb3):    {ours / sb3:8.2f}x")
+    ips = time_train(args.interactions)
+    print(f"sili train end to end (circle-3, sili, 1 update/step): {ips:.2f} interactions/s")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,14 @@
+"""The learning agent: one SAC + latent-model agent that every method is a configuration of."""
+
+from sili_robots.agent.agent import InteractionStats, SILIAgent
+from sili_robots.agent.config import LATENT_KINDS, METHODS, AgentConfig, BetaSchedule, method_config
+
+__all__ = [
+    "LATENT_KINDS",
+    "METHODS",
+    "AgentConfig",
+    "BetaSchedule",
+    "InteractionStats",
+    "SILIAgent",
+    "method_config",
+]

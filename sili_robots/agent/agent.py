@@ -1,0 +1,290 @@
+"""The SILI agent: SAC + latent strategy model + stability reward, configured into every method.
+
+How the learning signal crosses interactions (the paper's Eq. 1 made concrete):
+
+* Latents. z^j = E(tau^{j-1}) is computed once when interaction j begins and kept in a cache
+  ``Z`` (Z[0] is the all-zero "no history yet" latent). The cache is recomputed with the current
+  encoder every ``latent_refresh_every`` interactions, so RL batches use up-to-date latents
+  without running the encoder inside every gradient step.
+* Bootstrapping. The transition from the last step of interaction j goes to the *first
+  observation of interaction j+1*, paired with that interaction's latents: the critic's target
+  at the boundary is Q(s^{j+1}_0, z^{j+1}, z^j, .) rather than a terminal value. The repeated
+  game never terminates, so every target bootstraps.
+* Stability credit. The change z^j -> z^{j+1} is caused by what the ego did in interaction j, so
+  its stability reward, stability_scale * -d(z^j, z^{j+1}) (stability_scale defaults to H: the
+  paper's per-step R_stable summed over an interaction), is paid on the last step of
+  interaction j, the step whose successor lies in interaction j+1. Reward on each step:
+  (1 - b) R_task + b [t = H-1] stability_scale R_stable.
+* Partial observations: R_stable on each step is -flag(s_{t+1}), the observed "strategy changed"
+  flag of the next observation (at the boundary: of interaction j+1's first observation).
+* ``latent="true"`` (diagnostic): z^j is the true strategy's encoding and d is 1 when the true
+  strategy changed, which isolates influence learning from representation learning.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+
+from sili_robots.agent.buffer import InteractionBuffer
+from sili_robots.agent.config import AgentConfig
+from sili_robots.agent.latent import LatentModel, transitions
+from sili_robots.agent.sac import SAC
+from sili_robots.agent.smirl import RunningGaussian
+
+
+@dataclass
+class InteractionStats:
+    """What the agent saw of one finished interaction."""
+
+    stability_reward: float  # R_stable as the agent measured it (before weighting by b)
+    latent_category: int  # argmax of z^{j+1} (-1 when there is no discrete latent)
+    latent_changed: bool  # the agent's own latent changed between j and j+1
+
+
+class SILIAgent:
+    """One agent; ``AgentConfig.method`` decides which method of the paper it is."""
+
+    def __init__(
+        self,
+        cfg: AgentConfig,
+        obs_dim: int,
+        act_dim: int,
+        horizon: int,
+        strategy_dim: int,
+        seed: int = 0,
+        latent_refresh_every: int = 10,
+    ) -> None:
+        self.cfg = cfg.validate()
+        self.obs_dim, self.act_dim, self.horizon = obs_dim, act_dim, horizon
+        self.rng = np.random.default_rng(seed)
+        torch.manual_seed(seed)
+        self.latent_refresh_every = latent_refresh_every
+        self.zdim = strategy_dim if cfg.latent == "true" else cfg.latent_dim
+        self.n_latents = cfg.policy_latents
+        self.in_dim = obs_dim + self.n_latents * self.zdim
+        self.sac = SAC(self.in_dim, act_dim, cfg.hidden, cfg.lr, cfg.gamma, cfg.tau)
+        self.model: LatentModel | None = None
+        if cfg.uses_latent_model:
+            self.model = LatentModel(obs_dim, act_dim, cfg.latent_dim, cfg.hidden, cfg.latent)
+            self.model_opt = torch.optim.Adam(self.model.parameters(), lr=cfg.latent_lr)
+        self.buffer = InteractionBuffer(obs_dim, act_dim, horizon, strategy_dim)
+        self.Z = np.zeros((1, self.zdim), np.float32)  # Z[j] = z^j; Z[0] = no history
+        self.smirl = RunningGaussian(obs_dim, cfg.smirl_std_floor)
+        self.stability_scale = float(cfg.stability_scale or horizon)
+        self._update_credit = 0.0
+        self.interactions_seen = 0
+
+    # ------------------------------------------------------------------ acting
+    def policy_input(self, obs: np.ndarray, j: int | None = None) -> np.ndarray:
+        """[s, z^j, z^{j-1}] (SILI), [s, z^j] (LILI) or s, for the interaction being played."""
+        j = self.buffer.n if j is None else j
+        parts = [np.asarray(obs, np.float32)]
+        if self.n_latents >= 1:
+            parts.append(self.Z[j])
+        if self.n_latents == 2:
+            parts.append(self.Z[j - 1] if j >= 1 else np.zeros(self.zdim, np.float32))
+        return np.concatenate(parts)
+
+    def act(self, obs: np.ndarray, deterministic: bool = False) -> np.ndarray:
+        x = torch.from_numpy(self.policy_input(obs)).unsqueeze(0)
+        return self.sac.act(x, deterministic)[0].numpy()
+
+    def random_action(self) -> np.ndarray:
+        return self.rng.uniform(-1.0, 1.0, self.act_dim).astype(np.float32)
+
+    def begin_game(self, info: dict[str, Any]) -> None:
+        """A (re)started repeated game: z^0 is "no history"; the true mode knows z^0 already."""
+        if self.cfg.latent == "true" and self.buffer.n == 0:
+            self.Z[0] = info["strategy"]
+
+    # ------------------------------------------------------------------ data
+    def observe_interaction(
+        self,
+        obs: np.ndarray,
+        act: np.ndarray,
+        rew: np.ndarray,
+        next_first: np.ndarray,
+        strategy_id: float,
+        strategy: np.ndarray,
+        next_info: dict[str, Any],
+        refresh: bool = True,
+    ) -> InteractionStats:
+        """Store interaction j (obs [H+1, o], act [H, a], rew [H]) and infer z^{j+1}."""
+        aux = np.zeros(self.horizon, np.float32)
+        if self.cfg.method == "smirl":
+            aux = self.smirl.log_likelihood(obs[1:]).astype(np.float32)
+            self.smirl.update(obs[1:])
+        j = self.buffer.add(obs, act, rew, aux, next_first, strategy_id, strategy)
+        z_next = self._infer_next_latent(j, next_info)
+        self.Z = np.concatenate([self.Z, z_next[None]])
+        self.interactions_seen += 1
+        if refresh and self.model is not None and (j + 1) % self.latent_refresh_every == 0:
+            self.refresh_latents()
+        return self._stats(j, next_first)
+
+    def _infer_next_latent(self, j: int, next_info: dict[str, Any]) -> np.ndarray:
+        if self.cfg.latent == "true":
+            return np.asarray(next_info["strategy"], np.float32)
+        if self.model is None:
+            return np.zeros(self.zdim, np.float32)
+        return self._encode(np.array([j]))[0]
+
+    @torch.no_grad()
+    def _encode(self, idx: np.ndarray) -> np.ndarray:
+        """z^{j+1} = E(tau^j) for each j in ``idx``, deterministic."""
+        b = self.buffer
+        traj = transitions(
+            torch.from_numpy(b.obs[idx]), torch.from_numpy(b.act[idx]), torch.from_numpy(b.rew[idx])
+        )
+        return self.model.encode(traj).numpy()
+
+    def refresh_latents(self) -> None:
+        """Recompute every cached latent with the current encoder."""
+        n = self.buffer.n
+        out = [self._encode(np.arange(s, min(s + 512, n))) for s in range(0, n, 512)]
+        self.Z = np.concatenate([self.Z[:1], *out])
+
+    def _stats(self, j: int, next_first: np.ndarray) -> InteractionStats:
+        if self.cfg.latent == "partial":
+            flags = np.concatenate([self.buffer.obs[j, 1:, -1], next_first[-1:]])
+            return InteractionStats(-float(flags.sum()), -1, bool(flags.any()))
+        d = float(self._distance(self.Z[j : j + 1], self.Z[j + 1 : j + 2])[0])
+        if self.cfg.latent != "true" and j == 0:
+            d = 0.0  # z^0 is "no history", not a strategy
+        category = int(self.Z[j + 1].argmax()) if self.cfg.latent == "discrete" else -1
+        return InteractionStats(-d, category, d > 0)
+
+    def _distance(self, za: np.ndarray, zb: np.ndarray) -> np.ndarray:
+        """d(z, z') per row: discrete 0/1 on the category, continuous Euclidean."""
+        if self.cfg.latent == "discrete":
+            return (za.argmax(-1) != zb.argmax(-1)).astype(np.float32)
+        if self.cfg.latent == "true":
+            return (np.abs(za - zb).max(-1) > 1e-6).astype(np.float32)
+        return np.linalg.norm(za - zb, axis=-1).astype(np.float32)
+
+    # ------------------------------------------------------------------ learning
+    def update(self, interaction: int) -> dict[str, float]:
+        """Learning after an interaction: latent model, then H * updates_per_step SAC steps."""
+        losses: dict[str, float] = {}
+        if self.model is not None and self.buffer.n >= 2:
+            losses["latent_loss"] = self.update_latent_model(
+                self.cfg.latent_updates_per_interaction
+            )
+        self._update_credit += self.horizon * self.cfg.updates_per_step
+        n_updates = int(self._update_credit)
+        self._update_credit -= n_updates
+        if n_updates and self.buffer.n >= 1:
+            beta = self.cfg.beta_at(interaction)
+            x, a, r, x2 = self.sample_batches(n_updates, beta)
+            out = [self.sac.update(x[u], a[u], r[u], x2[u]) for u in range(n_updates)]
+            losses["critic_loss"] = float(torch.stack([o["critic_loss"] for o in out]).mean())
+            losses["actor_loss"] = float(torch.stack([o["actor_loss"] for o in out]).mean())
+            losses["alpha"] = self.sac.alpha
+        return losses
+
+    def update_latent_model(self, steps: int) -> float:
+        """Max-likelihood steps on random consecutive pairs (tau^{j-1}, tau^j)."""
+        if steps == 0:
+            return float("nan")
+        b = self.buffer
+        total = 0.0
+        for _ in range(steps):
+            j = self.rng.integers(1, b.n, self.cfg.latent_batch)
+            prev = transitions(
+                torch.from_numpy(b.obs[j - 1]),
+                torch.from_numpy(b.act[j - 1]),
+                torch.from_numpy(b.rew[j - 1]),
+            )
+            obs = torch.from_numpy(b.obs[j])
+            loss = self.model.loss(
+                prev,
+                obs[:, :-1],
+                torch.from_numpy(b.act[j]),
+                obs[:, 1:],
+                torch.from_numpy(b.rew[j]),
+            )
+            self.model_opt.zero_grad(set_to_none=True)
+            loss.backward()
+            self.model_opt.step()
+            total += float(loss.detach())
+        return total / steps
+
+    def sample_batches(
+        self, n_updates: int, beta: float
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``n_updates`` RL batches at once, each ``batch_interactions x batch_steps``
+        transitions (one vectorised gather instead of Python work per update)."""
+        b, h = self.buffer, self.horizon
+        m, k = self.cfg.batch_interactions, self.cfg.batch_steps
+        j = self.rng.integers(0, b.n, (n_updates, m))[..., None]  # [U, M, 1]
+        t = self.rng.integers(0, h, (n_updates, m, k))  # [U, M, K]
+        j = np.broadcast_to(j, t.shape)
+        last = t == h - 1
+        s = b.obs[j, t]
+        s2 = np.where(last[..., None], b.next_first[j], b.obs[j, np.minimum(t + 1, h)])
+        r = b.rew[j, t] * (1.0 - beta)
+        if beta > 0.0:
+            r = r + beta * self._stability_rewards(j, t, last, s2)
+        x, x2 = s, s2
+        if self.n_latents >= 1:
+            zpad = np.concatenate([np.zeros((1, self.zdim), np.float32), self.Z])
+            z_prev, z_cur, z_next = zpad[j], zpad[j + 1], zpad[j + 2]  # z^{j-1}, z^j, z^{j+1}
+            lz = last[..., None]
+            x = np.concatenate([s, z_cur] + ([z_prev] if self.n_latents == 2 else []), -1)
+            z2_cur = np.where(lz, z_next, z_cur)
+            z2_prev = np.where(lz, z_cur, z_prev)
+            x2 = np.concatenate([s2, z2_cur] + ([z2_prev] if self.n_latents == 2 else []), -1)
+        shape = (n_updates, m * k)
+        return (
+            torch.from_numpy(np.ascontiguousarray(x, np.float32).reshape(*shape, -1)),
+            torch.from_numpy(np.ascontiguousarray(b.act[j, t]).reshape(*shape, -1)),
+            torch.from_numpy(np.ascontiguousarray(r, np.float32).reshape(shape)),
+            torch.from_numpy(np.ascontiguousarray(x2, np.float32).reshape(*shape, -1)),
+        )
+
+    def _stability_rewards(
+        self, j: np.ndarray, t: np.ndarray, last: np.ndarray, s2: np.ndarray
+    ) -> np.ndarray:
+        """The stability (or SMiRL) term of each sampled transition, before weighting by b."""
+        if self.cfg.method == "smirl":
+            return self.buffer.aux[j, t]
+        if self.cfg.latent == "partial":
+            return -s2[..., -1]
+        d = self._distance(self.Z[j], self.Z[j + 1])
+        if self.cfg.latent != "true":
+            d = np.where(j >= 1, d, 0.0)  # z^0 is "no history", not a strategy
+        return -self.stability_scale * d * last
+
+    # ------------------------------------------------------------------ checkpoints
+    def state_dict(self) -> dict[str, Any]:
+        state = {
+            "sac": self.sac.state_dict(),
+            "buffer": self.buffer.state_dict(),
+            "Z": self.Z.copy(),
+            "smirl": self.smirl.state_dict(),
+            "rng": self.rng.bit_generator.state,
+            "torch_rng": torch.get_rng_state(),
+            "update_credit": self._update_credit,
+            "interactions_seen": self.interactions_seen,
+        }
+        if self.model is not None:
+            state["model"] = self.model.state_dict()
+            state["model_opt"] = self.model_opt.state_dict()
+        return state
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.sac.load_state_dict(state["sac"])
+        self.buffer.load_state_dict(state["buffer"])
+        self.Z = np.array(state["Z"], np.float32)
+        self.smirl.load_state_dict(state["smirl"])
+        self.rng.bit_generator.state = state["rng"]
+        torch.set_rng_state(state["torch_rng"])
+        self._update_credit = float(state["update_credit"])
+        self.interactions_seen = int(state["interactions_seen"])
+        if self.model is not None:
+            self.model.load_state_dict(state["model"])
+            self.model_opt.load_state_dict(state["model_opt"])

@@ -1,0 +1,158 @@
+"""Agent configuration: one dataclass, and the methods as presets of it.
+
+Every method of the paper is this one agent with different settings:
+
+| method  | latent model | policy input        | reward                                  |
+|---------|--------------|---------------------|-----------------------------------------|
+| sili    | yes          | s, z^j, z^{j-1}     | (1-b) R_task + b R_stable               |
+| lili    | yes          | s, z^j              | R_task (b = 0)                          |
+| stable  | yes          | s, z^j, z^{j-1}     | R_stable (b = 1)                        |
+| sac     | no           | s                   | R_task                                  |
+| oracle  | no           | s + true z          | R_task                                  |
+| smirl   | no           | s                   | (1-b) R_task + b log p(s) (SMiRL)       |
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+from sili_robots.errors import ConfigError
+
+METHODS = ("sili", "lili", "stable", "sac", "oracle", "smirl")
+#: ``true`` is the diagnostic that feeds the true strategy in place of the predicted latent
+LATENT_KINDS = ("discrete", "continuous", "partial", "true")
+
+
+@dataclass
+class BetaSchedule:
+    """Linear annealing of the stability weight b from ``start`` to ``end`` over ``length``."""
+
+    start: float
+    end: float
+    length: int  # interactions
+
+    def value(self, interaction: int) -> float:
+        if self.length <= 0:
+            return self.end
+        frac = min(max(interaction / self.length, 0.0), 1.0)
+        return self.start + frac * (self.end - self.start)
+
+
+@dataclass
+class AgentConfig:
+    """Everything that defines an agent; saved with every run."""
+
+    method: str = "sili"
+    latent: str = "discrete"
+    beta: float = 0.5
+    beta_schedule: BetaSchedule | None = None
+    latent_dim: int = 10
+    hidden: int = 256
+    # SAC
+    lr: float = 3e-4
+    gamma: float = 0.99
+    tau: float = 5e-3
+    batch_interactions: int = 16  # an RL batch = this many interactions ...
+    batch_steps: int = 16  # ... times this many timesteps from each
+    updates_per_step: float = 1.0  # SAC gradient updates per environment step
+    random_interactions: int = 20  # uniform random actions first (20 x 50 = 1,000 steps)
+    # latent model
+    latent_lr: float = 3e-4
+    latent_updates_per_interaction: int = 10
+    latent_batch: int = 32  # consecutive interaction pairs per latent-model update
+    #: total stability reward credited per interaction = stability_scale * R_stable
+    #: (default: the horizon, i.e. the paper's per-step R_stable summed over the interaction)
+    stability_scale: float | None = None
+    # SMiRL
+    smirl_std_floor: float = 0.05
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ derived
+    @property
+    def uses_latent_model(self) -> bool:
+        return self.method in ("sili", "lili", "stable") and self.latent in (
+            "discrete",
+            "continuous",
+        )
+
+    @property
+    def latent_width(self) -> int:
+        """Width of one latent as fed to the policy (0 when the policy sees none)."""
+        if self.method not in ("sili", "lili", "stable") or self.latent == "partial":
+            return 0
+        return self.latent_dim
+
+    @property
+    def policy_latents(self) -> int:
+        """How many latents the policy is conditioned on: z^j (and z^{j-1} for SILI/Stable)."""
+        if self.latent_width == 0:
+            return 0
+        return 1 if self.method == "lili" else 2
+
+    def beta_at(self, interaction: int) -> float:
+        if self.method in ("sac", "oracle"):
+            return 0.0
+        if self.beta_schedule is not None:
+            return self.beta_schedule.value(interaction)
+        return self.beta
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> AgentConfig:
+        data = dict(data)
+        known = {f.name for f in fields(cls)}
+        unknown = set(data) - known
+        if unknown:
+            raise ConfigError(f"unknown agent settings {sorted(unknown)}; allowed: {sorted(known)}")
+        if data.get("beta_schedule") is not None:
+            data["beta_schedule"] = BetaSchedule(**data["beta_schedule"])
+        return cls(**data)
+
+    def validate(self) -> AgentConfig:
+        if self.method not in METHODS:
+            raise ConfigError(f"unknown method {self.method!r}; allowed: {', '.join(METHODS)}")
+        if self.latent not in LATENT_KINDS:
+            raise ConfigError(
+                f"unknown latent kind {self.latent!r}; allowed: {', '.join(LATENT_KINDS)}"
+            )
+        if not 0.0 <= self.beta <= 1.0:
+            raise ConfigError(f"beta must be in [0, 1], got {self.beta}")
+        if self.beta_schedule is not None:
+            s = self.beta_schedule
+            for name, v in (("start", s.start), ("end", s.end)):
+                if not 0.0 <= v <= 1.0:
+                    raise ConfigError(f"beta schedule {name} must be in [0, 1], got {v}")
+            if s.length < 1:
+                raise ConfigError(f"beta schedule length must be >= 1, got {s.length}")
+        for name in ("latent_dim", "hidden", "batch_interactions", "batch_steps", "latent_batch"):
+            if getattr(self, name) < 1:
+                raise ConfigError(f"{name} must be >= 1, got {getattr(self, name)}")
+        for name in ("updates_per_step", "random_interactions", "latent_updates_per_interaction"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if not 0.0 < self.gamma <= 1.0:
+            raise ConfigError(f"gamma must be in (0, 1], got {self.gamma}")
+        return self
+
+
+def method_config(method: str, latent: str | None = None, **overrides: Any) -> AgentConfig:
+    """The preset for ``method``; ``latent`` defaults to the task's choice (else discrete)."""
+    if method not in METHODS:
+        raise ConfigError(f"unknown method {method!r}; allowed: {', '.join(METHODS)}")
+    cfg = AgentConfig(method=method, latent=latent or "discrete")
+    if method == "lili":
+        cfg.beta = 0.0
+    elif method == "stable":
+        cfg.beta = 1.0
+    elif method in ("sac", "oracle"):
+        cfg.beta = 0.0
+    for k, v in overrides.items():
+        if not hasattr(cfg, k):
+            raise ConfigError(f"unknown agent setting {k!r}")
+        setattr(cfg, k, v)
+    if method == "lili" and cfg.latent == "partial":
+        cfg.latent = "discrete"  # LILI always learns a latent; b = 0 makes the flag unused
+    return cfg.validate()

@@ -1,0 +1,83 @@
+"""Small torch building blocks: MLPs, a fused twin critic, a squashed-Gaussian actor."""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import nn
+
+
+def mlp(inp: int, out: int, hidden: int, layers: int = 2) -> nn.Sequential:
+    """``layers`` hidden layers of ``hidden`` units with ReLU (the paper's 2 x 256)."""
+    mods: list[nn.Module] = []
+    d = inp
+    for _ in range(layers):
+        mods += [nn.Linear(d, hidden), nn.ReLU()]
+        d = hidden
+    mods.append(nn.Linear(d, out))
+    return nn.Sequential(*mods)
+
+
+class EnsembleLinear(nn.Module):
+    """``n`` independent linear layers evaluated in one batched matmul."""
+
+    def __init__(self, n: int, inp: int, out: int) -> None:
+        super().__init__()
+        bound = 1.0 / math.sqrt(inp)
+        self.weight = nn.Parameter(torch.empty(n, inp, out).uniform_(-bound, bound))
+        self.bias = nn.Parameter(torch.empty(n, 1, out).uniform_(-bound, bound))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:  # x: [n, B, inp]
+        return torch.baddbmm(self.bias, x, self.weight)
+
+
+class TwinCritic(nn.Module):
+    """Both SAC critics fused: one [2, B, .] batched network instead of two modules."""
+
+    def __init__(self, inp: int, hidden: int, n: int = 2) -> None:
+        super().__init__()
+        self.n = n
+        self.l1 = EnsembleLinear(n, inp, hidden)
+        self.l2 = EnsembleLinear(n, hidden, hidden)
+        self.l3 = EnsembleLinear(n, hidden, 1)
+
+    def forward(self, x: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
+        """Q-values of shape [n, B]."""
+        h = torch.cat([x, a], dim=-1).unsqueeze(0).expand(self.n, -1, -1)
+        h = torch.relu(self.l1(h))
+        h = torch.relu(self.l2(h))
+        return self.l3(h).squeeze(-1)
+
+
+LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
+
+
+class Actor(nn.Module):
+    """tanh-squashed Gaussian policy over actions in [-1, 1]^d (CleanRL's parameterisation)."""
+
+    def __init__(self, inp: int, act_dim: int, hidden: int) -> None:
+        super().__init__()
+        self.trunk = nn.Sequential(
+            nn.Linear(inp, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()
+        )
+        self.head = nn.Linear(hidden, 2 * act_dim)
+
+    def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        mean, log_std = self.head(self.trunk(x)).chunk(2, dim=-1)
+        log_std = LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (torch.tanh(log_std) + 1)
+        return mean, log_std
+
+    def sample(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """A reparameterised action and its log-probability."""
+        mean, log_std = self(x)
+        std = log_std.exp()
+        eps = torch.randn_like(mean)
+        pre = mean + std * eps
+        action = torch.tanh(pre)
+        logp = (-0.5 * eps.pow(2) - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
+        logp = logp - (2 * (math.log(2) - pre - nn.functional.softplus(-2 * pre))).sum(-1)
+        return action, logp
+
+    def deterministic(self, x: torch.Tensor) -> torch.Tensor:
+        return torch.tanh(self(x)[0])

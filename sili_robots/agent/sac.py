@@ -1,0 +1,118 @@
+"""Soft actor-critic (twin critics, Polyak targets, learned entropy temperature).
+
+Readable like CleanRL's SAC, with the per-update work trimmed: both critics are one batched
+network (``TwinCritic``), the target network is updated with one fused ``_foreach_lerp_``, and
+the optimizers are fused Adam, and no gradient is
+computed that no optimizer uses. There are no terminal states
+here: the repeated game never ends, so targets always bootstrap (also across interactions).
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+from sili_robots.agent.networks import Actor, TwinCritic
+
+
+class SAC:
+    """SAC on inputs x (state plus whatever latents the method conditions on)."""
+
+    def __init__(
+        self,
+        in_dim: int,
+        act_dim: int,
+        hidden: int = 256,
+        lr: float = 3e-4,
+        gamma: float = 0.99,
+        tau: float = 5e-3,
+    ) -> None:
+        self.gamma, self.tau = gamma, tau
+        self.actor = Actor(in_dim, act_dim, hidden)
+        self.critic = TwinCritic(in_dim + act_dim, hidden)
+        self.critic_target = TwinCritic(in_dim + act_dim, hidden)
+        self.critic_target.load_state_dict(self.critic.state_dict())
+        self.critic_target.requires_grad_(False)
+        self.log_alpha = torch.zeros(1, requires_grad=True)
+        self.target_entropy = -float(act_dim)
+        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=lr, fused=True)
+        self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=lr, fused=True)
+        self.alpha_opt = torch.optim.Adam([self.log_alpha], lr=lr)
+        self._critic_params = list(self.critic.parameters())
+        self._target_params = list(self.critic_target.parameters())
+
+    @property
+    def alpha(self) -> float:
+        return float(self.log_alpha.detach().exp())
+
+    def critic_loss(
+        self,
+        x: torch.Tensor,
+        a: torch.Tensor,
+        r: torch.Tensor,
+        x2: torch.Tensor,
+        a2: torch.Tensor,
+        logp2: torch.Tensor,
+    ) -> torch.Tensor:
+        with torch.no_grad():
+            q_next = self.critic_target(x2, a2).min(0).values
+            y = r + self.gamma * (q_next - self.log_alpha.exp() * logp2)
+        q = self.critic(x, a)
+        return F.mse_loss(q, y.expand_as(q)) * q.shape[0]
+
+    def update(
+        self, x: torch.Tensor, a: torch.Tensor, r: torch.Tensor, x2: torch.Tensor
+    ) -> dict[str, float]:
+        """One gradient step of critic, actor and temperature on a batch of transitions."""
+        with torch.no_grad():
+            a2, logp2 = self.actor.sample(x2)
+
+        critic_loss = self.critic_loss(x, a, r, x2, a2, logp2)
+        self.critic_opt.zero_grad(set_to_none=True)
+        critic_loss.backward()
+        self.critic_opt.step()
+
+        alpha = self.log_alpha.exp().detach()
+        a_pi, logp = self.actor.sample(x)
+        self.critic.requires_grad_(False)
+        actor_loss = (alpha * logp - self.critic(x, a_pi).min(0).values).mean()
+        self.actor_opt.zero_grad(set_to_none=True)
+        actor_loss.backward()
+        self.actor_opt.step()
+        self.critic.requires_grad_(True)
+
+        alpha_loss = -(self.log_alpha * (logp.detach() + self.target_entropy)).mean()
+        self.alpha_opt.zero_grad(set_to_none=True)
+        alpha_loss.backward()
+        self.alpha_opt.step()
+
+        with torch.no_grad():
+            torch._foreach_lerp_(self._target_params, self._critic_params, self.tau)
+        return {"critic_loss": critic_loss.detach(), "actor_loss": actor_loss.detach()}
+
+    @torch.no_grad()
+    def act(self, x: torch.Tensor, deterministic: bool = False) -> torch.Tensor:
+        if deterministic:
+            return self.actor.deterministic(x)
+        return self.actor.sample(x)[0]
+
+    def state_dict(self) -> dict:
+        return {
+            "actor": self.actor.state_dict(),
+            "critic": self.critic.state_dict(),
+            "critic_target": self.critic_target.state_dict(),
+            "log_alpha": self.log_alpha.detach(),
+            "actor_opt": self.actor_opt.state_dict(),
+            "critic_opt": self.critic_opt.state_dict(),
+            "alpha_opt": self.alpha_opt.state_dict(),
+        }
+
+    def load_state_dict(self, state: dict) -> None:
+        self.actor.load_state_dict(state["actor"])
+        self.critic.load_state_dict(state["critic"])
+        self.critic_target.load_state_dict(state["critic_target"])
+        with torch.no_grad():
+            self.log_alpha.copy_(state["log_alpha"])
+        self.actor_opt.load_state_dict(state["actor_opt"])
+        self.critic_opt.load_state_dict(state["critic_opt"])
+        self.alpha_opt.load_state_dict(state["alpha_opt"])

@@ -1,0 +1,24 @@
+"""``sili eval``: run a trained policy without exploration and report reward and stability."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from sili_robots.commands.common import positive_int
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("eval", help="evaluate a trained run without exploration")
+    p.add_argument("run_dir", type=Path)
+    p.add_argument("--interactions", type=positive_int, default=100)
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from sili_robots.evaluation import evaluate
+
+    result = evaluate(args.run_dir, args.interactions)
+    print(json.dumps({"run_dir": str(args.run_dir), **result}, indent=2))
+    return 0

@@ -1,0 +1,131 @@
+"""``sili train``: train one method on one task into a run directory (or resume one)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+from pathlib import Path
+
+from sili_robots.agent import LATENT_KINDS, METHODS, BetaSchedule, method_config
+from sili_robots.commands.common import parse_env_kwargs, positive_int, task_name, unit_float
+from sili_robots.errors import ConfigError
+from sili_robots.runs import CONFIG, RunConfig, read_config
+from sili_robots.tasks import task_spec
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("train", help="train a method on a task (or --resume a run)")
+    p.add_argument("--task", type=task_name, help="task name, e.g. circle-3")
+    p.add_argument("--method", default="sili", choices=METHODS)
+    p.add_argument(
+        "--latent",
+        choices=LATENT_KINDS,
+        help="latent kind for sili/stable/lili (default: the task's, usually discrete)",
+    )
+    p.add_argument("--interactions", type=positive_int, default=1000)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", type=Path, help="run directory to create")
+    p.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue a killed run")
+    p.add_argument("--beta", type=unit_float, help="stability weight b in [0, 1] (default 0.5)")
+    p.add_argument(
+        "--beta-anneal",
+        nargs=3,
+        metavar=("START", "END", "LENGTH"),
+        help="anneal b linearly from START to END over LENGTH interactions",
+    )
+    p.add_argument("--controller", help="controller for robot tasks (e.g. sawyer-reach: mink)")
+    p.add_argument(
+        "--env-kwarg",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="extra task constructor argument (JSON value), repeatable",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        dest="agent_set",
+        help="override an agent setting (JSON value), e.g. --set updates_per_step=0.5",
+    )
+    p.add_argument("--checkpoint-every", type=positive_int, default=50)
+    p.add_argument("--overwrite", action="store_true", help="replace an existing run directory")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(run=run)
+
+
+def config_from_args(args: argparse.Namespace) -> RunConfig:
+    if args.task is None:
+        raise ConfigError(
+            "--task is required (or --resume RUN_DIR); allowed tasks: " + ", ".join(_task_names())
+        )
+    overrides = parse_env_kwargs(args.agent_set, "--set")
+    if args.beta is not None:
+        if args.method in ("lili", "stable", "sac", "oracle"):
+            raise ConfigError(
+                f"--beta does not apply to method {args.method!r} (its b is fixed); "
+                "use --method sili or smirl"
+            )
+        overrides["beta"] = args.beta
+    if args.beta_anneal:
+        start, end, length = args.beta_anneal
+        overrides["beta_schedule"] = BetaSchedule(
+            unit_float(start), unit_float(end), positive_int(length)
+        )
+    latent = args.latent or task_spec(args.task).default_latent
+    agent = method_config(args.method, latent, **overrides)
+    env_kwargs = parse_env_kwargs(args.env_kwarg, "--env-kwarg")
+    if args.controller is not None:
+        env_kwargs["controller"] = args.controller
+    return RunConfig(
+        task=args.task,
+        method=args.method,
+        seed=args.seed,
+        interactions=args.interactions,
+        agent=agent,
+        env_kwargs=env_kwargs,
+        checkpoint_every=args.checkpoint_every,
+    )
+
+
+def _task_names() -> list[str]:
+    from sili_robots.tasks import TASKS
+
+    return list(TASKS)
+
+
+def run(args: argparse.Namespace) -> int:
+    from sili_robots.training import resume, train, write_summary
+
+    if args.resume is not None:
+        read_config(args.resume)  # a clear error when it is not a run
+        run_dir = resume(args.resume, progress=not args.no_progress)
+    else:
+        cfg = config_from_args(args)
+        if args.out is None:
+            raise ConfigError("--out RUN_DIR is required for a new run")
+        if (args.out / CONFIG).exists():
+            if not args.overwrite:
+                raise ConfigError(
+                    f"{args.out} already holds a run; use --resume {args.out} to "
+                    "continue it or --overwrite to replace it"
+                )
+            shutil.rmtree(args.out)
+        _check_env_builds(cfg)
+        run_dir = train(cfg, args.out, progress=not args.no_progress)
+    summary = write_summary(run_dir)
+    print(json.dumps({"run_dir": str(run_dir), **summary}, indent=2))
+    return 0
+
+
+def _check_env_builds(cfg: RunConfig) -> None:
+    """Fail fast, with the task's own message, on bad task arguments (e.g. a controller)."""
+    from sili_robots.training import make_run_env
+
+    try:
+        env = make_run_env(cfg)
+    except TypeError as err:
+        raise ConfigError(f"bad argument for task {cfg.task!r}: {err}") from None
+    env.close()

@@ -1,0 +1,116 @@
+"""Running a trained agent: evaluation without exploration, and policies for previews.
+
+A trained agent continues the repeated game it was trained in (restored from the checkpoint),
+so its latents and the opponent's strategy carry on where training left them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from sili_robots.agent import SILIAgent
+from sili_robots.errors import ConfigError
+from sili_robots.runs import RunConfig, load_checkpoint, read_config
+from sili_robots.tasks.base import resume_game
+
+
+class AgentFeedback(gym.Wrapper):
+    """Feeds each finished interaction back to the agent so z^{j+1} = E(tau^j) is inferred.
+
+    The first ``reset`` (whatever its seed) continues the checkpointed game instead of
+    starting a new one.
+    """
+
+    def __init__(self, env: gym.Env, agent: SILIAgent, game_state: dict[str, Any]) -> None:
+        super().__init__(env)
+        self.agent = agent
+        self._game_state = game_state
+        self._steps: list[tuple[np.ndarray, np.ndarray, float]] = []
+        self._first_obs: np.ndarray | None = None
+        self._first_info: dict[str, Any] = {}
+
+    def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
+        if self._game_state is not None:
+            obs, info = resume_game(self.env, self._game_state)
+            self._game_state = None
+        else:
+            obs, info = self.env.reset(**kwargs)
+            if self._first_obs is not None and len(self._steps) == self.env.unwrapped.horizon:
+                o = np.stack([self._first_obs, *[s[0] for s in self._steps]])
+                a = np.stack([s[1] for s in self._steps])
+                r = np.array([s[2] for s in self._steps], np.float32)
+                self.agent.observe_interaction(
+                    o,
+                    a,
+                    r,
+                    obs,
+                    float(self._first_info["strategy_id"]),
+                    np.asarray(self._first_info["strategy"], np.float32),
+                    info,
+                    refresh=False,
+                )
+        self._steps, self._first_obs, self._first_info = [], obs, info
+        return obs, info
+
+    def step(self, action: np.ndarray):
+        obs, r, term, trunc, info = self.env.step(action)
+        self._steps.append((obs, np.asarray(action, np.float32), float(r)))
+        return obs, r, term, trunc, info
+
+
+def load_trained(run_dir: Path) -> tuple[RunConfig, gym.Env, SILIAgent, dict[str, Any]]:
+    """Rebuild a run's env and agent from its config and last checkpoint."""
+    from sili_robots.training import build_agent, make_run_env
+
+    cfg = read_config(run_dir)
+    state = load_checkpoint(run_dir)
+    if state is None:
+        raise ConfigError(f"{run_dir} has no checkpoint yet (no checkpoint.pt); train it first")
+    env = make_run_env(cfg)
+    agent = build_agent(cfg, env)
+    agent.load_state_dict(state["agent"])
+    return cfg, env, agent, state["game"]
+
+
+def policy_from_run(
+    run_dir: Path,
+) -> tuple[str, dict[str, Any], Callable[[gym.Env], tuple[gym.Env, Callable]]]:
+    """(task name, env kwargs, make_policy) where ``make_policy(env)`` returns the env to step
+    (a wrapper feeding the agent) and a deterministic ``policy(env, obs) -> action``."""
+    from sili_robots.training import run_env_kwargs
+
+    cfg = read_config(run_dir)
+    kwargs = run_env_kwargs(cfg)
+
+    def make_policy(env: gym.Env) -> tuple[gym.Env, Callable]:
+        _, own_env, agent, game = load_trained(run_dir)
+        own_env.close()
+        wrapped = AgentFeedback(env, agent, game)
+        return wrapped, lambda _env, obs: agent.act(obs, deterministic=True)
+
+    return cfg.task, kwargs, make_policy
+
+
+def evaluate(run_dir: Path, interactions: int) -> dict[str, float]:
+    """Mean task reward and fraction of interactions whose true strategy stayed the same,
+    acting deterministically (no exploration, no learning)."""
+    from sili_robots.rollout import run_interactions
+
+    _, env, agent, game = load_trained(run_dir)
+    wrapped = AgentFeedback(env, agent, game)
+    try:
+        summary = run_interactions(
+            wrapped, lambda _env, obs: agent.act(obs, deterministic=True), interactions, seed=None
+        )
+    finally:
+        wrapped.close()
+    return {
+        "interactions": interactions,
+        "mean_task_reward": float(np.mean([s.task_reward for s in summary])),
+        "fraction_strategy_unchanged": float(np.mean([not s.strategy_changed for s in summary])),
+    }

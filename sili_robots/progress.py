@@ -1,0 +1,33 @@
+"""A rich progress bar for training: interactions, recent task reward and true stability."""
+
+from __future__ import annotations
+
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+
+class TrainingProgress:
+    """Thin wrapper so the training loop does not care whether a bar is shown."""
+
+    def __init__(self, total: int, completed: int, enabled: bool = True, label: str = "") -> None:
+        self._progress = None
+        if enabled:
+            self._progress = Progress(
+                TextColumn("[bold]{task.description}"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn("reward {task.fields[reward]:>8.2f}"),
+                TextColumn("stable {task.fields[stable]:.2f}"),
+                TimeRemainingColumn(),
+            )
+            self._task = self._progress.add_task(
+                label, total=total, completed=completed, reward=float("nan"), stable=float("nan")
+            )
+            self._progress.start()
+
+    def advance(self, reward: float, stable: float) -> None:
+        if self._progress is not None:
+            self._progress.update(self._task, advance=1, reward=reward, stable=stable)
+
+    def close(self) -> None:
+        if self._progress is not None:
+            self._progress.stop()

@@ -1,0 +1,138 @@
+"""Run directories: the resolved config, a tidy per-interaction CSV, and checkpoints.
+
+A run directory holds ``config.json`` (everything needed to rebuild the run, plus package
+versions), ``metrics.csv`` (one row per interaction), ``checkpoint.pt`` (written atomically
+every ``checkpoint_every`` interactions) and, once finished, ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import platform
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from sili_robots.agent.config import AgentConfig
+from sili_robots.errors import ConfigError
+
+CONFIG, METRICS, CHECKPOINT, SUMMARY = "config.json", "metrics.csv", "checkpoint.pt", "summary.json"
+METRIC_COLUMNS = (
+    "interaction",
+    "task_reward",
+    "stability_reward",
+    "strategy_changed",
+    "strategy_id",
+    "latent_category",
+    "latent_changed",
+    "beta",
+    "latent_loss",
+    "critic_loss",
+    "actor_loss",
+    "alpha",
+    "wall_time",
+)
+
+
+@dataclass
+class RunConfig:
+    """One training run, fully resolved."""
+
+    task: str
+    method: str
+    seed: int
+    interactions: int
+    agent: AgentConfig
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    checkpoint_every: int = 50
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["agent"] = self.agent.to_dict()
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> RunConfig:
+        d = dict(d)
+        d["agent"] = AgentConfig.from_dict(d["agent"])
+        return cls(**d)
+
+
+def versions() -> dict[str, str]:
+    import gymnasium
+    import numpy
+
+    import sili_robots
+
+    return {
+        "sili_robots": sili_robots.__version__,
+        "torch": torch.__version__,
+        "numpy": numpy.__version__,
+        "gymnasium": gymnasium.__version__,
+        "python": platform.python_version(),
+    }
+
+
+def write_config(run_dir: Path, cfg: RunConfig) -> None:
+    run_dir.mkdir(parents=True, exist_ok=True)
+    payload = {"run": cfg.to_dict(), "versions": versions()}
+    (run_dir / CONFIG).write_text(json.dumps(payload, indent=2, sort_keys=True))
+
+
+def read_config(run_dir: Path) -> RunConfig:
+    path = Path(run_dir) / CONFIG
+    if not path.is_file():
+        raise ConfigError(
+            f"{run_dir} is not a run directory (no {CONFIG}); "
+            "give a directory written by `sili train --out`"
+        )
+    return RunConfig.from_dict(json.loads(path.read_text())["run"])
+
+
+class MetricsWriter:
+    """Append-only CSV; on resume, rows past the checkpoint are dropped first."""
+
+    def __init__(self, run_dir: Path, keep_rows: int | None = None) -> None:
+        self.path = Path(run_dir) / METRICS
+        if keep_rows is not None and self.path.exists():
+            with self.path.open() as f:
+                rows = list(csv.DictReader(f))[:keep_rows]
+            self._rewrite(rows)
+        elif keep_rows is None or not self.path.exists():
+            self._rewrite([])
+        self._file = self.path.open("a", newline="")
+        self._writer = csv.DictWriter(self._file, METRIC_COLUMNS)
+
+    def _rewrite(self, rows: list[dict[str, str]]) -> None:
+        tmp = self.path.with_suffix(".tmp")
+        with tmp.open("w", newline="") as f:
+            w = csv.DictWriter(f, METRIC_COLUMNS)
+            w.writeheader()
+            w.writerows(rows)
+        os.replace(tmp, self.path)
+
+    def write(self, row: dict[str, Any]) -> None:
+        self._writer.writerow({k: row.get(k, "") for k in METRIC_COLUMNS})
+        self._file.flush()
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def save_checkpoint(run_dir: Path, state: dict[str, Any]) -> None:
+    """Write atomically: a kill during the write leaves the previous checkpoint intact."""
+    path = Path(run_dir) / CHECKPOINT
+    tmp = path.with_suffix(".tmp")
+    torch.save(state, tmp)
+    os.replace(tmp, path)
+
+
+def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
+    path = Path(run_dir) / CHECKPOINT
+    if not path.is_file():
+        return None
+    return torch.load(path, weights_only=False)

@@ -1,0 +1,212 @@
+"""The SILI agent's pieces, each checked against what it must do."""
+
+import io
+
+import numpy as np
+import pytest
+import torch
+
+from sili_robots.agent import SILIAgent, method_config
+from sili_robots.agent.latent import LatentModel, gumbel_straight_through, transitions
+from sili_robots.agent.sac import SAC
+from sili_robots.errors import ConfigError
+
+H = 5
+
+
+def _agent(method="sili", latent="discrete", **kw):
+    cfg = method_config(
+        method, latent, latent_dim=4, hidden=32, batch_interactions=4, batch_steps=H, **kw
+    )
+    return SILIAgent(cfg, obs_dim=3, act_dim=2, horizon=H, strategy_dim=2, seed=0)
+
+
+def _fill(agent, n, flags=None):
+    rng = np.random.default_rng(1)
+    for j in range(n):
+        obs = rng.normal(size=(H + 1, 3)).astype(np.float32)
+        nxt = rng.normal(size=3).astype(np.float32)
+        if flags is not None:
+            obs[:, -1], nxt[-1] = flags[j][:-1], flags[j][-1]
+        agent.observe_interaction(
+            obs,
+            rng.uniform(-1, 1, (H, 2)).astype(np.float32),
+            rng.normal(size=H).astype(np.float32),
+            nxt,
+            float(j % 2),
+            np.array([j % 2, 0], np.float32),
+            {"strategy": np.array([(j + 1) % 2, 0], np.float32)},
+        )
+
+
+def test_gumbel_straight_through_is_one_hot_forward_with_gradients_backward():
+    logits = torch.randn(64, 10, requires_grad=True)
+    z = gumbel_straight_through(logits)
+    assert torch.all((z == 0) | (z == 1)) and torch.all(z.sum(-1) == 1)
+    (z * torch.arange(10.0)).sum().backward()
+    assert logits.grad is not None and logits.grad.abs().sum() > 0
+
+
+def test_discrete_stability_reward_is_minus_one_on_category_change_at_last_step():
+    agent = _agent()
+    _fill(agent, 6)
+    agent.Z = np.eye(4, dtype=np.float32)[[0, 1, 1, 2, 2, 2, 3]]  # z^0..z^6
+    j = np.array([[1], [2], [3], [4], [0]])
+    t = np.full((5, 1), H - 1)
+    r = agent._stability_rewards(j, t, t == H - 1, np.zeros((5, 1, 3)))
+    scale = agent.stability_scale
+    # z^1->z^2 same (0), z^2->z^3 change (-1), z^3->z^4 same, z^4->z^5 same, j=0: no history
+    np.testing.assert_allclose(r[:, 0], [0, -scale, 0, 0, 0])
+    mid = agent._stability_rewards(j, t - 1, t - 1 == H - 1, np.zeros((5, 1, 3)))
+    assert np.all(mid == 0)  # credited only on the step that crosses into the next interaction
+
+
+def test_continuous_stability_reward_is_euclidean():
+    agent = _agent(latent="continuous")
+    _fill(agent, 3)
+    agent.Z = np.array([[0, 0, 0, 0], [1, 0, 0, 0], [1, 3, 4, 0], [1, 3, 4, 0]], np.float32)
+    j = np.array([[1], [2]])
+    t = np.full((2, 1), H - 1)
+    r = agent._stability_rewards(j, t, t == H - 1, np.zeros((2, 1, 3)))
+    np.testing.assert_allclose(r[:, 0], [-5 * agent.stability_scale, 0])
+
+
+def test_partial_stability_reward_is_the_observed_flag_each_step():
+    agent = _agent(latent="partial")
+    flags = [np.array([0, 1, 0, 0, 1, 0, 1], np.float32)] * 3  # obs_0..obs_H, next_first
+    _fill(agent, 3, flags)
+    x, _, r, x2 = agent.sample_batches(1, beta=1.0)
+    # reward = -flag of the next observation, whatever the step
+    np.testing.assert_allclose(r[0].numpy(), -x2[0, :, 2].numpy())
+    assert agent.n_latents == 0 and x.shape[-1] == 3
+    stats = agent._stats(0, np.array([0, 0, 1], np.float32))
+    assert stats.stability_reward == -3.0  # flags at t=2, t=5 and the boundary
+
+
+def test_true_latent_mode_uses_the_true_strategy():
+    agent = _agent(latent="true")
+    agent.begin_game({"strategy": np.array([0, 0], np.float32)})
+    _fill(agent, 4)
+    assert agent.zdim == 2
+    np.testing.assert_array_equal(agent.Z[1:, 0], [1, 0, 1, 0])
+
+
+def test_bootstrap_across_boundary_uses_next_interactions_latents_and_first_obs():
+    agent = _agent()
+    _fill(agent, 6)
+    agent.Z = np.eye(4, dtype=np.float32)[[0, 1, 2, 3, 0, 1, 2]]
+    x, _, _, x2 = agent.sample_batches(50, beta=0.5)
+    x, x2 = x.reshape(-1, x.shape[-1]).numpy(), x2.reshape(-1, x2.shape[-1]).numpy()
+    b = agent.buffer
+    hits = 0
+    for row, row2 in zip(x, x2, strict=True):
+        match = np.where((b.obs[:, :-1] == row[:3]).all(-1))
+        j, t = int(match[0][0]), int(match[1][0])
+        np.testing.assert_array_equal(row[3:7], agent.Z[j])  # z^j
+        if t == H - 1:
+            hits += 1
+            np.testing.assert_array_equal(row2[:3], b.next_first[j])
+            np.testing.assert_array_equal(row2[3:7], agent.Z[j + 1])  # z^{j+1}
+            np.testing.assert_array_equal(row2[7:11], agent.Z[j])  # z^j as the previous one
+        else:
+            np.testing.assert_array_equal(row2[:3], b.obs[j, t + 1])
+            np.testing.assert_array_equal(row2[3:7], agent.Z[j])
+    assert hits > 0
+
+
+def test_one_sac_update_lowers_critic_loss_on_a_fixed_batch():
+    torch.manual_seed(0)
+    sac = SAC(5, 2, hidden=64, lr=1e-3)
+    x, a, r, x2 = (
+        torch.randn(128, 5),
+        torch.rand(128, 2) * 2 - 1,
+        torch.randn(128),
+        torch.randn(128, 5),
+    )
+    with torch.no_grad():
+        a2, logp2 = sac.actor.sample(x2)
+    before = float(sac.critic_loss(x, a, r, x2, a2, logp2).detach())
+    sac.update(x, a, r, x2)
+    after = float(sac.critic_loss(x, a, r, x2, a2, logp2).detach())
+    assert after < before
+
+
+def test_latent_model_learns_two_strategies():
+    """A random walk with reward -|x - g_z|; the strategy flips when the walk ends left of 0.
+    The encoder must recover z^j from tau^{j-1} (z^{j-1} from the rewards, the flip from the
+    last state) with no label, only by making the decoder's predictions good."""
+    torch.manual_seed(0)
+    rng = np.random.default_rng(0)
+    goals = np.array([-1.0, 1.0])
+    n, h = 400, 10
+    act = rng.uniform(-1, 1, (n, h, 1)).astype(np.float32)
+    pos = np.concatenate([np.zeros((n, 1, 1)), np.cumsum(0.3 * act, 1)], 1)
+    time_frac = np.broadcast_to((np.arange(h + 1) / h)[None, :, None], (n, h + 1, 1))
+    obs = np.concatenate([pos, time_frac], -1).astype(np.float32)
+    z = np.zeros(n, int)
+    for j in range(1, n):
+        z[j] = 1 - z[j - 1] if obs[j - 1, -1, 0] < 0 else z[j - 1]
+    rew = -np.abs(obs[:, 1:, 0] - goals[z][:, None]).astype(np.float32)
+    model = LatentModel(2, 1, latent_dim=4, hidden=64, kind="discrete")
+    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+    o, a_, r_ = torch.from_numpy(obs), torch.from_numpy(act), torch.from_numpy(rew)
+    tr = transitions(o, a_, r_)
+
+    def loss_on(idx):
+        return model.loss(tr[idx - 1], o[idx, :-1], a_[idx], o[idx, 1:], r_[idx])
+
+    everything = torch.arange(1, n)
+    first = float(loss_on(everything).detach())
+    for _ in range(1000):
+        loss = loss_on(torch.from_numpy(rng.integers(1, n, 64)))
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    with torch.no_grad():
+        last = float(loss_on(everything))
+        cats = model.encode(tr[:-1]).argmax(-1).numpy()
+    truth = z[1:]
+    # purity: each predicted category stands for one true strategy
+    purity = sum(np.bincount(truth[cats == c]).max() for c in np.unique(cats)) / len(truth)
+    assert last < 0.2 * first, (first, last)
+    assert purity > 0.85, purity
+
+
+def test_checkpoint_round_trip_restores_everything():
+    a1 = _agent()
+    _fill(a1, 8)
+    a1.update(8)
+    blob = io.BytesIO()
+    torch.save(a1.state_dict(), blob)  # through bytes, as a checkpoint file is
+    blob.seek(0)
+    a2 = _agent()
+    a2.load_state_dict(torch.load(blob, weights_only=False))
+    obs = np.ones(3, np.float32)
+    torch.manual_seed(3)
+    act1 = a1.act(obs)
+    torch.manual_seed(3)
+    np.testing.assert_allclose(act1, a2.act(obs))
+    np.testing.assert_array_equal(a1.Z, a2.Z)
+    np.testing.assert_array_equal(a1.buffer.obs[: a1.buffer.n], a2.buffer.obs[: a2.buffer.n])
+    # identical next updates: the RNGs were restored too
+    torch.manual_seed(4)
+    l1 = a1.update(9)
+    torch.manual_seed(4)
+    assert a2.update(9) == pytest.approx(l1)
+
+
+def test_methods_condition_on_the_right_inputs():
+    assert _agent("sili").in_dim == 3 + 2 * 4
+    assert _agent("lili").in_dim == 3 + 4
+    assert _agent("sac").in_dim == 3
+    assert _agent("stable").cfg.beta == 1.0
+    assert _agent("lili").cfg.beta == 0.0
+
+
+def test_bad_config_is_named():
+    with pytest.raises(ConfigError, match=r"beta must be in \[0, 1\], got 1.5"):
+        method_config("sili", beta=1.5)
+    with pytest.raises(ConfigError, match="unknown method 'ppo'"):
+        method_config("ppo")
+    with pytest.raises(ConfigError, match="unknown latent kind 'fuzzy'"):
+        method_config("sili", "fuzzy")

@@ -1,0 +1,182 @@
+"""``sili train`` / ``sili eval`` end to end: run directories, bad input, kill and resume."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+FAST = [
+    "--set",
+    "updates_per_step=0.1",
+    "--set",
+    "hidden=32",
+    "--set",
+    "random_interactions=3",
+    "--set",
+    "latent_updates_per_interaction=2",
+    "--no-progress",
+]
+
+
+def _sili(*args, **kw):
+    return subprocess.run(
+        [sys.executable, "-m", "sili_robots.cli", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        **kw,
+    )
+
+
+def test_train_writes_a_complete_run_and_eval_reads_it(tmp_path):
+    out = tmp_path / "run"
+    res = _sili(
+        "train",
+        "--task",
+        "circle-3",
+        "--method",
+        "sili",
+        "--interactions",
+        12,
+        "--seed",
+        1,
+        "--out",
+        out,
+        "--checkpoint-every",
+        5,
+        *FAST,
+    )
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)["interactions"] == 12
+    cfg = json.loads((out / "config.json").read_text())
+    assert cfg["run"]["method"] == "sili" and cfg["run"]["seed"] == 1
+    assert cfg["run"]["agent"]["beta"] == 0.5 and cfg["run"]["agent"]["latent"] == "discrete"
+    assert "torch" in cfg["versions"]
+    df = pd.read_csv(out / "metrics.csv")
+    assert list(df["interaction"]) == list(range(12))
+    for col in (
+        "task_reward",
+        "stability_reward",
+        "strategy_changed",
+        "latent_category",
+        "critic_loss",
+        "latent_loss",
+    ):
+        assert col in df.columns
+    assert df["critic_loss"].notna().sum() > 0
+    assert (out / "checkpoint.pt").is_file()
+    ev = _sili("eval", out, "--interactions", 4)
+    assert ev.returncode == 0, ev.stderr
+    result = json.loads(ev.stdout)
+    assert result["interactions"] == 4 and 0.0 <= result["fraction_strategy_unchanged"] <= 1.0
+    assert result["mean_task_reward"] < 0
+
+
+@pytest.mark.parametrize("method", ["lili", "stable", "sac", "oracle", "smirl"])
+def test_every_method_trains(tmp_path, method):
+    out = tmp_path / method
+    res = _sili(
+        "train", "--task", "circle-3", "--method", method, "--interactions", 5, "--out", out, *FAST
+    )
+    assert res.returncode == 0, res.stderr
+    assert len(pd.read_csv(out / "metrics.csv")) == 5
+
+
+@pytest.mark.parametrize("latent", ["continuous", "partial", "true"])
+def test_every_latent_kind_trains(tmp_path, latent):
+    out = tmp_path / latent
+    res = _sili(
+        "train",
+        "--task",
+        "speaker-listener",
+        "--latent",
+        latent,
+        "--interactions",
+        5,
+        "--out",
+        out,
+        *FAST,
+    )
+    assert res.returncode == 0, res.stderr
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--task", "circle-9"], "unknown task 'circle-9'"),
+        (["--task", "circle-3", "--method", "ppo"], "invalid choice: 'ppo'"),
+        (["--task", "circle-3", "--beta", "1.5"], "outside the allowed range [0, 1]"),
+        (["--task", "circle-3", "--interactions", "0"], "need an integer >= 1"),
+        (["--task", "circle-3", "--set", "gamma=2"], "gamma must be in (0, 1]"),
+        (["--task", "circle-3", "--method", "lili", "--beta", "0.3"], "does not apply to method"),
+        (["--resume", "/nonexistent"], "is not a run directory"),
+    ],
+)
+def test_bad_input_exits_2_without_traceback(tmp_path, args, message):
+    extra = [] if "--resume" in args else ["--out", str(tmp_path / "x")]
+    res = _sili("train", *args, *extra)
+    assert res.returncode == 2, res.stderr
+    assert message in res.stderr
+    assert "Traceback" not in res.stderr
+
+
+def test_eval_of_a_non_run_exits_2(tmp_path):
+    res = _sili("eval", tmp_path)
+    assert res.returncode == 2 and "is not a run directory" in res.stderr
+
+
+def test_resume_after_kill_reproduces_the_uninterrupted_run(tmp_path):
+    args = [
+        "--task",
+        "circle-3",
+        "--method",
+        "sili",
+        "--interactions",
+        30,
+        "--seed",
+        3,
+        "--checkpoint-every",
+        5,
+        *FAST,
+    ]
+    full = tmp_path / "full"
+    assert _sili("train", *args, "--out", full).returncode == 0
+    killed = tmp_path / "killed"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sili_robots.cli", "train", *map(str, args), "--out", str(killed)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    deadline = time.time() + 120
+    metrics = killed / "metrics.csv"
+    while time.time() < deadline:
+        if metrics.exists() and len(metrics.read_text().splitlines()) >= 1 + 13:
+            break
+        time.sleep(0.05)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    rows_at_kill = len(pd.read_csv(metrics))
+    assert 13 <= rows_at_kill < 30
+    res = _sili("train", "--resume", killed, "--no-progress")
+    assert res.returncode == 0, res.stderr
+    a = pd.read_csv(full / "metrics.csv").drop(columns="wall_time")
+    b = pd.read_csv(killed / "metrics.csv").drop(columns="wall_time")
+    assert len(b) == 30
+    pd.testing.assert_frame_equal(a, b)
+
+
+def test_existing_run_is_not_overwritten_silently(tmp_path):
+    out = tmp_path / "run"
+    assert (
+        _sili("train", "--task", "circle-3", "--interactions", 2, "--out", out, *FAST).returncode
+        == 0
+    )
+    res = _sili("train", "--task", "circle-3", "--interactions", 2, "--out", out, *FAST)
+    assert res.returncode == 2 and "--resume" in res.stderr
+    assert Path(out / "config.json").exists()
