@@ -1,0 +1,254 @@
+"""Preview a task from Python: record a rollout, build its meshcat scene, write HTML/PNG, serve.
+
+    from sili_robots.preview import preview
+    result = preview("circle-3", policy="scripted", interactions=3, out="p.html", png="p.png")
+
+The policy is a scripted one (``scripted`` = the task's stabilizing reference, ``random``) or a
+trained agent (``checkpoint=RUN_DIR``, through ``sili_robots.evaluation.policy_from_run``); any
+``policy(env, obs) -> action`` can also be recorded directly with ``Preview.record``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import meshcat
+import numpy as np
+
+from sili_robots.errors import ConfigError, check_choice
+from sili_robots.preview.browser import Browser
+from sili_robots.preview.build import overlay, populate, world_point
+from sili_robots.preview.html import SceneRecorder, scene_html, write_html
+from sili_robots.preview.recording import Recording, record_rollout
+from sili_robots.preview.render import Rendered, render_html
+from sili_robots.preview.scenes import TaskScene, scene_for
+from sili_robots.preview.scenes.base import Marker
+
+POLICIES = ("scripted", "random")
+SCRIPTED_KIND = {"scripted": "stabilizing", "random": "random"}
+
+
+class TeeWindow:
+    """Send every meshcat command to several windows (a live server and a recorder), so the
+    file and the live view are the same scene, byte for byte."""
+
+    def __init__(self, *windows: Any) -> None:
+        self.windows = windows
+
+    def send(self, command: Any) -> None:
+        for w in self.windows:
+            w.send(command)
+
+
+@dataclass
+class Preview:
+    """A recorded rollout and its meshcat scene."""
+
+    scene: TaskScene
+    recording: Recording
+    recorder: SceneRecorder = field(default_factory=SceneRecorder)
+
+    @classmethod
+    def record(
+        cls,
+        env: gym.Env,
+        policy: Callable[[gym.Env, np.ndarray], np.ndarray],
+        interactions: int,
+        seed: int = 0,
+        task: str = "",
+        policy_name: str = "",
+        live: meshcat.Visualizer | None = None,
+    ) -> Preview:
+        """Roll ``policy`` out on ``env`` and build the scene (also into ``live`` if given)."""
+        if isinstance(interactions, bool) or int(interactions) < 1:
+            raise ConfigError(f"interactions must be an integer >= 1, got {interactions!r}")
+        scene = scene_for(env)
+        rec = record_rollout(
+            env,
+            policy,
+            scene.snapshot,
+            int(interactions),
+            seed=seed,
+            task=task or type(env.unwrapped).__name__,
+            policy_name=policy_name,
+            static=scene.static,
+        )
+        out = cls(scene, rec)
+        window = out.recorder if live is None else TeeWindow(live.window, out.recorder)
+        populate(meshcat.Visualizer(window=window), scene, rec)
+        return out
+
+    def html(self) -> str:
+        return scene_html(self.recorder, overlay(self.scene, self.recording))
+
+    def write_html(self, path: str | Path) -> Path:
+        return write_html(self.recorder, overlay(self.scene, self.recording), path)
+
+    def markers(self, frame: int | None = None) -> list[tuple[Marker, tuple[float, ...]]]:
+        """What must be visible in ``frame`` (default: the last), with viewer-world points."""
+        f = self.recording.last if frame is None else frame
+        return [
+            (m, world_point(self.scene, self.recording, m.position))
+            for m in self.scene.markers(self.recording, f)
+        ]
+
+    def render(
+        self,
+        html_path: str | Path,
+        frame: int | None = None,
+        browser: Browser | None = None,
+        evaluate: str | None = None,
+    ) -> Rendered:
+        """Screenshot ``frame`` (default: the last) of the written HTML and check it."""
+        f = self.recording.last if frame is None else int(frame)
+        if not 0 <= f < len(self.recording):
+            raise ConfigError(
+                f"frame {frame} is outside the recording (0 to {len(self.recording) - 1})"
+            )
+        return render_html(html_path, f, self.markers(f), browser=browser, evaluate=evaluate)
+
+    def render_live(self, url: str, frame: int | None = None, browser: Browser | None = None):
+        """Screenshot ``frame`` of the scene as a live meshcat server shows it at ``url``."""
+        f = self.recording.last if frame is None else int(frame)
+        return render_html(url, f, self.markers(f), browser=browser, live_fps=self.scene.fps)
+
+
+def make_env_and_policy(
+    task: str, policy: str = "scripted", checkpoint: str | Path | None = None
+) -> tuple[str, gym.Env, Callable, str]:
+    """(task name, env to step, policy, policy label) for a scripted policy or a trained run."""
+    from sili_robots.policies import scripted_policy
+    from sili_robots.tasks import make_task, task_spec
+
+    name = task_spec(task).name
+    if checkpoint is None:
+        check_choice("preview policy", policy, POLICIES)
+        env = make_task(name)
+        try:
+            return name, env, scripted_policy(env, SCRIPTED_KIND[policy]), f"{policy} policy"
+        except BaseException:
+            env.close()
+            raise
+    policy_from_run = _policy_from_run()
+    run_dir = Path(checkpoint)
+    if not run_dir.is_dir():
+        raise ConfigError(f"checkpoint {str(checkpoint)!r} is not a run directory")
+    run_task, kwargs, make_policy = policy_from_run(run_dir)
+    if task_spec(run_task).name != name:
+        raise ConfigError(
+            f"checkpoint {str(checkpoint)!r} was trained on {run_task!r}, not {name!r}"
+        )
+    env = make_task(name, **kwargs)
+    try:
+        stepped, pol = make_policy(env)
+    except BaseException:
+        env.close()
+        raise
+    return name, stepped, pol, f"trained agent ({run_dir.name})"
+
+
+def _policy_from_run() -> Callable:
+    try:
+        from sili_robots.evaluation import policy_from_run
+    except ImportError as err:
+        raise ConfigError(
+            "--checkpoint needs sili_robots.evaluation.policy_from_run, which this installation "
+            f"does not provide ({err}); use --policy scripted|random"
+        ) from None
+    return policy_from_run
+
+
+@dataclass
+class PreviewResult:
+    """What ``preview`` produced, with wall-clock seconds per stage."""
+
+    preview: Preview
+    html: Path | None
+    png: Path | None = None
+    rendered: Rendered | None = None
+    url: str | None = None
+    seconds: dict[str, float] = field(default_factory=dict)
+
+
+def preview(
+    task: str,
+    *,
+    policy: str = "scripted",
+    checkpoint: str | Path | None = None,
+    interactions: int = 3,
+    seed: int = 0,
+    out: str | Path | None = "preview.html",
+    png: str | Path | None = None,
+    serve: bool = False,
+    serve_seconds: float | None = None,
+    on_url: Callable[[str], None] | None = None,
+) -> PreviewResult:
+    """Record ``interactions`` interactions of ``task`` and write/render/serve the preview.
+
+    ``png`` renders the last frame in headless Chromium (``out`` is written first; a temporary
+    file is used when ``out`` is None). ``serve`` starts a live meshcat server on 127.0.0.1,
+    calls ``on_url`` with its URL and blocks for ``serve_seconds`` (None: until Ctrl-C); the
+    server is stopped on every exit path.
+    """
+    from sili_robots.preview.server import LiveServer
+
+    seconds: dict[str, float] = {}
+    t0 = time.perf_counter()
+    name, env, pol, label = make_env_and_policy(task, policy, checkpoint)
+    server = LiveServer() if serve else None
+    try:
+        if server is not None:
+            server.start()
+        prev = Preview.record(
+            env,
+            pol,
+            interactions,
+            seed,
+            name,
+            label,
+            live=server.visualizer if server is not None else None,
+        )
+        seconds["record_and_build"] = time.perf_counter() - t0
+        result = PreviewResult(prev, None)
+        if out is not None or png is not None:
+            t1 = time.perf_counter()
+            result.html = _write(prev, out, png)
+            seconds["html"] = time.perf_counter() - t1
+        if png is not None:
+            t2 = time.perf_counter()
+            result.rendered = prev.render(result.html)
+            result.png = Path(png)
+            result.png.parent.mkdir(parents=True, exist_ok=True)
+            result.png.write_bytes(result.rendered.png)
+            seconds["png"] = time.perf_counter() - t2
+            if out is None:
+                result.html.unlink(missing_ok=True)
+                result.html = None
+        result.seconds = seconds
+        if server is not None:
+            result.url = server.web_url
+            if on_url is not None:
+                on_url(server.web_url)
+            server.serve(serve_seconds)
+        return result
+    finally:
+        if server is not None:
+            server.stop()
+        env.close()
+
+
+def _write(prev: Preview, out: str | Path | None, png: str | Path | None) -> Path:
+    if out is not None:
+        return prev.write_html(out)
+    import tempfile
+
+    fd, tmp = tempfile.mkstemp(prefix="sili-preview-", suffix=".html")
+    import os
+
+    os.close(fd)
+    return prev.write_html(tmp)

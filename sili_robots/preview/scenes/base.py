@@ -1,0 +1,147 @@
+"""What every task scene provides, and the animation helpers they share.
+
+A scene turns a ``Recording`` into meshcat objects animated with meshcat's timeline (one
+animation frame per recorded step), names the colours it uses (legend), writes a caption per
+frame, says where the camera goes, and lists ``Marker``s: world points with the colour a person
+should see there in a given frame. The visual checks look for exactly those.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any
+
+import meshcat
+import meshcat.transformations as tf
+import numpy as np
+from meshcat.animation import Animation
+
+from sili_robots.preview.recording import Recording
+
+#: scale used to hide an animated object (three.js dislikes an exact zero scale)
+HIDDEN = 1e-4
+
+
+@dataclass(frozen=True)
+class Marker:
+    """Something a person should see: ``color`` around world point ``position``."""
+
+    name: str
+    position: tuple[float, float, float]
+    color: int  # 0xRRGGBB as drawn (flat colour) or the base colour of a shaded body
+    radius: float  # world size around the point to look in
+    min_fraction: float = 0.25  # share of pixels within ``radius`` that must match
+    tolerance: float = 40.0  # max RGB distance counted as a match
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A perspective camera at ``position`` looking at ``target`` (world, z up)."""
+
+    position: tuple[float, float, float]
+    target: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    fov: float = 40.0
+    near: float = 0.05
+    far: float = 100.0
+
+
+class TaskScene(ABC):
+    """One task's preview. Subclasses fill in the task-specific parts."""
+
+    #: ``type(env.unwrapped).__name__`` values this scene draws
+    env_classes: tuple[str, ...] = ()
+    fps: float = 20.0
+    background: tuple[tuple[float, float, float], tuple[float, float, float]] = (
+        (0.93, 0.95, 0.97),
+        (0.80, 0.84, 0.89),
+    )
+
+    @abstractmethod
+    def snapshot(self, task: Any) -> dict[str, Any]:
+        """The state drawn in one frame, read from the unwrapped task."""
+
+    def static(self, task: Any) -> dict[str, Any]:
+        """Layout that does not change during the rollout (read once)."""
+        return {}
+
+    @abstractmethod
+    def draw(self, vis: meshcat.Visualizer, rec: Recording, anim: Animation) -> None:
+        """Create the objects under ``vis`` and add their tracks to ``anim``."""
+
+    @abstractmethod
+    def legend(self, rec: Recording) -> list[tuple[int, str]]:
+        """(colour, what it is) pairs shown over the picture."""
+
+    @abstractmethod
+    def caption(self, rec: Recording, frame: int) -> str:
+        """One line saying what is going on in ``frame``."""
+
+    @abstractmethod
+    def camera(self, rec: Recording) -> Camera:
+        """A default camera that frames the scene."""
+
+    @abstractmethod
+    def markers(self, rec: Recording, frame: int) -> list[Marker]:
+        """What must be visible, and where, when ``frame`` is shown."""
+
+    def title(self, rec: Recording) -> str:
+        return f"{rec.task} · {rec.policy} · {rec.interactions} interaction(s), H = {rec.horizon}"
+
+
+# ---------------------------------------------------------------------- animation helpers
+def translation(p: np.ndarray | tuple[float, ...]) -> np.ndarray:
+    return tf.translation_matrix(np.asarray(p, float)[:3])
+
+
+def animate_position(
+    anim: Animation, vis: meshcat.Visualizer, positions: np.ndarray, steps: bool = False
+) -> None:
+    """Key the node's position at every frame, or only around changes when ``steps``."""
+    positions = np.asarray(positions, float)
+    frames = change_frames(positions) if steps else range(len(positions))
+    for f in frames:
+        anim.at_frame(vis, f).set_property("position", "vector3", positions[f].tolist())
+    vis.set_transform(translation(positions[-1]))
+
+
+def animate_visible(anim: Animation, vis: meshcat.Visualizer, visible: np.ndarray) -> None:
+    """Show/hide the node over time (by scale, keyed only where it switches)."""
+    scales = np.where(np.asarray(visible, bool)[:, None], 1.0, HIDDEN) * np.ones((1, 3))
+    for f in change_frames(scales):
+        anim.at_frame(vis, f).set_property("scale", "vector3", scales[f].tolist())
+
+
+def animate_pose(
+    anim: Animation, vis: meshcat.Visualizer, matrices: np.ndarray, steps: bool = False
+) -> None:
+    """Key full 4x4 poses (position and orientation)."""
+    matrices = np.asarray(matrices, float)
+    flat_m = matrices.reshape(len(matrices), -1)
+    frames = change_frames(flat_m) if steps else range(len(matrices))
+    for f in frames:
+        anim.at_frame(vis, f).set_transform(matrices[f])
+    vis.set_transform(matrices[-1])
+
+
+def change_frames(values: np.ndarray) -> list[int]:
+    """Frames where a value differs from its neighbour, plus the ends: enough keys for
+    step changes under linear interpolation (the old value is held up to the frame before)."""
+    n = len(values)
+    if n == 0:
+        return []
+    keep = {0, n - 1}
+    for f in range(1, n):
+        if not np.allclose(values[f], values[f - 1]):
+            keep.update((f - 1, f))
+    return sorted(keep)
+
+
+def frame_of(rec: Recording, interaction: int, t: int) -> int:
+    """Frame index of step ``t`` of ``interaction`` (H + 1 frames per interaction)."""
+    return interaction * (rec.horizon + 1) + t
+
+
+def circle_points(radius: float, n: int = 8) -> np.ndarray:
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.column_stack([radius * np.cos(a), radius * np.sin(a)])

@@ -1,0 +1,160 @@
+"""Previews without a browser: what is recorded, what the HTML holds, bad input."""
+
+import base64
+import json
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import umsgpack
+
+from sili_robots.cli import main
+from sili_robots.errors import ConfigError
+from sili_robots.policies import scripted_policy
+from sili_robots.preview import Preview, find_chromium, make_env_and_policy, preview
+from sili_robots.preview.scenes import scene_for
+from sili_robots.rollout import run_interactions
+from sili_robots.tasks import make_task
+
+
+def _record(task, interactions=2, policy="scripted"):
+    name, env, pol, label = make_env_and_policy(task, policy)
+    try:
+        return Preview.record(env, pol, interactions, 0, name, label)
+    finally:
+        env.close()
+
+
+def _commands(html: str) -> list[dict]:
+    blob = re.search(r"var commands = (\[.*?\]);", html, re.S).group(1)
+    return [umsgpack.unpackb(base64.b64decode(c)) for c in json.loads(blob)]
+
+
+def test_recording_has_every_step_of_every_interaction():
+    prev = _record("circle-3", interactions=2)
+    rec = prev.recording
+    assert len(rec) == 2 * (rec.horizon + 1)
+    assert [f["t"] for f in rec.frames[:3]] == [0, 1, 2]
+    assert [f["interaction"] for f in rec.frames[:: rec.horizon + 1]] == [0, 1]
+    # the same policy rolled out directly visits the same positions
+    env = make_task("circle-3")
+    seen = []
+    run_interactions(
+        env,
+        scripted_policy(env, "stabilizing"),
+        2,
+        seed=0,
+        on_step=lambda obs, info: seen.append(obs[:2].copy()),
+    )
+    env.close()
+    recorded = np.array([f["ego"] for f in rec.frames if f["t"] > 0])
+    np.testing.assert_allclose(recorded, np.array(seen), atol=1e-6)
+
+
+def test_html_is_self_contained_and_animates_the_recorded_rollout():
+    prev = _record("circle-8", interactions=2)
+    html = prev.html()
+    # meshcat's viewer (three.js included) is inlined; nothing is loaded from elsewhere
+    assert "MeshCat" in html and len(html) > 500_000
+    assert not re.search(r"<(script|link|img|iframe)[^>]+(src|href)=", html)
+    assert "fetch(" not in html.split("var viewer = new MeshCat.Viewer")[1]
+    urls = set(re.findall(r"https?://[^\s\"'`)]+", html))
+    assert urls <= {"http://www.w3.org/1999/xhtml"}, urls
+    cmds = _commands(html)
+    objects = {c["path"] for c in cmds if c["type"] == "set_object"}
+    for part in ("ego", "opponent", "circle", "locations/7", "trail/dot050"):
+        assert f"/meshcat/{part}" in objects
+    (anim,) = [c for c in cmds if c["type"] == "set_animation"]
+    clip = {a["path"]: a["clip"] for a in anim["animations"]}["/meshcat/ego"]
+    (track,) = [t for t in clip["tracks"] if t["name"] == ".position"]
+    keys = {k["time"]: k["value"] for k in track["keys"]}
+    ego = prev.recording.series("ego")
+    assert len(keys) == len(ego)
+    for frame in (0, 10, 60, len(ego) - 1):
+        np.testing.assert_allclose(keys[frame][:2], ego[frame], atol=1e-9)
+    assert clip["fps"] == prev.scene.fps
+
+
+def test_any_policy_callable_is_recorded():
+    env = make_task("speaker-listener")
+    prev = Preview.record(env, lambda e, obs: np.array([1.0, 0.0]), 1, 0, "speaker-listener")
+    env.close()
+    xs = prev.recording.series("ego")[:, 0]
+    np.testing.assert_allclose(xs[:5], [0.0, 0.1, 0.2, 0.3, 0.4])
+    assert prev.recording.policy == ""
+
+
+def test_scene_for_unknown_env_names_the_known_ones():
+    class Other:
+        unwrapped = object()
+
+    with pytest.raises(ConfigError, match=r"no preview scene for task class 'object'.*CircleEnv"):
+        scene_for(Other())
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"policy": "greedy"}, "unknown preview policy 'greedy'; allowed: scripted, random"),
+        ({"interactions": 0}, "interactions must be an integer >= 1"),
+        ({"checkpoint": "/nonexistent/run"}, "is not a run directory"),
+    ],
+)
+def test_bad_preview_arguments_raise_config_error(kwargs, message, tmp_path):
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        preview("circle-3", out=tmp_path / "p.html", **kwargs)
+    assert not (tmp_path / "p.html").exists()
+
+
+def test_bad_frame_is_a_config_error(tmp_path):
+    prev = _record("circle-3", interactions=1)
+    with pytest.raises(ConfigError, match="frame 999 is outside the recording"):
+        prev.render(tmp_path / "x.html", frame=999)
+
+
+def test_missing_chromium_is_reported_with_the_install_hint(monkeypatch, tmp_path):
+    monkeypatch.setenv("PATH", str(tmp_path))
+    monkeypatch.delenv("SILI_CHROMIUM", raising=False)
+    with pytest.raises(ConfigError, match="apt-get install chromium"):
+        find_chromium()
+
+
+def test_cli_rejects_bad_input_with_exit_2(tmp_path, capsys):
+    for argv, message in [
+        (["--policy", "greedy"], "invalid choice: 'greedy'"),
+        (["--policy", "random", "--checkpoint", str(tmp_path)], "not allowed with argument"),
+        (["--interactions", "0"], "need an integer >= 1"),
+    ]:
+        with pytest.raises(SystemExit) as exc:
+            main(["preview", "circle-3", *argv])
+        assert exc.value.code == 2 and message in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["preview", "circle-4"])
+    assert "unknown task 'circle-4'" in capsys.readouterr().err
+    assert main(["preview", "circle-3", "--checkpoint", str(tmp_path / "nope")]) == 2
+    err = capsys.readouterr().err
+    assert "is not a run directory" in err and "Traceback" not in err
+
+
+def test_cli_writes_html(tmp_path):
+    out = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "sili_robots.cli",
+            "preview",
+            "circle-continuous",
+            "--interactions",
+            "2",
+            "--out",
+            str(tmp_path / "c.html"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert out.returncode == 0, out.stderr
+    assert "frames=102" in out.stdout and "self-contained" in out.stdout
+    assert (tmp_path / "c.html").stat().st_size > 500_000

@@ -1,0 +1,141 @@
+"""The live meshcat server: serves the same scene, and never outlives its parent.
+
+meshcat 0.3.2's ``Visualizer.close()`` is broken; these tests check that no server process is
+left behind on a normal exit, an error, Ctrl-C, SIGTERM, or when the parent is killed outright.
+"""
+
+import base64
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from sili_robots.preview import Browser, LiveServer, Preview, make_env_and_policy, preview
+from sili_robots.preview import api as preview_api
+
+
+def _alive(pid: int) -> bool:
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state not in "ZX"
+
+
+def _wait_dead(pid: int, timeout: float = 10.0) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if not _alive(pid):
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def _children_running(parent: int, needle: str) -> list[int]:
+    out = []
+    for d in Path("/proc").glob("[0-9]*"):
+        try:
+            stat = (d / "stat").read_text().rsplit(")", 1)[1].split()
+            cmd = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        if int(stat[1]) == parent and needle in cmd and stat[0] not in "ZX":
+            out.append(int(d.name))
+    return out
+
+
+def test_live_server_serves_the_same_scene_and_stops(tmp_path):
+    with LiveServer() as server:
+        pid = server.pid
+        assert _alive(pid) and server.web_url.startswith("http://127.0.0.1:")
+        name, env, pol, label = make_env_and_policy("circle-3")
+        prev = Preview.record(env, pol, 2, 0, name, label, live=server.visualizer)
+        env.close()
+        # meshcat's own static_html() from the server holds exactly the file's commands
+        served = set(re.findall(r'base64,([A-Za-z0-9+/=]+)"', server.visualizer.static_html()))
+        assert served == {base64.b64encode(c).decode() for c in prev.recorder.commands()}
+        # and a browser pointed at the server sees the scene where it belongs
+        with Browser() as b:
+            shot = prev.render_live(server.web_url, browser=b)
+        assert shot.problems() == []
+        assert any(u.startswith(server.web_url) for u in shot.page.requests)
+    assert _wait_dead(pid)
+
+
+def test_server_stops_when_building_the_preview_fails(monkeypatch, tmp_path):
+    started = []
+    real_start = LiveServer.start
+
+    def spy(self):
+        started.append(self)
+        return real_start(self)
+
+    def boom(*args, **kwargs):
+        raise RuntimeError("simulated failure while building the scene")
+
+    monkeypatch.setattr(LiveServer, "start", spy)
+    monkeypatch.setattr(preview_api.Preview, "record", boom)
+    with pytest.raises(RuntimeError, match="simulated failure"):
+        preview("circle-3", out=tmp_path / "p.html", serve=True)
+    (server,) = started
+    assert server.proc is None  # stopped
+    assert not _children_running(os.getpid(), "meshcat_child")
+
+
+def test_server_stops_after_serving_for_a_while(tmp_path):
+    urls = []
+    result = preview(
+        "speaker-listener",
+        interactions=1,
+        out=None,
+        serve=True,
+        serve_seconds=0.3,
+        on_url=urls.append,
+    )
+    assert urls == [result.url] and result.url.startswith("http://127.0.0.1:")
+    assert not _children_running(os.getpid(), "meshcat_child")
+
+
+def _serve_cli(tmp_path):
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "sili_robots.cli",
+            "preview",
+            "circle-3",
+            "--interactions",
+            "1",
+            "--out",
+            str(tmp_path / "p.html"),
+            "--serve",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    line = proc.stdout.readline()
+    assert line.startswith("meshcat server: http://127.0.0.1:"), line + proc.stderr.read()
+    (server,) = _children_running(proc.pid, "meshcat_child")
+    return proc, server
+
+
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 128 + 15)])
+def test_ctrl_c_and_sigterm_stop_the_server(sig, code, tmp_path):
+    proc, server = _serve_cli(tmp_path)
+    proc.send_signal(sig)
+    assert proc.wait(timeout=30) == code
+    assert "Traceback" not in proc.stderr.read()
+    assert _wait_dead(server)
+
+
+def test_server_dies_with_a_killed_parent(tmp_path):
+    proc, server = _serve_cli(tmp_path)
+    proc.kill()  # no cleanup code runs in the parent
+    proc.wait(timeout=30)
+    assert _wait_dead(server)
