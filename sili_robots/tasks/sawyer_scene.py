@@ -1,0 +1,307 @@
+"""The Sawyer-Reach scene: robosuite's Sawyer, its mount and gripper, and a table arena.
+
+Built from robosuite's models (``Sawyer``, ``RethinkMount``, ``RethinkGripper``, ``TableArena``,
+merged by ``ManipulationTask``) and compiled once per process and actuation kind, because
+compiling the meshes takes about a second; every environment then gets its own ``MjData`` on the
+shared, never modified, ``MjModel``. Nothing here renders: no cameras are used, no render context
+is created.
+
+Before compiling, the arm's actuation is chosen for the controller that will drive it:
+- ``"torque"``: robosuite's own torque motors, untouched (robosuite's OSC computes torques with
+  its own gravity compensation, ``qfrc_bias``).
+- ``"position"`` / ``"velocity"``: MuJoCo joint servos (critically damped position servos, or
+  velocity servos). Gravity compensation is set in the model (``gravcomp`` on the arm's bodies,
+  routed through the actuators with ``actuatorgravcomp``), and each joint's total actuator
+  torque, compensation included, is clamped to the Sawyer's torque limits (robosuite's motor
+  ranges: 80, 80, 40, 40, 9, 9, 9 N m) with ``actuatorfrcrange``.
+The physics integrator is ``implicitfast`` for every actuation (stable with stiff servos), the
+timestep robosuite's 2 ms, and the control frequency robosuite's default 20 Hz (25 substeps).
+
+Geometry (documented choice; the paper gives none): table top at z = 0.8 m, 0.8 x 0.8 m,
+centred at the origin; the robot's base sits at x = -0.56 m as in robosuite's table tasks. The
+three goals lie 3 cm above the table on a circle of radius 0.2 m around the table centre, at 0,
+120 and 240 degrees. Every interaction starts with the gripper pointing down at (0, 0, 1.0), 0.32
+m from each goal (the same joint configuration every time; found once by inverse kinematics
+from robosuite's Sawyer ``init_qpos``). The height plane of the strategy rule is z = 0.95 m.
+"""
+
+from __future__ import annotations
+
+import logging
+import xml.etree.ElementTree as ET
+from functools import cache
+
+import mujoco
+import numpy as np
+
+from sili_robots.controllers.base import ArmSpec
+from sili_robots.errors import check_choice
+
+ACTUATIONS = ("position", "velocity", "torque")
+TIMESTEP = 0.002  # s, robosuite's SIMULATION_TIMESTEP
+CONTROL_FREQ = 20  # Hz, robosuite's default control frequency
+N_SUBSTEPS = round(1.0 / (CONTROL_FREQ * TIMESTEP))
+
+TABLE_SIZE = (0.8, 0.8, 0.05)
+TABLE_TOP_Z = 0.8
+GOAL_HEIGHT = 0.03  # above the table top
+GOAL_RADIUS = 0.2
+GOAL_ANGLES_DEG = (0.0, 120.0, 240.0)
+GOALS = np.array(
+    [
+        [
+            GOAL_RADIUS * np.cos(np.deg2rad(a)),
+            GOAL_RADIUS * np.sin(np.deg2rad(a)),
+            TABLE_TOP_Z + GOAL_HEIGHT,
+        ]
+        for a in GOAL_ANGLES_DEG
+    ]
+)
+START_EE = np.array([0.0, 0.0, 1.0])
+PLANE_Z = 0.95
+#: gripper pointing straight down (site z axis to -z), fingers opening along world x
+EE_ROTATION = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+#: Sawyer joint speed limits (rad/s), from Rethink Robotics' sawyer_description URDF
+VELOCITY_LIMITS = np.array([1.74, 1.328, 1.957, 1.957, 3.485, 3.485, 4.545])
+#: Joint servo gains, from the joint-space inertia at the start configuration (robosuite's
+#: armature dominates it: about 6.6, 3.8, 2.2, 1.8, 1.1, 0.9, 0.8 kg m^2) for a natural frequency
+#: near 25 rad/s, critically damped: kp ~ I w^2 (N m / rad), kv ~ 2 I w (N m s / rad).
+SERVO_KP = np.array([4000.0, 2400.0, 1400.0, 1200.0, 700.0, 550.0, 450.0])
+SERVO_KV = np.array([330.0, 190.0, 110.0, 90.0, 55.0, 45.0, 38.0])
+
+EE_SITE = "gripper0_right_grip_site"
+BASE_SITE = "robot0_right_center"
+
+_QUIET = (
+    "No private macro file found",
+    "It is recommended to use a private macro file",
+    "To setup, run:",
+    "Could not import robosuite_models",
+    "Could not load the mink-based whole-body IK",
+)
+
+
+class _DropKnownImportWarnings(logging.Filter):
+    """robosuite warns about optional extras on import; they do not concern this scene."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        msg = record.getMessage()
+        return not any(msg.startswith(q) for q in _QUIET)
+
+
+def quiet_robosuite_import() -> None:
+    """Install the filter on robosuite's logger (before robosuite is first imported)."""
+    logger = logging.getLogger("robosuite_logs")
+    if not any(isinstance(f, _DropKnownImportWarnings) for f in logger.filters):
+        logger.addFilter(_DropKnownImportWarnings())
+
+
+def _scene_xml(actuation: str) -> str:
+    """robosuite's models merged into one MJCF string, actuated as ``actuation`` asks."""
+    quiet_robosuite_import()
+    from robosuite.models.arenas import TableArena
+    from robosuite.models.bases import robot_base_factory
+    from robosuite.models.grippers import gripper_factory
+    from robosuite.models.robots import Sawyer
+    from robosuite.models.tasks import ManipulationTask
+
+    robot = Sawyer(idn=0)
+    robot.add_base(robot_base_factory(robot.default_base, idn=0))
+    gripper = gripper_factory(robot.default_gripper["right"], idn="0_right")
+    robot.add_gripper(gripper, robot.eef_name["right"])
+    robot.set_base_xpos(robot.base_xpos_offset["table"](TABLE_SIZE[0]))
+    arena = TableArena(table_full_size=TABLE_SIZE, table_offset=(0.0, 0.0, TABLE_TOP_Z))
+    arena.set_origin([0, 0, 0])
+    task = ManipulationTask(mujoco_arena=arena, mujoco_robots=[robot])
+
+    root = task.root
+    root.find("option").set("integrator", "implicitfast")
+    root.find("option").set("timestep", repr(TIMESTEP))
+    world = root.find("worldbody")
+    for i, goal in enumerate(GOALS):
+        ET.SubElement(
+            world,
+            "site",
+            name=f"goal{i}",
+            pos=" ".join(map(repr, goal.tolist())),
+            size="0.015",
+            rgba="0.1 0.8 0.1 0.6",
+            group="1",
+        )
+    # robosuite's Sawyer: the collision sphere of link l0 rests exactly on the base cylinder,
+    # and since the base is welded to the world MuJoCo does not filter this parent-child pair;
+    # with robosuite's impratio=20 the friction of that contact holds joint j0 almost still.
+    # The real j0 turns freely, so the pair is excluded.
+    contact = root.find("contact")
+    if contact is None:
+        contact = ET.SubElement(root, "contact")
+    ET.SubElement(contact, "exclude", body1="robot0_right_arm_base_link", body2="robot0_right_l0")
+    if actuation != "torque":
+        _replace_arm_motors(root, robot, actuation)
+    return ET.tostring(root, encoding="unicode")
+
+
+def _replace_arm_motors(root: ET.Element, robot: object, actuation: str) -> None:
+    """Swap the arm's torque motors for joint servos with model-side gravity compensation.
+
+    ``"position"`` puts two actuators on each joint, a position servo (stiffness only) and a
+    velocity servo (damping toward a velocity reference), so a controller can send a joint
+    trajectory point (q*, qdot*) and the joint gets kp (q* - q) + kv (qdot* - qdot): PD tracking
+    with velocity feed-forward, computed inside MuJoCo. ``"velocity"`` keeps only the velocity
+    servo. The joint's actuatorfrcrange clamps the sum, gravity compensation included.
+    """
+    arm_joints = list(robot.joints)
+    joints = {j.get("name"): j for j in root.iter("joint")}
+    actuator = root.find("actuator")
+    motors = [m for m in actuator.findall("motor") if m.get("joint") in arm_joints]
+    motors.sort(key=lambda m: arm_joints.index(m.get("joint")))
+    servos: list[ET.Element] = []
+    for k, motor in enumerate(motors):
+        name = motor.get("joint")
+        limit = float(motor.get("ctrlrange").split()[1])
+        joint = joints[name]
+        joint.set("actuatorfrcrange", f"{-limit} {limit}")
+        joint.set("actuatorgravcomp", "true")
+        actuator.remove(motor)
+        vmax = VELOCITY_LIMITS[k]
+        if actuation == "position":
+            servos.append(
+                ET.Element(
+                    "position",
+                    name=f"{name}_position",
+                    joint=name,
+                    kp=repr(SERVO_KP[k]),
+                    ctrlrange=joint.get("range"),
+                )
+            )
+        servos.append(
+            ET.Element(
+                "velocity",
+                name=f"{name}_velocity",
+                joint=name,
+                kv=repr(SERVO_KV[k]),
+                ctrlrange=f"{-vmax} {vmax}",
+            )
+        )
+    for i, el in enumerate(servos):
+        actuator.insert(i, el)
+    for body in root.iter("body"):
+        if body.get("name", "").startswith(("robot0_", "gripper0_")):
+            body.set("gravcomp", "1")
+
+
+@cache
+def scene_model(actuation: str) -> mujoco.MjModel:
+    """The compiled scene for ``actuation`` (cached per process; treat it as read-only)."""
+    check_choice("actuation", actuation, ACTUATIONS)
+    return mujoco.MjModel.from_xml_string(_scene_xml(actuation))
+
+
+def arm_joint_names(model: mujoco.MjModel) -> tuple[str, ...]:
+    return tuple(f"robot0_right_j{i}" for i in range(7))
+
+
+@cache
+def home_qpos(actuation: str) -> np.ndarray:
+    """The start configuration: gripper down at ``START_EE``, found by mink from robosuite's
+    ``init_qpos`` (deterministic; the same for every actuation up to solver round-off)."""
+    from mink import SE3, SO3, Configuration, ConfigurationLimit, FrameTask, PostureTask, solve_ik
+
+    model = scene_model(actuation)
+    from robosuite.models.robots import Sawyer
+
+    q = model.qpos0.copy()
+    names = arm_joint_names(model)
+    adr = np.array([model.jnt_qposadr[model.joint(n).id] for n in names])
+    q[adr] = Sawyer().init_qpos
+    config = Configuration(model, q)
+    frame = FrameTask(EE_SITE, "site", position_cost=1.0, orientation_cost=1.0)
+    frame.set_target(SE3.from_rotation_and_translation(SO3.from_matrix(EE_ROTATION), START_EE))
+    posture = PostureTask(model, cost=1e-3)
+    posture.set_target(q)
+    limits = [ConfigurationLimit(model)]
+    for _ in range(500):
+        v = solve_ik(config, [frame, posture], 0.05, "daqp", damping=1e-6, limits=limits)
+        config.integrate_inplace(v, 0.05)
+        if np.linalg.norm(frame.compute_error(config)) < 1e-9:
+            break
+    out = config.q.copy()
+    out.setflags(write=False)
+    return out
+
+
+def _has_actuator(model: mujoco.MjModel, name: str) -> bool:
+    return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, name) >= 0
+
+
+class SawyerScene:
+    """One simulation of the scene: its own ``MjData`` on the shared compiled model."""
+
+    def __init__(self, actuation: str) -> None:
+        self.actuation = actuation
+        self.model = scene_model(actuation)
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        names = arm_joint_names(m)
+        jids = [m.joint(n).id for n in names]
+
+        def ids(kind: str) -> np.ndarray:
+            names_k = [f"{n}_{kind}" for n in names]
+            return np.array([m.actuator(a).id for a in names_k if _has_actuator(m, a)], int)
+
+        torque_motors = np.array(
+            [m.actuator(f"robot0_torq_right_j{i}").id for i in range(7)]
+            if actuation == "torque"
+            else [],
+            int,
+        )
+        if actuation == "torque":
+            torque = m.actuator_ctrlrange[torque_motors, 1].copy()
+        else:
+            torque = m.jnt_actfrcrange[jids, 1].copy()
+        self.arm = ArmSpec(
+            joint_names=names,
+            qpos_adr=np.array([m.jnt_qposadr[j] for j in jids]),
+            dof_adr=np.array([m.jnt_dofadr[j] for j in jids]),
+            position_actuators=ids("position"),
+            velocity_actuators=ids("velocity"),
+            torque_actuators=torque_motors,
+            ee_site=EE_SITE,
+            ee_site_id=m.site(EE_SITE).id,
+            base_site=BASE_SITE,
+            velocity_limits=VELOCITY_LIMITS.copy(),
+            torque_limits=torque,
+            home_qpos=home_qpos(actuation),
+            ee_rotation=EE_ROTATION.copy(),
+            n_substeps=N_SUBSTEPS,
+            control_dt=N_SUBSTEPS * TIMESTEP,
+        )
+        self.gripper_actuators = np.array(
+            [i for i in range(m.nu) if m.actuator(i).name.startswith("gripper0_")]
+        )
+
+    def reset(self) -> None:
+        """Put the arm at rest in the home configuration (gripper fingers closed, at rest)."""
+        mujoco.mj_resetData(self.model, self.data)
+        self.data.qpos[:] = self.arm.home_qpos
+        self.data.ctrl[:] = 0.0
+        if self.arm.position_actuators.size:
+            self.data.ctrl[self.arm.position_actuators] = self.arm.home_qpos[self.arm.qpos_adr]
+        mujoco.mj_forward(self.model, self.data)
+
+    @property
+    def ee_pos(self) -> np.ndarray:
+        return self.data.site_xpos[self.arm.ee_site_id]
+
+    def ee_velocity(self) -> np.ndarray:
+        """Linear velocity of the end-effector site (world frame, m/s)."""
+        out = np.zeros(6)
+        mujoco.mj_objectVelocity(
+            self.model, self.data, mujoco.mjtObj.mjOBJ_SITE, self.arm.ee_site_id, out, 0
+        )
+        return out[3:]
+
+    @property
+    def arm_qpos(self) -> np.ndarray:
+        return self.data.qpos[self.arm.qpos_adr]

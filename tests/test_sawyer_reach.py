@@ -1,0 +1,193 @@
+"""Sawyer-Reach on the real MuJoCo scene: contract, seeding, observation, strategy rule."""
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+from sili_robots.cli import main as cli_main
+from sili_robots.errors import ConfigError
+from sili_robots.policies import scripted_policy
+from sili_robots.rollout import run_interactions
+from sili_robots.tasks import TASKS, make_task
+from sili_robots.tasks.sawyer_reach import MAX_SPEED, SawyerReachEnv
+from sili_robots.tasks.sawyer_scene import GOALS, PLANE_Z, START_EE, TABLE_TOP_Z
+
+
+@pytest.fixture(scope="module")
+def below_plane_qpos() -> np.ndarray:
+    """A joint configuration with the end effector at goal 0, below the plane (by physics)."""
+    env = make_task("sawyer-reach").unwrapped
+    env.reset(seed=0)
+    env.goal = 0
+    policy = scripted_policy(env, "oracle")
+    obs = env._observation()
+    for _ in range(30):
+        obs, *_ = env.step(policy(env, obs))
+    assert env.scene.ee_pos[2] < PLANE_Z
+    return env.scene.data.qpos.copy()
+
+
+def _end_interaction_at(env: SawyerReachEnv, qpos: np.ndarray) -> None:
+    env.scene.data.qpos[:] = qpos
+    mujoco.mj_forward(env.scene.model, env.scene.data)
+
+
+def test_registered_with_gymnasium_and_spaces():
+    spec = TASKS["sawyer-reach"]
+    assert spec.gym_id == "sili/SawyerReach-v0"
+    env = gym.make("sili/SawyerReach-v0")
+    assert env.action_space == gym.spaces.Box(-1.0, 1.0, (3,), np.float32)
+    assert env.observation_space.dtype == np.float32
+    assert env.observation_space.shape == (7,)  # ee position, ee velocity, t/H
+    assert env.unwrapped.horizon == 50
+    env.close()
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"oracle": True}, {"strategy_flag": True}])
+def test_check_env_passes(kwargs):
+    env = make_task("sawyer-reach", **kwargs)
+    check_env(env.unwrapped, skip_render_check=True)
+
+
+def test_unknown_controller_is_a_config_error_listing_choices():
+    for build in (
+        lambda: make_task("sawyer-reach", controller="pid"),
+        lambda: gym.make("sili/SawyerReach-v0", controller="pid"),
+        lambda: SawyerReachEnv(controller="pid"),
+    ):
+        with pytest.raises(ConfigError, match=r"'pid'; allowed: mink, osc, joint_velocity"):
+            build()
+
+
+def test_observation_is_position_velocity_time_and_never_the_goal():
+    firsts = {}
+    for seed in range(12):
+        obs, info = make_task("sawyer-reach").unwrapped.reset(seed=seed)
+        firsts.setdefault(info["strategy_id"], obs)
+    assert len(firsts) == 3  # every goal drawn at least once...
+    for obs in firsts.values():  # ...and the first observation is the same for all of them
+        np.testing.assert_array_equal(obs, firsts[0])
+    obs = firsts[0]
+    np.testing.assert_allclose(obs[:3], START_EE, atol=1e-4)
+    np.testing.assert_allclose(obs[3:6], 0.0, atol=1e-6)
+    assert obs[6] == 0.0
+
+    env = make_task("sawyer-reach", oracle=True).unwrapped
+    obs, info = env.reset(seed=1)
+    np.testing.assert_allclose(obs[-3:], GOALS[info["strategy_id"]], atol=1e-6)
+    obs, reward, *_ = env.step(np.array([0.0, 0.0, -1.0]))
+    assert obs[6] == pytest.approx(1 / 50)
+    # Velocity is measured, not the command: moving down at (at most) MAX_SPEED.
+    assert -MAX_SPEED * 1.2 < obs[5] < -0.05
+    assert reward == pytest.approx(-np.linalg.norm(obs[:3] - GOALS[info["strategy_id"]]), abs=1e-5)
+
+
+def test_seed_reproduces_the_repeated_game():
+    def play(seed):
+        env = make_task("sawyer-reach").unwrapped
+        obs, info = env.reset(seed=seed)
+        env.action_space.seed(seed)
+        trace = [obs]
+        ids = [info["strategy_id"]]
+        for j in range(3):
+            if j:
+                obs, info = env.reset()
+                ids.append(info["strategy_id"])
+            for _ in range(env.horizon):
+                obs, *_ = env.step(env.action_space.sample())
+                trace.append(obs)
+        return np.array(trace), ids
+
+    a, ids_a = play(3)
+    b, ids_b = play(3)
+    c, _ = play(4)
+    np.testing.assert_array_equal(a, b)
+    assert ids_a == ids_b
+    assert not np.array_equal(a, c)
+
+
+def test_strategy_rule_above_plane_keeps_below_moves_uniformly(below_plane_qpos):
+    env = make_task("sawyer-reach").unwrapped
+    env.reset(seed=0)
+    moves = {0: [], 1: [], 2: []}
+    for _ in range(300):
+        before = env.goal
+        _end_interaction_at(env, below_plane_qpos)  # ends below the plane
+        _, info = env.reset()
+        assert env.goal != before and info["strategy_changed"]
+        moves[before].append(env.goal)
+    for before, after in moves.items():
+        others = [g for g in range(3) if g != before]
+        counts = [after.count(g) for g in others]
+        assert min(counts) > 0.3 * len(after), (before, counts)  # uniform among the other two
+    for _ in range(5):  # ends at the start pose, above the plane: the goal is kept
+        before = env.goal
+        assert env.ends_above_plane()
+        _, info = env.reset()
+        assert env.goal == before and not info["strategy_changed"]
+
+
+def test_scripted_policies_hold_or_move_the_goal_end_to_end():
+    env = make_task("sawyer-reach")
+    stable = run_interactions(env, scripted_policy(env, "stabilizing"), 4, seed=0)
+    assert all(not s.strategy_changed for s in stable[1:])
+    assert len({s.strategy_id for s in stable}) == 1
+    chase = run_interactions(env, scripted_policy(env, "oracle"), 4, seed=0)
+    assert all(s.strategy_changed for s in chase[1:])
+    # Reaching the true goal beats ending above the plane on task reward within an interaction.
+    assert np.mean([s.task_reward for s in chase]) > np.mean([s.task_reward for s in stable])
+
+
+def test_table_stops_the_gripper():
+    env = make_task("sawyer-reach").unwrapped
+    env.reset(seed=0)
+    table = env.scene.model.geom("table_collision").id
+    touched = False
+    for _ in range(env.horizon):  # push straight down into the table at full speed
+        env.step(np.array([0.0, 0.0, -1.0]))
+        d = env.scene.data
+        touched |= any(table in (d.contact[i].geom1, d.contact[i].geom2) for i in range(d.ncon))
+    assert touched
+    # The grip site sits ~1.5 cm above the fingertips; the table top is at 0.8 m.
+    assert TABLE_TOP_Z + 0.005 < env.scene.ee_pos[2] < TABLE_TOP_Z + 0.03
+
+
+def test_game_state_resumes_the_repeated_game(below_plane_qpos):
+    env = make_task("sawyer-reach").unwrapped
+    env.reset(seed=5)
+    for _ in range(3):
+        _end_interaction_at(env, below_plane_qpos)
+        env.reset()
+    saved = env.game_state()
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, (3, env.horizon, 3))
+
+    def tail(e):
+        out = []
+        for j in range(3):
+            for a in actions[j]:
+                out.append(e.step(a)[:2])
+            out.append(e.reset()[1]["strategy_id"])
+        return out
+
+    a = tail(env)
+    fresh = make_task("sawyer-reach").unwrapped
+    fresh.restore_game_state(saved)
+    b = tail(fresh)
+    for x, y in zip(a, b, strict=True):
+        if isinstance(x, tuple):
+            np.testing.assert_array_equal(x[0], y[0])
+            assert x[1] == y[1]
+        else:
+            assert x == y
+
+
+def test_cli_rollout_runs_on_sawyer(capsys):
+    assert (
+        cli_main(["rollout", "sawyer-reach", "--policy", "stabilizing", "--interactions", "2"]) == 0
+    )
+    out = capsys.readouterr().out
+    assert "task=sawyer-reach" in out
+    assert "unchanged: 1.000" in out
