@@ -17,6 +17,7 @@ from sili_robots.preview import Preview, find_chromium, make_env_and_policy, pre
 from sili_robots.preview.scenes import scene_for
 from sili_robots.rollout import run_interactions
 from sili_robots.tasks import make_task
+from sili_robots.tasks.registry import TASKS
 
 
 def _record(task, interactions=2, policy="scripted"):
@@ -84,6 +85,15 @@ def test_any_policy_callable_is_recorded():
     xs = prev.recording.series("ego")[:, 0]
     np.testing.assert_allclose(xs[:5], [0.0, 0.1, 0.2, 0.3, 0.4])
     assert prev.recording.policy == ""
+
+
+def test_every_registered_task_has_a_preview_scene():
+    for name in TASKS:
+        env = make_task(name)  # cheap: Driving starts SUMO only on reset
+        try:
+            assert scene_for(env).env_classes, name
+        finally:
+            env.close()
 
 
 def test_scene_for_unknown_env_names_the_known_ones():

@@ -4,8 +4,11 @@ Chromium is required here (CI installs Debian's ``chromium``); without it these 
 with the install hint instead of being skipped.
 """
 
+import base64
 import io
+import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -13,13 +16,22 @@ from pathlib import Path
 import meshcat
 import meshcat.transformations as tf
 import pytest
+import umsgpack
 from PIL import Image
 
 from sili_robots.preview import Browser, BrowserError, Preview, make_env_and_policy
 from sili_robots.preview.build import populate
 from sili_robots.preview.html import SceneRecorder
+from sili_robots.tasks.registry import TASKS
 
-TASKS_2D = ["circle-3", "circle-8", "circle-continuous", "circle-unequal", "speaker-listener"]
+# every registered task: a new task without a preview scene fails here
+ALL_TASKS = sorted(TASKS)
+WHAT_IS_SEEN = {
+    "circle": {"ego", "opponent", "circle"},
+    "speaker-listener": {"listener", "speaker", "true goal", "message label"},
+    "sawyer-reach": {"robot robot0_right_hand", "opponent's goal", "height plane edge"},
+    "driving": {"ego", "opponent", "road", "hazard"},
+}
 
 
 @pytest.fixture(scope="module")
@@ -28,23 +40,38 @@ def browser():
         yield b
 
 
+_CACHE: dict = {}
+
+
+def _commands(html: str) -> list[dict]:
+    blob = re.search(r"var commands = (\[.*?\]);", html, re.S).group(1)
+    return [umsgpack.unpackb(base64.b64decode(c)) for c in json.loads(blob)]
+
+
 def _record(task, interactions=2, policy="scripted"):
-    name, env, pol, label = make_env_and_policy(task, policy)
-    try:
-        return Preview.record(env, pol, interactions, 0, name, label)
-    finally:
-        env.close()
+    """A recorded preview, made once per test module run (Sawyer takes seconds)."""
+    key = (task, interactions, policy)
+    if key not in _CACHE:
+        name, env, pol, label = make_env_and_policy(task, policy)
+        try:
+            _CACHE[key] = Preview.record(env, pol, interactions, 0, name, label)
+        finally:
+            env.close()
+    return _CACHE[key]
 
 
-@pytest.mark.parametrize("task", TASKS_2D)
+def _interactions(task):
+    return 1 if task == "sawyer-reach" else 2
+
+
+@pytest.mark.parametrize("task", ALL_TASKS)
 def test_picture_shows_the_scene(task, browser, tmp_path):
-    prev = _record(task, policy="random" if task == "circle-8" else "scripted")
+    prev = _record(task, _interactions(task), "random" if task == "circle-8" else "scripted")
     html = prev.write_html(tmp_path / "p.html")
     shot = prev.render(html, browser=browser)
     assert shot.problems() == []
     seen = {r.marker.name for r in shot.markers}
-    assert {"ego", "opponent", "circle"} <= seen or {"listener", "speaker", "true goal"} <= seen
-    assert len(seen) >= 3
+    assert WHAT_IS_SEEN[task.split("-")[0] if task.startswith("circle") else task] <= seen
     # the page worked offline: only the file itself and inline data were requested
     assert shot.page.requests and all(u.startswith(("file:", "data:")) for u in shot.page.requests)
     assert Image.open(io.BytesIO(shot.png)).size == (640, 480)
@@ -65,8 +92,21 @@ def test_timeline_moves_the_ego_and_the_caption(browser, tmp_path):
     assert abs(e0[0] - e1[0]) + abs(e0[1] - e1[1]) > 40  # the ball really moved on screen
 
 
-def _variant(prev, tmp_path, draw=True, shift=None):
-    """The same preview, re-drawn empty or displaced (its markers stay where they were)."""
+def test_driving_timeline_follows_the_cars(browser, tmp_path):
+    prev = _record("driving", interactions=1)
+    html = prev.write_html(tmp_path / "d.html")
+    start = prev.render(html, frame=1, browser=browser)  # the red line is just ahead
+    assert start.problems() == []
+    assert "red line" in {r.marker.name for r in start.markers}
+    shot = prev.render(html, browser=browser)
+    assert shot.problems() == []
+    ego = prev.recording.frames
+    assert ego[prev.frame()]["ego"][0] - ego[1]["ego"][0] > 50  # 100 m further down the road
+
+
+def _variant(prev, tmp_path, draw=True, shift=None, path=""):
+    """The same preview, re-drawn empty or with the node at ``path`` displaced (its markers
+    stay where they were)."""
     scene = prev.scene
     if not draw:
         scene = type("Empty", (type(scene),), {"draw": lambda self, vis, rec, anim: None})()
@@ -74,7 +114,7 @@ def _variant(prev, tmp_path, draw=True, shift=None):
     vis = meshcat.Visualizer(window=recorder)
     populate(vis, scene, prev.recording)
     if shift is not None:
-        vis.set_transform(tf.translation_matrix(shift))
+        (vis[path] if path else vis).set_transform(tf.translation_matrix(shift))
     broken = Preview(prev.scene, prev.recording, recorder)
     return broken, broken.write_html(tmp_path / "variant.html")
 
@@ -88,13 +128,20 @@ def test_empty_scene_fails_the_same_check(browser, tmp_path):
     assert any(p.startswith("opponent not seen") for p in found)
 
 
-def test_misplaced_scene_fails_the_same_check(browser, tmp_path):
-    prev = _record("speaker-listener")
-    broken, html = _variant(prev, tmp_path, shift=[0.45, 0.3, 0.0])
+@pytest.mark.parametrize(
+    ("task", "path", "shift", "missing"),
+    [
+        ("speaker-listener", "", [0.45, 0.3, 0.0], ["listener", "speaker"]),
+        ("driving", "vehicles", [0.0, 9.0, 0.0], ["ego", "opponent"]),
+    ],
+)
+def test_misplaced_scene_fails_the_same_check(task, path, shift, missing, browser, tmp_path):
+    prev = _record(task)
+    broken, html = _variant(prev, tmp_path, shift=shift, path=path)
     found = broken.render(html, browser=browser).problems()
     assert not any("blank" in p for p in found)  # something is drawn, just not where it belongs
-    assert any(p.startswith("listener not seen") for p in found)
-    assert any(p.startswith("speaker not seen") for p in found)
+    for name in missing:
+        assert any(p.startswith(f"{name} not seen") for p in found), found
 
 
 def test_broken_page_fails_the_same_check(browser, tmp_path):
@@ -152,3 +199,45 @@ def test_browser_processes_end_with_close():
     b.close()
     assert _alive_with(profile) == []
     assert not os.path.exists(profile)
+
+
+def test_sawyer_is_drawn_from_the_models_own_geoms_and_joint_positions():
+    from sili_robots.preview import mujoco_geoms
+
+    prev = _record("sawyer-reach", 1)
+    model = prev.recording.static["model"]
+    cmds = _commands(prev.html())
+    meshes = [c for c in cmds if c["type"] == "set_object" and "/robot/" in c["path"]]
+    n_mesh_geoms = sum(
+        model.geom_type[i] == 7
+        and model.body(model.geom_bodyid[i]).name.startswith(
+            ("robot0_", "gripper0_", "fixed_mount0_")
+        )
+        for i in mujoco_geoms.visual_geom_ids(model)
+    )
+    assert n_mesh_geoms > 40 and len(meshes) >= n_mesh_geoms
+    (anim,) = [c for c in cmds if c["type"] == "set_animation"]
+    clip = {a["path"]: a["clip"] for a in anim["animations"]}["/meshcat/robot/robot0_right_l6"]
+    (track,) = [t for t in clip["tracks"] if t["name"] == ".position"]
+    keys = {k["time"]: k["value"] for k in track["keys"]}
+    poses = mujoco_geoms.body_poses(model, prev.recording.series("qpos"))
+    hand = model.body("robot0_right_l6").id
+    for frame in (0, 20, 50):
+        assert keys[frame] == pytest.approx(poses[frame, hand, :3, 3].tolist(), abs=1e-9)
+    # the hand really moved: it went down to a goal on the table
+    assert poses[:, hand, 2, 3].min() < poses[0, hand, 2, 3] - 0.1
+
+
+def test_driving_cars_follow_sumo_positions_step_by_step():
+    prev = _record("driving")
+    cmds = _commands(prev.html())
+    (anim,) = [c for c in cmds if c["type"] == "set_animation"]
+    clip = {a["path"]: a["clip"] for a in anim["animations"]}["/meshcat/vehicles/opponent"]
+    (track,) = [t for t in clip["tracks"] if t["name"] == ".position"]
+    keys = {round(k["time"], 6): k["value"][:2] for k in track["keys"]}
+    frames = prev.recording.frames
+    sub = frames[5]["sub_opponent"]  # the ten SUMO steps of decision step 5
+    assert len(sub) == 10
+    for k, p in enumerate(sub):
+        assert keys[round(4 + (k + 1) / 10, 6)] == pytest.approx(p.tolist(), abs=1e-9)
+    assert keys[0.0] == pytest.approx(frames[0]["opponent"].tolist(), abs=1e-9)

@@ -91,11 +91,21 @@ class Preview:
 
     def markers(self, frame: int | None = None) -> list[tuple[Marker, tuple[float, ...]]]:
         """What must be visible in ``frame`` (default: the last), with viewer-world points."""
-        f = self.recording.last if frame is None else frame
+        f = self.frame(frame)
         return [
-            (m, world_point(self.scene, self.recording, m.position))
+            (m, world_point(self.scene, self.recording, m.position, f))
             for m in self.scene.markers(self.recording, f)
         ]
+
+    def frame(self, frame: int | None = None) -> int:
+        """``frame``, or the scene's default picture frame; ConfigError when out of range."""
+        if frame is None:
+            return self.scene.picture_frame(self.recording)
+        if isinstance(frame, bool) or not 0 <= int(frame) < len(self.recording):
+            raise ConfigError(
+                f"frame {frame} is outside the recording (0 to {len(self.recording) - 1})"
+            )
+        return int(frame)
 
     def render(
         self,
@@ -104,17 +114,14 @@ class Preview:
         browser: Browser | None = None,
         evaluate: str | None = None,
     ) -> Rendered:
-        """Screenshot ``frame`` (default: the last) of the written HTML and check it."""
-        f = self.recording.last if frame is None else int(frame)
-        if not 0 <= f < len(self.recording):
-            raise ConfigError(
-                f"frame {frame} is outside the recording (0 to {len(self.recording) - 1})"
-            )
+        """Screenshot ``frame`` (default: the scene's picture frame) of the written HTML and
+        check it."""
+        f = self.frame(frame)
         return render_html(html_path, f, self.markers(f), browser=browser, evaluate=evaluate)
 
     def render_live(self, url: str, frame: int | None = None, browser: Browser | None = None):
         """Screenshot ``frame`` of the scene as a live meshcat server shows it at ``url``."""
-        f = self.recording.last if frame is None else int(frame)
+        f = self.frame(frame)
         return render_html(url, f, self.markers(f), browser=browser, live_fps=self.scene.fps)
 
 

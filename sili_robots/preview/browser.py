@@ -92,6 +92,8 @@ class PageResult:
     projections: list[tuple[float, float]] = field(default_factory=list)
     #: whatever the ``evaluate`` expression returned
     value: Any = None
+    #: screenshots with one meshcat node hidden, by path
+    hidden: dict[str, bytes] = field(default_factory=dict)
     #: (x0, y0, x1, y1) of HTML boxes drawn over the 3D view (captions, controls)
     covered: list[tuple[float, float, float, float]] = field(default_factory=list)
 
@@ -242,6 +244,14 @@ class Browser:
             raise BrowserError(f"page script failed: {text}")
         return res.get("result", {}).get("value")
 
+    def _screenshot(self, session: str) -> bytes:
+        """PNG of the page after two more animation frames (the scene drawn as it is now)."""
+        self.evaluate(
+            session, "new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))"
+        )
+        shot = self.call("Page.captureScreenshot", {"format": "png", "fromSurface": True}, session)
+        return base64.b64decode(shot["data"])
+
     # ------------------------------------------------------------------ pages
     def render(
         self,
@@ -253,12 +263,14 @@ class Browser:
         points: list[tuple[float, float, float]] | None = None,
         evaluate: str | None = None,
         ready_timeout: float = 30.0,
+        toggles: list[str] = (),
     ) -> PageResult:
         """Open a local HTML file (or a URL), wait for ``ready`` (a JS expression), run
         ``setup``, take a screenshot.
 
         ``points`` are projected to pixels with the page's ``viewer.camera`` (meshcat) after the
-        frame is drawn, so checks can look where the scene puts things.
+        frame is drawn, so checks can look where the scene puts things. For each meshcat path in
+        ``toggles`` a second screenshot is taken with that node hidden.
         """
         if isinstance(html, str) and html.startswith(("http://", "https://", "file://")):
             url = html
@@ -302,9 +314,12 @@ class Browser:
                 projections = [tuple(p) for p in self.evaluate(session, _project_js(list(points)))]
             value = self.evaluate(session, evaluate) if evaluate else None
             covered = self.evaluate(session, COVERED_JS)
-            shot = self.call(
-                "Page.captureScreenshot", {"format": "png", "fromSurface": True}, session
-            )
+            shot = self._screenshot(session)
+            hidden: dict[str, bytes] = {}
+            for path in dict.fromkeys(toggles):
+                self.evaluate(session, _visible_js(path, False))
+                hidden[path] = self._screenshot(session)
+                self.evaluate(session, _visible_js(path, True))
         finally:
             with contextlib.suppress(BrowserError):
                 self.call("Target.closeTarget", {"targetId": target})
@@ -328,7 +343,8 @@ class Browser:
                     errors.append(f"{entry.get('text', '')} {entry.get('url', '')}".strip())
         self._events = [e for e in self._events if e.get("sessionId") != session]
         return PageResult(
-            png=base64.b64decode(shot["data"]),
+            png=shot,
+            hidden=hidden,
             width=width,
             height=height,
             requests=requests,
@@ -337,6 +353,14 @@ class Browser:
             value=value,
             covered=[tuple(r) for r in covered],
         )
+
+
+def _visible_js(path: str, visible: bool) -> str:
+    parts = [p for p in path.split("/") if p]
+    return (
+        f"(() => {{ const n = viewer.scene_tree.find({json.dumps(parts)});"
+        f" n.object.visible = {'true' if visible else 'false'}; viewer.set_dirty(); }})()"
+    )
 
 
 def _page_errors(events: list[dict[str, Any]], session: str) -> list[str]:

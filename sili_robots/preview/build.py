@@ -42,10 +42,13 @@ def populate(vis: meshcat.Visualizer, scene: TaskScene, rec: Recording) -> Anima
     return anim
 
 
-def world_point(scene: TaskScene, rec: Recording, p: tuple[float, ...]) -> tuple[float, ...]:
-    """Where a task-frame point ends up in the viewer's world (after the camera shift)."""
-    target = scene.camera(rec).target
-    return tuple(float(a - b) for a, b in zip(p, target, strict=True))
+def world_point(
+    scene: TaskScene, rec: Recording, p: tuple[float, ...], frame: int
+) -> tuple[float, ...]:
+    """Where a task-frame point ends up in the viewer's world in ``frame`` (after the camera
+    target shift and any follow-the-action shift)."""
+    shift = np.asarray(scene.camera(rec).target, float) + scene.view_shift(rec, frame)
+    return tuple(float(a - b) for a, b in zip(p, shift, strict=True))
 
 
 def overlay(scene: TaskScene, rec: Recording) -> Overlay:

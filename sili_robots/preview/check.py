@@ -62,8 +62,11 @@ def marker_results(
     markers: list[Marker],
     centres: list[tuple[float, float]],
     edges: list[tuple[float, float]],
+    hidden: dict[str, np.ndarray] | None = None,
 ) -> list[MarkerResult]:
-    """Colour share around each marker's projected centre (``edges``: centre + radius)."""
+    """Share of matching pixels around each marker's projected centre (``edges``: centre +
+    radius). A colour marker matches its colour; a toggle marker matches where the picture
+    with its node hidden (``hidden[path]``) differs."""
     h, w, _ = rgb.shape
     yy, xx = np.mgrid[0:h, 0:w]
     out = []
@@ -73,8 +76,16 @@ def marker_results(
             out.append(MarkerResult(m, c, r, 0.0))
             continue
         inside = (xx - c[0]) ** 2 + (yy - c[1]) ** 2 <= r * r
-        dist = np.linalg.norm(rgb[inside] - np.array(hex_rgb(m.color)), axis=1)
-        frac = float((dist <= m.tolerance).mean()) if dist.size else 0.0
+        if m.toggle is not None:
+            other = (hidden or {}).get(m.toggle)
+            if other is None:
+                out.append(MarkerResult(m, c, r, 0.0))
+                continue
+            dist = np.linalg.norm(rgb[inside] - other[inside], axis=1)
+            frac = float((dist > m.tolerance).mean()) if dist.size else 0.0
+        else:
+            dist = np.linalg.norm(rgb[inside] - np.array(hex_rgb(m.color)), axis=1)
+            frac = float((dist <= m.tolerance).mean()) if dist.size else 0.0
         out.append(MarkerResult(m, c, r, frac))
     return out
 
@@ -92,9 +103,14 @@ def problems(
         found.append(blank)
     for r in results_or_none or []:
         if not r.ok:
+            what = (
+                f"change when '{r.marker.toggle}' is hidden"
+                if r.marker.toggle is not None
+                else f"have colour #{r.marker.color:06x}"
+            )
             found.append(
                 f"{r.marker.name} not seen at pixel ({r.pixel[0]:.0f}, {r.pixel[1]:.0f}): "
-                f"{r.fraction:.0%} of pixels within {r.radius_px:.0f} px have colour "
-                f"#{r.marker.color:06x}, need {r.marker.min_fraction:.0%}"
+                f"{r.fraction:.0%} of pixels within {r.radius_px:.0f} px {what}, "
+                f"need {r.marker.min_fraction:.0%}"
             )
     return found

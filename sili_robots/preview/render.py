@@ -72,13 +72,19 @@ def render_html(
             else LIVE_SEEK.format(time=int(frame) / live_fps),
             points=points + edges,
             evaluate=evaluate,
+            toggles=[f"/meshcat/{m.toggle}" for m, _ in markers if m.toggle is not None],
         )
     finally:
         if own:
             b.close()
     n = len(points)
+    hidden = {path.removeprefix("/meshcat/"): _rgb(png) for path, png in page.hidden.items()}
     results = marker_results(
-        _rgb(page.png), [m for m, _ in markers], page.projections[:n], page.projections[n:]
+        _rgb(page.png),
+        [m for m, _ in markers],
+        page.projections[:n],
+        page.projections[n:],
+        hidden,
     )
     out = Rendered(page, frame, results)
     if live_fps is not None:

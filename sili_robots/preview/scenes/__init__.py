@@ -7,9 +7,16 @@ from typing import Any
 from sili_robots.errors import ConfigError
 from sili_robots.preview.scenes.base import Camera, Marker, TaskScene
 from sili_robots.preview.scenes.circle import CircleScene
+from sili_robots.preview.scenes.driving import DrivingScene
+from sili_robots.preview.scenes.sawyer_reach import SawyerReachScene
 from sili_robots.preview.scenes.speaker_listener import SpeakerListenerScene
 
-SCENES: tuple[TaskScene, ...] = (CircleScene(), SpeakerListenerScene())
+SCENES: tuple[TaskScene, ...] = (
+    CircleScene(),
+    SpeakerListenerScene(),
+    SawyerReachScene(),
+    DrivingScene(),
+)
 
 
 def scene_for(env: Any) -> TaskScene:

@@ -33,6 +33,9 @@ class Marker:
     radius: float  # world size around the point to look in
     min_fraction: float = 0.25  # share of pixels within ``radius`` that must match
     tolerance: float = 40.0  # max RGB distance counted as a match
+    #: for shaded bodies: instead of a colour, the pixels must change when the scene node at
+    #: this path (under the scene root) is hidden, i.e. the body is what is seen there
+    toggle: str | None = None
 
 
 @dataclass(frozen=True)
@@ -84,6 +87,15 @@ class TaskScene(ABC):
     @abstractmethod
     def markers(self, rec: Recording, frame: int) -> list[Marker]:
         """What must be visible, and where, when ``frame`` is shown."""
+
+    def picture_frame(self, rec: Recording) -> int:
+        """The frame a still picture shows by default (the end of the rollout)."""
+        return rec.last
+
+    def view_shift(self, rec: Recording, frame: int) -> np.ndarray:
+        """How far the scene content is moved in ``frame`` so the camera follows the action
+        (a scene that animates its root by ``-(target + shift)`` overrides this)."""
+        return np.zeros(3)
 
     def title(self, rec: Recording) -> str:
         return f"{rec.task} · {rec.policy} · {rec.interactions} interaction(s), H = {rec.horizon}"
