@@ -1,28 +1,38 @@
 """The Sawyer-Reach scene: robosuite's Sawyer, its mount and gripper, and a table arena.
 
 Built from robosuite's models (``Sawyer``, ``RethinkMount``, ``RethinkGripper``, ``TableArena``,
-merged by ``ManipulationTask``) and compiled once per process and actuation kind, because
-compiling the meshes takes about a second; every environment then gets its own ``MjData`` on the
-shared, never modified, ``MjModel``. Nothing here renders: no cameras are used, no render context
-is created.
+merged by ``ManipulationTask``) and compiled once per process and actuation kind; every
+environment then gets its own ``MjData`` on the shared, never modified, ``MjModel``. Nothing
+here renders: no camera is used, no render context is created.
 
 Before compiling, the arm's actuation is chosen for the controller that will drive it:
 - ``"torque"``: robosuite's own torque motors, untouched (robosuite's OSC computes torques with
   its own gravity compensation, ``qfrc_bias``).
-- ``"position"`` / ``"velocity"``: MuJoCo joint servos (critically damped position servos, or
-  velocity servos). Gravity compensation is set in the model (``gravcomp`` on the arm's bodies,
-  routed through the actuators with ``actuatorgravcomp``), and each joint's total actuator
-  torque, compensation included, is clamped to the Sawyer's torque limits (robosuite's motor
-  ranges: 80, 80, 40, 40, 9, 9, 9 N m) with ``actuatorfrcrange``.
-The physics integrator is ``implicitfast`` for every actuation (stable with stiff servos), the
-timestep robosuite's 2 ms, and the control frequency robosuite's default 20 Hz (25 substeps).
+- ``"position"``: per joint a position servo and a velocity servo (PD tracking of a joint
+  trajectory point with velocity feed-forward); ``"velocity"``: the velocity servo alone. For
+  both, gravity compensation is set in the model (``gravcomp`` on the arm's bodies, routed
+  through the actuators with ``actuatorgravcomp``) and each joint's total actuator torque,
+  compensation included, is clamped to the Sawyer's torque limits (robosuite's motor ranges: 80,
+  80, 40, 40, 9, 9, 9 N m) with ``actuatorfrcrange``.
+The physics options are robosuite's (Euler integrator, 2 ms timestep, elliptic friction cones,
+impratio 20) and the control frequency robosuite's default 20 Hz (25 substeps). The servo gains
+keep the explicit part of Euler well inside its stability limit (kv dt / I is about 0.1).
+
+One change to robosuite's Sawyer: the contact between link ``l0`` and the base is excluded (see
+``_scene_xml``); left in, its friction holds the first joint almost still.
+
+Unless ``visual=True``, geoms that only render (no collision, and no mass either: every body
+carries an explicit inertial, which a test checks) and the meshes, materials and textures only
+they use are dropped before compiling: nothing here renders, the physics is unchanged, a
+physics step is cheaper and compiling takes a fraction of a second instead of over one.
 
 Geometry (documented choice; the paper gives none): table top at z = 0.8 m, 0.8 x 0.8 m,
 centred at the origin; the robot's base sits at x = -0.56 m as in robosuite's table tasks. The
 three goals lie 3 cm above the table on a circle of radius 0.2 m around the table centre, at 0,
-120 and 240 degrees. Every interaction starts with the gripper pointing down at (0, 0, 1.0), 0.32
-m from each goal (the same joint configuration every time; found once by inverse kinematics
-from robosuite's Sawyer ``init_qpos``). The height plane of the strategy rule is z = 0.95 m.
+120 and 240 degrees. Every interaction starts at rest with the gripper pointing down at
+(0, 0, 1.0), 0.26 m from each goal (the same joint configuration every time, found once by
+inverse kinematics from robosuite's Sawyer ``init_qpos``). The height plane of the strategy rule
+is z = 0.95 m.
 """
 
 from __future__ import annotations
@@ -70,6 +80,7 @@ VELOCITY_LIMITS = np.array([1.74, 1.328, 1.957, 1.957, 3.485, 3.485, 4.545])
 SERVO_KP = np.array([4000.0, 2400.0, 1400.0, 1200.0, 700.0, 550.0, 450.0])
 SERVO_KV = np.array([330.0, 190.0, 110.0, 90.0, 55.0, 45.0, 38.0])
 
+ARM_JOINTS = tuple(f"robot0_right_j{i}" for i in range(7))
 EE_SITE = "gripper0_right_grip_site"
 BASE_SITE = "robot0_right_center"
 
@@ -97,7 +108,7 @@ def quiet_robosuite_import() -> None:
         logger.addFilter(_DropKnownImportWarnings())
 
 
-def _scene_xml(actuation: str) -> str:
+def _scene_xml(actuation: str, visual: bool = False) -> str:
     """robosuite's models merged into one MJCF string, actuated as ``actuation`` asks."""
     quiet_robosuite_import()
     from robosuite.models.arenas import TableArena
@@ -116,7 +127,6 @@ def _scene_xml(actuation: str) -> str:
     task = ManipulationTask(mujoco_arena=arena, mujoco_robots=[robot])
 
     root = task.root
-    root.find("option").set("integrator", "implicitfast")
     root.find("option").set("timestep", repr(TIMESTEP))
     world = root.find("worldbody")
     for i, goal in enumerate(GOALS):
@@ -139,7 +149,26 @@ def _scene_xml(actuation: str) -> str:
     ET.SubElement(contact, "exclude", body1="robot0_right_arm_base_link", body2="robot0_right_l0")
     if actuation != "torque":
         _replace_arm_motors(root, robot, actuation)
+    if not visual:
+        _drop_render_only(root)
     return ET.tostring(root, encoding="unicode")
+
+
+def _drop_render_only(root: ET.Element) -> None:
+    """Remove geoms that neither collide nor weigh, then the assets nothing references."""
+    for parent in root.iter():
+        for geom in parent.findall("geom"):
+            if geom.get("contype") == "0" and geom.get("conaffinity") == "0":
+                parent.remove(geom)
+    asset = root.find("asset")
+    used = {g.get(k) for g in root.iter("geom") for k in ("mesh", "material")}
+    for mat in asset.findall("material"):
+        if mat.get("name") not in used:
+            asset.remove(mat)
+    used |= {m.get("texture") for m in asset.findall("material")}
+    for el in [*asset.findall("mesh"), *asset.findall("texture")]:
+        if el.get("name") not in used:
+            asset.remove(el)
 
 
 def _replace_arm_motors(root: ET.Element, robot: object, actuation: str) -> None:
@@ -192,14 +221,13 @@ def _replace_arm_motors(root: ET.Element, robot: object, actuation: str) -> None
 
 
 @cache
-def scene_model(actuation: str) -> mujoco.MjModel:
-    """The compiled scene for ``actuation`` (cached per process; treat it as read-only)."""
+def scene_model(actuation: str, visual: bool = False) -> mujoco.MjModel:
+    """The compiled scene for ``actuation`` (cached per process; treat it as read-only).
+
+    ``visual=True`` keeps robosuite's render-only meshes (for viewers); physics is the same.
+    """
     check_choice("actuation", actuation, ACTUATIONS)
-    return mujoco.MjModel.from_xml_string(_scene_xml(actuation))
-
-
-def arm_joint_names(model: mujoco.MjModel) -> tuple[str, ...]:
-    return tuple(f"robot0_right_j{i}" for i in range(7))
+    return mujoco.MjModel.from_xml_string(_scene_xml(actuation, visual))
 
 
 @cache
@@ -207,13 +235,11 @@ def home_qpos(actuation: str) -> np.ndarray:
     """The start configuration: gripper down at ``START_EE``, found by mink from robosuite's
     ``init_qpos`` (deterministic; the same for every actuation up to solver round-off)."""
     from mink import SE3, SO3, Configuration, ConfigurationLimit, FrameTask, PostureTask, solve_ik
-
-    model = scene_model(actuation)
     from robosuite.models.robots import Sawyer
 
+    model = scene_model(actuation)
     q = model.qpos0.copy()
-    names = arm_joint_names(model)
-    adr = np.array([model.jnt_qposadr[model.joint(n).id] for n in names])
+    adr = np.array([model.jnt_qposadr[model.joint(n).id] for n in ARM_JOINTS])
     q[adr] = Sawyer().init_qpos
     config = Configuration(model, q)
     frame = FrameTask(EE_SITE, "site", position_cost=1.0, orientation_cost=1.0)
@@ -243,29 +269,22 @@ class SawyerScene:
         self.model = scene_model(actuation)
         self.data = mujoco.MjData(self.model)
         m = self.model
-        names = arm_joint_names(m)
-        jids = [m.joint(n).id for n in names]
+        jids = [m.joint(n).id for n in ARM_JOINTS]
 
-        def ids(kind: str) -> np.ndarray:
-            names_k = [f"{n}_{kind}" for n in names]
-            return np.array([m.actuator(a).id for a in names_k if _has_actuator(m, a)], int)
+        def ids(names: list[str]) -> np.ndarray:
+            return np.array([m.actuator(a).id for a in names if _has_actuator(m, a)], int)
 
-        torque_motors = np.array(
-            [m.actuator(f"robot0_torq_right_j{i}").id for i in range(7)]
-            if actuation == "torque"
-            else [],
-            int,
-        )
+        torque_motors = ids([f"robot0_torq_right_j{i}" for i in range(7)])
         if actuation == "torque":
             torque = m.actuator_ctrlrange[torque_motors, 1].copy()
         else:
             torque = m.jnt_actfrcrange[jids, 1].copy()
         self.arm = ArmSpec(
-            joint_names=names,
+            joint_names=ARM_JOINTS,
             qpos_adr=np.array([m.jnt_qposadr[j] for j in jids]),
             dof_adr=np.array([m.jnt_dofadr[j] for j in jids]),
-            position_actuators=ids("position"),
-            velocity_actuators=ids("velocity"),
+            position_actuators=ids([f"{n}_position" for n in ARM_JOINTS]),
+            velocity_actuators=ids([f"{n}_velocity" for n in ARM_JOINTS]),
             torque_actuators=torque_motors,
             ee_site=EE_SITE,
             ee_site_id=m.site(EE_SITE).id,
@@ -277,12 +296,9 @@ class SawyerScene:
             n_substeps=N_SUBSTEPS,
             control_dt=N_SUBSTEPS * TIMESTEP,
         )
-        self.gripper_actuators = np.array(
-            [i for i in range(m.nu) if m.actuator(i).name.startswith("gripper0_")]
-        )
 
     def reset(self) -> None:
-        """Put the arm at rest in the home configuration (gripper fingers closed, at rest)."""
+        """Put the arm at rest in the home configuration, gripper fingers held at rest."""
         mujoco.mj_resetData(self.model, self.data)
         self.data.qpos[:] = self.arm.home_qpos
         self.data.ctrl[:] = 0.0
