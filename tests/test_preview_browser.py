@@ -241,3 +241,40 @@ def test_driving_cars_follow_sumo_positions_step_by_step():
     for k, p in enumerate(sub):
         assert keys[round(4 + (k + 1) / 10, 6)] == pytest.approx(p.tolist(), abs=1e-9)
     assert keys[0.0] == pytest.approx(frames[0]["opponent"].tolist(), abs=1e-9)
+
+
+@pytest.mark.slow
+def test_trained_agent_preview_from_a_checkpoint(tmp_path):
+    """A real (tiny) training run, then its agent previewed through policy_from_run."""
+
+    def sili(*args):
+        return subprocess.run(
+            [sys.executable, "-m", "sili_robots.cli", *args],
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+
+    run = tmp_path / "run"
+    out = sili(
+        "train", "--task", "circle-3", "--interactions", "3", "--out", str(run), "--no-progress"
+    )
+    assert out.returncode == 0, out.stderr
+    png = tmp_path / "agent.png"
+    out = sili(
+        "preview",
+        "circle-3",
+        "--checkpoint",
+        str(run),
+        "--interactions",
+        "2",
+        "--out",
+        str(tmp_path / "agent.html"),
+        "--png",
+        str(png),
+    )
+    assert out.returncode == 0, out.stderr
+    assert "policy=trained agent (run)" in out.stdout and "picture check: ok" in out.stdout
+    assert "frames=102" in out.stdout  # interactions counted from the preview's start
+    out = sili("preview", "speaker-listener", "--checkpoint", str(run))
+    assert out.returncode == 2 and "was trained on 'circle-3', not 'speaker-listener'" in out.stderr

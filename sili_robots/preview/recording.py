@@ -66,11 +66,13 @@ def record_rollout(
         seed=seed,
     )
     returns = [0.0]
+    started = [0]  # interactions begun in this recording (the game may carry an older count)
 
     def take(reward: float) -> None:
         frame = snapshot(task_env)
         frame.update(
-            interaction=int(task_env.interaction),
+            interaction=started[0] - 1,
+            game_interaction=int(task_env.interaction),
             t=int(task_env.t),
             strategy_id=float(task_env.strategy_id()),
             reward=float(reward),
@@ -80,6 +82,7 @@ def record_rollout(
 
     def acting(e: gym.Env, obs: np.ndarray) -> np.ndarray:
         if task_env.t == 0:
+            started[0] += 1
             returns[0] = 0.0
             if static is not None and not rec.static:
                 rec.static = static(task_env)

@@ -1,0 +1,112 @@
+"""Preview generation time per task, against a plain rollout of the same policy.
+
+For every task: a plain rollout (``run_interactions`` with the scripted stabilizing policy, no
+recording; the reference) and then the preview the CLI makes (``sili preview TASK --interactions
+N --png``): build the env and policy, record the rollout and build the meshcat scene, write the
+self-contained HTML, render the picture frame in headless Chromium and check it. All in one
+process, one task after the other, one Chromium for all (its start-up is timed separately).
+Per-process one-off costs (compiling Sawyer's visual model) land on the first preview of a task.
+
+    python benchmarks/bench_preview.py [--interactions 3] [--tasks circle-3 driving ...]
+                                       [--docs docs]   # also write docs/preview-TASK.png
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+from tempfile import TemporaryDirectory
+
+from sili_robots.policies import scripted_policy
+from sili_robots.preview import Browser, Preview, make_env_and_policy
+from sili_robots.rollout import run_interactions
+from sili_robots.tasks import make_task
+from sili_robots.tasks.registry import TASKS
+
+
+def plain_rollout(task: str, interactions: int, seed: int) -> float:
+    env = make_task(task)
+    try:
+        t0 = time.perf_counter()
+        run_interactions(env, scripted_policy(env, "stabilizing"), interactions, seed=seed)
+        return time.perf_counter() - t0
+    finally:
+        env.close()
+
+
+def preview_times(
+    task: str, interactions: int, seed: int, browser: Browser, out: Path, docs: Path | None
+) -> dict[str, float]:
+    t0 = time.perf_counter()
+    name, env, policy, label = make_env_and_policy(task, "scripted")
+    t1 = time.perf_counter()
+    try:
+        prev = Preview.record(env, policy, interactions, seed, name, label)
+    finally:
+        env.close()
+    t2 = time.perf_counter()
+    html = prev.write_html(out / f"{task}.html")
+    t3 = time.perf_counter()
+    shot = prev.render(html, browser=browser)
+    t4 = time.perf_counter()
+    problems = shot.problems()
+    if problems:
+        raise SystemExit(f"{task}: the picture failed its checks: {problems}")
+    if docs is not None:
+        docs.mkdir(parents=True, exist_ok=True)
+        (docs / f"preview-{task}.png").write_bytes(shot.png)
+    return {
+        "frames": len(prev.recording),
+        "env": t1 - t0,
+        "record_build": t2 - t1,
+        "html": t3 - t2,
+        "html_mb": html.stat().st_size / 1e6,
+        "png": t4 - t3,
+        "total": t4 - t0,
+        "markers": len(shot.markers),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--interactions", type=int, default=3)
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--tasks", nargs="*", default=sorted(TASKS))
+    parser.add_argument("--docs", type=Path, default=None)
+    args = parser.parse_args()
+    t0 = time.perf_counter()
+    browser = Browser().start()
+    startup = time.perf_counter() - t0
+    rows = []
+    try:
+        with TemporaryDirectory() as tmp:
+            for task in args.tasks:
+                ref = plain_rollout(task, args.interactions, args.seed)
+                rows.append(
+                    (
+                        task,
+                        ref,
+                        preview_times(
+                            task, args.interactions, args.seed, browser, Path(tmp), args.docs
+                        ),
+                    )
+                )
+    finally:
+        browser.close()
+    print(f"Chromium start-up: {startup:.2f} s; interactions per preview: {args.interactions}")
+    print(
+        "| task | frames | plain rollout (reference) | env | record + scene | HTML (size) "
+        "| PNG + checks | preview total | total / rollout |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
+    for task, ref, r in rows:
+        print(
+            f"| {task} | {r['frames']} | {ref:.2f} s | {r['env']:.2f} s | {r['record_build']:.2f} s"
+            f" | {r['html']:.2f} s ({r['html_mb']:.1f} MB) | {r['png']:.2f} s | "
+            f"{r['total']:.2f} s | {r['total'] / ref:.1f}x |"
+        )
+
+
+if __name__ == "__main__":
+    main()
