@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from sili_robots.agent import SILIAgent
+from sili_robots.diagnostics import latent_diagnostics
 from sili_robots.progress import TrainingProgress
 from sili_robots.runs import (
     SUMMARY,
@@ -171,6 +172,7 @@ def write_summary(run_dir: Path, window: int = 100) -> dict[str, Any]:
         "final_stability": float(1.0 - tail["strategy_changed"].mean()),
         "window": window,
         "wall_time_s": float(df["wall_time"].iloc[-1]) if len(df) else 0.0,
+        **latent_diagnostics(df, window),
     }
     (Path(run_dir) / SUMMARY).write_text(json.dumps(summary, indent=2))
     return summary

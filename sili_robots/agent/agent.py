@@ -69,7 +69,15 @@ class SILIAgent:
         self.sac = SAC(self.in_dim, act_dim, cfg.hidden, cfg.lr, cfg.gamma, cfg.tau)
         self.model: LatentModel | None = None
         if cfg.uses_latent_model:
-            self.model = LatentModel(obs_dim, act_dim, cfg.latent_dim, cfg.hidden, cfg.latent)
+            self.model = LatentModel(
+                obs_dim,
+                act_dim,
+                cfg.latent_dim,
+                cfg.hidden,
+                cfg.latent,
+                cfg.latent_estimator,
+                cfg.latent_usage_bonus,
+            )
             self.model_opt = torch.optim.Adam(self.model.parameters(), lr=cfg.latent_lr)
         self.buffer = InteractionBuffer(obs_dim, act_dim, horizon, strategy_dim)
         self.Z = np.zeros((1, self.zdim), np.float32)  # Z[j] = z^j; Z[0] = no history

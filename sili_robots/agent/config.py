@@ -58,9 +58,13 @@ class AgentConfig:
     updates_per_step: float = 1.0  # SAC gradient updates per environment step
     random_interactions: int = 20  # uniform random actions first (20 x 50 = 1,000 steps)
     # latent model
-    latent_lr: float = 3e-4
-    latent_updates_per_interaction: int = 10
+    latent_lr: float = 1e-3
+    latent_updates_per_interaction: int = 20
     latent_batch: int = 32  # consecutive interaction pairs per latent-model update
+    #: discrete latents: "expected" (exact expectation over categories, default) or "gumbel"
+    #: (the paper's straight-through Gumbel-Softmax); see sili_robots/agent/latent.py
+    latent_estimator: str = "expected"
+    latent_usage_bonus: float = 0.03
     #: total stability reward credited per interaction = stability_scale * R_stable
     #: (default: the horizon, i.e. the paper's per-step R_stable summed over the interaction)
     stability_scale: float | None = None
@@ -133,6 +137,10 @@ class AgentConfig:
         for name in ("updates_per_step", "random_interactions", "latent_updates_per_interaction"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if self.latent_estimator not in ("expected", "gumbel"):
+            raise ConfigError(
+                f"unknown latent_estimator {self.latent_estimator!r}; allowed: expected, gumbel"
+            )
         if not 0.0 < self.gamma <= 1.0:
             raise ConfigError(f"gamma must be in (0, 1], got {self.gamma}")
         return self

@@ -1,0 +1,42 @@
+"""Where learning fails: latent usage statistics from a run's per-interaction metrics.
+
+Row j of ``metrics.csv`` holds ``latent_category`` = argmax of z^{j+1} = E(tau^j), the agent's
+prediction of the *next* interaction's strategy, so it is compared with row j+1's true strategy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+
+def latent_diagnostics(df: pd.DataFrame, window: int = 100) -> dict[str, float]:
+    """Over the last ``window`` interactions: how the predicted latent relates to the truth.
+
+    - ``latent_entropy``: entropy (nats) of the predicted-category histogram (0 = one category).
+    - ``latent_purity``: fraction of interactions whose predicted category's most frequent true
+      strategy is their true strategy (1 = every category stands for one strategy).
+    - ``latent_change_agreement``: fraction where "my latent changed" equals "the true
+      strategy changed".
+    - ``stability_reward_paid``: mean stability reward the agent received per interaction.
+    """
+    out = {"stability_reward_paid": float(df["stability_reward"].tail(window).mean())}
+    if len(df) < 2 or (df["latent_category"] < 0).all():
+        return out
+    pred = df["latent_category"].to_numpy()[:-1][-window:]
+    true = df["strategy_id"].to_numpy()[1:][-window:]
+    pred_changed = df["latent_changed"].to_numpy()[:-1][-window:].astype(bool)
+    true_changed = df["strategy_changed"].to_numpy()[1:][-window:].astype(bool)
+    counts = np.bincount(pred)
+    p = counts[counts > 0] / counts.sum()
+    purity = sum(pd.Series(true[pred == c]).value_counts().iloc[0] for c in np.unique(pred)) / len(
+        pred
+    )
+    out.update(
+        {
+            "latent_entropy": float(-(p * np.log(p)).sum()),
+            "latent_purity": float(purity),
+            "latent_change_agreement": float(np.mean(pred_changed == true_changed)),
+        }
+    )
+    return out
