@@ -1,0 +1,61 @@
+"""``sili plot SWEEP_DIR``: the paper-style figures of a sweep (PNG and PDF)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from sili_robots.commands.common import positive_int
+from sili_robots.errors import ConfigError
+
+FORMATS = ("png", "pdf", "svg")
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "plot",
+        help="figures of a sweep: learning curves per task, the b sweep, an overview",
+        description="Rebuilds SWEEP_DIR/results.csv from the run directories, then writes per "
+        "task TASK.png/pdf (task reward, true stability, stability reward per interaction; mean "
+        "± std across seeds), TASK_beta.png/pdf where SILI ran with several b, and "
+        "overview.png/pdf.",
+    )
+    p.add_argument("sweep_dir", type=Path, metavar="SWEEP_DIR")
+    p.add_argument("--out", type=Path, help="figure directory (default: SWEEP_DIR/figures)")
+    p.add_argument(
+        "--smooth",
+        type=positive_int,
+        help="moving-average window in interactions (default: 2%% of the run length)",
+    )
+    p.add_argument(
+        "--window",
+        type=positive_int,
+        default=100,
+        help="final values (b sweep) = mean over each run's last WINDOW interactions",
+    )
+    p.add_argument("--formats", default="png,pdf", help=f"comma-separated, of {', '.join(FORMATS)}")
+    p.add_argument(
+        "--include-unfinished", action="store_true", help="also plot runs that have not finished"
+    )
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from sili_robots.plotting import plot_sweep
+
+    formats = [f.strip() for f in args.formats.split(",") if f.strip()]
+    bad = [f for f in formats if f not in FORMATS]
+    if bad or not formats:
+        raise ConfigError(
+            f"unknown figure format {bad or args.formats!r}; allowed: {', '.join(FORMATS)}"
+        )
+    for path in plot_sweep(
+        args.sweep_dir,
+        args.out,
+        smooth=args.smooth,
+        window=args.window,
+        formats=formats,
+        include_unfinished=args.include_unfinished,
+    ):
+        print(path)
+    return 0

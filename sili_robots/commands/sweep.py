@@ -1,0 +1,164 @@
+"""``sili sweep``: train tasks x methods x seeds (x b x controllers) on a process pool or Ray."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+from sili_robots.agent import LATENT_KINDS
+from sili_robots.commands.common import parse_env_kwargs, positive_int
+from sili_robots.errors import ConfigError
+from sili_robots.sweep.spec import SweepSpec, parse_betas, parse_list, parse_seeds
+
+BACKENDS = ("local", "ray")
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "sweep",
+        help="run many training runs (tasks x methods x seeds x b x controllers), resumably",
+        description="Every combination becomes one run directory under OUT/runs/; finished runs "
+        "are skipped and interrupted ones resume when the same sweep is run again. Writes "
+        "OUT/results.csv (a row per run per interaction) and OUT/runs.csv (a row per run).",
+    )
+    p.add_argument("--tasks", help="comma-separated task names, e.g. circle-3,circle-8")
+    p.add_argument("--methods", help="comma-separated methods, or 'all'")
+    p.add_argument("--seeds", default="0", help="seeds: ranges and lists, e.g. 0-4 or 0,2,7")
+    p.add_argument(
+        "--beta",
+        metavar="B1,B2,...",
+        help="stability weights b to sweep (for sili and smirl; other methods fix b)",
+    )
+    p.add_argument(
+        "--controller",
+        metavar="C1,C2,...",
+        help="controllers to sweep on the tasks that take one (e.g. sawyer-reach: mink,osc)",
+    )
+    p.add_argument("--latent", choices=LATENT_KINDS, help="latent kind (default: each task's)")
+    p.add_argument("--interactions", type=positive_int, default=1000)
+    p.add_argument("--checkpoint-every", type=positive_int, default=50)
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        dest="agent_set",
+        help="override an agent setting for every run (JSON value), repeatable",
+    )
+    p.add_argument(
+        "--env-kwarg",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="extra task constructor argument for every run (JSON value), repeatable",
+    )
+    p.add_argument("--out", type=Path, help="sweep directory (created, or continued)")
+    p.add_argument(
+        "--resume", type=Path, metavar="SWEEP_DIR", help="run the sweep recorded in SWEEP_DIR again"
+    )
+    p.add_argument("--backend", choices=BACKENDS, default="local")
+    p.add_argument(
+        "--workers",
+        type=positive_int,
+        help="parallel runs (local default: the CPU count; ray default: as the cluster allows)",
+    )
+    p.add_argument(
+        "--ray-address",
+        metavar="ADDRESS",
+        help="Ray cluster to join (e.g. auto, HOST:6379, ray://HOST:10001); default: a local one",
+    )
+    p.add_argument(
+        "--retries",
+        type=int,
+        default=0,
+        help="re-run a run whose worker died this many times (it resumes from its checkpoint)",
+    )
+    p.add_argument("--no-tensorboard", action="store_true", help="no TensorBoard scalars")
+    p.add_argument("--no-progress", action="store_true", help="no live display (log lines only)")
+    p.add_argument("--dry-run", action="store_true", help="list the runs and their state, run none")
+    p.set_defaults(run=run)
+
+
+def spec_from_args(args: argparse.Namespace) -> SweepSpec:
+    from sili_robots.agent import METHODS
+
+    if not args.tasks or not args.methods:
+        raise ConfigError("--tasks and --methods are required (or --resume SWEEP_DIR)")
+    methods = list(METHODS) if args.methods.strip() == "all" else parse_list(args.methods)
+    return SweepSpec(
+        tasks=parse_list(args.tasks),
+        methods=methods,
+        seeds=parse_seeds(args.seeds),
+        interactions=args.interactions,
+        betas=parse_betas(args.beta) if args.beta is not None else None,
+        controllers=parse_list(args.controller) if args.controller is not None else None,
+        latent=args.latent,
+        agent_overrides=parse_env_kwargs(args.agent_set, "--set"),
+        env_kwargs=parse_env_kwargs(args.env_kwarg, "--env-kwarg"),
+        checkpoint_every=args.checkpoint_every,
+    )
+
+
+def _specs_and_dir(args: argparse.Namespace) -> tuple[list[SweepSpec], Path]:
+    from sili_robots.sweep.state import recorded_specs
+
+    if args.resume is not None:
+        if args.tasks or args.methods or args.out:
+            raise ConfigError("--resume SWEEP_DIR takes no --tasks, --methods or --out")
+        return recorded_specs(args.resume), args.resume
+    if args.out is None:
+        raise ConfigError("--out SWEEP_DIR is required")
+    return [spec_from_args(args)], args.out
+
+
+def _backend(args: argparse.Namespace):
+    if args.retries < 0:
+        raise ConfigError(f"--retries must be >= 0, got {args.retries}")
+    if args.backend == "ray":
+        from sili_robots.sweep.ray_backend import RayBackend, import_ray
+
+        import_ray()  # a clear error now when Ray is not installed
+        return RayBackend(args.ray_address, args.workers, args.retries)
+    if args.ray_address:
+        raise ConfigError("--ray-address needs --backend ray")
+    from sili_robots.sweep.local import LocalBackend
+
+    return LocalBackend(args.workers or os.cpu_count() or 1, args.retries)
+
+
+def run(args: argparse.Namespace) -> int:
+    from sili_robots.sweep.runner import plan, run_sweep
+    from sili_robots.sweep.state import check_existing, run_path, run_state
+
+    specs, sweep_dir = _specs_and_dir(args)
+    if args.dry_run:
+        planned = plan(specs)
+        for run_ in planned:
+            check_existing(sweep_dir, run_)
+            print(f"{run_.name}\t{run_state(run_path(sweep_dir, run_.name))}")
+        print(f"{len(planned)} runs")
+        return 0
+    backend = _backend(args)
+    report = run_sweep(
+        specs,
+        sweep_dir,
+        backend,
+        progress=not args.no_progress,
+        tensorboard_scalars=False if args.no_tensorboard else None,
+    )
+    print(
+        json.dumps(
+            {
+                "sweep_dir": str(sweep_dir),
+                "runs": len(report.planned),
+                "already_done": len(report.skipped),
+                "done": sum(o.status == "done" for o in report.outcomes.values()),
+                "failed": report.failed,
+                "results": str(sweep_dir / "results.csv"),
+            },
+            indent=2,
+        )
+    )
+    return 0 if report.ok else 1

@@ -1,0 +1,312 @@
+"""The paper's figures from a sweep's results table.
+
+- Per task (``TASK.png/pdf``): task reward, true stability (1 - strategy_changed) and the agent's
+  stability reward per interaction, one curve per method (or method variant: b, controller,
+  latent kind when a task has several), mean across seeds with a +-1 std band, each run smoothed
+  by a trailing moving average before averaging.
+- b sweep (``TASK_beta.png/pdf``, tasks where SILI ran with two or more b): final task reward and
+  final true stability (mean over each run's last ``window`` interactions) against b, mean and
+  std across seeds.
+- ``overview.png/pdf``: every task's task reward and true stability, one row per task (the
+  layout of the paper's results figure).
+
+Figures are built on ``matplotlib.figure.Figure`` (no pyplot state, no display needed); each
+curve is a ``Line2D`` labelled with its variant, so what is drawn can be read back and checked.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from matplotlib import colormaps
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+
+from sili_robots.errors import ConfigError
+
+TASK_TITLES = {
+    "circle-3": "Circle (3 Goals)",
+    "circle-8": "Circle (8 Goals)",
+    "circle-unequal": "Circle (Unequal)",
+    "circle-continuous": "Circle (Continuous)",
+    "speaker-listener": "Detour Speaker-Listener",
+    "driving": "Driving",
+    "sawyer-reach": "Sawyer-Reach",
+}
+METHOD_ORDER = ("sili", "oracle", "lili", "stable", "sac", "smirl")
+METHOD_NAMES = {
+    "sili": "SILI",
+    "oracle": "Oracle",
+    "lili": "LILI",
+    "stable": "Stable",
+    "sac": "SAC",
+    "smirl": "SMiRL",
+}
+#: one colour family per method; variants of a method (e.g. b values) take shades of it
+METHOD_CMAPS = {
+    "sili": "Blues",
+    "oracle": "Greys",
+    "lili": "Oranges",
+    "stable": "Greens",
+    "sac": "Reds",
+    "smirl": "Purples",
+}
+METHOD_COLORS = {
+    "sili": "tab:blue",
+    "oracle": "black",
+    "lili": "tab:orange",
+    "stable": "tab:green",
+    "sac": "tab:red",
+    "smirl": "tab:purple",
+}
+#: (table column, axis label) of the per-interaction panels
+CURVE_METRICS = (
+    ("task_reward", "task reward"),
+    ("true_stability", "true stability\n(1 − P[strategy changed])"),
+    ("stability_reward", "stability reward\n(agent's, per interaction)"),
+)
+FINAL_METRICS = (("task_reward", "final task reward"), ("true_stability", "final true stability"))
+VARIANT_KEYS = ("method", "config_beta", "controller", "latent")
+
+
+def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFrame:
+    """The sweep's tidy table, rebuilt from its run directories (and written to results.csv)."""
+    from sili_robots.sweep.results import write_tables
+    from sili_robots.sweep.state import SWEEP_FILE
+
+    if not (Path(sweep_dir) / SWEEP_FILE).is_file():
+        raise ConfigError(
+            f"{sweep_dir} is not a sweep directory (no {SWEEP_FILE}); give a directory written "
+            "by `sili sweep --out`"
+        )
+    df, _ = write_tables(sweep_dir)
+    if not include_unfinished:
+        df = df[df["finished"].astype(bool)]
+    if df.empty:
+        raise ConfigError(
+            f"{sweep_dir} has no finished runs to plot yet "
+            "(--include-unfinished plots partial runs)"
+        )
+    return df
+
+
+def variant_labels(df: pd.DataFrame) -> pd.Series:
+    """A label per row naming its method, plus b / controller / latent where the rows of the
+    same method differ in them (e.g. ``SILI b=0.2``, ``SAC [osc]``)."""
+    labels = pd.Series([METHOD_NAMES.get(m, m) for m in df["method"]], index=df.index)
+    for _, rows in df.groupby("method"):
+        idx = rows.index
+        if rows["config_beta"].nunique() > 1:
+            labels[idx] += rows["config_beta"].map(lambda b: f" b={b:g}")
+        if rows["controller"].fillna("").nunique() > 1:
+            labels[idx] += rows["controller"].fillna("").map(lambda c: f" [{c or 'default'}]")
+        if rows["latent"].nunique() > 1:
+            labels[idx] += rows["latent"].map(lambda k: f" ({k})")
+    return labels
+
+
+def _variant_order(df: pd.DataFrame) -> list[tuple]:
+    keys = df[list(VARIANT_KEYS)].fillna("").drop_duplicates()
+    rank = {m: i for i, m in enumerate(METHOD_ORDER)}
+    return sorted(
+        (tuple(r) for r in keys.itertuples(index=False)),
+        key=lambda k: (rank.get(k[0], len(rank)), k[0], *k[1:]),
+    )
+
+
+def _colors(variants: list[tuple]) -> dict[tuple, object]:
+    out: dict[tuple, object] = {}
+    for method in dict.fromkeys(v[0] for v in variants):
+        mine = [v for v in variants if v[0] == method]
+        if len(mine) == 1:
+            out[mine[0]] = METHOD_COLORS.get(method, "tab:gray")
+        else:
+            cmap = colormaps[METHOD_CMAPS.get(method, "viridis")]
+            for v, x in zip(mine, np.linspace(0.4, 0.95, len(mine)), strict=True):
+                out[v] = cmap(x)
+    return out
+
+
+def default_smoothing(n_interactions: int) -> int:
+    """About 2% of the run length (at least 1): enough to read a trend, not to hide a jump."""
+    return max(1, round(n_interactions / 50))
+
+
+def curve(rows: pd.DataFrame, metric: str, window: int) -> pd.DataFrame:
+    """Mean and std across runs (seeds) per interaction of each run's trailing moving average."""
+    smoothed = (
+        rows.sort_values("interaction")
+        .groupby("run")[metric]
+        .transform(lambda s: s.rolling(window, min_periods=1).mean())
+    )
+    per_run = (
+        rows.assign(value=smoothed)
+        .pivot_table(index="interaction", columns="run", values="value", aggfunc="first")
+        .sort_index()
+    )
+    return pd.DataFrame(
+        {
+            "mean": per_run.mean(axis=1),
+            "std": per_run.std(axis=1, ddof=0),
+            "seeds": per_run.notna().sum(axis=1),
+        }
+    )
+
+
+def _draw_curves(
+    axes: Sequence[Axes], task_rows: pd.DataFrame, metrics: Sequence[tuple[str, str]], window: int
+) -> None:
+    labels = variant_labels(task_rows)
+    variants = _variant_order(task_rows)
+    colors = _colors(variants)
+    keyed = task_rows[list(VARIANT_KEYS)].fillna("").apply(tuple, axis=1)
+    for variant in variants:
+        rows = task_rows[keyed == variant]
+        label = labels[rows.index[0]]
+        style = "--" if variant[0] == "oracle" else "-"
+        for ax, (metric, _) in zip(axes, metrics, strict=True):
+            stats = curve(rows, metric, window)
+            x = stats.index.to_numpy(float)
+            mean, std = stats["mean"].to_numpy(), stats["std"].to_numpy()
+            ax.plot(x, mean, style, color=colors[variant], label=label, lw=1.6)
+            ax.fill_between(x, mean - std, mean + std, color=colors[variant], alpha=0.18, lw=0)
+    for ax, (metric, ylabel) in zip(axes, metrics, strict=True):
+        ax.set_ylabel(ylabel)
+        ax.set_gid(metric)
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("interaction")
+
+
+def _seed_note(rows: pd.DataFrame) -> str:
+    seeds = rows.groupby(list(VARIANT_KEYS), dropna=False)["seed"].nunique()
+    lo, hi = int(seeds.min()), int(seeds.max())
+    return f"{lo} seeds" if lo == hi else f"{lo}-{hi} seeds"
+
+
+def learning_curves(df: pd.DataFrame, task: str, smooth: int | None = None) -> Figure:
+    """Task reward, true stability and stability reward per interaction for every method."""
+    rows = df[df["task"] == task]
+    if rows.empty:
+        raise ConfigError(
+            f"no results for task {task!r}; tasks in the table: {sorted(set(df.task))}"
+        )
+    window = smooth or default_smoothing(int(rows["interaction"].max()) + 1)
+    fig = Figure(figsize=(14, 4.0), layout="constrained")
+    axes = fig.subplots(1, len(CURVE_METRICS), sharex=True)
+    _draw_curves(axes, rows, CURVE_METRICS, window)
+    for ax in axes:
+        ax.set_xlabel("interaction")
+    fig.suptitle(
+        f"{TASK_TITLES.get(task, task)}: mean ± std over {_seed_note(rows)}, "
+        f"smoothed over {window} interaction{'s' if window > 1 else ''}"
+    )
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside right upper")
+    return fig
+
+
+def final_values(df: pd.DataFrame, window: int = 100) -> pd.DataFrame:
+    """Per run: the mean of each metric over its last ``window`` interactions."""
+    tail = df.sort_values("interaction").groupby("run").tail(window)
+    cols = [m for m, _ in FINAL_METRICS]
+    ident = tail.groupby("run")[["task", *VARIANT_KEYS, "seed"]].first()
+    return ident.join(tail.groupby("run")[cols].mean()).reset_index()
+
+
+def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "sili") -> Figure:
+    """Final task reward and final true stability against b (mean and std across seeds)."""
+    rows = df[(df["task"] == task) & (df["method"] == method)]
+    if rows["config_beta"].nunique() < 2:
+        raise ConfigError(
+            f"task {task!r} has no b sweep of {method} (needs runs with two or more b values)"
+        )
+    finals = final_values(rows, window)
+    fig = Figure(figsize=(10, 4.0), layout="constrained")
+    axes = fig.subplots(1, len(FINAL_METRICS))
+    groups = [(c or "", k) for c, k in finals[["controller", "latent"]].drop_duplicates().values]
+    for controller, latent in groups:
+        part = finals[
+            (finals["controller"].fillna("") == controller) & (finals["latent"] == latent)
+        ]
+        label = METHOD_NAMES.get(method, method)
+        if len(groups) > 1:
+            label += f" [{controller or 'default'}] ({latent})"
+        for ax, (metric, ylabel) in zip(axes, FINAL_METRICS, strict=True):
+            stats = part.groupby("config_beta")[metric].agg(["mean", lambda s: s.std(ddof=0)])
+            stats.columns = ["mean", "std"]
+            b = stats.index.to_numpy(float)
+            (line,) = ax.plot(b, stats["mean"].to_numpy(), "o-", label=label, lw=1.6)
+            ax.errorbar(
+                b, stats["mean"], yerr=stats["std"], fmt="none", color=line.get_color(), capsize=4
+            )
+            ax.set_xlabel("stability weight b")
+            ax.set_ylabel(ylabel)
+            ax.set_gid(metric)
+            ax.grid(alpha=0.3)
+    seeds = finals.groupby("config_beta")["seed"].nunique()
+    seed_text = f"{seeds.min()}" if seeds.min() == seeds.max() else f"{seeds.min()}-{seeds.max()}"
+    last = min(window, int(rows.groupby("run").size().min()))
+    fig.suptitle(
+        f"{TASK_TITLES.get(task, task)}: effect of b on {METHOD_NAMES.get(method, method)} "
+        f"(mean of the last {last} interactions; mean ± std over {seed_text} seeds)"
+    )
+    if len(groups) > 1:
+        fig.legend(*axes[0].get_legend_handles_labels(), loc="outside right upper")
+    return fig
+
+
+def overview(df: pd.DataFrame, smooth: int | None = None) -> Figure:
+    """One row per task: task reward and true stability per interaction, like the paper's
+    results figure."""
+    tasks = [t for t in TASK_TITLES if t in set(df["task"])] + sorted(
+        set(df["task"]) - set(TASK_TITLES)
+    )
+    metrics = CURVE_METRICS[:2]
+    fig = Figure(figsize=(11, 2.7 * len(tasks) + 0.6), layout="constrained")
+    grid = np.atleast_2d(fig.subplots(len(tasks), len(metrics), squeeze=False))
+    handles: dict[str, object] = {}
+    for row, task in zip(grid, tasks, strict=True):
+        rows = df[df["task"] == task]
+        window = smooth or default_smoothing(int(rows["interaction"].max()) + 1)
+        _draw_curves(row, rows, metrics, window)
+        row[0].set_title(TASK_TITLES.get(task, task), loc="left", fontsize=10)
+        for h, lab in zip(*row[0].get_legend_handles_labels(), strict=True):
+            handles.setdefault(lab, h)
+    fig.legend(list(handles.values()), list(handles), loc="outside right upper")
+    return fig
+
+
+def save_figure(fig: Figure, stem: Path, formats: Sequence[str] = ("png", "pdf")) -> list[Path]:
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for fmt in formats:
+        path = stem.with_suffix(f".{fmt}")
+        fig.savefig(path, dpi=150)
+        paths.append(path)
+    return paths
+
+
+def plot_sweep(
+    sweep_dir: Path,
+    out_dir: Path | None = None,
+    smooth: int | None = None,
+    window: int = 100,
+    formats: Sequence[str] = ("png", "pdf"),
+    include_unfinished: bool = False,
+) -> list[Path]:
+    """Write every figure of a sweep; returns the files written."""
+    df = load_results(sweep_dir, include_unfinished)
+    out_dir = Path(out_dir) if out_dir is not None else Path(sweep_dir) / "figures"
+    written: list[Path] = []
+    tasks = [t for t in TASK_TITLES if t in set(df["task"])] + sorted(
+        set(df["task"]) - set(TASK_TITLES)
+    )
+    for task in tasks:
+        written += save_figure(learning_curves(df, task, smooth), out_dir / task, formats)
+        sili = df[(df["task"] == task) & (df["method"] == "sili")]
+        if sili["config_beta"].nunique() > 1:
+            written += save_figure(beta_sweep(df, task, window), out_dir / f"{task}_beta", formats)
+    written += save_figure(overview(df, smooth), out_dir / "overview", formats)
+    return written

@@ -1,0 +1,175 @@
+"""Local backend: at most K worker processes on this machine, a fresh process for every run.
+
+A fresh process per run (not a long-lived pool) keeps runs apart: libsumo allows one simulation
+per process, nothing one run loads leaks into the next, and a worker that dies (killed, out of
+memory) takes only its own run down, where ``concurrent.futures`` would break the whole pool.
+Processes come from ``multiprocessing``'s forkserver, which has imported torch and the training
+code once (a worker starts in a fraction of a second instead of ~3 s), or from ``spawn``. Never
+``fork``: it would copy the parent's threads and state. Workers die with the sweep (Linux
+``PR_SET_PDEATHSIG``, through the forkserver), so none keeps training a run a later sweep resumes.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import multiprocessing as mp
+import os
+import signal
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+from multiprocessing.connection import Connection, wait
+from pathlib import Path
+
+from sili_robots.errors import ConfigError
+from sili_robots.sweep.backend import Monitor, describe_exit
+from sili_robots.sweep.state import ERROR_FILE, RUNNING_FILE
+from sili_robots.sweep.worker import THREAD_ENV, Job, Outcome, limit_threads, run_job
+
+PR_SET_PDEATHSIG = 1
+#: imported once by the forkserver, so forked workers start with them loaded
+PRELOAD = ["sili_robots.sweep.worker", "sili_robots.training", "torch.utils.tensorboard"]
+
+
+def _die_with_parent() -> None:
+    # not Linux: the parent's own cleanup is all there is
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+
+
+def _raise_exit(signum: int, _frame: object) -> None:
+    raise SystemExit(128 + signum)
+
+
+def _child(job: Job, conn: Connection) -> None:
+    """Entry point of a worker process."""
+    _die_with_parent()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the sweep's to handle
+    signal.signal(signal.SIGTERM, _raise_exit)  # run `finally` blocks (closes simulators)
+    limit_threads()
+    outcome = run_job(job)
+    conn.send(outcome.to_dict())
+    conn.close()
+
+
+@dataclass
+class _Worker:
+    process: mp.process.BaseProcess
+    conn: Connection
+    job: Job
+
+
+class LocalBackend:
+    """Run jobs in up to ``workers`` processes; a crashed worker's run is retried ``retries``
+    times (it resumes from its checkpoint), then reported failed."""
+
+    def __init__(
+        self, workers: int = 1, retries: int = 0, start_method: str = "forkserver"
+    ) -> None:
+        if workers < 1:
+            raise ConfigError(f"workers must be >= 1, got {workers}")
+        if start_method not in ("spawn", "forkserver"):
+            raise ConfigError(
+                f"start method {start_method!r} is not allowed; use spawn or forkserver "
+                "(fork would copy the parent's threads and simulators)"
+            )
+        self.workers = workers
+        self.retries = retries
+        if start_method not in mp.get_all_start_methods():
+            start_method = "spawn"
+        self.start_method = start_method
+        self._ctx = mp.get_context(start_method)
+
+    def _ensure_forkserver(self) -> None:
+        """Start the forkserver with the training code imported, under one-thread settings."""
+        if self.start_method != "forkserver":
+            return
+        from multiprocessing import forkserver
+
+        self._ctx.set_forkserver_preload(PRELOAD)
+        saved = {var: os.environ.get(var) for var in THREAD_ENV}
+        os.environ.update(dict.fromkeys(THREAD_ENV, "1"))
+        try:
+            forkserver.ensure_running()
+        finally:
+            for var, value in saved.items():
+                if value is None:
+                    os.environ.pop(var, None)
+                else:
+                    os.environ[var] = value
+
+    def _start(self, job: Job) -> _Worker:
+        parent_conn, child_conn = self._ctx.Pipe(duplex=False)
+        proc = self._ctx.Process(
+            target=_child, args=(job, child_conn), name=f"sili-{job.name}", daemon=True
+        )
+        proc.start()
+        child_conn.close()
+        return _Worker(proc, parent_conn, job)
+
+    def run(self, jobs: Sequence[Job], monitor: Monitor) -> list[Outcome]:
+        pending = deque(jobs)
+        attempts = {job.name: 0 for job in jobs}
+        running: dict[int, _Worker] = {}
+        outcomes: list[Outcome] = []
+        if pending:
+            self._ensure_forkserver()
+        try:
+            while pending or running:
+                while pending and len(running) < self.workers:
+                    job = pending.popleft()
+                    attempts[job.name] += 1
+                    worker = self._start(job)
+                    running[worker.process.sentinel] = worker
+                    monitor.started(job)
+                for sentinel in wait(list(running), timeout=1.0):
+                    worker = running.pop(sentinel)
+                    outcome = self._collect(worker)
+                    if outcome is None:
+                        reason = describe_exit(worker.process.exitcode)
+                        if attempts[worker.job.name] <= self.retries:
+                            monitor.retrying(worker.job, reason)
+                            pending.appendleft(worker.job)
+                            continue
+                        outcome = Outcome(worker.job.name, "failed", error=reason)
+                        _record_crash(worker.job, reason)
+                    outcomes.append(outcome)
+                    monitor.finished(outcome)
+                monitor.tick()
+        finally:
+            self._stop(running.values())
+        return outcomes
+
+    @staticmethod
+    def _collect(worker: _Worker) -> Outcome | None:
+        worker.process.join()
+        try:
+            if worker.conn.poll():
+                return Outcome(**worker.conn.recv())
+        except (EOFError, OSError):
+            pass
+        finally:
+            worker.conn.close()
+        return None
+
+    @staticmethod
+    def _stop(workers) -> None:
+        """Stop the workers still running (an interrupted sweep): SIGTERM, then SIGKILL."""
+        workers = list(workers)
+        for w in workers:
+            if w.process.is_alive():
+                w.process.terminate()
+        for w in workers:
+            w.process.join(timeout=10)
+            if w.process.is_alive():
+                w.process.kill()
+                w.process.join()
+            w.conn.close()
+
+
+def _record_crash(job: Job, reason: str) -> None:
+    path = Path(job.run_dir)
+    path.mkdir(parents=True, exist_ok=True)
+    (path / ERROR_FILE).write_text(reason + "\n")
+    (path / RUNNING_FILE).unlink(missing_ok=True)

@@ -1,0 +1,169 @@
+"""The sweep's live display: runs done / running / failed / pending, interactions, ETA.
+
+Progress is counted in interactions (rows of each run's ``metrics.csv``), so runs of different
+lengths weigh what they cost and the ETA follows the recent rate across all workers. Every run
+that ends also gets one printed line, which is what a log (no terminal) keeps.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+from rich.console import Console
+from rich.markup import escape
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TaskID,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+
+from sili_robots.runs import METRICS
+from sili_robots.sweep.worker import Job, Outcome
+
+
+def logged_interactions(run_dir: Path) -> int:
+    """Rows in a run's ``metrics.csv`` (0 when there is none yet)."""
+    try:
+        data = (Path(run_dir) / METRICS).read_bytes()
+    except FileNotFoundError:
+        return 0
+    return max(data.count(b"\n") - 1, 0)
+
+
+class SweepProgress:
+    """A :class:`~sili_robots.sweep.backend.Monitor` drawing with rich (or just logging)."""
+
+    def __init__(
+        self,
+        jobs: list[Job],
+        interactions: dict[str, int],
+        already_done: int,
+        enabled: bool = True,
+        console: Console | None = None,
+    ) -> None:
+        self.console = console or Console(stderr=True)
+        self.total_runs = len(jobs) + already_done
+        self.done = already_done
+        self.failed = 0
+        self.running: dict[str, Job] = {}
+        self._jobs = {job.name: job for job in jobs}
+        self._planned = {job.name: interactions[job.name] for job in jobs}
+        self._logged = {job.name: logged_interactions(Path(job.run_dir)) for job in jobs}
+        self._total_interactions = sum(interactions.values())
+        self._finished_interactions = sum(interactions.values()) - sum(self._planned.values())
+        self._last_tick = 0.0
+        self._t0 = time.perf_counter()
+        self._progress: Progress | None = None
+        self._run_tasks: dict[str, TaskID] = {}
+        if enabled:
+            self._progress = Progress(
+                TextColumn("[bold]{task.description}"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn("{task.fields[counts]}"),
+                TimeElapsedColumn(),
+                TextColumn("ETA"),
+                TimeRemainingColumn(),
+                console=self.console,
+            )
+            self._overall = self._progress.add_task(
+                "sweep",
+                total=self._total_interactions,
+                completed=self._completed(),
+                counts=self._counts(),
+            )
+
+    # ------------------------------------------------------------------ monitor
+    def started(self, job: Job) -> None:
+        self.running[job.name] = job
+        if self._progress is not None:
+            self._run_tasks[job.name] = self._progress.add_task(
+                f"  {job.name}",
+                total=self._planned[job.name],
+                completed=self._logged[job.name],
+                counts="",
+            )
+        self._refresh(force=True)
+
+    def finished(self, outcome: Outcome) -> None:
+        if outcome.status == "done":
+            self.done += 1
+            self._logged[outcome.name] = self._planned[outcome.name]
+            resumed = " (resumed)" if outcome.resumed else ""
+            self._log(
+                f"[green]done[/] {escape(outcome.name)}{resumed} in {outcome.wall_time_s:.1f} s"
+            )
+        else:
+            self.failed += 1
+            job = self._jobs[outcome.name]
+            logged = logged_interactions(Path(job.run_dir))
+            self._logged[outcome.name] = min(logged, self._planned[outcome.name])
+            # what it will not run no longer counts towards the sweep's total
+            self._total_interactions -= self._planned[outcome.name] - self._logged[outcome.name]
+            if self._progress is not None:
+                self._progress.update(self._overall, total=self._total_interactions)
+            error = escape(str(outcome.error))
+            self._log(f"[red]failed[/] {escape(outcome.name)}: {error}")
+        self.running.pop(outcome.name, None)
+        task = self._run_tasks.pop(outcome.name, None)
+        if task is not None and self._progress is not None:
+            self._progress.remove_task(task)
+        self._refresh(force=True)
+
+    def retrying(self, job: Job, reason: str) -> None:
+        self.running.pop(job.name, None)
+        task = self._run_tasks.pop(job.name, None)
+        if task is not None and self._progress is not None:
+            self._progress.remove_task(task)
+        self._log(f"[yellow]retrying[/] {escape(job.name)}: {escape(reason)}")
+
+    def _log(self, text: str) -> None:
+        self.console.print(text, soft_wrap=True, highlight=False)
+
+    def tick(self) -> None:
+        self._refresh()
+
+    # ------------------------------------------------------------------ display
+    @property
+    def pending(self) -> int:
+        return self.total_runs - self.done - self.failed - len(self.running)
+
+    def _counts(self) -> str:
+        return (
+            f"[green]done {self.done}[/] [cyan]running {len(self.running)}[/] "
+            f"[red]failed {self.failed}[/] pending {self.pending}"
+        )
+
+    def _completed(self) -> int:
+        return self._finished_interactions + sum(self._logged.values())
+
+    def _refresh(self, force: bool = False) -> None:
+        now = time.perf_counter()
+        if not force and now - self._last_tick < 1.0:
+            return
+        self._last_tick = now
+        for name, job in self.running.items():
+            self._logged[name] = min(logged_interactions(Path(job.run_dir)), self._planned[name])
+            if self._progress is not None and name in self._run_tasks:
+                self._progress.update(self._run_tasks[name], completed=self._logged[name])
+        if self._progress is not None:
+            self._progress.update(self._overall, completed=self._completed(), counts=self._counts())
+
+    def __enter__(self) -> SweepProgress:
+        if self._progress is not None:
+            self._progress.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._progress is not None:
+            self._refresh(force=True)
+            self._progress.stop()
+        self._log(
+            f"sweep: {self.done} done, {self.failed} failed, {self.pending} not run, "
+            f"{time.perf_counter() - self._t0:.1f} s"
+        )

@@ -1,0 +1,123 @@
+"""Ray backend: the same jobs as Ray tasks, on an existing cluster or a local Ray instance.
+
+Each run is one task with ``num_cpus=1`` and ``max_calls=1``, so Ray gives every run a fresh
+worker process (libsumo: one simulation per process) and Ray's scheduler decides placement.
+``max_retries`` re-runs a task whose worker died; the retry resumes from the run's checkpoint.
+On a multi-node cluster the sweep directory must be on a filesystem every node sees, and every
+node needs this package installed. Ray is optional: ``pip install sili-robots[ray]``.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections import deque
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from sili_robots.errors import ConfigError
+from sili_robots.sweep.backend import Monitor
+from sili_robots.sweep.state import ERROR_FILE, RUNNING_FILE
+from sili_robots.sweep.worker import Job, Outcome, run_job
+
+
+def import_ray() -> Any:
+    try:
+        import ray
+    except ImportError:
+        raise ConfigError(
+            "the ray backend needs Ray: pip install 'sili-robots[ray]' (or use --backend local)"
+        ) from None
+    return ray
+
+
+class RayBackend:
+    """Submit every job as a Ray task (at most ``workers`` in flight when given)."""
+
+    def __init__(
+        self, address: str | None = None, workers: int | None = None, retries: int = 0
+    ) -> None:
+        if workers is not None and workers < 1:
+            raise ConfigError(f"workers must be >= 1, got {workers}")
+        self.address = address
+        self.workers = workers
+        self.retries = retries
+
+    def _connect(self, ray: Any) -> bool:
+        """Connect (or start a local instance); True when this call started Ray."""
+        if ray.is_initialized():
+            return False
+        os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # no reporting home
+        kwargs: dict[str, Any] = {"log_to_driver": False}
+        if self.address:
+            kwargs["address"] = self.address
+        else:
+            kwargs.update(num_cpus=self.workers or os.cpu_count() or 1, include_dashboard=False)
+        try:
+            ray.init(**kwargs)
+        except ConnectionError as err:
+            raise ConfigError(f"cannot connect to Ray at {self.address!r}: {err}") from None
+        return True
+
+    def run(self, jobs: Sequence[Job], monitor: Monitor) -> list[Outcome]:
+        ray = import_ray()
+        started_here = self._connect(ray)
+        remote = ray.remote(num_cpus=1, max_calls=1, max_retries=self.retries)(run_job)
+        pending = deque(jobs)
+        in_flight: dict[Any, Job] = {}
+        not_started: set[str] = set()
+        outcomes: list[Outcome] = []
+        try:
+            while pending or in_flight:
+                while pending and (self.workers is None or len(in_flight) < self.workers):
+                    job = pending.popleft()
+                    in_flight[remote.remote(job)] = job
+                    not_started.add(job.name)
+                ready, _ = ray.wait(list(in_flight), num_returns=1, timeout=1.0)
+                for ref in ready:
+                    job = in_flight.pop(ref)
+                    if job.name in not_started:
+                        not_started.discard(job.name)
+                        monitor.started(job)
+                    outcome = self._result(ray, ref, job)
+                    outcomes.append(outcome)
+                    monitor.finished(outcome)
+                for job in in_flight.values():
+                    if job.name in not_started and (Path(job.run_dir) / RUNNING_FILE).exists():
+                        not_started.discard(job.name)
+                        monitor.started(job)
+                monitor.tick()
+        except BaseException:
+            for ref in in_flight:
+                ray.cancel(ref, force=True)
+            raise
+        finally:
+            if started_here:
+                _wait_for_workers(ray, in_flight)
+                ray.shutdown()
+        return outcomes
+
+    @staticmethod
+    def _result(ray: Any, ref: Any, job: Job) -> Outcome:
+        try:
+            return ray.get(ref)
+        except ray.exceptions.RayError as err:
+            reason = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
+            reason = f"{type(err).__name__}: {reason}"[:2000]
+            path = Path(job.run_dir)
+            path.mkdir(parents=True, exist_ok=True)
+            (path / ERROR_FILE).write_text(str(err) + "\n")
+            (path / RUNNING_FILE).unlink(missing_ok=True)
+            return Outcome(job.name, "failed", error=reason)
+
+
+def _wait_for_workers(ray: Any, cancelled: dict[Any, Job]) -> None:
+    """Give cancelled tasks a moment to stop before Ray is shut down."""
+    if not cancelled:
+        return
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        _, not_ready = ray.wait(list(cancelled), num_returns=len(cancelled), timeout=0.5)
+        if not not_ready:
+            return

@@ -1,0 +1,107 @@
+"""The sweep's tables, built from its run directories (the single source of truth).
+
+- ``results.csv``: tidy, one row per run per interaction: the run's identity (``run``, ``task``,
+  ``method``, ``latent``, ``seed``, ``controller``, ``config_beta``) + every ``metrics.csv``
+  column + ``true_stability`` (1 - strategy_changed) + ``finished``.
+- ``runs.csv``: one row per run: status (done / failed / incomplete / not started), interactions
+  logged, final task reward and true stability, wall time, error.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+
+from sili_robots.runs import CONFIG, METRIC_COLUMNS, METRICS, SUMMARY
+from sili_robots.sweep.state import ERROR_FILE, RESULTS, RUNS_DIR, RUNS_TABLE
+
+ID_COLUMNS = ("run", "task", "method", "latent", "seed", "controller", "config_beta")
+RESULT_COLUMNS = (*ID_COLUMNS, *METRIC_COLUMNS, "true_stability", "finished")
+RUN_COLUMNS = (
+    *ID_COLUMNS,
+    "status",
+    "interactions",
+    "interactions_logged",
+    "final_task_reward",
+    "final_stability",
+    "wall_time_s",
+    "error",
+)
+
+
+def run_dirs(sweep_dir: Path) -> list[Path]:
+    """Every run directory of the sweep (those with a config), by name."""
+    root = Path(sweep_dir) / RUNS_DIR
+    return sorted(p for p in root.glob("*") if (p / CONFIG).is_file())
+
+
+def _identity(run_dir: Path) -> tuple[dict, dict]:
+    cfg = json.loads((run_dir / CONFIG).read_text())["run"]
+    agent = cfg["agent"]
+    ident = {
+        "run": run_dir.name,
+        "task": cfg["task"],
+        "method": cfg["method"],
+        "latent": agent["latent"],
+        "seed": int(cfg["seed"]),
+        "controller": cfg.get("env_kwargs", {}).get("controller", ""),
+        "config_beta": float(agent["beta"]),
+    }
+    return ident, cfg
+
+
+def results_table(sweep_dir: Path) -> pd.DataFrame:
+    """All runs' per-interaction rows in one tidy frame (columns ``RESULT_COLUMNS``)."""
+    frames = []
+    for run_dir in run_dirs(sweep_dir):
+        if not (run_dir / METRICS).is_file():
+            continue
+        df = pd.read_csv(run_dir / METRICS)
+        if df.empty:
+            continue
+        ident, _ = _identity(run_dir)
+        for key, value in ident.items():
+            df[key] = value
+        df["true_stability"] = 1.0 - df["strategy_changed"]
+        df["finished"] = (run_dir / SUMMARY).is_file()
+        frames.append(df)
+    if not frames:
+        return pd.DataFrame(columns=list(RESULT_COLUMNS))
+    return pd.concat(frames, ignore_index=True)[list(RESULT_COLUMNS)]
+
+
+def runs_table(sweep_dir: Path) -> pd.DataFrame:
+    """One row per run with its state and final numbers (from ``summary.json`` when done)."""
+    rows = []
+    for run_dir in run_dirs(sweep_dir):
+        ident, cfg = _identity(run_dir)
+        summary_path, error_path = run_dir / SUMMARY, run_dir / ERROR_FILE
+        logged = 0
+        if (run_dir / METRICS).is_file():
+            logged = len(pd.read_csv(run_dir / METRICS, usecols=["interaction"]))
+        row = {**ident, "interactions": int(cfg["interactions"]), "interactions_logged": logged}
+        if summary_path.is_file():
+            summary = json.loads(summary_path.read_text())
+            row.update(
+                status="done",
+                final_task_reward=summary["final_task_reward"],
+                final_stability=summary["final_stability"],
+                wall_time_s=summary["wall_time_s"],
+            )
+        elif error_path.is_file():
+            text = error_path.read_text().strip().splitlines()
+            row.update(status="failed", error=text[-1] if text else "")
+        else:
+            row.update(status="incomplete" if logged else "not started")
+        rows.append(row)
+    return pd.DataFrame(rows, columns=list(RUN_COLUMNS))
+
+
+def write_tables(sweep_dir: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Write ``results.csv`` and ``runs.csv`` into the sweep directory and return them."""
+    results, runs = results_table(sweep_dir), runs_table(sweep_dir)
+    results.to_csv(Path(sweep_dir) / RESULTS, index=False)
+    runs.to_csv(Path(sweep_dir) / RUNS_TABLE, index=False)
+    return results, runs

@@ -1,0 +1,114 @@
+"""Run a sweep: plan its runs, skip finished ones, hand the rest to a backend, write the tables."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from sili_robots.errors import ConfigError
+from sili_robots.runs import write_config
+from sili_robots.sweep import tensorboard
+from sili_robots.sweep.backend import Backend, Monitor
+from sili_robots.sweep.local import LocalBackend
+from sili_robots.sweep.spec import PlannedRun, SweepSpec, expand
+from sili_robots.sweep.state import (
+    RUNNING_FILE,
+    check_existing,
+    record_invocation,
+    run_path,
+    run_state,
+    sweep_lock,
+)
+from sili_robots.sweep.worker import Job, Outcome
+
+
+@dataclass
+class SweepReport:
+    """What one invocation did: runs skipped as already finished, and each run's outcome."""
+
+    sweep_dir: Path
+    planned: list[str]
+    skipped: list[str] = field(default_factory=list)
+    outcomes: dict[str, Outcome] = field(default_factory=dict)
+
+    @property
+    def failed(self) -> dict[str, str]:
+        return {n: o.error or "" for n, o in self.outcomes.items() if o.status != "done"}
+
+    @property
+    def ok(self) -> bool:
+        return not self.failed and len(self.outcomes) + len(self.skipped) == len(self.planned)
+
+
+def plan(specs: Sequence[SweepSpec]) -> list[PlannedRun]:
+    """The union of the specs' runs (a run named twice must be the same run)."""
+    runs: dict[str, PlannedRun] = {}
+    for spec in specs:
+        for run in expand(spec):
+            prev = runs.get(run.name)
+            if prev is not None and prev.config.to_dict() != run.config.to_dict():
+                raise ConfigError(f"run {run.name} is planned twice with different settings")
+            runs.setdefault(run.name, run)
+    return list(runs.values())
+
+
+def run_sweep(
+    specs: SweepSpec | Sequence[SweepSpec],
+    sweep_dir: Path,
+    backend: Backend | None = None,
+    monitor: Monitor | None = None,
+    progress: bool = True,
+    tensorboard_scalars: bool | None = None,
+) -> SweepReport:
+    """Run every planned run not yet finished; failures are reported, never raised.
+
+    Without a ``monitor`` a :class:`SweepProgress` prints one line per run that ends and, with
+    ``progress``, draws the live display.
+
+    ``tensorboard_scalars`` None means: on when the ``tensorboard`` package is installed.
+    """
+    from sili_robots.sweep.progress import SweepProgress
+    from sili_robots.sweep.results import write_tables
+
+    specs = [specs] if isinstance(specs, SweepSpec) else list(specs)
+    sweep_dir = Path(sweep_dir)
+    planned = plan(specs)
+    backend = backend or LocalBackend()
+    if tensorboard_scalars is None:
+        tensorboard_scalars = tensorboard.available()
+    elif tensorboard_scalars and not tensorboard.available():
+        raise ConfigError("TensorBoard scalars need: pip install 'sili-robots[tensorboard]'")
+    with sweep_lock(sweep_dir):
+        for run in planned:
+            check_existing(sweep_dir, run)
+        for spec in specs:
+            record_invocation(sweep_dir, spec)
+        report = SweepReport(sweep_dir, [r.name for r in planned])
+        jobs: list[Job] = []
+        for run in planned:
+            path = run_path(sweep_dir, run.name)
+            (path / RUNNING_FILE).unlink(missing_ok=True)  # stale: we hold the sweep's lock
+            if run_state(path) == "done":
+                report.skipped.append(run.name)
+                continue
+            if run_state(path) == "new":
+                write_config(path, run.config)  # listed in the tables even if it fails early
+            jobs.append(Job(run.name, run.config.to_dict(), str(path), tensorboard_scalars))
+        display = None
+        if monitor is None:
+            display = SweepProgress(
+                jobs,
+                {r.name: r.config.interactions for r in planned},
+                already_done=len(report.skipped),
+                enabled=progress,
+            )
+            monitor = display
+        try:
+            with display or contextlib.nullcontext():
+                outcomes = backend.run(jobs, monitor) if jobs else []
+        finally:
+            write_tables(sweep_dir)
+        report.outcomes = {o.name: o for o in outcomes}
+    return report

@@ -1,0 +1,211 @@
+"""What a sweep is: tasks x methods x seeds x b values x controllers, expanded into run configs.
+
+Every run gets a name made only from what distinguishes it (task, controller, method, latent
+kind when not the task's default, b for the methods where b is free, seed), so the same run has
+the same name in every sweep and a re-invoked sweep finds its earlier runs.
+"""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+from dataclasses import asdict, dataclass, field
+from functools import cache
+from typing import Any
+
+from sili_robots.agent import LATENT_KINDS, METHODS, method_config
+from sili_robots.errors import ConfigError, check_choice
+from sili_robots.runs import RunConfig
+from sili_robots.tasks import TASKS, task_spec
+
+#: methods whose stability weight b is a free parameter (the others fix it: lili/sac/oracle 0,
+#: stable 1); ``--beta`` values multiply only these
+BETA_METHODS = ("sili", "smirl")
+
+
+@dataclass
+class SweepSpec:
+    """The axes of a sweep and the settings every run shares."""
+
+    tasks: list[str]
+    methods: list[str]
+    seeds: list[int]
+    interactions: int
+    betas: list[float] | None = None  # None: each method's own b
+    controllers: list[str] | None = None  # None: each task's default
+    latent: str | None = None  # None: each task's default latent kind
+    agent_overrides: dict[str, Any] = field(default_factory=dict)
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    checkpoint_every: int = 50
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> SweepSpec:
+        return cls(**data)
+
+
+@dataclass(frozen=True)
+class PlannedRun:
+    """One run of a sweep: its stable name and its fully resolved config."""
+
+    name: str
+    config: RunConfig
+
+
+def parse_seeds(text: str) -> list[int]:
+    """``"0-4"``, ``"0,2,7"`` or a mix (``"0-2,5"``) -> sorted unique seeds."""
+    seeds: set[int] = set()
+    for part in filter(None, (p.strip() for p in text.split(","))):
+        lo, dash, hi = part.partition("-")
+        try:
+            a, b = (int(lo), int(hi)) if dash and lo else (int(part), int(part))
+        except ValueError:
+            raise ConfigError(
+                f"bad seed {part!r}; give integers and ranges, e.g. 0-4 or 0,2,7"
+            ) from None
+        if b < a:
+            raise ConfigError(f"seed range {part!r} is empty; write LOW-HIGH with LOW <= HIGH")
+        seeds.update(range(a, b + 1))
+    if not seeds:
+        raise ConfigError(f"no seeds in {text!r}; give e.g. 0-4 or 0,2,7")
+    return sorted(seeds)
+
+
+def parse_list(text: str) -> list[str]:
+    """Comma-separated names, duplicates dropped, order kept."""
+    return list(dict.fromkeys(p.strip() for p in text.split(",") if p.strip()))
+
+
+def parse_betas(text: str) -> list[float]:
+    out: list[float] = []
+    for part in parse_list(text):
+        try:
+            value = float(part)
+        except ValueError:
+            raise ConfigError(
+                f"bad b value {part!r}; give numbers in [0, 1], e.g. 0,0.5,1"
+            ) from None
+        if not 0.0 <= value <= 1.0:
+            raise ConfigError(f"b value {value} is outside the allowed range [0, 1]")
+        out.append(value)
+    if not out:
+        raise ConfigError(f"no b values in {text!r}; give e.g. 0,0.2,0.4")
+    return list(dict.fromkeys(out))
+
+
+@cache
+def task_accepts(task: str, kwarg: str) -> bool:
+    """Whether the task's constructor takes ``kwarg`` (e.g. ``controller``)."""
+    module, _, name = task_spec(task).entry_point.partition(":")
+    cls = getattr(importlib.import_module(module), name)
+    return kwarg in inspect.signature(cls.__init__).parameters
+
+
+def format_beta(beta: float) -> str:
+    return f"{beta:g}"
+
+
+def run_name(
+    task: str,
+    method: str,
+    seed: int,
+    *,
+    beta: float | None = None,
+    controller: str | None = None,
+    latent: str | None = None,
+) -> str:
+    """``task[-controller]__method[-latent][-bB]__sSEED``, e.g. ``circle-3__sili-b0.5__s0``."""
+    head = task if controller is None else f"{task}-{controller}"
+    mid = method
+    if latent is not None:
+        mid += f"-{latent}"
+    if beta is not None:
+        mid += f"-b{format_beta(beta)}"
+    return f"{head}__{mid}__s{seed}"
+
+
+def validate(spec: SweepSpec) -> None:
+    """Reject bad axes up front with the allowed values (tasks' own arguments are checked when a
+    run builds its task, so a bad one fails that run only)."""
+    if not spec.tasks:
+        raise ConfigError(f"no tasks given; allowed: {', '.join(TASKS)}")
+    if not spec.methods:
+        raise ConfigError(f"no methods given; allowed: {', '.join(METHODS)}")
+    for task in spec.tasks:
+        task_spec(task)
+    for method in spec.methods:
+        check_choice("method", method, METHODS)
+    if spec.latent is not None:
+        check_choice("latent kind", spec.latent, LATENT_KINDS)
+    if spec.interactions < 1:
+        raise ConfigError(f"interactions must be >= 1, got {spec.interactions}")
+    if spec.checkpoint_every < 1:
+        raise ConfigError(f"checkpoint_every must be >= 1, got {spec.checkpoint_every}")
+    for key in ("beta", "beta_schedule", "method", "latent"):
+        if key in spec.agent_overrides:
+            raise ConfigError(
+                f"agent setting {key!r} cannot be overridden in a sweep; use the sweep's "
+                "--beta / --methods / --latent"
+            )
+    if "controller" in spec.env_kwargs:
+        raise ConfigError("give controllers with --controller, not as a task argument")
+    if spec.betas is not None and not set(spec.methods) & set(BETA_METHODS):
+        raise ConfigError(
+            f"--beta applies to methods {', '.join(BETA_METHODS)} only, none of which is in "
+            f"the sweep ({', '.join(spec.methods)})"
+        )
+    if spec.controllers is not None and not any(task_accepts(t, "controller") for t in spec.tasks):
+        with_ctrl = [t for t in TASKS if task_accepts(t, "controller")]
+        raise ConfigError(
+            f"--controller applies to tasks {', '.join(with_ctrl)} only, none of which is in "
+            f"the sweep ({', '.join(spec.tasks)})"
+        )
+
+
+def expand(spec: SweepSpec) -> list[PlannedRun]:
+    """Every run of the sweep, in a stable order (task, controller, method, b, seed)."""
+    validate(spec)
+    runs: list[PlannedRun] = []
+    for task in spec.tasks:
+        tspec = task_spec(task)
+        latent = spec.latent or tspec.default_latent
+        controllers: list[str | None] = [None]
+        if spec.controllers is not None and task_accepts(tspec.name, "controller"):
+            controllers = list(spec.controllers)
+        for controller in controllers:
+            env_kwargs = dict(spec.env_kwargs)
+            if controller is not None:
+                env_kwargs["controller"] = controller
+            for method in spec.methods:
+                betas: list[float | None] = [None]
+                if method in BETA_METHODS:
+                    betas = list(spec.betas) if spec.betas is not None else [None]
+                for beta in betas:
+                    overrides = dict(spec.agent_overrides)
+                    if beta is not None:
+                        overrides["beta"] = beta
+                    agent = method_config(method, latent, **overrides)
+                    for seed in spec.seeds:
+                        name = run_name(
+                            tspec.name,
+                            method,
+                            seed,
+                            beta=agent.beta if method in BETA_METHODS else None,
+                            controller=controller,
+                            latent=None if latent == tspec.default_latent else latent,
+                        )
+                        cfg = RunConfig(
+                            task=tspec.name,
+                            method=method,
+                            seed=seed,
+                            interactions=spec.interactions,
+                            agent=agent,
+                            env_kwargs=env_kwargs,
+                            checkpoint_every=spec.checkpoint_every,
+                        )
+                        runs.append(PlannedRun(name, cfg))
+    names = [r.name for r in runs]
+    assert len(set(names)) == len(names), "run names must be unique"
+    return runs

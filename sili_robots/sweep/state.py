@@ -1,0 +1,116 @@
+"""A sweep directory on disk: where runs live, what state each is in, and who owns the sweep.
+
+Layout::
+
+    SWEEP_DIR/sweep.json        every invocation's spec (the sweep can be re-run from it)
+    SWEEP_DIR/runs/NAME/        one run directory per run (``sili_robots.runs``)
+    SWEEP_DIR/results.csv       tidy table, one row per run per interaction
+    SWEEP_DIR/runs.csv          one row per run: status, final numbers, error
+    SWEEP_DIR/figures/          ``sili plot``
+
+A run is *done* when it has ``summary.json``, *resumable* when it has ``checkpoint.pt`` but no
+summary, *new* otherwise (a run killed before its first checkpoint starts over).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import json
+import os
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any, Literal
+
+from sili_robots.errors import ConfigError
+from sili_robots.runs import CHECKPOINT, CONFIG, SUMMARY
+from sili_robots.sweep.spec import PlannedRun, SweepSpec
+
+SWEEP_FILE, RUNS_DIR, RESULTS, RUNS_TABLE, LOCK = (
+    "sweep.json",
+    "runs",
+    "results.csv",
+    "runs.csv",
+    ".lock",
+)
+#: written by a failed run (the traceback or how its worker died); removed when it succeeds
+ERROR_FILE = "error.txt"
+#: written by a worker while it trains a run: {"pid": ..., "host": ...}
+RUNNING_FILE = "worker.json"
+
+RunState = Literal["done", "resumable", "new"]
+
+
+def run_path(sweep_dir: Path, name: str) -> Path:
+    return Path(sweep_dir) / RUNS_DIR / name
+
+
+def run_state(run_dir: Path) -> RunState:
+    if (run_dir / SUMMARY).is_file():
+        return "done"
+    if (run_dir / CHECKPOINT).is_file():
+        return "resumable"
+    return "new"
+
+
+def _diff(a: Any, b: Any, prefix: str = "") -> list[str]:
+    if isinstance(a, dict) and isinstance(b, dict):
+        out: list[str] = []
+        for key in sorted(set(a) | set(b)):
+            out += _diff(a.get(key), b.get(key), f"{prefix}{key}.")
+        return out
+    return [] if a == b else [f"{prefix[:-1]}: {a!r} on disk, {b!r} now"]
+
+
+def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
+    """An existing run directory must hold the same run (else resuming it would mix two)."""
+    path = run_path(sweep_dir, planned.name) / CONFIG
+    if not path.is_file():
+        return
+    on_disk = json.loads(path.read_text())["run"]
+    diffs = _diff(on_disk, json.loads(json.dumps(planned.config.to_dict())))
+    if diffs:
+        raise ConfigError(
+            f"run {planned.name} in {sweep_dir} was made with other settings ("
+            + "; ".join(diffs[:4])
+            + "); use another --out for a different sweep"
+        )
+
+
+def record_invocation(sweep_dir: Path, spec: SweepSpec) -> None:
+    """Append ``spec`` to ``sweep.json`` unless the same spec is already there."""
+    path = Path(sweep_dir) / SWEEP_FILE
+    data = json.loads(path.read_text()) if path.is_file() else {"invocations": []}
+    entry = json.loads(json.dumps(spec.to_dict()))
+    if entry not in data["invocations"]:
+        data["invocations"].append(entry)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(data, indent=2))
+    os.replace(tmp, path)
+
+
+def recorded_specs(sweep_dir: Path) -> list[SweepSpec]:
+    path = Path(sweep_dir) / SWEEP_FILE
+    if not path.is_file():
+        raise ConfigError(
+            f"{sweep_dir} is not a sweep directory (no {SWEEP_FILE}); give a directory written "
+            "by `sili sweep --out`"
+        )
+    return [SweepSpec.from_dict(d) for d in json.loads(path.read_text())["invocations"]]
+
+
+@contextlib.contextmanager
+def sweep_lock(sweep_dir: Path) -> Iterator[None]:
+    """One sweep process per directory: two would train the same runs at once."""
+    Path(sweep_dir).mkdir(parents=True, exist_ok=True)
+    with open(Path(sweep_dir) / LOCK, "w") as f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ConfigError(
+                f"another `sili sweep` is running in {sweep_dir}; wait for it or stop it first"
+            ) from None
+        try:
+            yield
+        finally:
+            fcntl.flock(f, fcntl.LOCK_UN)

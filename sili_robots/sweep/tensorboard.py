@@ -1,0 +1,135 @@
+"""TensorBoard scalars for a run, written from its ``metrics.csv`` as the rows appear.
+
+The training loop writes one CSV row per interaction; a thread in the worker tails that file and
+mirrors each row into ``RUN_DIR/tb/`` (step = interaction), so TensorBoard shows runs live
+without the training loop knowing about it. A (re)started run rewrites ``tb/`` from the CSV,
+which the training loop has already trimmed to its checkpoint, so both always agree.
+TensorBoard is optional: without the ``tensorboard`` package nothing is written.
+"""
+
+from __future__ import annotations
+
+import csv
+import importlib.util
+import io
+import math
+import os
+import shutil
+import threading
+from pathlib import Path
+
+from sili_robots.runs import METRIC_COLUMNS, METRICS
+
+TB_DIR = "tb"
+#: metrics.csv column -> TensorBoard tag (true stability is derived: 1 - strategy_changed)
+TAGS = {
+    "task_reward": "reward/task",
+    "stability_reward": "reward/stability",
+    "strategy_changed": "stability/strategy_changed",
+    "latent_changed": "stability/latent_changed",
+    "beta": "train/beta",
+    "latent_loss": "loss/latent",
+    "critic_loss": "loss/critic",
+    "actor_loss": "loss/actor",
+    "alpha": "train/alpha",
+}
+TRUE_STABILITY_TAG = "stability/true"
+
+
+def available() -> bool:
+    """Whether TensorBoard's writer can be used (the optional ``tensorboard`` package)."""
+    return importlib.util.find_spec("tensorboard") is not None
+
+
+def _scalars(row: dict[str, str]) -> dict[str, float]:
+    out = {}
+    for column, tag in TAGS.items():
+        text = row.get(column, "")
+        if text not in ("", None):
+            value = float(text)
+            if math.isfinite(value):
+                out[tag] = value
+    if "stability/strategy_changed" in out:
+        out[TRUE_STABILITY_TAG] = 1.0 - out["stability/strategy_changed"]
+    return out
+
+
+class MetricsTail:
+    """Mirror ``metrics.csv`` into TensorBoard event files, polling every ``interval`` seconds.
+
+    Waits until the training loop has (re)created the CSV (a new file, see
+    ``runs.MetricsWriter``) so rows a resume is about to drop are never mirrored.
+    """
+
+    def __init__(self, run_dir: Path, interval: float = 2.0) -> None:
+        self.run_dir = Path(run_dir)
+        self.interval = interval
+        self._path = self.run_dir / METRICS
+        self._old_inode = self._inode()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="tensorboard-tail", daemon=True)
+        self._writer = None
+        self._file: io.TextIOBase | None = None
+        self._pending = ""
+        self.rows_written = 0
+
+    def _inode(self) -> int | None:
+        try:
+            return os.stat(self._path).st_ino
+        except FileNotFoundError:
+            return None
+
+    def start(self) -> None:
+        from torch.utils.tensorboard import SummaryWriter
+
+        shutil.rmtree(self.run_dir / TB_DIR, ignore_errors=True)
+        self._writer = SummaryWriter(str(self.run_dir / TB_DIR))
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Mirror what is left and close (the run is over, however it ended)."""
+        self._stop.set()
+        self._thread.join()
+        self.poll()
+        if self._file is not None:
+            self._file.close()
+        if self._writer is not None:
+            self._writer.close()
+
+    def _loop(self) -> None:
+        while not self._stop.wait(self.interval):
+            self.poll()
+
+    def poll(self) -> None:
+        if self._file is None:
+            inode = self._inode()
+            if inode is None or inode == self._old_inode:
+                return  # training has not (re)created the CSV yet (or never did)
+            self._file = self._path.open(newline="")
+            self._file.readline()  # header
+        chunk = self._pending + self._file.read()
+        lines = chunk.split("\n")
+        self._pending = lines.pop()  # an incomplete last line waits for the next poll
+        for values in csv.reader(line.rstrip("\r") for line in lines if line.strip()):
+            row = dict(zip(METRIC_COLUMNS, values, strict=False))
+            step = int(row["interaction"])
+            for tag, value in _scalars(row).items():
+                self._writer.add_scalar(tag, value, step)
+            self.rows_written += 1
+        self._writer.flush()
+
+
+def export_run(run_dir: Path) -> int:
+    """Write ``RUN_DIR/tb/`` from a run's whole ``metrics.csv`` (e.g. for a ``sili train`` run);
+    returns the number of interactions written."""
+    from torch.utils.tensorboard import SummaryWriter
+
+    run_dir = Path(run_dir)
+    shutil.rmtree(run_dir / TB_DIR, ignore_errors=True)
+    n = 0
+    with (run_dir / METRICS).open(newline="") as f, SummaryWriter(str(run_dir / TB_DIR)) as w:
+        for row in csv.DictReader(f):
+            for tag, value in _scalars(row).items():
+                w.add_scalar(tag, value, int(row["interaction"]))
+            n += 1
+    return n

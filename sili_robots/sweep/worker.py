@@ -1,0 +1,112 @@
+"""One sweep run inside a worker process (local pool or Ray): train or resume, never raise.
+
+Both backends call :func:`run_job` in a process of its own (one run per process: libsumo holds
+one simulation per process, and nothing of one run leaks into the next). Any failure becomes an
+outcome with the error text, and ``error.txt`` in the run directory, so one bad run never stops
+the sweep. This module imports torch only inside the call, after capping threads.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import socket
+import time
+import traceback
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from sili_robots.sweep.state import ERROR_FILE, RUNNING_FILE, run_state
+
+#: one thread per worker: K workers share the machine's cores
+THREAD_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+
+
+@dataclass
+class Job:
+    """What a worker needs to know; plain data so it pickles for any backend."""
+
+    name: str
+    config: dict[str, Any]
+    run_dir: str
+    tensorboard: bool = False
+
+
+@dataclass
+class Outcome:
+    name: str
+    status: str  # "done" or "failed"
+    resumed: bool = False
+    error: str | None = None
+    wall_time_s: float = 0.0
+    pid: int = 0  # the worker process that ran it (0: none did)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def limit_threads() -> None:
+    for var in THREAD_ENV:
+        os.environ[var] = "1"
+
+
+def run_job(job: Job) -> Outcome:
+    """Train (or resume, or skip when finished) one run; failures are returned, not raised."""
+    limit_threads()
+    t0 = time.perf_counter()
+    run_dir = Path(job.run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    state = run_state(run_dir)
+    if state == "done":
+        return Outcome(job.name, "done", pid=os.getpid())
+    running = run_dir / RUNNING_FILE
+    running.write_text(json.dumps({"pid": os.getpid(), "host": socket.gethostname()}))
+    try:
+        import torch
+
+        from sili_robots.runs import RunConfig
+        from sili_robots.training import train
+
+        torch.set_num_threads(1)
+        cfg = RunConfig.from_dict(job.config)
+        with _tensorboard(run_dir, job.tensorboard):
+            train(cfg, run_dir, resume=state == "resumable", progress=False)
+    except (KeyboardInterrupt, SystemExit):
+        raise  # the sweep is being stopped: the run stays resumable from its checkpoint
+    except Exception as err:  # a run's failure must not reach the sweep
+        (run_dir / ERROR_FILE).write_text("".join(traceback.format_exception(err)))
+        return Outcome(
+            job.name,
+            "failed",
+            resumed=state == "resumable",
+            error=f"{type(err).__name__}: {err}"[:2000],
+            wall_time_s=time.perf_counter() - t0,
+            pid=os.getpid(),
+        )
+    finally:
+        running.unlink(missing_ok=True)
+    (run_dir / ERROR_FILE).unlink(missing_ok=True)
+    return Outcome(
+        job.name,
+        "done",
+        resumed=state == "resumable",
+        wall_time_s=time.perf_counter() - t0,
+        pid=os.getpid(),
+    )
+
+
+@contextlib.contextmanager
+def _tensorboard(run_dir: Path, enabled: bool):
+    if not enabled:
+        yield
+        return
+    from sili_robots.sweep.tensorboard import MetricsTail
+
+    tail = MetricsTail(run_dir)
+    tail.start()
+    try:
+        yield
+    finally:
+        tail.stop()

@@ -1,0 +1,159 @@
+"""``sili plot``: the figures show exactly the sweep's results table (read back from the figure
+objects), and the command writes readable PNG and PDF files."""
+
+import shutil
+
+import numpy as np
+import pandas as pd
+import pytest
+from matplotlib.collections import PolyCollection
+from matplotlib.colors import to_rgb
+
+from sili_robots.cli import main
+from sili_robots.plotting import beta_sweep, learning_curves, load_results, overview
+from sili_robots.sweep import LocalBackend, SweepSpec, run_sweep
+
+FAST = {
+    "updates_per_step": 0.1,
+    "hidden": 32,
+    "random_interactions": 3,
+    "latent_updates_per_interaction": 2,
+}
+
+
+@pytest.fixture(scope="module")
+def sweep_dir(tmp_path_factory):
+    """Circle (3 Goals): SILI at b = 0.5 and 1 and SAC, 2 seeds; SAC on Speaker-Listener."""
+    out = tmp_path_factory.mktemp("plot-sweep")
+    common = {"seeds": [0, 1], "interactions": 8, "agent_overrides": FAST, "checkpoint_every": 4}
+    specs = [
+        SweepSpec(tasks=["circle-3"], methods=["sili", "sac"], betas=[0.5, 1.0], **common),
+        SweepSpec(tasks=["speaker-listener"], methods=["sac"], **{**common, "seeds": [0]}),
+    ]
+    report = run_sweep(specs, out, LocalBackend(workers=2), progress=False)
+    assert report.ok, report.failed
+    return out
+
+
+def _moving_average(x: np.ndarray, w: int) -> np.ndarray:
+    """Trailing mean over the last w values (fewer at the start), written independently."""
+    c = np.cumsum(np.insert(x.astype(float), 0, 0.0))
+    idx = np.arange(1, len(x) + 1)
+    lo = np.maximum(idx - w, 0)
+    return (c[idx] - c[lo]) / (idx - lo)
+
+
+def _expected_curve(table, task, method, beta, column, w):
+    rows = table[(table.task == task) & (table.method == method) & (table.config_beta == beta)]
+    per_seed = np.stack(
+        [
+            _moving_average(g.sort_values("interaction")[column].to_numpy(), w)
+            for _, g in rows.groupby("seed")
+        ]
+    )
+    return per_seed.mean(axis=0), per_seed.std(axis=0)
+
+
+def _line(ax, label):
+    (line,) = [ln for ln in ax.get_lines() if ln.get_label() == label]
+    return line
+
+
+def _band(ax, line):
+    """The shaded band drawn in the colour of ``line``."""
+    color = to_rgb(line.get_color())
+    (band,) = [
+        c
+        for c in ax.collections
+        if isinstance(c, PolyCollection) and np.allclose(c.get_facecolor()[0][:3], color)
+    ]
+    return band
+
+
+def test_learning_curves_plot_the_table_mean_and_std_across_seeds(sweep_dir):
+    table = pd.read_csv(sweep_dir / "results.csv")
+    table["stable"] = 1 - table["strategy_changed"]  # true stability, derived here independently
+    fig = learning_curves(load_results(sweep_dir), "circle-3", smooth=3)
+    axes = {ax.get_gid(): ax for ax in fig.axes}
+    assert set(axes) == {"task_reward", "true_stability", "stability_reward"}
+    variants = {"SILI b=0.5": ("sili", 0.5), "SILI b=1": ("sili", 1.0), "SAC": ("sac", 0.0)}
+    columns = {"task_reward": "task_reward", "true_stability": "stable"}
+    for metric, ax in axes.items():
+        assert {ln.get_label() for ln in ax.get_lines()} == set(variants)
+        for label, (method, beta) in variants.items():
+            column = columns.get(metric, metric)
+            mean, std = _expected_curve(table, "circle-3", method, beta, column, 3)
+            line = _line(ax, label)
+            xy = line.get_xydata()
+            np.testing.assert_array_equal(xy[:, 0], np.arange(8))
+            np.testing.assert_allclose(xy[:, 1], mean, rtol=1e-9, atol=1e-12)
+            # the band of this variant spans mean - std .. mean + std at every interaction
+            verts = np.concatenate([p.vertices for p in _band(ax, line).get_paths()])
+            for x in range(8):
+                at_x = verts[np.isclose(verts[:, 0], x), 1]
+                assert at_x.min() == pytest.approx(mean[x] - std[x], abs=1e-9)
+                assert at_x.max() == pytest.approx(mean[x] + std[x], abs=1e-9)
+
+
+def test_beta_figure_plots_final_values_against_b(sweep_dir):
+    table = pd.read_csv(sweep_dir / "results.csv")
+    fig = beta_sweep(load_results(sweep_dir), "circle-3", window=4)
+    axes = {ax.get_gid(): ax for ax in fig.axes}
+    sili = table[(table.task == "circle-3") & (table.method == "sili")]
+    for metric in ("task_reward", "true_stability"):
+        finals = (
+            sili.sort_values("interaction")
+            .groupby(["config_beta", "seed"])[metric]
+            .apply(lambda s: s.tail(4).mean())
+            .unstack("seed")
+        )
+        xy = _line(axes[metric], "SILI").get_xydata()
+        np.testing.assert_array_equal(xy[:, 0], [0.5, 1.0])
+        np.testing.assert_allclose(xy[:, 1], finals.mean(axis=1).to_numpy())
+        assert axes[metric].get_xlabel() == "stability weight b"
+
+
+def test_overview_has_a_row_per_task(sweep_dir):
+    fig = overview(load_results(sweep_dir), smooth=2)
+    grid = [ax for ax in fig.axes if ax.get_gid()]
+    assert [ax.get_gid() for ax in grid] == ["task_reward", "true_stability"] * 2
+    assert [ax.get_title(loc="left") for ax in grid[::2]] == [
+        "Circle (3 Goals)",
+        "Detour Speaker-Listener",
+    ]
+    table = pd.read_csv(sweep_dir / "results.csv")
+    sl = table[table.task == "speaker-listener"].sort_values("interaction")
+    xy = _line(grid[2], "SAC").get_xydata()
+    np.testing.assert_allclose(xy[:, 1], _moving_average(sl["task_reward"].to_numpy(), 2))
+
+
+def test_plot_command_writes_png_and_pdf(sweep_dir, tmp_path, capsys):
+    out = tmp_path / "figs"
+    assert main(["plot", str(sweep_dir), "--out", str(out)]) == 0
+    written = capsys.readouterr().out.split()
+    names = sorted(p.rsplit("/", 1)[-1] for p in written)
+    expected = ["circle-3", "circle-3_beta", "overview", "speaker-listener"]
+    assert names == sorted(f"{n}.{ext}" for n in expected for ext in ("png", "pdf"))
+    for name in expected:
+        png, pdf = (out / f"{name}.png").read_bytes(), (out / f"{name}.pdf").read_bytes()
+        assert png.startswith(b"\x89PNG") and len(png) > 20_000
+        assert pdf.startswith(b"%PDF") and len(pdf) > 5_000
+
+
+def test_unfinished_runs_are_left_out_unless_asked(sweep_dir, tmp_path):
+    copy = tmp_path / "sweep"
+    shutil.copytree(sweep_dir, copy)
+    (copy / "runs" / "circle-3__sac__s1" / "summary.json").unlink()
+    df = load_results(copy)
+    assert "circle-3__sac__s1" not in set(df["run"])
+    xy = _line(learning_curves(df, "circle-3", smooth=1).axes[0], "SAC").get_xydata()
+    only_s0 = df[df.run == "circle-3__sac__s0"].sort_values("interaction")["task_reward"]
+    np.testing.assert_allclose(xy[:, 1], only_s0)
+    assert "circle-3__sac__s1" in set(load_results(copy, include_unfinished=True)["run"])
+
+
+def test_plot_of_a_non_sweep_exits_2(tmp_path, capsys):
+    assert main(["plot", str(tmp_path)]) == 2
+    assert "is not a sweep directory" in capsys.readouterr().err
+    assert main(["plot", str(tmp_path), "--formats", "gif"]) == 2
+    assert "unknown figure format" in capsys.readouterr().err

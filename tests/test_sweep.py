@@ -1,0 +1,273 @@
+"""``sili sweep`` on the local process pool: real runs, the results table, TensorBoard scalars,
+resume after a SIGKILLed worker, a failing run isolated, bad input."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+from sili_robots.cli import main
+from sili_robots.runs import RunConfig
+from sili_robots.sweep import LocalBackend, SweepSpec, expand, run_sweep
+from sili_robots.sweep import tensorboard as tb
+from sili_robots.sweep.state import sweep_lock
+from sili_robots.training import train
+
+FAST = {
+    "updates_per_step": 0.1,
+    "hidden": 32,
+    "random_interactions": 3,
+    "latent_updates_per_interaction": 2,
+}
+FAST_ARGS = [x for k, v in FAST.items() for x in ("--set", f"{k}={v}")]
+
+
+def _spec(**kw):
+    base = {
+        "tasks": ["circle-3"],
+        "methods": ["sili", "sac"],
+        "seeds": [0, 1],
+        "interactions": 8,
+        "agent_overrides": FAST,
+        "checkpoint_every": 4,
+    }
+    return SweepSpec(**{**base, **kw})
+
+
+def _sili(*args, timeout=300):
+    return subprocess.run(
+        [sys.executable, "-m", "sili_robots.cli", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+def _without_wall_time(df):
+    return df.drop(columns="wall_time").reset_index(drop=True)
+
+
+@pytest.fixture(scope="module")
+def tiny_sweep(tmp_path_factory):
+    """2 methods x 2 seeds on Circle (3 Goals), 8 interactions each, two workers."""
+    out = tmp_path_factory.mktemp("sweep")
+    report = run_sweep(_spec(), out, LocalBackend(workers=2), progress=False)
+    return out, report
+
+
+def test_local_sweep_runs_every_run_in_its_own_process(tiny_sweep):
+    out, report = tiny_sweep
+    names = ["circle-3__sili-b0.5__s0", "circle-3__sili-b0.5__s1", "circle-3__sac__s0"]
+    assert report.ok and set(names) < set(report.outcomes)
+    assert all(o.status == "done" for o in report.outcomes.values())
+    pids = {o.pid for o in report.outcomes.values()}
+    assert len(pids) == 4 and os.getpid() not in pids  # one fresh process per run
+    for name in report.planned:
+        run_dir = out / "runs" / name
+        assert (run_dir / "summary.json").is_file()
+        assert len(pd.read_csv(run_dir / "metrics.csv")) == 8
+
+
+def test_a_sweep_run_is_the_run_sili_train_would_make(tiny_sweep, tmp_path):
+    out, _ = tiny_sweep
+    cfg = {r.name: r.config for r in expand(_spec())}["circle-3__sili-b0.5__s1"]
+    train(cfg, tmp_path / "ref", progress=False)
+    ref = pd.read_csv(tmp_path / "ref" / "metrics.csv")
+    got = pd.read_csv(out / "runs" / "circle-3__sili-b0.5__s1" / "metrics.csv")
+    pd.testing.assert_frame_equal(_without_wall_time(ref), _without_wall_time(got))
+
+
+def test_results_table_has_a_row_per_run_per_interaction(tiny_sweep):
+    out, report = tiny_sweep
+    table = pd.read_csv(out / "results.csv")
+    assert len(table) == 4 * 8
+    assert table.groupby("run")["interaction"].apply(list).map(lambda x: x == list(range(8))).all()
+    for name in report.planned:
+        rows = table[table["run"] == name].reset_index(drop=True)
+        metrics = pd.read_csv(out / "runs" / name / "metrics.csv")
+        pd.testing.assert_frame_equal(rows[metrics.columns], metrics, check_dtype=False)
+        cfg = RunConfig.from_dict(
+            json.loads((out / "runs" / name / "config.json").read_text())["run"]
+        )
+        assert (rows["task"] == cfg.task).all() and (rows["method"] == cfg.method).all()
+        assert (rows["seed"] == cfg.seed).all() and (rows["config_beta"] == cfg.agent.beta).all()
+    np.testing.assert_array_equal(table["true_stability"], 1 - table["strategy_changed"])
+    assert table["finished"].all()
+    runs = pd.read_csv(out / "runs.csv").set_index("run")
+    assert (runs["status"] == "done").all() and (runs["interactions_logged"] == 8).all()
+    summary = json.loads((out / "runs" / "circle-3__sac__s1" / "summary.json").read_text())
+    assert runs.loc["circle-3__sac__s1", "final_task_reward"] == pytest.approx(
+        summary["final_task_reward"]
+    )
+
+
+def test_rerunning_a_finished_sweep_skips_every_run(tiny_sweep, capsys):
+    out, _ = tiny_sweep
+    before = {p: p.stat().st_mtime_ns for p in out.glob("runs/*/metrics.csv")}
+    report = run_sweep(_spec(), out, LocalBackend(workers=2), progress=False)
+    assert sorted(report.skipped) == sorted(report.planned) and not report.outcomes and report.ok
+    assert {p: p.stat().st_mtime_ns for p in out.glob("runs/*/metrics.csv")} == before
+    assert main(["sweep", "--resume", str(out), "--dry-run"]) == 0
+    listed = capsys.readouterr().out
+    assert "circle-3__sac__s1\tdone" in listed and "4 runs" in listed
+
+
+@pytest.mark.skipif(not tb.available(), reason="tensorboard is not installed")
+def test_tensorboard_scalars_mirror_the_metrics(tiny_sweep):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    out, _ = tiny_sweep
+    run_dir = out / "runs" / "circle-3__sili-b0.5__s0"
+    acc = EventAccumulator(str(run_dir / "tb"))
+    acc.Reload()
+    metrics = pd.read_csv(run_dir / "metrics.csv")
+    task = acc.Scalars("reward/task")
+    assert [e.step for e in task] == list(range(8))
+    np.testing.assert_allclose([e.value for e in task], metrics["task_reward"], rtol=1e-6)
+    stable = acc.Scalars("stability/true")
+    np.testing.assert_allclose([e.value for e in stable], 1 - metrics["strategy_changed"])
+    assert [e.step for e in acc.Scalars("loss/critic")] == list(
+        metrics.index[metrics["critic_loss"].notna()]
+    )
+
+
+def test_failing_run_is_reported_and_the_others_complete(tmp_path):
+    out = tmp_path / "sweep"
+    res = _sili(
+        "sweep",
+        "--tasks",
+        "circle-3,sawyer-reach",
+        "--methods",
+        "sac",
+        "--controller",
+        "bogus",
+        "--interactions",
+        4,
+        "--workers",
+        2,
+        "--out",
+        out,
+        "--no-progress",
+        *FAST_ARGS,
+    )
+    assert res.returncode == 1, res.stderr
+    report = json.loads(res.stdout)
+    assert report["done"] == 1
+    assert report["failed"] == {
+        "sawyer-reach-bogus__sac__s0": "ConfigError: unknown controller 'bogus'; "
+        "allowed: mink, osc, joint_velocity"
+    }
+    assert "failed sawyer-reach-bogus__sac__s0: ConfigError: unknown controller" in res.stderr
+    assert "Traceback" not in res.stderr
+    assert len(pd.read_csv(out / "runs" / "circle-3__sac__s0" / "metrics.csv")) == 4
+    assert (
+        "unknown controller"
+        in (out / "runs" / "sawyer-reach-bogus__sac__s0" / "error.txt").read_text()
+    )
+    runs = pd.read_csv(out / "runs.csv").set_index("run")
+    assert runs.loc["circle-3__sac__s0", "status"] == "done"
+    assert runs.loc["sawyer-reach-bogus__sac__s0", "status"] == "failed"
+    assert "unknown controller 'bogus'" in runs.loc["sawyer-reach-bogus__sac__s0", "error"]
+
+
+def _wait_for(predicate, timeout=120.0):
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.02)
+    return False
+
+
+def _rows(path):
+    return max(len(path.read_text().splitlines()) - 1, 0) if path.exists() else 0
+
+
+def test_killed_worker_is_reported_and_the_sweep_resumes_its_run(tmp_path):
+    out = tmp_path / "sweep"
+    args = ["--tasks", "circle-3", "--methods", "sili", "--seeds", "0,1", "--interactions", 40]
+    args += ["--checkpoint-every", 5, "--workers", 2, "--no-progress", *FAST_ARGS]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sili_robots.cli", "sweep", *map(str, args), "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    victim = out / "runs" / "circle-3__sili-b0.5__s0"
+    try:
+        assert _wait_for(lambda: _rows(victim / "metrics.csv") >= 12), "run never got going"
+        pid = json.loads((victim / "worker.json").read_text())["pid"]
+        assert pid != proc.pid
+        os.kill(pid, signal.SIGKILL)
+        stdout, stderr = proc.communicate(timeout=240)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 1, stderr
+    assert json.loads(stdout)["failed"] == {"circle-3__sili-b0.5__s0": "worker killed by SIGKILL"}
+    assert len(pd.read_csv(out / "runs" / "circle-3__sili-b0.5__s1" / "metrics.csv")) == 40
+    checkpointed = torch.load(victim / "checkpoint.pt", weights_only=False)["interaction"]
+    assert 10 <= checkpointed < 40 and not (victim / "summary.json").exists()
+    before = pd.read_csv(victim / "metrics.csv")
+
+    res = _sili("sweep", "--resume", out, "--no-progress")
+    assert res.returncode == 0, res.stderr
+    report = json.loads(res.stdout)
+    assert (report["already_done"], report["done"], report["failed"]) == (1, 1, {})
+    assert "done circle-3__sili-b0.5__s0 (resumed)" in res.stderr
+    after = pd.read_csv(victim / "metrics.csv")
+    # resumed, not restarted: the rows up to the checkpoint are the very rows written before
+    pd.testing.assert_frame_equal(after.head(checkpointed), before.head(checkpointed))
+    # and the result is exactly the uninterrupted run
+    cfg = RunConfig.from_dict(json.loads((victim / "config.json").read_text())["run"])
+    train(cfg, tmp_path / "ref", progress=False)
+    ref = pd.read_csv(tmp_path / "ref" / "metrics.csv")
+    pd.testing.assert_frame_equal(_without_wall_time(after), _without_wall_time(ref))
+    assert (pd.read_csv(out / "runs.csv")["status"] == "done").all()
+    if tb.available():
+        from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+        acc = EventAccumulator(str(victim / "tb"))
+        acc.Reload()
+        assert [e.step for e in acc.Scalars("reward/task")] == list(range(40))
+
+
+def test_a_second_sweep_on_the_same_directory_is_refused(tmp_path):
+    with sweep_lock(tmp_path), pytest.raises(Exception, match="another `sili sweep` is running"):
+        run_sweep(_spec(), tmp_path, LocalBackend(workers=1), progress=False)
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--tasks", "circle-9", "--methods", "sili"], "unknown task 'circle-9'"),
+        (["--tasks", "circle-3", "--methods", "sili,ppo"], "unknown method 'ppo'"),
+        (["--tasks", "circle-3", "--methods", "sili", "--seeds", "4-2"], "seed range '4-2'"),
+        (["--tasks", "circle-3", "--methods", "sili", "--beta", "2"], "outside the allowed"),
+        (["--tasks", "circle-3", "--methods", "sac", "--beta", "0.5"], "--beta applies to"),
+        (["--tasks", "circle-3", "--methods", "sili", "--controller", "osc"], "--controller"),
+        (["--tasks", "circle-3", "--methods", "sili", "--set", "gamma=3"], "gamma must be"),
+        (["--tasks", "circle-3"], "--tasks and --methods are required"),
+        (["--tasks", "circle-3", "--methods", "sili", "--ray-address", "x"], "needs --backend ray"),
+    ],
+)
+def test_bad_sweep_input_exits_2_with_the_allowed_values(tmp_path, capsys, args, message):
+    assert main(["sweep", *args, "--out", str(tmp_path / "s")]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "s" / "runs").exists()
+
+
+def test_resume_of_a_non_sweep_and_changed_settings_exit_2(tiny_sweep, tmp_path, capsys):
+    assert main(["sweep", "--resume", str(tmp_path)]) == 2
+    assert "is not a sweep directory" in capsys.readouterr().err
+    out, _ = tiny_sweep
+    args = ["--tasks", "circle-3", "--methods", "sac", "--seeds", "0", "--interactions", "9"]
+    assert main(["sweep", *args, "--out", str(out), *FAST_ARGS]) == 2
+    assert "interactions: 8 on disk, 9 now" in capsys.readouterr().err

@@ -1,0 +1,143 @@
+"""``sili sweep --backend ray`` against a local Ray instance started by the test: the same runs
+as the local backend, a failing run isolated, a killed worker retried from its checkpoint."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import pandas as pd
+import pytest
+
+from sili_robots.runs import RunConfig
+from sili_robots.sweep import RayBackend, SweepSpec, expand, run_sweep
+from sili_robots.training import train
+
+ray = pytest.importorskip("ray")
+
+pytestmark = pytest.mark.slow
+
+FAST = {
+    "updates_per_step": 0.1,
+    "hidden": 32,
+    "random_interactions": 3,
+    "latent_updates_per_interaction": 2,
+}
+
+
+@pytest.fixture(scope="module")
+def ray_cluster():
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+    ctx = ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    yield ctx.address_info["gcs_address"]
+    ray.shutdown()
+
+
+def _spec(**kw):
+    base = {
+        "tasks": ["circle-3"],
+        "methods": ["sili", "sac"],
+        "seeds": [0, 1],
+        "interactions": 6,
+        "agent_overrides": FAST,
+        "checkpoint_every": 3,
+    }
+    return SweepSpec(**{**base, **kw})
+
+
+def _strip(df):
+    return df.drop(columns="wall_time").reset_index(drop=True)
+
+
+def test_ray_sweep_runs_each_run_in_a_fresh_worker_and_isolates_a_failure(ray_cluster, tmp_path):
+    bad = _spec(tasks=["sawyer-reach"], methods=["sac"], seeds=[0], controllers=["bogus"])
+    report = run_sweep([_spec(), bad], tmp_path, RayBackend(), progress=False)
+    assert ray.is_initialized()  # the test's instance is used, not shut down
+    assert report.failed == {
+        "sawyer-reach-bogus__sac__s0": "ConfigError: unknown controller 'bogus'; "
+        "allowed: mink, osc, joint_velocity"
+    }
+    done = [o for o in report.outcomes.values() if o.status == "done"]
+    assert len(done) == 4
+    assert len({o.pid for o in report.outcomes.values()}) == 5  # max_calls=1: a process each
+    assert os.getpid() not in {o.pid for o in done}
+    table = pd.read_csv(tmp_path / "results.csv")
+    assert len(table) == 4 * 6 and set(table["run"]) == {o.name for o in done}
+    # the same run as the local training loop makes
+    cfg = {r.name: r.config for r in expand(_spec())}["circle-3__sili-b0.5__s1"]
+    train(cfg, tmp_path / "ref", progress=False)
+    ref = pd.read_csv(tmp_path / "ref" / "metrics.csv")
+    got = pd.read_csv(tmp_path / "runs" / "circle-3__sili-b0.5__s1" / "metrics.csv")
+    pd.testing.assert_frame_equal(_strip(ref), _strip(got))
+    runs = pd.read_csv(tmp_path / "runs.csv").set_index("run")
+    assert runs.loc["sawyer-reach-bogus__sac__s0", "status"] == "failed"
+
+
+def test_cli_joins_a_running_ray_cluster_by_address(ray_cluster, tmp_path):
+    out = tmp_path / "sweep"
+    res = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "sili_robots.cli",
+            "sweep",
+            "--backend",
+            "ray",
+            "--ray-address",
+            ray_cluster,
+            "--tasks",
+            "circle-3",
+            "--methods",
+            "sac",
+            "--seeds",
+            "0-1",
+            "--interactions",
+            "5",
+            "--out",
+            str(out),
+            "--no-progress",
+            *[x for k, v in FAST.items() for x in ("--set", f"{k}={v}")],
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert res.returncode == 0, res.stderr
+    report = json.loads(res.stdout)
+    assert (report["runs"], report["done"], report["failed"]) == (2, 2, {})
+    assert "done circle-3__sac__s1" in res.stderr
+    assert ray.is_initialized() and ray.cluster_resources().get("CPU") == 2  # still up
+
+
+def test_ray_retries_a_killed_worker_from_its_checkpoint(ray_cluster, tmp_path):
+    spec = _spec(methods=["sili"], seeds=[0], interactions=40, checkpoint_every=5)
+    run_dir = tmp_path / "runs" / "circle-3__sili-b0.5__s0"
+    killed: list[int] = []
+
+    def kill_once_past_a_checkpoint():
+        deadline = time.time() + 120
+        while time.time() < deadline:
+            metrics, info = run_dir / "metrics.csv", run_dir / "worker.json"
+            if metrics.exists() and len(metrics.read_text().splitlines()) > 12 and info.exists():
+                pid = json.loads(info.read_text())["pid"]
+                os.kill(pid, signal.SIGKILL)
+                killed.append(pid)
+                return
+            time.sleep(0.02)
+
+    killer = threading.Thread(target=kill_once_past_a_checkpoint)
+    killer.start()
+    report = run_sweep(spec, tmp_path, RayBackend(retries=1), progress=False)
+    killer.join()
+    assert killed, "the worker was never killed"
+    (outcome,) = report.outcomes.values()
+    assert outcome.status == "done" and outcome.resumed and outcome.pid != killed[0]
+    cfg = RunConfig.from_dict(json.loads((run_dir / "config.json").read_text())["run"])
+    train(cfg, tmp_path / "ref", progress=False)
+    pd.testing.assert_frame_equal(
+        _strip(pd.read_csv(tmp_path / "ref" / "metrics.csv")),
+        _strip(pd.read_csv(run_dir / "metrics.csv")),
+    )

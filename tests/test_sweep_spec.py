@@ -1,0 +1,119 @@
+"""Sweep specs: parsing, expansion into run configs, stable names, what is rejected up front."""
+
+import json
+
+import pytest
+
+from sili_robots.errors import ConfigError
+from sili_robots.sweep import SweepSpec, expand, parse_betas, parse_seeds, plan
+from sili_robots.sweep.state import check_existing, run_path
+
+
+def _spec(**kw):
+    base = {"tasks": ["circle-3"], "methods": ["sili"], "seeds": [0], "interactions": 5}
+    return SweepSpec(**{**base, **kw})
+
+
+def test_parse_seeds_ranges_lists_and_errors():
+    assert parse_seeds("0-4") == [0, 1, 2, 3, 4]
+    assert parse_seeds("0-2,7,1") == [0, 1, 2, 7]
+    assert parse_seeds("3") == [3]
+    with pytest.raises(ConfigError, match="'x'"):
+        parse_seeds("0,x")
+    with pytest.raises(ConfigError, match="empty"):
+        parse_seeds("4-2")
+
+
+def test_parse_betas_range_checked():
+    assert parse_betas("0,0.2,1") == [0.0, 0.2, 1.0]
+    with pytest.raises(ConfigError, match=r"1.5 is outside the allowed range \[0, 1\]"):
+        parse_betas("0.5,1.5")
+    with pytest.raises(ConfigError, match="bad b value 'a'"):
+        parse_betas("a,b")
+
+
+def test_expansion_is_the_cross_product_with_b_only_where_b_is_free():
+    runs = expand(
+        _spec(
+            tasks=["circle-3", "circle-8"],
+            methods=["sili", "lili", "sac"],
+            seeds=[0, 1],
+            betas=[0.2, 0.8],
+            agent_overrides={"hidden": 32},
+        )
+    )
+    # per task: sili x 2 b x 2 seeds + lili x 2 seeds + sac x 2 seeds
+    assert len(runs) == 2 * (4 + 2 + 2)
+    by_name = {r.name: r.config for r in runs}
+    cfg = by_name["circle-8__sili-b0.2__s1"]
+    assert (cfg.task, cfg.method, cfg.seed, cfg.agent.beta) == ("circle-8", "sili", 1, 0.2)
+    assert cfg.agent.hidden == 32 and cfg.interactions == 5
+    assert by_name["circle-3__lili__s0"].agent.beta == 0.0  # LILI's b stays 0
+    assert by_name["circle-3__sac__s1"].agent.method == "sac"
+    # the default b is part of SILI's name, so the b=0.5 run of a b sweep is the same run
+    assert [r.name for r in expand(_spec())] == ["circle-3__sili-b0.5__s0"]
+    assert "circle-3__sili-b0.5__s0" in {r.name for r in expand(_spec(betas=[0.5, 1.0]))}
+
+
+def test_names_are_stable_and_unique():
+    spec = _spec(tasks=["circle-3", "speaker-listener"], methods=["sili", "smirl"], seeds=[0, 1, 2])
+    a, b = [r.name for r in expand(spec)], [r.name for r in expand(spec)]
+    assert a == b and len(set(a)) == len(a)
+
+
+def test_controllers_multiply_only_tasks_that_take_one():
+    runs = expand(
+        _spec(tasks=["circle-3", "sawyer-reach"], methods=["sac"], controllers=["mink", "osc"])
+    )
+    names = [r.name for r in runs]
+    assert names == ["circle-3__sac__s0", "sawyer-reach-mink__sac__s0", "sawyer-reach-osc__sac__s0"]
+    assert runs[0].config.env_kwargs == {}
+    assert runs[2].config.env_kwargs == {"controller": "osc"}
+
+
+def test_latent_kind_other_than_the_default_is_named():
+    runs = expand(_spec(latent="continuous"))
+    assert runs[0].name == "circle-3__sili-continuous-b0.5__s0"
+    assert runs[0].config.agent.latent == "continuous"
+    # speaker-listener's default latent is partial: not named
+    assert expand(_spec(tasks=["speaker-listener"]))[0].name == "speaker-listener__sili-b0.5__s0"
+
+
+@pytest.mark.parametrize(
+    "kw,message",
+    [
+        ({"tasks": ["circle-9"]}, "unknown task 'circle-9'; allowed: circle-3"),
+        ({"methods": ["ppo"]}, "unknown method 'ppo'; allowed: sili"),
+        ({"methods": ["lili", "sac"], "betas": [0.2]}, "--beta applies to methods sili, smirl"),
+        ({"controllers": ["osc"]}, "--controller applies to tasks sawyer-reach"),
+        ({"agent_overrides": {"beta": 0.3}}, "use the sweep's --beta"),
+        ({"agent_overrides": {"hiddden": 3}}, "unknown agent setting 'hiddden'"),
+        ({"agent_overrides": {"gamma": 2}}, r"gamma must be in \(0, 1\]"),
+        ({"latent": "fuzzy"}, "unknown latent kind 'fuzzy'"),
+        ({"tasks": []}, "no tasks given"),
+        ({"env_kwargs": {"controller": "osc"}}, "give controllers with --controller"),
+    ],
+)
+def test_bad_specs_are_config_errors_naming_the_value(kw, message):
+    with pytest.raises(ConfigError, match=message):
+        expand(_spec(**kw))
+
+
+def test_an_existing_run_with_other_settings_is_refused(tmp_path):
+    (run,) = expand(_spec())
+    path = run_path(tmp_path, run.name)
+    path.mkdir(parents=True)
+    other = run.config.to_dict()
+    other["interactions"] = 99
+    (path / "config.json").write_text(json.dumps({"run": other}))
+    with pytest.raises(ConfigError, match=r"interactions: 99 on disk, 5 now"):
+        check_existing(tmp_path, run)
+    (path / "config.json").write_text(json.dumps({"run": run.config.to_dict()}))
+    check_existing(tmp_path, run)  # the same run: fine
+
+
+def test_plan_unions_specs_and_rejects_a_name_planned_twice_differently():
+    runs = plan([_spec(), _spec(methods=["sili", "sac"])])
+    assert [r.name for r in runs] == ["circle-3__sili-b0.5__s0", "circle-3__sac__s0"]
+    with pytest.raises(ConfigError, match="planned twice"):
+        plan([_spec(), _spec(interactions=6)])
