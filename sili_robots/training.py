@@ -123,7 +123,7 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
                 data["strategy"],
                 info,
             )
-            losses = agent.update(j) if j + 1 >= cfg.agent.random_interactions else {}
+            losses = agent.update(j, rl=j + 1 >= cfg.agent.random_interactions)
             task_reward = float(data["rew"].sum())
             recent.append((task_reward, changed))
             metrics.write(

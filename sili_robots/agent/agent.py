@@ -175,13 +175,17 @@ class SILIAgent:
         return np.linalg.norm(za - zb, axis=-1).astype(np.float32)
 
     # ------------------------------------------------------------------ learning
-    def update(self, interaction: int) -> dict[str, float]:
-        """Learning after an interaction: latent model, then H * updates_per_step SAC steps."""
+    def update(self, interaction: int, rl: bool = True) -> dict[str, float]:
+        """Learning after an interaction: latent model, then (with ``rl``) H * updates_per_step
+        SAC steps. The latent model also learns during the random warm-up, whose diverse
+        trajectories are the most informative about the opponent."""
         losses: dict[str, float] = {}
         if self.model is not None and self.buffer.n >= 2:
             losses["latent_loss"] = self.update_latent_model(
                 self.cfg.latent_updates_per_interaction
             )
+        if not rl:
+            return losses
         self._update_credit += self.horizon * self.cfg.updates_per_step
         n_updates = int(self._update_credit)
         self._update_credit -= n_updates

@@ -61,8 +61,9 @@ class AgentConfig:
     latent_lr: float = 1e-3
     latent_updates_per_interaction: int = 20
     latent_batch: int = 32  # consecutive interaction pairs per latent-model update
-    #: discrete latents: "expected" (exact expectation over categories, default) or "gumbel"
-    #: (the paper's straight-through Gumbel-Softmax); see sili_robots/agent/latent.py
+    #: discrete latents: "expected" (exact expectation over categories, default), "marginal"
+    #: (exact marginal likelihood) or "gumbel" (the paper's straight-through Gumbel-Softmax);
+    #: see sili_robots/agent/latent.py
     latent_estimator: str = "expected"
     latent_usage_bonus: float = 0.03
     #: total stability reward credited per interaction = stability_scale * R_stable
@@ -137,9 +138,10 @@ class AgentConfig:
         for name in ("updates_per_step", "random_interactions", "latent_updates_per_interaction"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
-        if self.latent_estimator not in ("expected", "gumbel"):
+        if self.latent_estimator not in ("expected", "marginal", "gumbel"):
             raise ConfigError(
-                f"unknown latent_estimator {self.latent_estimator!r}; allowed: expected, gumbel"
+                f"unknown latent_estimator {self.latent_estimator!r}; "
+                "allowed: expected, marginal, gumbel"
             )
         if not 0.0 < self.gamma <= 1.0:
             raise ConfigError(f"gamma must be in (0, 1], got {self.gamma}")

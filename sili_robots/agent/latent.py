@@ -19,6 +19,9 @@ Training objective for discrete latents (``estimator``):
   paper's straight-through Gumbel estimator collapsed to one category (the decoder learns to
   ignore a z that is noise at first, and then the encoder gets no signal); the exact expectation
   with the usage bonus recovers the true strategy (purity 0.97 where Gumbel stayed at 0.4-0.5).
+* ``marginal``: the exact marginal likelihood -log sum_k q_k p(tau^j | k) (an EM-like
+  objective whose head gradients are weighted by the posterior); measured on the same data it
+  found 2-3 clusters but did not beat ``expected`` (purity 0.37-0.69).
 * ``gumbel``: the paper's straight-through Gumbel-Softmax (temperature 1): one-hot forward, soft
   gradient backward.
 
@@ -34,7 +37,7 @@ from torch import nn
 
 from sili_robots.agent.networks import mlp
 
-ESTIMATORS = ("expected", "gumbel")
+ESTIMATORS = ("marginal", "expected", "gumbel")
 
 
 def gumbel_straight_through(logits: torch.Tensor, temperature: float = 1.0) -> torch.Tensor:
@@ -57,6 +60,7 @@ class LatentModel(nn.Module):
         kind: str,
         estimator: str = "expected",
         usage_bonus: float = 0.03,
+        evidence_scale: float = 1.0,
     ) -> None:
         super().__init__()
         if kind not in ("discrete", "continuous"):
@@ -64,6 +68,7 @@ class LatentModel(nn.Module):
         if estimator not in ESTIMATORS:
             raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
         self.kind, self.estimator, self.usage_bonus = kind, estimator, usage_bonus
+        self.evidence_scale = evidence_scale
         self.latent_dim = latent_dim
         tr_dim = 2 * obs_dim + act_dim + 1
         self.phi = nn.Sequential(
@@ -124,6 +129,13 @@ class LatentModel(nn.Module):
         logits = self.encode_logits(prev_traj)
         heads = (self._heads(obs, act) - mean) / scale  # [B, H, k, out]
         err = (heads - target.unsqueeze(-2)).pow(2).mean(-1).mean(1)  # [B, k]
+        if self.estimator == "marginal":
+            # -log sum_k q_k p(tau^j | k); log p = -0.5 * evidence_scale * H * err (per step)
+            log_lik = -0.5 * self.evidence_scale * obs.shape[1] * err
+            log_q = F.log_softmax(logits, dim=-1)
+            nll = -torch.logsumexp(log_q + log_lik, dim=-1).mean() / obs.shape[1]
+            usage = log_q.exp().mean(0)
+            return nll + self.usage_bonus * (usage * torch.log(usage + 1e-8)).sum()
         if self.estimator == "gumbel":
             z = gumbel_straight_through(logits)
             return (z * err).sum(-1).mean()
