@@ -1,0 +1,108 @@
+"""Learning benchmark: methods x seeds on a task, each run in its own process, then a table.
+
+For each run: final task reward and true stability (fraction of interactions whose true
+strategy stayed the same) over the last ``--window`` interactions, the first interaction at
+which a ``--window`` rolling stability reached 0.9, wall time, and the latent diagnostics.
+
+    python benchmarks/bench_learning.py --task circle-3 \\
+        --methods sili,lili,sac,oracle,stable,smirl --seeds 0,1,2 --interactions 3000 \\
+        --workers 2 --out runs/bench-circle3
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+
+def run_one(task: str, method: str, seed: int, args: argparse.Namespace) -> Path:
+    out = Path(args.out) / f"{task}-{method}-s{seed}"
+    if (out / "summary.json").exists():
+        return out
+    cmd = [
+        sys.executable,
+        "-m",
+        "sili_robots.cli",
+        "train",
+        "--task",
+        task,
+        "--method",
+        method,
+        "--interactions",
+        str(args.interactions),
+        "--seed",
+        str(seed),
+        "--no-progress",
+    ]
+    if args.latent and method in ("sili", "stable"):
+        cmd += ["--latent", args.latent]
+    for item in args.set:
+        cmd += ["--set", item]
+    cmd += ["--resume", str(out)] if (out / "config.json").exists() else ["--out", str(out)]
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+    return out
+
+
+def first_stable(df: pd.DataFrame, window: int, level: float = 0.9) -> float:
+    stable = 1.0 - df["strategy_changed"].rolling(window).mean()
+    hit = np.flatnonzero(stable.to_numpy() >= level)
+    return float(df["interaction"].iloc[hit[0]]) if hit.size else float("nan")
+
+
+def table(run_dirs: list[Path], window: int) -> pd.DataFrame:
+    rows = []
+    for d in run_dirs:
+        cfg = json.loads((d / "config.json").read_text())["run"]
+        summary = json.loads((d / "summary.json").read_text())
+        df = pd.read_csv(d / "metrics.csv")
+        rows.append(
+            {
+                "task": cfg["task"],
+                "method": cfg["method"],
+                "latent": cfg["agent"]["latent"],
+                "seed": cfg["seed"],
+                "interactions": len(df),
+                "final_task_reward": df["task_reward"].tail(window).mean(),
+                "final_stability": 1.0 - df["strategy_changed"].tail(window).mean(),
+                "first_stable_0.9": first_stable(df, window),
+                "latent_purity": summary.get("latent_purity", float("nan")),
+                "wall_min": summary["wall_time_s"] / 60,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser()
+    p.add_argument("--task", default="circle-3")
+    p.add_argument("--methods", default="sili,lili,sac,oracle,stable,smirl")
+    p.add_argument("--seeds", default="0,1,2")
+    p.add_argument("--interactions", type=int, default=3000)
+    p.add_argument("--latent", default=None, help="latent kind for sili/stable")
+    p.add_argument("--set", action="append", default=[], help="agent override KEY=VALUE")
+    p.add_argument("--window", type=int, default=100)
+    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--out", default="runs/bench-learning")
+    args = p.parse_args()
+    jobs = [(args.task, m, int(s)) for m in args.methods.split(",") for s in args.seeds.split(",")]
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(args.workers) as pool:
+        dirs = list(pool.map(lambda j: run_one(*j, args), jobs))
+    df = table(dirs, args.window)
+    print(df.to_string(index=False, float_format="%.3g"))
+    agg = df.groupby("method")[["final_task_reward", "final_stability"]].agg(["mean", "std"])
+    print()
+    print(agg.to_string(float_format="%.3g"))
+    print(f"\nwall time {(time.perf_counter() - t0) / 60:.1f} min with {args.workers} workers")
+
+
+if __name__ == "__main__":
+    main()
