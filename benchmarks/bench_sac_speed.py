@@ -102,15 +102,19 @@ def main() -> None:
     p.add_argument("--updates", type=int, default=300)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--interactions", type=int, default=30)
+    p.add_argument("--rounds", type=int, default=3, help="alternating rounds; medians reported")
     args = p.parse_args()
     torch.set_num_threads(args.threads)
     in_dim, act_dim, batch = 3 + 2 * 10, 2, 256
-    sb3 = time_sb3(in_dim, act_dim, batch, args.updates)
-    ours = time_ours(in_dim, act_dim, batch, args.updates)
+    sb3_rates, our_rates = [], []
+    for _ in range(args.rounds):  # alternate, so a load change hits both alike
+        sb3_rates.append(time_sb3(in_dim, act_dim, batch, args.updates))
+        our_rates.append(time_ours(in_dim, act_dim, batch, args.updates))
+    sb3, ours = float(np.median(sb3_rates)), float(np.median(our_rates))
     print(f"torch threads: {args.threads}; batch {batch}; input {in_dim}; 2 x 256 networks")
     print(f"stable-baselines3 SAC: {sb3:8.1f} updates/s ({1e3 / sb3:.2f} ms/update)")
     print(f"sili_robots SAC:       {ours:8.1f} updates/s ({1e3 / ours:.2f} ms/update)")
-    print(f"ratio (ours / sb3):    {ours / sb3:8.2f}x")
+    print(f"ratio (ours / sb3):    {ours / sb3:8.2f}x  (median of {args.rounds} alternating rounds)")
     ips = time_train(args.interactions)
     print(f"sili train end to end (circle-3, sili, 1 update/step): {ips:.2f} interactions/s")
 

@@ -210,3 +210,26 @@ def test_bad_config_is_named():
         method_config("ppo")
     with pytest.raises(ConfigError, match="unknown latent kind 'fuzzy'"):
         method_config("sili", "fuzzy")
+
+
+def test_relabel_keeps_the_function_and_refresh_keeps_category_names():
+    torch.manual_seed(0)
+    model = LatentModel(3, 2, latent_dim=4, hidden=16, kind="discrete")
+    traj = torch.randn(20, H, 3 + 2 + 1 + 3)
+    obs, act = torch.randn(20, H, 3), torch.randn(20, H, 2)
+    z_before = model.encode(traj)
+    perm = torch.tensor([2, 0, 3, 1])
+    pred_before = model.decode(obs, act, z_before)
+    model.relabel(perm)
+    z_after = model.encode(traj)
+    np.testing.assert_array_equal(z_after.numpy(), z_before[:, perm].numpy())
+    torch.testing.assert_close(model.decode(obs, act, z_after), pred_before)
+
+    agent = _agent()
+    _fill(agent, 12)
+    agent.refresh_latents()
+    cached = agent.Z.argmax(-1).copy()
+    agent.model.relabel(torch.tensor([1, 2, 3, 0]))  # as if training had shuffled the names
+    agent.refresh_latents()
+    np.testing.assert_array_equal(agent.Z.argmax(-1)[1:], cached[1:])
+    assert agent.relabels == 1

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 import torch
+from scipy.optimize import linear_sum_assignment
 
 from sili_robots.agent.buffer import InteractionBuffer
 from sili_robots.agent.config import AgentConfig
@@ -85,6 +86,7 @@ class SILIAgent:
         self.stability_scale = float(cfg.stability_scale or horizon)
         self._update_credit = 0.0
         self.interactions_seen = 0
+        self.relabels = 0  # how often refresh_latents renamed categories (diagnostics)
 
     # ------------------------------------------------------------------ acting
     def policy_input(self, obs: np.ndarray, j: int | None = None) -> np.ndarray:
@@ -151,10 +153,33 @@ class SILIAgent:
         return self.model.encode(traj).numpy()
 
     def refresh_latents(self) -> None:
-        """Recompute every cached latent with the current encoder."""
+        """Recompute every cached latent with the current encoder.
+
+        Discrete categories are first renamed to agree as much as possible with the cached
+        ones (a maximum matching on the old-by-new confusion matrix): training may shuffle which
+        category stands for which strategy, and the policy should not have to relearn that.
+        """
         n = self.buffer.n
-        out = [self._encode(np.arange(s, min(s + 512, n))) for s in range(0, n, 512)]
-        self.Z = np.concatenate([self.Z[:1], *out])
+        new = self._encode_all(n)
+        if self.cfg.latent == "discrete" and n > 0:
+            old_c, new_c = self.Z[1 : n + 1].argmax(-1), new.argmax(-1)
+            k = self.zdim
+            confusion = np.zeros((k, k))
+            np.add.at(confusion, (old_c, new_c), 1.0)
+            rows, cols = linear_sum_assignment(-confusion)
+            perm = np.empty(k, int)
+            perm[rows] = cols  # new name i <- old model category perm[i]
+            if not np.array_equal(perm, np.arange(k)):
+                self.model.relabel(torch.from_numpy(perm))
+                new = new[:, perm]
+                self.relabels += 1
+        self.Z = np.concatenate([self.Z[:1], new])
+
+    def _encode_all(self, n: int) -> np.ndarray:
+        return np.concatenate(
+            [self._encode(np.arange(s, min(s + 512, n))) for s in range(0, n, 512)]
+            or [np.zeros((0, self.zdim), np.float32)]
+        )
 
     def _stats(self, j: int, next_first: np.ndarray) -> InteractionStats:
         if self.cfg.latent == "partial":

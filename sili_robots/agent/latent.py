@@ -81,6 +81,20 @@ class LatentModel(nn.Module):
         else:
             self.decoder = mlp(obs_dim + act_dim + latent_dim, self.out_dim, hidden)
 
+    @torch.no_grad()
+    def relabel(self, perm: torch.Tensor) -> None:
+        """Rename categories: new category i is old category ``perm[i]`` (encoder output and
+        decoder head move together, so the model computes the same function)."""
+        if self.kind != "discrete":
+            raise ValueError("only discrete latents have categories to relabel")
+        self.head.weight.copy_(self.head.weight[perm])
+        self.head.bias.copy_(self.head.bias[perm])
+        last = self.decoder[-1]
+        w = last.weight.unflatten(0, (self.latent_dim, self.out_dim))
+        b = last.bias.unflatten(0, (self.latent_dim, self.out_dim))
+        last.weight.copy_(w[perm].flatten(0, 1))
+        last.bias.copy_(b[perm].flatten(0, 1))
+
     def encode_logits(self, traj: torch.Tensor) -> torch.Tensor:
         """``traj``: [N, H, tr_dim] -> raw encoder output [N, latent_dim]."""
         h = self.phi(traj)
