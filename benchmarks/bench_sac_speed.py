@@ -114,7 +114,7 @@ def main() -> None:
     print(f"torch threads: {args.threads}; batch {batch}; input {in_dim}; 2 x 256 networks")
     print(f"stable-baselines3 SAC: {sb3:8.1f} updates/s ({1e3 / sb3:.2f} ms/update)")
     print(f"sili_robots SAC:       {ours:8.1f} updates/s ({1e3 / ours:.2f} ms/update)")
-    print(f"ratio (ours / sb3):    {ours / sb3:8.2f}x  (median of {args.rounds} alternating rounds)")
+    print(f"ratio (ours / sb3): {ours / sb3:.2f}x (median of {args.rounds} alternating rounds)")
     ips = time_train(args.interactions)
     print(f"sili train end to end (circle-3, sili, 1 update/step): {ips:.2f} interactions/s")
 
