@@ -271,3 +271,99 @@ def test_resume_of_a_non_sweep_and_changed_settings_exit_2(tiny_sweep, tmp_path,
     args = ["--tasks", "circle-3", "--methods", "sac", "--seeds", "0", "--interactions", "9"]
     assert main(["sweep", *args, "--out", str(out), *FAST_ARGS]) == 2
     assert "interactions: 8 on disk, 9 now" in capsys.readouterr().err
+
+
+def _alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    # a zombie is dead too
+    with open(f"/proc/{pid}/stat") as f:
+        return f.read().split(")")[-1].split()[0] != "Z"
+
+
+def test_workers_stop_when_the_sweep_process_is_killed(tmp_path):
+    out = tmp_path / "sweep"
+    args = ["--tasks", "circle-3", "--methods", "sac", "--seeds", "0", "--interactions", 5000]
+    args += [*FAST_ARGS, "--no-progress", "--out", out]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sili_robots.cli", "sweep", *map(str, args)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    run_dir = out / "runs" / "circle-3__sac__s0"
+    try:
+        assert _wait_for(lambda: _rows(run_dir / "metrics.csv") >= 5)
+        pid = json.loads((run_dir / "worker.json").read_text())["pid"]
+    finally:
+        proc.kill()
+        proc.wait()
+    assert _wait_for(lambda: not _alive(pid), timeout=20), "the worker outlived its sweep"
+    assert not (run_dir / "summary.json").exists()
+    assert _rows(run_dir / "metrics.csv") < 5000
+
+
+def test_progress_display_counts_runs_and_interactions(tmp_path):
+    import io
+
+    from rich.console import Console
+
+    from sili_robots.sweep.progress import SweepProgress
+    from sili_robots.sweep.worker import Job, Outcome
+
+    jobs = [Job(f"r{i}", {}, str(tmp_path / f"r{i}")) for i in range(3)]
+    for i, rows in enumerate((4, 2, 0)):
+        (tmp_path / f"r{i}").mkdir()
+        lines = ["interaction"] + [str(j) for j in range(rows)]
+        (tmp_path / f"r{i}" / "metrics.csv").write_text("\n".join(lines) + "\n")
+    buf = io.StringIO()
+    console = Console(file=buf, force_terminal=True, width=150, color_system=None)
+    display = SweepProgress(
+        jobs, {"r0": 10, "r1": 10, "r2": 10, "old": 10}, already_done=1, console=console
+    )
+    with display:
+        display.started(jobs[0])
+        display.started(jobs[1])
+        display.finished(Outcome("r0", "done", wall_time_s=1.5))
+        display.finished(Outcome("r1", "failed", error="ConfigError: bad [thing]"))
+        counts = display._counts()
+        assert "2 done" in counts and "0 running" in counts and "1 failed" in counts
+        assert "1 pending (of 4)" in counts
+        # finished runs count in full, a failed one only for what it logged: 10 + 10 + 2 + 0
+        assert display._completed() == 22 and display._total_interactions == 32
+    out = buf.getvalue()
+    assert "done r0 in 1.5 s" in out
+    assert "failed r1: ConfigError: bad [thing]" in out  # error text not eaten as markup
+    assert "sweep: 2 done, 1 failed, 1 not run" in out
+
+
+@pytest.mark.slow
+def test_driving_and_sawyer_runs_sweep_side_by_side(tmp_path):
+    """Two Driving runs at once (libsumo: one simulation per process, so one run per worker)
+    and Sawyer-Reach under two controllers."""
+    spec = SweepSpec(
+        tasks=["driving", "sawyer-reach"],
+        methods=["sac"],
+        seeds=[0, 1],
+        interactions=3,
+        controllers=["mink", "osc"],
+        agent_overrides=FAST,
+    )
+    report = run_sweep(spec, tmp_path, LocalBackend(workers=2), progress=False)
+    assert report.ok, report.failed
+    runs = pd.read_csv(tmp_path / "runs.csv").set_index("run")
+    assert list(runs.index) == [
+        "driving__sac__s0",
+        "driving__sac__s1",
+        "sawyer-reach-mink__sac__s0",
+        "sawyer-reach-mink__sac__s1",
+        "sawyer-reach-osc__sac__s0",
+        "sawyer-reach-osc__sac__s1",
+    ]
+    assert (runs["status"] == "done").all()
+    assert runs.loc["sawyer-reach-osc__sac__s0", "controller"] == "osc"
+    table = pd.read_csv(tmp_path / "results.csv")
+    mink = table[table.run == "sawyer-reach-mink__sac__s0"]["task_reward"].to_numpy()
+    osc = table[table.run == "sawyer-reach-osc__sac__s0"]["task_reward"].to_numpy()
+    assert not np.allclose(mink, osc)  # the controller reached the task

@@ -5,17 +5,18 @@ per process, nothing one run loads leaks into the next, and a worker that dies (
 memory) takes only its own run down, where ``concurrent.futures`` would break the whole pool.
 Processes come from ``multiprocessing``'s forkserver, which has imported torch and the training
 code once (a worker starts in a fraction of a second instead of ~3 s), or from ``spawn``. Never
-``fork``: it would copy the parent's threads and state. Workers die with the sweep (Linux
-``PR_SET_PDEATHSIG``, through the forkserver), so none keeps training a run a later sweep resumes.
+``fork``: it would copy the parent's threads and state. Workers stop when the sweep process dies,
+however it dies, so none keeps training a run that a later sweep resumes.
 """
 
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import multiprocessing as mp
 import os
 import signal
+import threading
+import time
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -27,26 +28,39 @@ from sili_robots.sweep.backend import Monitor, describe_exit
 from sili_robots.sweep.state import ERROR_FILE, RUNNING_FILE
 from sili_robots.sweep.worker import THREAD_ENV, Job, Outcome, limit_threads, run_job
 
-PR_SET_PDEATHSIG = 1
 #: imported once by the forkserver, so forked workers start with them loaded
 PRELOAD = ["sili_robots.sweep.worker", "sili_robots.training", "torch.utils.tensorboard"]
-
-
-def _die_with_parent() -> None:
-    # not Linux: the parent's own cleanup is all there is
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+#: after asking itself to stop (SIGTERM), a worker whose sweep is gone waits this long, then exits
+ORPHAN_GRACE_S = 10.0
 
 
 def _raise_exit(signum: int, _frame: object) -> None:
     raise SystemExit(128 + signum)
 
 
-def _child(job: Job, conn: Connection) -> None:
+def _exit_when_orphaned(alive: Connection) -> None:
+    """Stop this worker when the sweep process is gone, however it ended (even SIGKILL).
+
+    Only the sweep holds the write end of ``alive``, so reading it returns EOF exactly when the
+    sweep has died. (``PR_SET_PDEATHSIG`` would not do: a forkserver worker's parent is the
+    forkserver, which itself lives as long as any worker does.)
+    """
+
+    def watch() -> None:
+        with contextlib.suppress(EOFError, OSError):
+            alive.recv()
+        os.kill(os.getpid(), signal.SIGTERM)  # `finally` blocks run, simulators close
+        time.sleep(ORPHAN_GRACE_S)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="sweep-watchdog", daemon=True).start()
+
+
+def _child(job: Job, conn: Connection, alive: Connection) -> None:
     """Entry point of a worker process."""
-    _die_with_parent()
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the sweep's to handle
     signal.signal(signal.SIGTERM, _raise_exit)  # run `finally` blocks (closes simulators)
+    _exit_when_orphaned(alive)
     limit_threads()
     outcome = run_job(job)
     conn.send(outcome.to_dict())
@@ -99,10 +113,10 @@ class LocalBackend:
                 else:
                     os.environ[var] = value
 
-    def _start(self, job: Job) -> _Worker:
+    def _start(self, job: Job, alive: Connection) -> _Worker:
         parent_conn, child_conn = self._ctx.Pipe(duplex=False)
         proc = self._ctx.Process(
-            target=_child, args=(job, child_conn), name=f"sili-{job.name}", daemon=True
+            target=_child, args=(job, child_conn, alive), name=f"sili-{job.name}", daemon=True
         )
         proc.start()
         child_conn.close()
@@ -115,12 +129,14 @@ class LocalBackend:
         outcomes: list[Outcome] = []
         if pending:
             self._ensure_forkserver()
+        # workers hold the read end; it reaches EOF when this process (the write end) is gone
+        alive_r, alive_w = self._ctx.Pipe(duplex=False)
         try:
             while pending or running:
                 while pending and len(running) < self.workers:
                     job = pending.popleft()
                     attempts[job.name] += 1
-                    worker = self._start(job)
+                    worker = self._start(job, alive_r)
                     running[worker.process.sentinel] = worker
                     monitor.started(job)
                 for sentinel in wait(list(running), timeout=1.0):
@@ -139,6 +155,8 @@ class LocalBackend:
                 monitor.tick()
         finally:
             self._stop(running.values())
+            alive_r.close()
+            alive_w.close()
         return outcomes
 
     @staticmethod

@@ -10,7 +10,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from rich.console import Console
+from rich.console import Console, Group
+from rich.live import Live
 from rich.markup import escape
 from rich.progress import (
     BarColumn,
@@ -21,6 +22,8 @@ from rich.progress import (
     TimeElapsedColumn,
     TimeRemainingColumn,
 )
+from rich.table import Column
+from rich.text import Text
 
 from sili_robots.runs import METRICS
 from sili_robots.sweep.worker import Job, Outcome
@@ -59,24 +62,31 @@ class SweepProgress:
         self._last_tick = 0.0
         self._t0 = time.perf_counter()
         self._progress: Progress | None = None
+        self._live: Live | None = None
         self._run_tasks: dict[str, TaskID] = {}
         if enabled:
             self._progress = Progress(
-                TextColumn("[bold]{task.description}"),
-                BarColumn(),
+                TextColumn(
+                    "{task.description}",
+                    table_column=Column(no_wrap=True, overflow="ellipsis", max_width=40),
+                ),
+                BarColumn(bar_width=24),
                 MofNCompleteColumn(),
-                TextColumn("{task.fields[counts]}"),
                 TimeElapsedColumn(),
                 TextColumn("ETA"),
                 TimeRemainingColumn(),
                 console=self.console,
             )
             self._overall = self._progress.add_task(
-                "sweep",
+                "[bold]all runs (interactions)",
                 total=self._total_interactions,
                 completed=self._completed(),
-                counts=self._counts(),
             )
+            self._live = Live(self, console=self.console, refresh_per_second=4)
+
+    def __rich__(self) -> Group:
+        """What the live display shows: the run counts, then the progress bars."""
+        return Group(Text.from_markup(self._counts()), self._progress)
 
     # ------------------------------------------------------------------ monitor
     def started(self, job: Job) -> None:
@@ -86,11 +96,11 @@ class SweepProgress:
                 f"  {job.name}",
                 total=self._planned[job.name],
                 completed=self._logged[job.name],
-                counts="",
             )
         self._refresh(force=True)
 
     def finished(self, outcome: Outcome) -> None:
+        self.running.pop(outcome.name, None)  # first: the display thread reads the counts
         if outcome.status == "done":
             self.done += 1
             self._logged[outcome.name] = self._planned[outcome.name]
@@ -109,7 +119,6 @@ class SweepProgress:
                 self._progress.update(self._overall, total=self._total_interactions)
             error = escape(str(outcome.error))
             self._log(f"[red]failed[/] {escape(outcome.name)}: {error}")
-        self.running.pop(outcome.name, None)
         task = self._run_tasks.pop(outcome.name, None)
         if task is not None and self._progress is not None:
             self._progress.remove_task(task)
@@ -135,8 +144,8 @@ class SweepProgress:
 
     def _counts(self) -> str:
         return (
-            f"[green]done {self.done}[/] [cyan]running {len(self.running)}[/] "
-            f"[red]failed {self.failed}[/] pending {self.pending}"
+            f"runs: [green]{self.done} done[/] · [cyan]{len(self.running)} running[/] · "
+            f"[red]{self.failed} failed[/] · {self.pending} pending (of {self.total_runs})"
         )
 
     def _completed(self) -> int:
@@ -152,17 +161,17 @@ class SweepProgress:
             if self._progress is not None and name in self._run_tasks:
                 self._progress.update(self._run_tasks[name], completed=self._logged[name])
         if self._progress is not None:
-            self._progress.update(self._overall, completed=self._completed(), counts=self._counts())
+            self._progress.update(self._overall, completed=self._completed())
 
     def __enter__(self) -> SweepProgress:
-        if self._progress is not None:
-            self._progress.start()
+        if self._live is not None:
+            self._live.start()
         return self
 
     def __exit__(self, *exc: object) -> None:
-        if self._progress is not None:
+        if self._live is not None:
             self._refresh(force=True)
-            self._progress.stop()
+            self._live.stop()
         self._log(
             f"sweep: {self.done} done, {self.failed} failed, {self.pending} not run, "
             f"{time.perf_counter() - self._t0:.1f} s"
