@@ -367,3 +367,50 @@ def test_driving_and_sawyer_runs_sweep_side_by_side(tmp_path):
     mink = table[table.run == "sawyer-reach-mink__sac__s0"]["task_reward"].to_numpy()
     osc = table[table.run == "sawyer-reach-osc__sac__s0"]["task_reward"].to_numpy()
     assert not np.allclose(mink, osc)  # the controller reached the task
+
+
+def test_without_tensorboard_no_scalars_are_written(tmp_path, monkeypatch):
+    monkeypatch.setattr(tb, "available", lambda: False)
+    with pytest.raises(Exception, match=r"pip install 'sili-robots\[tensorboard\]'"):
+        run_sweep(_spec(), tmp_path, LocalBackend(workers=1), tensorboard_scalars=True)
+    spec = _spec(methods=["sac"], seeds=[0], interactions=2)
+    report = run_sweep(spec, tmp_path / "s", LocalBackend(workers=1), progress=False)
+    assert report.ok
+    run_dir = tmp_path / "s" / "runs" / "circle-3__sac__s0"
+    assert (run_dir / "summary.json").exists() and not (run_dir / "tb").exists()
+
+
+@pytest.mark.skipif(not tb.available(), reason="tensorboard is not installed")
+def test_tensorboard_tail_skips_rows_a_resume_drops_and_waits_for_whole_lines(tmp_path):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    from sili_robots.runs import METRIC_COLUMNS
+
+    def row(j, reward):
+        values = {"interaction": j, "task_reward": reward, "strategy_changed": j % 2}
+        return ",".join(str(values.get(c, "")) for c in METRIC_COLUMNS) + "\r\n"
+
+    header = ",".join(METRIC_COLUMNS) + "\r\n"
+    metrics = tmp_path / "metrics.csv"
+    metrics.write_text(header + "".join(row(j, -99.0) for j in range(5)))  # before the kill
+    tail = tb.MetricsTail(tmp_path, interval=60)
+    tail.start()
+    tail.poll()
+    assert tail.rows_written == 0  # the old file: training has not trimmed it yet
+    new = tmp_path / "new.csv"
+    new.write_text(header + row(0, -1.0) + row(1, -2.0) + row(2, -3.0)[:7])
+    os.replace(new, metrics)  # what MetricsWriter does when a run (re)starts
+    tail.poll()
+    assert tail.rows_written == 2  # the half-written third row waits
+    with metrics.open("a") as f:
+        f.write(row(2, -3.0)[7:])
+    tail.stop()
+    assert tail.rows_written == 3
+    acc = EventAccumulator(str(tmp_path / "tb"))
+    acc.Reload()
+    assert [(e.step, e.value) for e in acc.Scalars("reward/task")] == [
+        (0, -1.0),
+        (1, -2.0),
+        (2, -3.0),
+    ]
+    assert [e.value for e in acc.Scalars("stability/true")] == [1.0, 0.0, 1.0]

@@ -110,6 +110,10 @@ def test_an_existing_run_with_other_settings_is_refused(tmp_path):
         check_existing(tmp_path, run)
     (path / "config.json").write_text(json.dumps({"run": run.config.to_dict()}))
     check_existing(tmp_path, run)  # the same run: fine
+    older = run.config.to_dict()
+    del older["agent"]["smirl_std_floor"]  # written before that setting existed: its default
+    (path / "config.json").write_text(json.dumps({"run": older}))
+    check_existing(tmp_path, run)
 
 
 def test_plan_unions_specs_and_rejects_a_name_planned_twice_differently():

@@ -10,6 +10,7 @@
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pandas as pd
@@ -102,6 +103,9 @@ def runs_table(sweep_dir: Path) -> pd.DataFrame:
 def write_tables(sweep_dir: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Write ``results.csv`` and ``runs.csv`` into the sweep directory and return them."""
     results, runs = results_table(sweep_dir), runs_table(sweep_dir)
-    results.to_csv(Path(sweep_dir) / RESULTS, index=False)
-    runs.to_csv(Path(sweep_dir) / RUNS_TABLE, index=False)
+    for frame, name in ((results, RESULTS), (runs, RUNS_TABLE)):
+        path = Path(sweep_dir) / name
+        tmp = path.with_suffix(".tmp")
+        frame.to_csv(tmp, index=False)
+        os.replace(tmp, path)  # readers never see half a table (`sili plot` during a sweep)
     return results, runs

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from sili_robots.errors import ConfigError
-from sili_robots.runs import CHECKPOINT, CONFIG, SUMMARY
+from sili_robots.runs import CHECKPOINT, CONFIG, SUMMARY, RunConfig
 from sili_robots.sweep.spec import PlannedRun, SweepSpec
 
 SWEEP_FILE, RUNS_DIR, RESULTS, RUNS_TABLE, LOCK = (
@@ -67,7 +67,12 @@ def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
     path = run_path(sweep_dir, planned.name) / CONFIG
     if not path.is_file():
         return
-    on_disk = json.loads(path.read_text())["run"]
+    raw = json.loads(path.read_text())["run"]
+    try:  # through RunConfig, so settings added to the package since get their defaults
+        on_disk = RunConfig.from_dict(raw).to_dict()
+    except (ConfigError, TypeError, KeyError):
+        on_disk = raw
+    on_disk = json.loads(json.dumps(on_disk))
     diffs = _diff(on_disk, json.loads(json.dumps(planned.config.to_dict())))
     if diffs:
         raise ConfigError(

@@ -16,6 +16,7 @@ import math
 import os
 import shutil
 import threading
+import warnings
 from pathlib import Path
 
 from sili_robots.runs import METRIC_COLUMNS, METRICS
@@ -72,6 +73,7 @@ class MetricsTail:
         self._file: io.TextIOBase | None = None
         self._pending = ""
         self.rows_written = 0
+        self.failed = False
 
     def _inode(self) -> int | None:
         try:
@@ -90,15 +92,27 @@ class MetricsTail:
         """Mirror what is left and close (the run is over, however it ended)."""
         self._stop.set()
         self._thread.join()
-        self.poll()
+        self._safe_poll()
         if self._file is not None:
             self._file.close()
         if self._writer is not None:
             self._writer.close()
 
     def _loop(self) -> None:
-        while not self._stop.wait(self.interval):
+        while not self._stop.wait(self.interval) and self._safe_poll():
+            pass
+
+    def _safe_poll(self) -> bool:
+        """Poll; on an error warn once and stop mirroring (the run itself goes on)."""
+        if self.failed:
+            return False
+        try:
             self.poll()
+        except Exception as err:
+            self.failed = True
+            name = self.run_dir.name
+            warnings.warn(f"TensorBoard scalars stopped for {name}: {err}", stacklevel=2)
+        return not self.failed
 
     def poll(self) -> None:
         if self._file is None:

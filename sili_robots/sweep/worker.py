@@ -14,6 +14,7 @@ import os
 import socket
 import time
 import traceback
+import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -99,14 +100,20 @@ def run_job(job: Job) -> Outcome:
 
 @contextlib.contextmanager
 def _tensorboard(run_dir: Path, enabled: bool):
-    if not enabled:
-        yield
-        return
-    from sili_robots.sweep.tensorboard import MetricsTail
+    """Mirror metrics into TensorBoard while the run trains; a TensorBoard problem only turns
+    the scalars off (with a warning), it never fails the run."""
+    tail = None
+    if enabled:
+        try:
+            from sili_robots.sweep.tensorboard import MetricsTail
 
-    tail = MetricsTail(run_dir)
-    tail.start()
+            tail = MetricsTail(run_dir)
+            tail.start()
+        except Exception as err:
+            warnings.warn(f"TensorBoard scalars off for {run_dir.name}: {err}", stacklevel=2)
+            tail = None
     try:
         yield
     finally:
-        tail.stop()
+        if tail is not None:
+            tail.stop()
