@@ -129,7 +129,7 @@ def _serve_cli(tmp_path):
 def test_ctrl_c_and_sigterm_stop_the_server(sig, code, tmp_path):
     proc, server = _serve_cli(tmp_path)
     proc.send_signal(sig)
-    assert proc.wait(timeout=30) == code
+    assert proc.wait(timeout=90) == code  # generous: a loaded machine starts Python slowly
     assert "Traceback" not in proc.stderr.read()
     assert _wait_dead(server)
 
