@@ -85,7 +85,10 @@ def test_every_method_trains(tmp_path, method):
         "train", "--task", "circle-3", "--method", method, "--interactions", 5, "--out", out, *FAST
     )
     assert res.returncode == 0, res.stderr
-    assert len(pd.read_csv(out / "metrics.csv")) == 5
+    df = pd.read_csv(out / "metrics.csv")
+    assert len(df) == 5
+    # methods without a latent model report no latent category
+    assert (df["latent_category"] == -1).all() == (method in ("sac", "oracle", "smirl"))
 
 
 @pytest.mark.parametrize("latent", ["continuous", "partial", "true"])

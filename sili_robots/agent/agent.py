@@ -188,7 +188,11 @@ class SILIAgent:
         d = float(self._distance(self.Z[j : j + 1], self.Z[j + 1 : j + 2])[0])
         if self.cfg.latent != "true" and j == 0:
             d = 0.0  # z^0 is "no history", not a strategy
-        category = int(self.Z[j + 1].argmax()) if self.cfg.latent == "discrete" else -1
+        category = (
+            int(self.Z[j + 1].argmax())
+            if self.model is not None and self.cfg.latent == "discrete"
+            else -1
+        )
         return InteractionStats(-d, category, d > 0)
 
     def _distance(self, za: np.ndarray, zb: np.ndarray) -> np.ndarray:
