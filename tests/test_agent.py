@@ -233,3 +233,20 @@ def test_relabel_keeps_the_function_and_refresh_keeps_category_names():
     agent.refresh_latents()
     np.testing.assert_array_equal(agent.Z.argmax(-1)[1:], cached[1:])
     assert agent.relabels == 1
+
+
+@pytest.mark.parametrize("estimator", ["expected", "marginal", "gumbel"])
+def test_every_discrete_estimator_trains_encoder_and_decoder(estimator):
+    torch.manual_seed(0)
+    model = LatentModel(3, 2, latent_dim=4, hidden=16, kind="discrete", estimator=estimator)
+    prev, obs = torch.randn(8, H, 3 + 2 + 1 + 3), torch.randn(8, H + 1, 3)
+    loss = model.loss(prev, obs[:, :-1], torch.randn(8, H, 2), obs[:, 1:], torch.randn(8, H))
+    loss.backward()
+    assert torch.isfinite(loss)
+    assert model.head.weight.grad.abs().sum() > 0  # the encoder learns
+    assert model.decoder[-1].weight.grad.abs().sum() > 0  # the decoder learns
+
+
+def test_unknown_estimator_is_named():
+    with pytest.raises(ConfigError, match="unknown latent_estimator 'vq'"):
+        method_config("sili", latent_estimator="vq")
