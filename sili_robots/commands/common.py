@@ -49,3 +49,23 @@ def parse_env_kwargs(items: list[str], flag: str) -> dict:
         except json.JSONDecodeError:
             out[key] = value
     return out
+
+
+def add_override_args(p: argparse.ArgumentParser, scope: str) -> None:
+    """``--set KEY=VALUE`` (agent settings) and ``--env-kwarg KEY=VALUE`` (task arguments)."""
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        dest="agent_set",
+        help=f"override an agent setting{scope} (JSON value), repeatable, "
+        "e.g. --set updates_per_step=0.5",
+    )
+    p.add_argument(
+        "--env-kwarg",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help=f"extra task constructor argument{scope} (JSON value), repeatable",
+    )

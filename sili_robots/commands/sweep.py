@@ -8,7 +8,7 @@ import os
 from pathlib import Path
 
 from sili_robots.agent import LATENT_KINDS
-from sili_robots.commands.common import parse_env_kwargs, positive_int
+from sili_robots.commands.common import add_override_args, parse_env_kwargs, positive_int
 from sili_robots.errors import ConfigError
 from sili_robots.sweep.spec import SweepSpec, parse_betas, parse_list, parse_seeds
 
@@ -39,21 +39,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--latent", choices=LATENT_KINDS, help="latent kind (default: each task's)")
     p.add_argument("--interactions", type=positive_int, default=1000)
     p.add_argument("--checkpoint-every", type=positive_int, default=50)
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        dest="agent_set",
-        help="override an agent setting for every run (JSON value), repeatable",
-    )
-    p.add_argument(
-        "--env-kwarg",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="extra task constructor argument for every run (JSON value), repeatable",
-    )
+    add_override_args(p, scope=" for every run")
     p.add_argument("--out", type=Path, help="sweep directory (created, or continued)")
     p.add_argument(
         "--resume", type=Path, metavar="SWEEP_DIR", help="run the sweep recorded in SWEEP_DIR again"

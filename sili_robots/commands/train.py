@@ -8,7 +8,13 @@ import shutil
 from pathlib import Path
 
 from sili_robots.agent import LATENT_KINDS, METHODS, BetaSchedule, method_config
-from sili_robots.commands.common import parse_env_kwargs, positive_int, task_name, unit_float
+from sili_robots.commands.common import (
+    add_override_args,
+    parse_env_kwargs,
+    positive_int,
+    task_name,
+    unit_float,
+)
 from sili_robots.errors import ConfigError
 from sili_robots.runs import CONFIG, RunConfig, read_config
 from sili_robots.tasks import task_spec
@@ -35,21 +41,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="anneal b linearly from START to END over LENGTH interactions",
     )
     p.add_argument("--controller", help="controller for robot tasks (e.g. sawyer-reach: mink)")
-    p.add_argument(
-        "--env-kwarg",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="extra task constructor argument (JSON value), repeatable",
-    )
-    p.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        dest="agent_set",
-        help="override an agent setting (JSON value), e.g. --set updates_per_step=0.5",
-    )
+    add_override_args(p, scope="")
     p.add_argument("--checkpoint-every", type=positive_int, default=50)
     p.add_argument("--overwrite", action="store_true", help="replace an existing run directory")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
