@@ -85,7 +85,6 @@ class SILIAgent:
         self.smirl = RunningGaussian(obs_dim, cfg.smirl_std_floor)
         self.stability_scale = float(cfg.stability_scale or horizon)
         self._update_credit = 0.0
-        self.interactions_seen = 0
         self.relabels = 0  # how often refresh_latents renamed categories (diagnostics)
 
     # ------------------------------------------------------------------ acting
@@ -131,7 +130,6 @@ class SILIAgent:
         j = self.buffer.add(obs, act, rew, aux, next_first, strategy_id, strategy)
         z_next = self._infer_next_latent(j, next_info)
         self.Z = np.concatenate([self.Z, z_next[None]])
-        self.interactions_seen += 1
         if refresh and self.model is not None and (j + 1) % self.latent_refresh_every == 0:
             self.refresh_latents()
         return self._stats(j, next_first)
@@ -310,7 +308,6 @@ class SILIAgent:
             "rng": self.rng.bit_generator.state,
             "torch_rng": torch.get_rng_state(),
             "update_credit": self._update_credit,
-            "interactions_seen": self.interactions_seen,
         }
         if self.model is not None:
             state["model"] = self.model.state_dict()
@@ -325,7 +322,6 @@ class SILIAgent:
         self.rng.bit_generator.state = state["rng"]
         torch.set_rng_state(state["torch_rng"])
         self._update_credit = float(state["update_credit"])
-        self.interactions_seen = int(state["interactions_seen"])
         if self.model is not None:
             self.model.load_state_dict(state["model"])
             self.model_opt.load_state_dict(state["model_opt"])
