@@ -6,19 +6,13 @@ import shutil
 import numpy as np
 import pandas as pd
 import pytest
+from fast_settings import FAST_AGENT as FAST
 from matplotlib.collections import PolyCollection
 from matplotlib.colors import to_rgb
 
 from sili_robots.cli import main
 from sili_robots.plotting import beta_sweep, learning_curves, load_results, overview
 from sili_robots.sweep import LocalBackend, SweepSpec, run_sweep
-
-FAST = {
-    "updates_per_step": 0.1,
-    "hidden": 32,
-    "random_interactions": 3,
-    "latent_updates_per_interaction": 2,
-}
 
 
 @pytest.fixture(scope="module")

@@ -12,6 +12,8 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
+from fast_settings import FAST_AGENT as FAST
+from fast_settings import FAST_ARGS
 
 from sili_robots.cli import main
 from sili_robots.runs import RunConfig
@@ -19,14 +21,6 @@ from sili_robots.sweep import LocalBackend, SweepSpec, expand, run_sweep
 from sili_robots.sweep import tensorboard as tb
 from sili_robots.sweep.state import sweep_lock
 from sili_robots.training import train
-
-FAST = {
-    "updates_per_step": 0.1,
-    "hidden": 32,
-    "random_interactions": 3,
-    "latent_updates_per_interaction": 2,
-}
-FAST_ARGS = [x for k, v in FAST.items() for x in ("--set", f"{k}={v}")]
 
 
 def _spec(**kw):

@@ -11,6 +11,7 @@ import time
 
 import pandas as pd
 import pytest
+from fast_settings import FAST_AGENT as FAST
 
 from sili_robots.runs import RunConfig
 from sili_robots.sweep import RayBackend, SweepSpec, expand, run_sweep
@@ -19,13 +20,6 @@ from sili_robots.training import train
 ray = pytest.importorskip("ray")
 
 pytestmark = pytest.mark.slow
-
-FAST = {
-    "updates_per_step": 0.1,
-    "hidden": 32,
-    "random_interactions": 3,
-    "latent_updates_per_interaction": 2,
-}
 
 
 @pytest.fixture(scope="module")

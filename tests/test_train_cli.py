@@ -10,18 +10,9 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from fast_settings import FAST_ARGS
 
-FAST = [
-    "--set",
-    "updates_per_step=0.1",
-    "--set",
-    "hidden=32",
-    "--set",
-    "random_interactions=3",
-    "--set",
-    "latent_updates_per_interaction=2",
-    "--no-progress",
-]
+FAST = [*FAST_ARGS, "--no-progress"]
 
 
 def _sili(*args, **kw):
