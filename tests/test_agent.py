@@ -7,7 +7,12 @@ import pytest
 import torch
 
 from sili_robots.agent import SILIAgent, method_config
-from sili_robots.agent.latent import LatentModel, gumbel_straight_through, transitions
+from sili_robots.agent.latent import (
+    LatentModel,
+    category_groups,
+    gumbel_straight_through,
+    transitions,
+)
 from sili_robots.agent.sac import SAC
 from sili_robots.errors import ConfigError
 
@@ -228,11 +233,42 @@ def test_relabel_keeps_the_function_and_refresh_keeps_category_names():
     agent = _agent()
     _fill(agent, 12)
     agent.refresh_latents()
-    cached = agent.Z.argmax(-1).copy()
+    cached, relabels = agent.Z.argmax(-1).copy(), agent.relabels
     agent.model.relabel(torch.tensor([1, 2, 3, 0]))  # as if training had shuffled the names
     agent.refresh_latents()
     np.testing.assert_array_equal(agent.Z.argmax(-1)[1:], cached[1:])
-    assert agent.relabels == 1
+    assert agent.relabels == relabels + 1
+
+
+def test_categories_with_the_same_behaviour_count_as_one_strategy():
+    torch.manual_seed(0)
+    model = LatentModel(3, 2, latent_dim=3, hidden=16, kind="discrete")
+    last = model.decoder[-1]
+    with torch.no_grad():  # heads [k, out]: category 1 copies 0, category 2 predicts reward + 5
+        w, b = last.weight.view(3, 4, -1), last.bias.view(3, 4)
+        w[1], b[1] = w[0], b[0]
+        w[2], b[2] = w[0], b[0]
+        b[2, -1] += 5.0
+    obs, act = torch.randn(10, H, 3), torch.randn(10, H, 2)
+    d = model.head_distances(obs, act, torch.ones(4))
+    assert float(d[0, 1]) == pytest.approx(0.0, abs=1e-6)
+    assert float(d[0, 2]) == pytest.approx(5.0, rel=1e-4)
+    assert category_groups(d, [1, 0, 2], threshold=0.5) == {1: 1, 0: 1, 2: 2}
+    assert category_groups(d, [1, 0, 2], threshold=6.0) == {1: 1, 0: 1, 2: 1}
+
+    # in the agent: when every head predicts the same, every latent is one category and the
+    # stability reward never pays for a change; with grouping off the raw categories change
+    for threshold, one_category in ((0.5, True), (0.0, False)):
+        agent = _agent(latent_merge_threshold=threshold)
+        with torch.no_grad():
+            w = agent.model.decoder[-1].weight.view(4, 4, -1)
+            bias = agent.model.decoder[-1].bias.view(4, 4)
+            w[1:], bias[1:] = w[0], bias[0]
+            agent.model.head.bias.copy_(torch.tensor([0.0, 0.0, 0.0, -50.0]))
+            agent.model.head.weight.mul_(100.0)  # several categories in use
+        _fill(agent, 30)
+        agent.refresh_latents()
+        assert (len(np.unique(agent.Z[1:].argmax(-1))) == 1) is one_category
 
 
 @pytest.mark.parametrize("estimator", ["expected", "marginal", "gumbel"])

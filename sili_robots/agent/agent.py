@@ -32,7 +32,7 @@ from scipy.optimize import linear_sum_assignment
 
 from sili_robots.agent.buffer import InteractionBuffer
 from sili_robots.agent.config import AgentConfig
-from sili_robots.agent.latent import LatentModel, transitions
+from sili_robots.agent.latent import LatentModel, category_groups, target_scale, transitions
 from sili_robots.agent.sac import SAC
 from sili_robots.agent.smirl import RunningGaussian
 
@@ -86,6 +86,8 @@ class SILIAgent:
         self.stability_scale = float(cfg.stability_scale or horizon)
         self._update_credit = 0.0
         self.relabels = 0  # how often refresh_latents renamed categories (diagnostics)
+        #: discrete latents: category -> the category standing for its behaviour group
+        self.category_map = np.arange(self.zdim)
 
     # ------------------------------------------------------------------ acting
     def policy_input(self, obs: np.ndarray, j: int | None = None) -> np.ndarray:
@@ -148,16 +150,25 @@ class SILIAgent:
         traj = transitions(
             torch.from_numpy(b.obs[idx]), torch.from_numpy(b.act[idx]), torch.from_numpy(b.rew[idx])
         )
-        return self.model.encode(traj).numpy()
+        z = self.model.encode(traj).numpy()
+        if self.cfg.latent == "discrete":
+            z = np.eye(self.zdim, dtype=np.float32)[self.category_map[z.argmax(-1)]]
+        return z
 
     def refresh_latents(self) -> None:
         """Recompute every cached latent with the current encoder.
 
-        Discrete categories are first renamed to agree as much as possible with the cached
-        ones (a maximum matching on the old-by-new confusion matrix): training may shuffle which
-        category stands for which strategy, and the policy should not have to relearn that.
+        Discrete categories whose decoder heads predict the same behaviour are first mapped to
+        one category (``latent_merge_threshold``, see ``category_groups``), then renamed to agree
+        as much as possible with the cached ones (a maximum matching on the old-by-new confusion
+        matrix): training may shuffle which category stands for which strategy, and the policy
+        should not have to relearn that.
         """
         n = self.buffer.n
+        if self.cfg.latent == "discrete" and n > 0:
+            self.category_map = np.arange(self.zdim)
+            if self.cfg.latent_merge_threshold > 0:
+                self.category_map = self._behaviour_groups(self._encode_all(n).argmax(-1))
         new = self._encode_all(n)
         if self.cfg.latent == "discrete" and n > 0:
             old_c, new_c = self.Z[1 : n + 1].argmax(-1), new.argmax(-1)
@@ -169,9 +180,27 @@ class SILIAgent:
             perm[rows] = cols  # new name i <- old model category perm[i]
             if not np.array_equal(perm, np.arange(k)):
                 self.model.relabel(torch.from_numpy(perm))
+                inverse = np.argsort(perm)
+                self.category_map = inverse[self.category_map[perm]]
                 new = new[:, perm]
                 self.relabels += 1
         self.Z = np.concatenate([self.Z[:1], new])
+
+    def _behaviour_groups(self, categories: np.ndarray, reference: int = 64) -> np.ndarray:
+        """category -> group leader, from the decoder heads' predictions on up to ``reference``
+        stored interactions (unused categories map to themselves)."""
+        b = self.buffer
+        idx = self.rng.choice(b.n, min(reference, b.n), replace=False)
+        obs, act, rew = (torch.from_numpy(x[idx]) for x in (b.obs, b.act, b.rew))
+        scale = target_scale(obs[:, :-1], obs[:, 1:], rew)
+        distances = self.model.head_distances(obs[:, :-1], act, scale)
+        counts = np.bincount(categories, minlength=self.zdim)
+        used = [int(c) for c in np.argsort(-counts, kind="stable") if counts[c] > 0]
+        groups = category_groups(distances, used, self.cfg.latent_merge_threshold)
+        mapping = np.arange(self.zdim)
+        for c, leader in groups.items():
+            mapping[c] = leader
+        return mapping
 
     def _encode_all(self, n: int) -> np.ndarray:
         return np.concatenate(
@@ -308,6 +337,7 @@ class SILIAgent:
             "rng": self.rng.bit_generator.state,
             "torch_rng": torch.get_rng_state(),
             "update_credit": self._update_credit,
+            "category_map": self.category_map.copy(),
         }
         if self.model is not None:
             state["model"] = self.model.state_dict()
@@ -322,6 +352,7 @@ class SILIAgent:
         self.rng.bit_generator.state = state["rng"]
         torch.set_rng_state(state["torch_rng"])
         self._update_credit = float(state["update_credit"])
+        self.category_map = np.asarray(state.get("category_map", np.arange(self.zdim)))
         if self.model is not None:
             self.model.load_state_dict(state["model"])
             self.model_opt.load_state_dict(state["model_opt"])

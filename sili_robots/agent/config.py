@@ -65,7 +65,10 @@ class AgentConfig:
     #: (exact marginal likelihood) or "gumbel" (the paper's straight-through Gumbel-Softmax);
     #: see sili_robots/agent/latent.py
     latent_estimator: str = "expected"
-    latent_usage_bonus: float = 0.03
+    latent_usage_bonus: float = 0.1
+    #: discrete latents: categories whose decoder heads differ by less than this many target
+    #: standard deviations count as one strategy (0 = off; see latent.category_groups)
+    latent_merge_threshold: float = 0.5
     #: total stability reward credited per interaction = stability_scale * R_stable
     #: (default: the horizon, i.e. the paper's per-step R_stable summed over the interaction)
     stability_scale: float | None = None
@@ -138,6 +141,10 @@ class AgentConfig:
         for name in ("updates_per_step", "random_interactions", "latent_updates_per_interaction"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if self.latent_merge_threshold < 0:
+            raise ConfigError(
+                f"latent_merge_threshold must be >= 0, got {self.latent_merge_threshold}"
+            )
         if self.latent_estimator not in ("expected", "marginal", "gumbel"):
             raise ConfigError(
                 f"unknown latent_estimator {self.latent_estimator!r}; "

@@ -27,6 +27,18 @@ Training objective for discrete latents (``estimator``):
 
 Targets are standardised per dimension within each batch, so the usage bonus weighs the same
 against the reconstruction whatever the task's reward scale.
+
+Same strategy, several categories. Gradient training of a mixture of decoder heads has local
+optima where two strategies share one head; a larger usage bonus avoids them by spreading the
+data over more categories than there are strategies, which on its own would make one strategy
+show up as several categories and the stability reward pay for changes that did not happen.
+``category_groups`` undoes that split by behaviour: two categories are the same strategy when no
+output of their decoder heads differs by more than ``threshold`` target standard deviations
+(root mean square over states the agent visited). Measured offline on 500 Circle (3 Goals)
+interactions of a SILI run: the usage bonus 0.03 gave purity 0.69 and change agreement 0.69;
+0.1 gave purity 0.87 over 10 categories but change agreement 0.70; grouping at 0.5 kept the
+purity and raised the agreement to 0.83 (same-strategy heads differed by 0.04-0.34, different
+strategies by 0.54 or more).
 """
 
 from __future__ import annotations
@@ -59,7 +71,7 @@ class LatentModel(nn.Module):
         hidden: int,
         kind: str,
         estimator: str = "expected",
-        usage_bonus: float = 0.03,
+        usage_bonus: float = 0.1,
         evidence_scale: float = 1.0,
     ) -> None:
         super().__init__()
@@ -94,6 +106,16 @@ class LatentModel(nn.Module):
         b = last.bias.unflatten(0, (self.latent_dim, self.out_dim))
         last.weight.copy_(w[perm].flatten(0, 1))
         last.bias.copy_(b[perm].flatten(0, 1))
+
+    @torch.no_grad()
+    def head_distances(
+        self, obs: torch.Tensor, act: torch.Tensor, scale: torch.Tensor
+    ) -> torch.Tensor:
+        """[k, k]: the largest over outputs of the RMS difference between two categories'
+        predictions on the states ``obs`` / actions ``act``, in units of ``scale`` per output."""
+        heads = self._heads(obs, act).reshape(-1, self.latent_dim, self.out_dim) / scale
+        diff = heads.unsqueeze(2) - heads.unsqueeze(1)  # [N, k, k, out]
+        return diff.pow(2).mean(0).sqrt().amax(-1)
 
     def encode_logits(self, traj: torch.Tensor) -> torch.Tensor:
         """``traj``: [N, H, tr_dim] -> raw encoder output [N, latent_dim]."""
@@ -157,6 +179,26 @@ class LatentModel(nn.Module):
         usage = q.mean(0)
         usage_entropy = -(usage * torch.log(usage + 1e-8)).sum()
         return (q * err).sum(-1).mean() - self.usage_bonus * usage_entropy
+
+
+def target_scale(obs: torch.Tensor, next_obs: torch.Tensor, rew: torch.Tensor) -> torch.Tensor:
+    """Per-output standard deviation of the decoder's targets [s' - s, r] (1 where constant)."""
+    flat = torch.cat([next_obs - obs, rew.unsqueeze(-1)], dim=-1).reshape(-1, obs.shape[-1] + 1)
+    std = flat.std(0)
+    return torch.where(std > 1e-4, std, torch.ones_like(std))
+
+
+def category_groups(distances: torch.Tensor, used: list[int], threshold: float) -> dict[int, int]:
+    """Map each used category to its group's leader. ``used`` is ordered most used first; each
+    category joins the first leader closer than ``threshold``, else leads a group of its own
+    (leaders rather than single linkage, so a chain of near pairs cannot join two strategies)."""
+    rep = {c: c for c in used}
+    for i, a in enumerate(used):
+        for b in used[:i]:
+            if rep[b] == b and float(distances[a, b]) < threshold:
+                rep[a] = b
+                break
+    return rep
 
 
 def transitions(obs: torch.Tensor, act: torch.Tensor, rew: torch.Tensor) -> torch.Tensor:
