@@ -10,6 +10,20 @@ import numpy as np
 import pandas as pd
 
 
+def purity(pred: np.ndarray, true: np.ndarray) -> float:
+    """Fraction of items whose predicted category's most frequent true label is their label."""
+    true = np.asarray(true)
+    return float(
+        sum(pd.Series(true[pred == c]).value_counts().iloc[0] for c in np.unique(pred)) / len(pred)
+    )
+
+
+def change_agreement(pred: np.ndarray, true: np.ndarray) -> float:
+    """Fraction of consecutive pairs where "the prediction changed" equals "the truth changed"."""
+    pred, true = np.asarray(pred), np.asarray(true)
+    return float(np.mean((pred[1:] != pred[:-1]) == (true[1:] != true[:-1])))
+
+
 def latent_diagnostics(df: pd.DataFrame, window: int = 100) -> dict[str, float]:
     """Over the last ``window`` interactions: how the predicted latent relates to the truth.
 
@@ -29,13 +43,10 @@ def latent_diagnostics(df: pd.DataFrame, window: int = 100) -> dict[str, float]:
     true_changed = df["strategy_changed"].to_numpy()[1:][-window:].astype(bool)
     counts = np.bincount(pred)
     p = counts[counts > 0] / counts.sum()
-    purity = sum(pd.Series(true[pred == c]).value_counts().iloc[0] for c in np.unique(pred)) / len(
-        pred
-    )
     out.update(
         {
             "latent_entropy": float(-(p * np.log(p)).sum()),
-            "latent_purity": float(purity),
+            "latent_purity": purity(pred, true),
             "latent_change_agreement": float(np.mean(pred_changed == true_changed)),
         }
     )
