@@ -150,10 +150,13 @@ class SILIAgent:
         traj = transitions(
             torch.from_numpy(b.obs[idx]), torch.from_numpy(b.act[idx]), torch.from_numpy(b.rew[idx])
         )
-        z = self.model.encode(traj).numpy()
-        if self.cfg.latent == "discrete":
-            z = np.eye(self.zdim, dtype=np.float32)[self.category_map[z.argmax(-1)]]
-        return z
+        return self._grouped(self.model.encode(traj).numpy())
+
+    def _grouped(self, z: np.ndarray) -> np.ndarray:
+        """Discrete latents: each category replaced by its behaviour group's category."""
+        if self.cfg.latent != "discrete":
+            return z
+        return np.eye(self.zdim, dtype=np.float32)[self.category_map[z.argmax(-1)]]
 
     def refresh_latents(self) -> None:
         """Recompute every cached latent with the current encoder.
@@ -165,12 +168,14 @@ class SILIAgent:
         should not have to relearn that.
         """
         n = self.buffer.n
-        if self.cfg.latent == "discrete" and n > 0:
-            self.category_map = np.arange(self.zdim)
-            if self.cfg.latent_merge_threshold > 0:
-                self.category_map = self._behaviour_groups(self._encode_all(n).argmax(-1))
+        discrete = self.cfg.latent == "discrete" and n > 0
+        if discrete:
+            self.category_map = np.arange(self.zdim)  # encode raw categories first
         new = self._encode_all(n)
-        if self.cfg.latent == "discrete" and n > 0:
+        if discrete:
+            if self.cfg.latent_merge_threshold > 0:
+                self.category_map = self._behaviour_groups(new.argmax(-1))
+                new = self._grouped(new)
             old_c, new_c = self.Z[1 : n + 1].argmax(-1), new.argmax(-1)
             k = self.zdim
             confusion = np.zeros((k, k))
