@@ -14,6 +14,7 @@ import torch
 
 from sili_robots.agent import SILIAgent
 from sili_robots.diagnostics import latent_diagnostics
+from sili_robots.errors import ConfigError
 from sili_robots.progress import TrainingProgress
 from sili_robots.runs import (
     SUMMARY,
@@ -176,6 +177,21 @@ def write_summary(run_dir: Path, window: int = 100) -> dict[str, Any]:
     }
     (Path(run_dir) / SUMMARY).write_text(json.dumps(summary, indent=2))
     return summary
+
+
+def extend(run_dir: Path, interactions: int) -> None:
+    """Raise a run's target to ``interactions``; resuming it then continues from its last
+    checkpoint exactly as a run started with that target would have (nothing else in the run
+    depends on the target)."""
+    cfg = read_config(run_dir)
+    if interactions < cfg.interactions:
+        raise ConfigError(
+            f"--interactions {interactions} would shorten {run_dir}, which is set to "
+            f"{cfg.interactions}; a run can only be extended (allowed: >= {cfg.interactions})"
+        )
+    if interactions != cfg.interactions:
+        cfg.interactions = interactions
+        write_config(Path(run_dir), cfg)
 
 
 def resume(run_dir: Path, progress: bool = True) -> Path:

@@ -286,3 +286,51 @@ def test_every_discrete_estimator_trains_encoder_and_decoder(estimator):
 def test_unknown_estimator_is_named():
     with pytest.raises(ConfigError, match="unknown latent_estimator 'vq'"):
         method_config("sili", latent_estimator="vq")
+
+
+def test_posterior_stability_pays_only_for_a_strategy_shown_to_stay():
+    """stability_distance="posterior": d = 1 - P(strategy during j = predicted z^{j+1})."""
+    agent = _agent(stability_distance="posterior")
+    assert agent.uses_posterior
+    with torch.no_grad():  # constant heads: category k predicts s' - s = 0 and reward 5k
+        last = agent.model.decoder[-1]
+        last.weight.zero_()
+        last.bias.zero_()
+        last.bias.view(4, 4)[:, -1] = torch.tensor([0.0, 5.0, 10.0, 15.0])
+    obs = np.ones((H + 1, 3), np.float32)  # standing still: s' - s = 0 on every step
+    act = np.zeros((H, 2), np.float32)
+    info = {"strategy": np.zeros(2, np.float32)}
+    for reward in (0.0, 5.0, 2.5):  # shows category 0; shows 1; halfway, tells 0 and 1 apart not
+        agent.observe_interaction(
+            obs,
+            act,
+            np.full(H, reward, np.float32),
+            obs[0],
+            0.0,
+            np.zeros(2, np.float32),
+            info,
+            refresh=False,
+        )
+    agent.Z = np.eye(4, dtype=np.float32)[[0, 0, 1, 0]]  # categories in use: 0 and 1
+    agent.P = agent._posteriors(np.arange(3))
+    np.testing.assert_allclose(agent.P[:, :2], [[1, 0], [0, 1], [0.5, 0.5]], atol=1e-6)
+    assert np.all(agent.P[:, 2:] == 0)  # categories not in use get no mass
+    # z^1 = 0 predicted after interaction 0 (which showed 0): stayed; z^2 = 1 after interaction 1
+    # (which showed 1): stayed; z^3 = 0 after an interaction that cannot tell: half a change
+    j, t = np.arange(3)[:, None], np.full((3, 1), H - 1)
+    r = agent._stability_rewards(j, t, t == H - 1, np.zeros((3, 1, 3)))
+    np.testing.assert_allclose(r[:, 0], [0, 0, -0.5 * agent.stability_scale], atol=1e-5)
+    agent.Z = np.eye(4, dtype=np.float32)[[0, 1, 0, 0]]  # now both predictions say "changed"
+    agent.P = agent._posteriors(np.arange(3))
+    r = agent._stability_rewards(j, t, t == H - 1, np.zeros((3, 1, 3)))
+    np.testing.assert_allclose(r[:2, 0], [-agent.stability_scale] * 2, atol=1e-5)
+    assert agent._stats(1, obs[0]).stability_reward == pytest.approx(-1.0, abs=1e-5)
+    # the posteriors survive a checkpoint round trip
+    other = _agent(stability_distance="posterior")
+    other.load_state_dict(agent.state_dict())
+    np.testing.assert_array_equal(other.P, agent.P)
+
+
+def test_unknown_stability_distance_is_named():
+    with pytest.raises(ConfigError, match=r"unknown stability_distance 'kl'.*latents, posterior"):
+        method_config("sili", stability_distance="kl")

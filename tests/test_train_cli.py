@@ -174,3 +174,20 @@ def test_existing_run_is_not_overwritten_silently(tmp_path):
     res = _sili("train", "--task", "circle-3", "--interactions", 2, "--out", out, *FAST)
     assert res.returncode == 2 and "--resume" in res.stderr
     assert Path(out / "config.json").exists()
+
+
+def test_extending_a_finished_run_reproduces_the_longer_run(tmp_path):
+    args = ["--task", "circle-3", "--method", "sili", "--seed", 2, "--checkpoint-every", 4, *FAST]
+    longer, extended = tmp_path / "longer", tmp_path / "extended"
+    assert _sili("train", *args, "--interactions", 12, "--out", longer).returncode == 0
+    assert _sili("train", *args, "--interactions", 8, "--out", extended).returncode == 0
+    res = _sili("train", "--resume", extended, "--interactions", 12, "--no-progress")
+    assert res.returncode == 0, res.stderr
+    assert json.loads((extended / "config.json").read_text())["run"]["interactions"] == 12
+    a = pd.read_csv(longer / "metrics.csv").drop(columns="wall_time")
+    b = pd.read_csv(extended / "metrics.csv").drop(columns="wall_time")
+    assert len(b) == 12
+    pd.testing.assert_frame_equal(a, b)
+    res = _sili("train", "--resume", extended, "--interactions", 5, "--no-progress")
+    assert res.returncode == 2 and "would shorten" in res.stderr and ">= 12" in res.stderr
+    assert "Traceback" not in res.stderr

@@ -88,6 +88,14 @@ class SILIAgent:
         self.relabels = 0  # how often refresh_latents renamed categories (diagnostics)
         #: discrete latents: category -> the category standing for its behaviour group
         self.category_map = np.arange(self.zdim)
+        #: stability_distance="posterior": P[j] = posterior over categories of the strategy in
+        #: effect during stored interaction j
+        self.P = np.zeros((0, self.zdim), np.float32)
+        self.uses_posterior = (
+            cfg.stability_distance == "posterior"
+            and cfg.latent == "discrete"
+            and cfg.method != "lili"
+        ) and self.model is not None
 
     # ------------------------------------------------------------------ acting
     def policy_input(self, obs: np.ndarray, j: int | None = None) -> np.ndarray:
@@ -132,6 +140,8 @@ class SILIAgent:
         j = self.buffer.add(obs, act, rew, aux, next_first, strategy_id, strategy)
         z_next = self._infer_next_latent(j, next_info)
         self.Z = np.concatenate([self.Z, z_next[None]])
+        if self.uses_posterior:
+            self.P = np.concatenate([self.P, self._posteriors(np.array([j]))])
         if refresh and self.model is not None and (j + 1) % self.latent_refresh_every == 0:
             self.refresh_latents()
         return self._stats(j, next_first)
@@ -190,6 +200,35 @@ class SILIAgent:
                 new = new[:, perm]
                 self.relabels += 1
         self.Z = np.concatenate([self.Z[:1], new])
+        if self.uses_posterior:
+            self.P = np.concatenate(
+                [self._posteriors(np.arange(s, min(s + 512, n))) for s in range(0, n, 512)]
+                or [np.zeros((0, self.zdim), np.float32)]
+            )
+
+    @torch.no_grad()
+    def _posteriors(self, idx: np.ndarray) -> np.ndarray:
+        """Posterior over the categories in use (uniform prior) of the strategy in effect during
+        each stored interaction in ``idx``, from how well each decoder head predicts it.
+
+        An interaction that tells the strategies apart gives a one-hot posterior; one that does
+        not (every head predicts it alike, e.g. standing still at the start) gives a flat one,
+        so "the strategy stayed" cannot be claimed by playing uninformatively. Targets are in
+        units of their standard deviation over the whole replay (a deliberately broad noise
+        model: only consistent differences over many steps make the posterior sharp).
+        """
+        b = self.buffer
+        n = b.n
+        in_use = np.unique(self.Z[1 : n + 1].argmax(-1))
+        obs, act, rew = (torch.from_numpy(x[idx]) for x in (b.obs, b.act, b.rew))
+        full_obs = torch.from_numpy(b.obs[:n])
+        scale = target_scale(full_obs[:, :-1], full_obs[:, 1:], torch.from_numpy(b.rew[:n]))
+        loglik = self.model.log_likelihoods(obs[:, :-1], act, obs[:, 1:], rew, scale).numpy()
+        post = np.zeros((len(idx), self.zdim), np.float32)
+        ll = loglik[:, in_use]
+        ll = np.exp(ll - ll.max(-1, keepdims=True))
+        post[:, in_use] = ll / ll.sum(-1, keepdims=True)
+        return post
 
     def _behaviour_groups(self, categories: np.ndarray, reference: int = 64) -> np.ndarray:
         """category -> group leader, from the decoder heads' predictions on up to ``reference``
@@ -217,15 +256,26 @@ class SILIAgent:
         if self.cfg.latent == "partial":
             flags = np.concatenate([self.buffer.obs[j, 1:, -1], next_first[-1:]])
             return InteractionStats(-float(flags.sum()), -1, bool(flags.any()))
-        d = float(self._distance(self.Z[j : j + 1], self.Z[j + 1 : j + 2])[0])
-        if self.cfg.latent != "true" and j == 0:
-            d = 0.0  # z^0 is "no history", not a strategy
+        if self.uses_posterior:
+            d = float(self._posterior_distance(np.array([j]))[0])
+        else:
+            d = float(self._distance(self.Z[j : j + 1], self.Z[j + 1 : j + 2])[0])
+            if self.cfg.latent != "true" and j == 0:
+                d = 0.0  # z^0 is "no history", not a strategy
         category = (
             int(self.Z[j + 1].argmax())
             if self.model is not None and self.cfg.latent == "discrete"
             else -1
         )
-        return InteractionStats(-d, category, d > 0)
+        changed = bool(self.Z[j].argmax() != self.Z[j + 1].argmax()) and j > 0
+        return InteractionStats(-d, category, changed if self.uses_posterior else d > 0)
+
+    def _posterior_distance(self, j: np.ndarray) -> np.ndarray:
+        """1 - P(strategy during interaction j = the predicted z^{j+1}), per entry of ``j``."""
+        return (
+            1.0
+            - np.take_along_axis(self.P[j], self.Z[j + 1].argmax(-1)[..., None], axis=-1)[..., 0]
+        )
 
     def _distance(self, za: np.ndarray, zb: np.ndarray) -> np.ndarray:
         """d(z, z') per row: discrete 0/1 on the category, continuous Euclidean."""
@@ -327,6 +377,8 @@ class SILIAgent:
             return self.buffer.aux[j, t]
         if self.cfg.latent == "partial":
             return -s2[..., -1]
+        if self.uses_posterior:
+            return -self.stability_scale * self._posterior_distance(j) * last
         d = self._distance(self.Z[j], self.Z[j + 1])
         if self.cfg.latent != "true":
             d = np.where(j >= 1, d, 0.0)  # z^0 is "no history", not a strategy
@@ -343,6 +395,7 @@ class SILIAgent:
             "torch_rng": torch.get_rng_state(),
             "update_credit": self._update_credit,
             "category_map": self.category_map.copy(),
+            "posteriors": self.P.copy(),
         }
         if self.model is not None:
             state["model"] = self.model.state_dict()
@@ -358,6 +411,7 @@ class SILIAgent:
         torch.set_rng_state(state["torch_rng"])
         self._update_credit = float(state["update_credit"])
         self.category_map = np.asarray(state.get("category_map", np.arange(self.zdim)))
+        self.P = np.asarray(state.get("posteriors", np.zeros((0, self.zdim))), np.float32)
         if self.model is not None:
             self.model.load_state_dict(state["model"])
             self.model_opt.load_state_dict(state["model_opt"])

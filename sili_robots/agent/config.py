@@ -22,6 +22,7 @@ from sili_robots.errors import ConfigError
 METHODS = ("sili", "lili", "stable", "sac", "oracle", "smirl")
 #: ``true`` is the diagnostic that feeds the true strategy in place of the predicted latent
 LATENT_KINDS = ("discrete", "continuous", "partial", "true")
+STABILITY_DISTANCES = ("latents", "posterior")
 
 
 @dataclass
@@ -69,6 +70,11 @@ class AgentConfig:
     #: discrete latents: categories whose decoder heads differ by less than this many target
     #: standard deviations count as one strategy (0 = off; see latent.category_groups)
     latent_merge_threshold: float = 0.5
+    #: discrete latents: what the stability reward counts as a change of strategy. "latents":
+    #: the paper's d(z^j, z^{j+1}), 1 when the encoder's category changed. "posterior": the
+    #: probability that the strategy in effect during interaction j (the decoder's posterior
+    #: given that interaction) differs from the predicted z^{j+1} (see sili_robots/agent/agent.py)
+    stability_distance: str = "latents"
     #: total stability reward credited per interaction = stability_scale * R_stable
     #: (default: the horizon, i.e. the paper's per-step R_stable summed over the interaction)
     stability_scale: float | None = None
@@ -144,6 +150,11 @@ class AgentConfig:
         if self.latent_merge_threshold < 0:
             raise ConfigError(
                 f"latent_merge_threshold must be >= 0, got {self.latent_merge_threshold}"
+            )
+        if self.stability_distance not in STABILITY_DISTANCES:
+            raise ConfigError(
+                f"unknown stability_distance {self.stability_distance!r}; "
+                f"allowed: {', '.join(STABILITY_DISTANCES)}"
             )
         if self.latent_estimator not in ("expected", "marginal", "gumbel"):
             raise ConfigError(

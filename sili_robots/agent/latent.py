@@ -116,6 +116,21 @@ class LatentModel(nn.Module):
         diff = heads.unsqueeze(2) - heads.unsqueeze(1)  # [N, k, k, out]
         return diff.pow(2).mean(0).sqrt().amax(-1)
 
+    @torch.no_grad()
+    def log_likelihoods(
+        self,
+        obs: torch.Tensor,
+        act: torch.Tensor,
+        next_obs: torch.Tensor,
+        rew: torch.Tensor,
+        scale: torch.Tensor,
+    ) -> torch.Tensor:
+        """[N, k]: log p(tau | k) of each interaction under each category's decoder head, a
+        unit-variance Gaussian on targets in units of ``scale`` (constants dropped)."""
+        target = decoder_targets(obs, next_obs, rew) / scale
+        heads = self._heads(obs, act) / scale  # [N, H, k, out]
+        return -0.5 * (heads - target.unsqueeze(-2)).pow(2).sum(-1).sum(1)
+
     def encode_logits(self, traj: torch.Tensor) -> torch.Tensor:
         """``traj``: [N, H, tr_dim] -> raw encoder output [N, latent_dim]."""
         h = self.phi(traj)

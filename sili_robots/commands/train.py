@@ -29,10 +29,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         choices=LATENT_KINDS,
         help="latent kind for sili/stable/lili (default: the task's, usually discrete)",
     )
-    p.add_argument("--interactions", type=positive_int, default=1000)
+    p.add_argument(
+        "--interactions",
+        type=positive_int,
+        help="interactions to train (default 1000); with --resume, extend the run to this many",
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", type=Path, help="run directory to create")
-    p.add_argument("--resume", type=Path, metavar="RUN_DIR", help="continue a killed run")
+    p.add_argument(
+        "--resume",
+        type=Path,
+        metavar="RUN_DIR",
+        help="continue a killed run (or, with --interactions, extend a finished one)",
+    )
     p.add_argument("--beta", type=unit_float, help="stability weight b in [0, 1] (default 0.5)")
     p.add_argument(
         "--beta-anneal",
@@ -75,7 +84,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         task=args.task,
         method=args.method,
         seed=args.seed,
-        interactions=args.interactions,
+        interactions=args.interactions or 1000,
         agent=agent,
         env_kwargs=env_kwargs,
         checkpoint_every=args.checkpoint_every,
@@ -89,10 +98,12 @@ def _task_names() -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sili_robots.training import resume, train, write_summary
+    from sili_robots.training import extend, resume, train, write_summary
 
     if args.resume is not None:
         read_config(args.resume)  # a clear error when it is not a run
+        if args.interactions is not None:
+            extend(args.resume, args.interactions)
         run_dir = resume(args.resume, progress=not args.no_progress)
     else:
         cfg = config_from_args(args)
