@@ -5,6 +5,9 @@ policy on Circle: state 3 + two 10-d latents), one process, one after the other,
 thread count. Also reports end-to-end interactions per second of ``sili train`` (SILI, Circle 3).
 
     python benchmarks/bench_sac_speed.py [--updates 300] [--threads 1]
+
+Our SAC is timed in float32 (the default, same arithmetic as stable-baselines3) and with
+``precision="bfloat16"`` (matrix products under CPU autocast).
 """
 
 from __future__ import annotations
@@ -20,10 +23,10 @@ import numpy as np
 import torch
 
 
-def time_ours(in_dim: int, act_dim: int, batch: int, updates: int) -> float:
+def time_ours(in_dim: int, act_dim: int, batch: int, updates: int, precision: str) -> float:
     from sili_robots.agent.sac import SAC
 
-    sac = SAC(in_dim, act_dim, hidden=256)
+    sac = SAC(in_dim, act_dim, hidden=256, precision=precision)
     g = torch.Generator().manual_seed(0)
     x = torch.randn(updates, batch, in_dim, generator=g)
     a = torch.rand(updates, batch, act_dim, generator=g) * 2 - 1
@@ -77,7 +80,7 @@ def time_sb3(in_dim: int, act_dim: int, batch: int, updates: int) -> float:
     return updates / (time.perf_counter() - t)
 
 
-def time_train(interactions: int) -> float:
+def time_train(interactions: int, precision: str) -> float:
     from sili_robots.agent import method_config
     from sili_robots.runs import RunConfig
     from sili_robots.training import train
@@ -88,7 +91,7 @@ def time_train(interactions: int) -> float:
         "sili",
         0,
         interactions,
-        method_config("sili", "discrete", random_interactions=5),
+        method_config("sili", "discrete", random_interactions=5, precision=precision),
     )
     t = time.perf_counter()
     train(cfg, out, progress=False)
@@ -106,17 +109,28 @@ def main() -> None:
     args = p.parse_args()
     torch.set_num_threads(args.threads)
     in_dim, act_dim, batch = 3 + 2 * 10, 2, 256
-    sb3_rates, our_rates = [], []
-    for _ in range(args.rounds):  # alternate, so a load change hits both alike
-        sb3_rates.append(time_sb3(in_dim, act_dim, batch, args.updates))
-        our_rates.append(time_ours(in_dim, act_dim, batch, args.updates))
-    sb3, ours = float(np.median(sb3_rates)), float(np.median(our_rates))
+    rates: dict[str, list[float]] = {"sb3": [], "float32": [], "bfloat16": []}
+    for _ in range(args.rounds):  # alternate, so a load change hits all alike
+        rates["sb3"].append(time_sb3(in_dim, act_dim, batch, args.updates))
+        for precision in ("float32", "bfloat16"):
+            rates[precision].append(time_ours(in_dim, act_dim, batch, args.updates, precision))
+    med = {k: float(np.median(v)) for k, v in rates.items()}
+    sb3 = med["sb3"]
     print(f"torch threads: {args.threads}; batch {batch}; input {in_dim}; 2 x 256 networks")
-    print(f"stable-baselines3 SAC: {sb3:8.1f} updates/s ({1e3 / sb3:.2f} ms/update)")
-    print(f"sili_robots SAC:       {ours:8.1f} updates/s ({1e3 / ours:.2f} ms/update)")
-    print(f"ratio (ours / sb3): {ours / sb3:.2f}x (median of {args.rounds} alternating rounds)")
-    ips = time_train(args.interactions)
-    print(f"sili train end to end (circle-3, sili, 1 update/step): {ips:.2f} interactions/s")
+    print(f"stable-baselines3 SAC:            {sb3:8.1f} updates/s ({1e3 / sb3:.2f} ms/update)")
+    for precision in ("float32", "bfloat16"):
+        ours = med[precision]
+        print(
+            f"sili_robots SAC, {precision:8s}:       {ours:8.1f} updates/s "
+            f"({1e3 / ours:.2f} ms/update), {ours / sb3:.2f}x stable-baselines3"
+        )
+    print(f"(medians of {args.rounds} alternating rounds)")
+    for precision in ("float32", "bfloat16"):
+        ips = time_train(args.interactions, precision)
+        print(
+            f"sili train end to end (circle-3, sili, 1 update/step, {precision}): "
+            f"{ips:.2f} interactions/s"
+        )
 
 
 if __name__ == "__main__":

@@ -119,9 +119,10 @@ def test_bootstrap_across_boundary_uses_next_interactions_latents_and_first_obs(
     assert hits > 0
 
 
-def test_one_sac_update_lowers_critic_loss_on_a_fixed_batch():
+@pytest.mark.parametrize("precision", ["float32", "bfloat16"])
+def test_one_sac_update_lowers_critic_loss_on_a_fixed_batch(precision):
     torch.manual_seed(0)
-    sac = SAC(5, 2, hidden=64, lr=1e-3)
+    sac = SAC(5, 2, hidden=64, lr=1e-3, precision=precision)
     x, a, r, x2 = (
         torch.randn(128, 5),
         torch.rand(128, 2) * 2 - 1,
@@ -131,9 +132,24 @@ def test_one_sac_update_lowers_critic_loss_on_a_fixed_batch():
     with torch.no_grad():
         a2, logp2 = sac.actor.sample(x2)
     before = float(sac.critic_loss(x, a, r, x2, a2, logp2).detach())
-    sac.update(x, a, r, x2)
+    out = sac.update(x, a, r, x2)
     after = float(sac.critic_loss(x, a, r, x2, a2, logp2).detach())
     assert after < before
+    # whatever the precision of the matrix products, what is learned and reported is float32
+    assert out["critic_loss"].dtype == torch.float32
+    assert all(p.dtype == torch.float32 for p in sac.critic.parameters())
+    assert sac.actor.sample(x)[1].dtype == torch.float32
+
+
+def test_bfloat16_precision_runs_the_products_in_bfloat16():
+    sac = SAC(5, 2, hidden=64, precision="bfloat16")
+    seen = []
+    hook = sac.actor.trunk[0].register_forward_hook(lambda m, i, o: seen.append(o.dtype))
+    sac.update(torch.randn(8, 5), torch.zeros(8, 2), torch.zeros(8), torch.randn(8, 5))
+    hook.remove()
+    assert seen and all(d == torch.bfloat16 for d in seen)
+    with pytest.raises(ConfigError, match="unknown precision 'fp8'; allowed: float32, bfloat16"):
+        method_config("sili", precision="fp8")
 
 
 def test_latent_model_learns_two_strategies():

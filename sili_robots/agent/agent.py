@@ -67,7 +67,7 @@ class SILIAgent:
         self.zdim = strategy_dim if cfg.latent == "true" else cfg.latent_dim
         self.n_latents = cfg.policy_latents
         self.in_dim = obs_dim + self.n_latents * self.zdim
-        self.sac = SAC(self.in_dim, act_dim, cfg.hidden, cfg.lr, cfg.gamma, cfg.tau)
+        self.sac = SAC(self.in_dim, act_dim, cfg.hidden, cfg.lr, cfg.gamma, cfg.tau, cfg.precision)
         self.model: LatentModel | None = None
         if cfg.uses_latent_model:
             self.model = LatentModel(

@@ -23,6 +23,7 @@ METHODS = ("sili", "lili", "stable", "sac", "oracle", "smirl")
 #: ``true`` is the diagnostic that feeds the true strategy in place of the predicted latent
 LATENT_KINDS = ("discrete", "continuous", "partial", "true")
 STABILITY_DISTANCES = ("latents", "posterior")
+PRECISIONS = ("float32", "bfloat16")
 
 
 @dataclass
@@ -57,6 +58,9 @@ class AgentConfig:
     batch_interactions: int = 16  # an RL batch = this many interactions ...
     batch_steps: int = 16  # ... times this many timesteps from each
     updates_per_step: float = 1.0  # SAC gradient updates per environment step
+    #: "bfloat16": SAC's forward passes under CPU autocast (faster on CPUs with bfloat16 units;
+    #: weights, gradients and optimizer state stay float32; see sili_robots/agent/sac.py)
+    precision: str = "float32"
     random_interactions: int = 20  # uniform random actions first (20 x 50 = 1,000 steps)
     # latent model
     latent_lr: float = 1e-3
@@ -150,6 +154,10 @@ class AgentConfig:
         if self.latent_merge_threshold < 0:
             raise ConfigError(
                 f"latent_merge_threshold must be >= 0, got {self.latent_merge_threshold}"
+            )
+        if self.precision not in PRECISIONS:
+            raise ConfigError(
+                f"unknown precision {self.precision!r}; allowed: {', '.join(PRECISIONS)}"
             )
         if self.stability_distance not in STABILITY_DISTANCES:
             raise ConfigError(

@@ -47,7 +47,7 @@ class TwinCritic(nn.Module):
         h = torch.cat([x, a], dim=-1).unsqueeze(0).expand(self.n, -1, -1)
         h = torch.relu(self.l1(h))
         h = torch.relu(self.l2(h))
-        return self.l3(h).squeeze(-1)
+        return self.l3(h).squeeze(-1).float()  # float32 even under bfloat16 autocast
 
 
 LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
@@ -64,7 +64,8 @@ class Actor(nn.Module):
         self.head = nn.Linear(hidden, 2 * act_dim)
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        mean, log_std = self.head(self.trunk(x)).chunk(2, dim=-1)
+        # float32 even under bfloat16 autocast: the distribution's arithmetic stays exact
+        mean, log_std = self.head(self.trunk(x)).float().chunk(2, dim=-1)
         log_std = LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (torch.tanh(log_std) + 1)
         return mean, log_std
 

@@ -5,13 +5,20 @@ network (``TwinCritic``), the target network is updated with one fused ``_foreac
 the optimizers are fused Adam, and no gradient is
 computed that no optimizer uses. There are no terminal states
 here: the repeated game never ends, so targets always bootstrap (also across interactions).
+
+``precision="bfloat16"`` runs the forward passes of an update under CPU autocast: matrix
+products in bfloat16 (on CPUs with bfloat16 units, e.g. AMX, they run faster), while weights,
+gradients, optimizer state and losses stay float32. Off by default: it changes the numerics.
 """
 
 from __future__ import annotations
 
+from contextlib import nullcontext
+
 import torch
 import torch.nn.functional as F
 
+from sili_robots.agent.config import PRECISIONS
 from sili_robots.agent.networks import Actor, TwinCritic
 
 
@@ -26,8 +33,12 @@ class SAC:
         lr: float = 3e-4,
         gamma: float = 0.99,
         tau: float = 5e-3,
+        precision: str = "float32",
     ) -> None:
+        if precision not in PRECISIONS:
+            raise ValueError(f"precision must be one of {PRECISIONS}, got {precision!r}")
         self.gamma, self.tau = gamma, tau
+        self.precision = precision
         self.actor = Actor(in_dim, act_dim, hidden)
         self.critic = TwinCritic(in_dim + act_dim, hidden)
         self.critic_target = TwinCritic(in_dim + act_dim, hidden)
@@ -40,6 +51,11 @@ class SAC:
         self.alpha_opt = torch.optim.Adam([self.log_alpha], lr=lr)
         self._critic_params = list(self.critic.parameters())
         self._target_params = list(self.critic_target.parameters())
+
+    def _forward_precision(self) -> torch.autocast | nullcontext:
+        if self.precision == "bfloat16":
+            return torch.autocast("cpu", dtype=torch.bfloat16)
+        return nullcontext()
 
     @property
     def alpha(self) -> float:
@@ -64,18 +80,20 @@ class SAC:
         self, x: torch.Tensor, a: torch.Tensor, r: torch.Tensor, x2: torch.Tensor
     ) -> dict[str, float]:
         """One gradient step of critic, actor and temperature on a batch of transitions."""
-        with torch.no_grad():
+        with torch.no_grad(), self._forward_precision():
             a2, logp2 = self.actor.sample(x2)
 
-        critic_loss = self.critic_loss(x, a, r, x2, a2, logp2)
+        with self._forward_precision():
+            critic_loss = self.critic_loss(x, a, r, x2, a2, logp2)
         self.critic_opt.zero_grad(set_to_none=True)
         critic_loss.backward()
         self.critic_opt.step()
 
         alpha = self.log_alpha.exp().detach()
-        a_pi, logp = self.actor.sample(x)
         self.critic.requires_grad_(False)
-        actor_loss = (alpha * logp - self.critic(x, a_pi).min(0).values).mean()
+        with self._forward_precision():
+            a_pi, logp = self.actor.sample(x)
+            actor_loss = (alpha * logp - self.critic(x, a_pi).min(0).values).mean()
         self.actor_opt.zero_grad(set_to_none=True)
         actor_loss.backward()
         self.actor_opt.step()
