@@ -7,6 +7,11 @@ which a ``--window`` rolling stability reached 0.9, wall time, and the latent di
     python benchmarks/bench_learning.py --task circle-3 \\
         --methods sili,lili,sac,oracle,stable,smirl --seeds 0,1,2 --interactions 3000 \\
         --workers 2 --out runs/bench-circle3
+    python benchmarks/bench_learning.py --from-runs sweeps/circle-3/runs   # table finished runs
+
+Then the learning targets are checked: SILI holds the true strategy in >= 90% of the last
+``--window`` interactions in at least 2 of 3 seeds, and its mean final task reward is within 15%
+of Oracle's and above LILI's and SAC's.
 """
 
 from __future__ import annotations
@@ -80,6 +85,42 @@ def table(run_dirs: list[Path], window: int) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def check_targets(df: pd.DataFrame) -> list[tuple[str, bool, str]]:
+    """The learning targets for SILI, each as (what, met, the measured numbers)."""
+    mean = df.groupby("method")["final_task_reward"].mean()
+    if "sili" not in mean:
+        return []
+    sili = df[df["method"] == "sili"]
+    held = int((sili["final_stability"] >= 0.9).sum())
+    out = [
+        (
+            "SILI stability >= 0.9 in at least 2 of 3 seeds",
+            held >= min(2, len(sili)),
+            f"{held} of {len(sili)} seeds ({', '.join(f'{x:.2f}' for x in sili.final_stability)})",
+        )
+    ]
+    if "oracle" in mean:
+        ratio = mean["sili"] / mean["oracle"]
+        out.append(
+            (
+                "SILI task reward within 15% of Oracle's",
+                ratio <= 1.15,
+                f"SILI {mean['sili']:.2f}, Oracle {mean['oracle']:.2f} "
+                f"({ratio:.2f}x Oracle's cost)",
+            )
+        )
+    for other in ("lili", "sac"):
+        if other in mean:
+            out.append(
+                (
+                    f"SILI task reward above {other.upper()}'s",
+                    mean["sili"] > mean[other],
+                    f"SILI {mean['sili']:.2f}, {other.upper()} {mean[other]:.2f}",
+                )
+            )
+    return out
+
+
 def main() -> None:
     p = argparse.ArgumentParser()
     p.add_argument("--task", default="circle-3")
@@ -91,16 +132,24 @@ def main() -> None:
     p.add_argument("--window", type=int, default=100)
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--out", default="runs/bench-learning")
+    p.add_argument("--from-runs", type=Path, help="only tabulate the finished runs in this folder")
     args = p.parse_args()
-    jobs = [(args.task, m, int(s)) for m in args.methods.split(",") for s in args.seeds.split(",")]
     t0 = time.perf_counter()
-    with ThreadPoolExecutor(args.workers) as pool:
-        dirs = list(pool.map(lambda j: run_one(*j, args), jobs))
+    if args.from_runs is not None:
+        dirs = sorted(d for d in args.from_runs.iterdir() if (d / "summary.json").exists())
+    else:
+        jobs = [
+            (args.task, m, int(s)) for m in args.methods.split(",") for s in args.seeds.split(",")
+        ]
+        with ThreadPoolExecutor(args.workers) as pool:
+            dirs = list(pool.map(lambda j: run_one(*j, args), jobs))
     df = table(dirs, args.window)
     print(df.to_string(index=False, float_format="%.3g"))
     agg = df.groupby("method")[["final_task_reward", "final_stability"]].agg(["mean", "std"])
     print()
     print(agg.to_string(float_format="%.3g"))
+    for what, met, numbers in check_targets(df):
+        print(f"{'MET    ' if met else 'NOT MET'} {what}: {numbers}")
     print(f"\nwall time {(time.perf_counter() - t0) / 60:.1f} min with {args.workers} workers")
 
 
