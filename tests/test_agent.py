@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from sili_robots.agent import SILIAgent, method_config
+from sili_robots.agent import BetaSchedule, SILIAgent, method_config
 from sili_robots.agent.latent import (
     LatentModel,
     category_groups,
@@ -350,3 +350,14 @@ def test_posterior_stability_pays_only_for_a_strategy_shown_to_stay():
 def test_unknown_stability_distance_is_named():
     with pytest.raises(ConfigError, match=r"unknown stability_distance 'kl'.*latents, posterior"):
         method_config("sili", stability_distance="kl")
+
+
+def test_beta_schedule_holds_start_for_the_delay_then_ramps():
+    schedule = BetaSchedule(start=0.0, end=0.5, length=50, delay=250)
+    values = [schedule.value(i) for i in (0, 249, 250, 275, 300, 1000)]
+    assert values == pytest.approx([0.0, 0.0, 0.0, 0.25, 0.5, 0.5])
+    cfg = method_config("sili", beta_schedule=schedule)
+    assert cfg.beta_at(100) == 0.0 and cfg.beta_at(400) == 0.5
+    assert BetaSchedule(1.0, 0.5, 10).value(5) == pytest.approx(0.75)  # no delay: ramp at once
+    with pytest.raises(ConfigError, match="delay must be >= 0"):
+        method_config("sili", beta_schedule=BetaSchedule(0.0, 0.5, 10, delay=-1))

@@ -109,6 +109,9 @@ def test_every_latent_kind_trains(tmp_path, latent):
         (["--task", "circle-3", "--interactions", "0"], "need an integer >= 1"),
         (["--task", "circle-3", "--set", "gamma=2"], "gamma must be in (0, 1]"),
         (["--task", "circle-3", "--method", "lili", "--beta", "0.3"], "does not apply to method"),
+        (["--task", "circle-3", "--beta-anneal", "2", "0", "10"], "outside the allowed range"),
+        (["--task", "circle-3", "--beta-anneal", "0", "0.5"], "START END LENGTH [DELAY]"),
+        (["--task", "circle-3", "--beta-anneal", "0", "0.5", "9", "-1"], "need an integer >= 0"),
         (["--resume", "/nonexistent"], "is not a run directory"),
     ],
 )

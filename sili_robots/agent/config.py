@@ -28,16 +28,22 @@ PRECISIONS = ("float32", "bfloat16")
 
 @dataclass
 class BetaSchedule:
-    """Linear annealing of the stability weight b from ``start`` to ``end`` over ``length``."""
+    """The stability weight b: ``start`` for the first ``delay`` interactions, then linear to
+    ``end`` over ``length`` interactions. A delay with start 0 lets the latent model learn from
+    a policy that pursues the task (as LILI) before the stability reward, which is noise while
+    the latent is still wrong, starts to shape the policy."""
 
     start: float
     end: float
     length: int  # interactions
+    delay: int = 0  # interactions at b = start before the ramp
 
     def value(self, interaction: int) -> float:
+        if interaction < self.delay:
+            return self.start
         if self.length <= 0:
             return self.end
-        frac = min(max(interaction / self.length, 0.0), 1.0)
+        frac = min(max((interaction - self.delay) / self.length, 0.0), 1.0)
         return self.start + frac * (self.end - self.start)
 
 
@@ -145,6 +151,8 @@ class AgentConfig:
                     raise ConfigError(f"beta schedule {name} must be in [0, 1], got {v}")
             if s.length < 1:
                 raise ConfigError(f"beta schedule length must be >= 1, got {s.length}")
+            if s.delay < 0:
+                raise ConfigError(f"beta schedule delay must be >= 0, got {s.delay}")
         for name in ("latent_dim", "hidden", "batch_interactions", "batch_steps", "latent_batch"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"{name} must be >= 1, got {getattr(self, name)}")

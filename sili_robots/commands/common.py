@@ -18,6 +18,16 @@ def positive_int(text: str) -> int:
     return value
 
 
+def non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer (need >= 0)") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{value} is not allowed: need an integer >= 0")
+    return value
+
+
 def unit_float(text: str) -> float:
     try:
         value = float(text)

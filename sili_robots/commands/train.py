@@ -10,6 +10,7 @@ from pathlib import Path
 from sili_robots.agent import LATENT_KINDS, METHODS, BetaSchedule, method_config
 from sili_robots.commands.common import (
     add_override_args,
+    non_negative_int,
     parse_env_kwargs,
     positive_int,
     task_name,
@@ -45,9 +46,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--beta", type=unit_float, help="stability weight b in [0, 1] (default 0.5)")
     p.add_argument(
         "--beta-anneal",
-        nargs=3,
-        metavar=("START", "END", "LENGTH"),
-        help="anneal b linearly from START to END over LENGTH interactions",
+        nargs="+",
+        metavar="START END LENGTH [DELAY]",
+        help="b = START for DELAY interactions (default 0), then linear to END over LENGTH",
     )
     p.add_argument("--controller", help="controller for robot tasks (e.g. sawyer-reach: mink)")
     add_override_args(p, scope="")
@@ -71,10 +72,20 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
             )
         overrides["beta"] = args.beta
     if args.beta_anneal:
-        start, end, length = args.beta_anneal
-        overrides["beta_schedule"] = BetaSchedule(
-            unit_float(start), unit_float(end), positive_int(length)
-        )
+        if len(args.beta_anneal) not in (3, 4):
+            raise ConfigError(
+                f"--beta-anneal takes START END LENGTH [DELAY], got {' '.join(args.beta_anneal)}"
+            )
+        start, end, length, *delay = args.beta_anneal
+        try:
+            overrides["beta_schedule"] = BetaSchedule(
+                unit_float(start),
+                unit_float(end),
+                positive_int(length),
+                non_negative_int(delay[0]) if delay else 0,
+            )
+        except argparse.ArgumentTypeError as err:
+            raise ConfigError(f"--beta-anneal: {err}") from None
     latent = args.latent or task_spec(args.task).default_latent
     agent = method_config(args.method, latent, **overrides)
     env_kwargs = parse_env_kwargs(args.env_kwarg, "--env-kwarg")
