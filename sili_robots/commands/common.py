@@ -8,24 +8,24 @@ from sili_robots.errors import ConfigError
 from sili_robots.tasks import task_spec
 
 
-def positive_int(text: str) -> int:
+def _int_at_least(text: str, minimum: int) -> int:
     try:
         value = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer (need >= 1)") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value} is not allowed: need an integer >= 1")
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not an integer (need >= {minimum})"
+        ) from None
+    if value < minimum:
+        raise argparse.ArgumentTypeError(f"{value} is not allowed: need an integer >= {minimum}")
     return value
+
+
+def positive_int(text: str) -> int:
+    return _int_at_least(text, 1)
 
 
 def non_negative_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer (need >= 0)") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"{value} is not allowed: need an integer >= 0")
-    return value
+    return _int_at_least(text, 0)
 
 
 def unit_float(text: str) -> float:
