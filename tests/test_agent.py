@@ -347,6 +347,22 @@ def test_posterior_stability_pays_only_for_a_strategy_shown_to_stay():
     np.testing.assert_array_equal(other.P, agent.P)
 
 
+def test_hindsight_stability_compares_the_strategies_in_effect_in_both_interactions():
+    """stability_distance="hindsight": d = 1 - sum_k P[j, k] P[j+1, k]."""
+    agent = _agent(stability_distance="hindsight")
+    _fill(agent, 3)
+    agent.Z = np.eye(4, dtype=np.float32)[[0, 0, 0, 1]]
+    agent.P = np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0.5, 0.5, 0, 0]], np.float32)
+    j, t = np.arange(3)[:, None], np.full((3, 1), H - 1)
+    r = agent._stability_rewards(j, t, t == H - 1, np.zeros((3, 1, 3)))
+    # 0 -> 1: changed for sure; 1 -> half/half: half; the newest (no successor yet) against the
+    # predicted z^3 = category 1: half
+    np.testing.assert_allclose(r[:, 0], np.array([-1.0, -0.5, -0.5]) * agent.stability_scale)
+    agent.Z[2] = np.eye(4, dtype=np.float32)[1]  # the encoder's prediction does not matter here
+    r2 = agent._stability_rewards(j, t, t == H - 1, np.zeros((3, 1, 3)))
+    np.testing.assert_allclose(r2[:2], r[:2])
+
+
 def test_unknown_stability_distance_is_named():
     with pytest.raises(ConfigError, match=r"unknown stability_distance 'kl'.*latents, posterior"):
         method_config("sili", stability_distance="kl")

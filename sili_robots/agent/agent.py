@@ -92,7 +92,7 @@ class SILIAgent:
         #: effect during stored interaction j
         self.P = np.zeros((0, self.zdim), np.float32)
         self.uses_posterior = (
-            cfg.stability_distance == "posterior"
+            cfg.stability_distance in ("posterior", "hindsight")
             and cfg.latent == "discrete"
             and cfg.method != "lili"
         ) and self.model is not None
@@ -271,11 +271,18 @@ class SILIAgent:
         return InteractionStats(-d, category, changed if self.uses_posterior else d > 0)
 
     def _posterior_distance(self, j: np.ndarray) -> np.ndarray:
-        """1 - P(strategy during interaction j = the predicted z^{j+1}), per entry of ``j``."""
-        return (
-            1.0
-            - np.take_along_axis(self.P[j], self.Z[j + 1].argmax(-1)[..., None], axis=-1)[..., 0]
-        )
+        """Per entry of ``j``, the probability that the strategy changed after interaction j.
+
+        ``posterior``: 1 - P[j, argmax z^{j+1}], the strategy in effect during j against the
+        encoder's prediction for j+1. ``hindsight``: 1 - sum_k P[j, k] P[j+1, k], the strategies
+        in effect during j and j+1 (for the newest interaction, whose successor is not played
+        yet, the prediction stands in for P[j+1])."""
+        predicted = np.take_along_axis(self.P[j], self.Z[j + 1].argmax(-1)[..., None], axis=-1)
+        if self.cfg.stability_distance == "posterior":
+            return 1.0 - predicted[..., 0]
+        n = len(self.P)
+        same = (self.P[j] * self.P[np.minimum(j + 1, n - 1)]).sum(-1)
+        return 1.0 - np.where(j + 1 < n, same, predicted[..., 0])
 
     def _distance(self, za: np.ndarray, zb: np.ndarray) -> np.ndarray:
         """d(z, z') per row: discrete 0/1 on the category, continuous Euclidean."""

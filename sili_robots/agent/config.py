@@ -22,7 +22,7 @@ from sili_robots.errors import ConfigError
 METHODS = ("sili", "lili", "stable", "sac", "oracle", "smirl")
 #: ``true`` is the diagnostic that feeds the true strategy in place of the predicted latent
 LATENT_KINDS = ("discrete", "continuous", "partial", "true")
-STABILITY_DISTANCES = ("latents", "posterior")
+STABILITY_DISTANCES = ("latents", "posterior", "hindsight")
 PRECISIONS = ("float32", "bfloat16")
 
 
