@@ -15,6 +15,9 @@ How the learning signal crosses interactions (the paper's Eq. 1 made concrete):
   paper's per-step R_stable summed over an interaction), is paid on the last step of
   interaction j, the step whose successor lies in interaction j+1. Reward on each step:
   (1 - b) R_task + b [t = H-1] stability_scale R_stable.
+* ``stability_distance`` "posterior" / "hindsight" (discrete latents) replace d(z^j, z^{j+1}) by
+  a probability of change computed from the decoder heads' posterior of the strategy in effect
+  during an interaction (``_posteriors``, ``_posterior_distance``); same credit, same step.
 * Partial observations: R_stable on each step is -flag(s_{t+1}), the observed "strategy changed"
   flag of the next observation (at the boundary: of interaction j+1's first observation).
 * ``latent="true"`` (diagnostic): z^j is the true strategy's encoding and d is 1 when the true
