@@ -27,6 +27,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from sili_robots.diagnostics import latent_diagnostics
+
 
 def run_one(task: str, method: str, seed: int, args: argparse.Namespace) -> Path:
     out = Path(args.out) / f"{task}-{method}-s{seed}"
@@ -78,7 +80,7 @@ def table(run_dirs: list[Path], window: int) -> pd.DataFrame:
                 "final_task_reward": df["task_reward"].tail(window).mean(),
                 "final_stability": 1.0 - df["strategy_changed"].tail(window).mean(),
                 "first_stable_0.9": first_stable(df, window),
-                "latent_purity": summary.get("latent_purity", float("nan")),
+                "latent_purity": latent_diagnostics(df, window).get("latent_purity", float("nan")),
                 "wall_min": summary["wall_time_s"] / 60,
             }
         )

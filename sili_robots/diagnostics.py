@@ -38,6 +38,8 @@ def latent_diagnostics(df: pd.DataFrame, window: int = 100) -> dict[str, float]:
     if len(df) < 2 or (df["latent_category"] < 0).all():
         return out
     pred = df["latent_category"].to_numpy()[:-1][-window:]
+    if (pred < 0).all():  # no discrete latent in this window
+        return out
     true = df["strategy_id"].to_numpy()[1:][-window:]
     pred_changed = df["latent_changed"].to_numpy()[:-1][-window:].astype(bool)
     true_changed = df["strategy_changed"].to_numpy()[1:][-window:].astype(bool)

@@ -1,0 +1,47 @@
+"""Latent diagnostics from a run's metrics: what they report and when they stay silent."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from sili_robots.diagnostics import change_agreement, latent_diagnostics, purity
+
+
+def _metrics(categories, strategies, stability_reward=0.0):
+    categories, strategies = np.asarray(categories), np.asarray(strategies)
+    changed_true = np.r_[0, (strategies[1:] != strategies[:-1]).astype(int)]
+    # row j: z^{j+1} (category j) differs from z^j (category j-1)
+    changed_latent = np.r_[0, (categories[1:] != categories[:-1]).astype(int)]
+    return pd.DataFrame(
+        {
+            "latent_category": categories,
+            "strategy_id": strategies,
+            "strategy_changed": changed_true,
+            "latent_changed": changed_latent,
+            "stability_reward": stability_reward,
+        }
+    )
+
+
+def test_purity_and_change_agreement():
+    assert purity(np.array([5, 5, 7, 7]), np.array([0, 0, 1, 1])) == 1.0
+    assert purity(np.array([5, 5, 5, 5]), np.array([0, 0, 1, 2])) == 0.5
+    assert change_agreement(np.array([1, 1, 2]), np.array([0, 0, 1])) == 1.0
+    assert change_agreement(np.array([1, 2, 2]), np.array([0, 0, 1])) == 0.0
+
+
+def test_a_latent_that_predicts_the_next_strategy_is_pure_and_agrees():
+    strategies = [0, 0, 1, 1, 2, 2, 2, 0]
+    categories = [3, 4, 4, 9, 9, 9, 3, 3]  # row j predicts row j+1's strategy (3=0, 4=1, 9=2)
+    out = latent_diagnostics(_metrics(categories, strategies, -0.25), window=100)
+    assert out["latent_purity"] == 1.0
+    assert out["latent_change_agreement"] == 1.0
+    assert out["stability_reward_paid"] == pytest.approx(-0.25)
+
+
+def test_a_window_without_latents_reports_no_latent_statistics():
+    # a run whose early rows had categories but whose last window has none (-1)
+    categories = [0, 1, 2] + [-1] * 10
+    out = latent_diagnostics(_metrics(categories, [0, 1, 2] + [0] * 10), window=5)
+    assert "latent_purity" not in out and "latent_entropy" not in out
+    assert out["stability_reward_paid"] == 0.0
