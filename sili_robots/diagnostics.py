@@ -38,11 +38,13 @@ def latent_diagnostics(df: pd.DataFrame, window: int = 100) -> dict[str, float]:
     if len(df) < 2 or (df["latent_category"] < 0).all():
         return out
     pred = df["latent_category"].to_numpy()[:-1][-window:]
-    if (pred < 0).all():  # no discrete latent in this window
+    has_latent = pred >= 0  # -1: no discrete latent on that row
+    if not has_latent.any():
         return out
-    true = df["strategy_id"].to_numpy()[1:][-window:]
-    pred_changed = df["latent_changed"].to_numpy()[:-1][-window:].astype(bool)
-    true_changed = df["strategy_changed"].to_numpy()[1:][-window:].astype(bool)
+    pred = pred[has_latent]
+    true = df["strategy_id"].to_numpy()[1:][-window:][has_latent]
+    pred_changed = df["latent_changed"].to_numpy()[:-1][-window:][has_latent].astype(bool)
+    true_changed = df["strategy_changed"].to_numpy()[1:][-window:][has_latent].astype(bool)
     counts = np.bincount(pred)
     p = counts[counts > 0] / counts.sum()
     out.update(

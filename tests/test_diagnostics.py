@@ -45,3 +45,12 @@ def test_a_window_without_latents_reports_no_latent_statistics():
     out = latent_diagnostics(_metrics(categories, [0, 1, 2] + [0] * 10), window=5)
     assert "latent_purity" not in out and "latent_entropy" not in out
     assert out["stability_reward_paid"] == 0.0
+
+
+def test_rows_without_a_latent_are_left_out_of_a_mixed_window():
+    strategies = [0, 0, 1, 1, 2, 2, 2, 0]
+    categories = [3, 4, 4, 9, 9, 9, 3, 3]
+    mixed = _metrics(categories, strategies)
+    mixed.loc[2:3, "latent_category"] = -1
+    out = latent_diagnostics(mixed, window=100)
+    assert out["latent_purity"] == 1.0  # computed on the rows that have a latent
