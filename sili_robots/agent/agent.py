@@ -26,6 +26,7 @@ How the learning signal crosses interactions (the paper's Eq. 1 made concrete):
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -91,14 +92,15 @@ class SILIAgent:
         self.relabels = 0  # how often refresh_latents renamed categories (diagnostics)
         #: discrete latents: category -> the category standing for its behaviour group
         self.category_map = np.arange(self.zdim)
-        #: stability_distance="posterior": P[j] = posterior over categories of the strategy in
-        #: effect during stored interaction j
+        #: stability_distance "posterior" / "hindsight": P[j] = posterior over categories of the
+        #: strategy in effect during stored interaction j
         self.P = np.zeros((0, self.zdim), np.float32)
         self.uses_posterior = (
-            cfg.stability_distance in ("posterior", "hindsight")
+            self.model is not None
             and cfg.latent == "discrete"
+            and cfg.stability_distance != "latents"
             and cfg.method != "lili"
-        ) and self.model is not None
+        )
 
     # ------------------------------------------------------------------ acting
     def policy_input(self, obs: np.ndarray, j: int | None = None) -> np.ndarray:
@@ -204,13 +206,17 @@ class SILIAgent:
                 self.relabels += 1
         self.Z = np.concatenate([self.Z[:1], new])
         if self.uses_posterior:
-            self.P = np.concatenate(
-                [self._posteriors(np.arange(s, min(s + 512, n))) for s in range(0, n, 512)]
-                or [np.zeros((0, self.zdim), np.float32)]
-            )
+            scale = self._replay_target_scale()
+            self.P = self._in_chunks(lambda idx: self._posteriors(idx, scale), n)
+
+    def _replay_target_scale(self) -> torch.Tensor:
+        """Per-output standard deviation of the decoder's targets over the whole replay."""
+        b = self.buffer
+        obs = torch.from_numpy(b.obs[: b.n])
+        return target_scale(obs[:, :-1], obs[:, 1:], torch.from_numpy(b.rew[: b.n]))
 
     @torch.no_grad()
-    def _posteriors(self, idx: np.ndarray) -> np.ndarray:
+    def _posteriors(self, idx: np.ndarray, scale: torch.Tensor | None = None) -> np.ndarray:
         """Posterior over the categories in use (uniform prior) of the strategy in effect during
         each stored interaction in ``idx``, from how well each decoder head predicts it.
 
@@ -221,11 +227,10 @@ class SILIAgent:
         model: only consistent differences over many steps make the posterior sharp).
         """
         b = self.buffer
-        n = b.n
-        in_use = np.unique(self.Z[1 : n + 1].argmax(-1))
+        in_use = np.unique(self.Z[1 : b.n + 1].argmax(-1))
         obs, act, rew = (torch.from_numpy(x[idx]) for x in (b.obs, b.act, b.rew))
-        full_obs = torch.from_numpy(b.obs[:n])
-        scale = target_scale(full_obs[:, :-1], full_obs[:, 1:], torch.from_numpy(b.rew[:n]))
+        if scale is None:
+            scale = self._replay_target_scale()
         loglik = self.model.log_likelihoods(obs[:, :-1], act, obs[:, 1:], rew, scale).numpy()
         post = np.zeros((len(idx), self.zdim), np.float32)
         ll = loglik[:, in_use]
@@ -250,8 +255,12 @@ class SILIAgent:
         return mapping
 
     def _encode_all(self, n: int) -> np.ndarray:
+        return self._in_chunks(self._encode, n)
+
+    def _in_chunks(self, fn: Callable[[np.ndarray], np.ndarray], n: int) -> np.ndarray:
+        """``fn`` over stored interactions 0..n-1 in chunks of 512, rows concatenated."""
         return np.concatenate(
-            [self._encode(np.arange(s, min(s + 512, n))) for s in range(0, n, 512)]
+            [fn(np.arange(s, min(s + 512, n))) for s in range(0, n, 512)]
             or [np.zeros((0, self.zdim), np.float32)]
         )
 
@@ -261,17 +270,18 @@ class SILIAgent:
             return InteractionStats(-float(flags.sum()), -1, bool(flags.any()))
         if self.uses_posterior:
             d = float(self._posterior_distance(np.array([j]))[0])
+            changed = j > 0 and bool(self.Z[j].argmax() != self.Z[j + 1].argmax())
         else:
             d = float(self._distance(self.Z[j : j + 1], self.Z[j + 1 : j + 2])[0])
             if self.cfg.latent != "true" and j == 0:
                 d = 0.0  # z^0 is "no history", not a strategy
+            changed = d > 0
         category = (
             int(self.Z[j + 1].argmax())
             if self.model is not None and self.cfg.latent == "discrete"
             else -1
         )
-        changed = bool(self.Z[j].argmax() != self.Z[j + 1].argmax()) and j > 0
-        return InteractionStats(-d, category, changed if self.uses_posterior else d > 0)
+        return InteractionStats(-d, category, changed)
 
     def _posterior_distance(self, j: np.ndarray) -> np.ndarray:
         """Per entry of ``j``, the probability that the strategy changed after interaction j.

@@ -83,7 +83,8 @@ class AgentConfig:
     #: discrete latents: what the stability reward counts as a change of strategy. "latents":
     #: the paper's d(z^j, z^{j+1}), 1 when the encoder's category changed. "posterior": the
     #: probability that the strategy in effect during interaction j (the decoder's posterior
-    #: given that interaction) differs from the predicted z^{j+1} (see sili_robots/agent/agent.py)
+    #: given that interaction) differs from the predicted z^{j+1}. "hindsight": the probability
+    #: that the strategies in effect during j and j+1 differ (see sili_robots/agent/agent.py)
     stability_distance: str = "latents"
     #: total stability reward credited per interaction = stability_scale * R_stable
     #: (default: the horizon, i.e. the paper's per-step R_stable summed over the interaction)
