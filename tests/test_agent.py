@@ -152,6 +152,21 @@ def test_bfloat16_precision_runs_the_products_in_bfloat16():
         method_config("sili", precision="fp8")
 
 
+def test_target_entropy_sets_where_the_temperature_moves():
+    """The temperature rises while the policy's entropy is below the target, falls above it."""
+    x, a, r = torch.randn(64, 5), torch.zeros(64, 2), torch.zeros(64)
+    moved = {}
+    for target in (-20.0, 20.0):
+        torch.manual_seed(0)
+        sac = SAC(5, 2, hidden=64, target_entropy=target)
+        sac.update(x, a, r, x)
+        moved[target] = float(sac.log_alpha)
+    assert moved[-20.0] < 0.0 < moved[20.0]
+    assert SAC(5, 2).target_entropy == -2.0
+    agent = SILIAgent(method_config("sac", target_entropy=-4), 3, 2, horizon=10, strategy_dim=2)
+    assert agent.sac.target_entropy == -4.0
+
+
 def test_latent_model_learns_two_strategies():
     """A random walk with reward -|x - g_z|; the strategy flips when the walk ends left of 0.
     The encoder must recover z^j from tau^{j-1} (z^{j-1} from the rewards, the flip from the

@@ -71,7 +71,16 @@ class SILIAgent:
         self.zdim = strategy_dim if cfg.latent == "true" else cfg.latent_dim
         self.n_latents = cfg.policy_latents
         self.in_dim = obs_dim + self.n_latents * self.zdim
-        self.sac = SAC(self.in_dim, act_dim, cfg.hidden, cfg.lr, cfg.gamma, cfg.tau, cfg.precision)
+        self.sac = SAC(
+            self.in_dim,
+            act_dim,
+            cfg.hidden,
+            cfg.lr,
+            cfg.gamma,
+            cfg.tau,
+            cfg.precision,
+            cfg.target_entropy,
+        )
         self.model: LatentModel | None = None
         if cfg.uses_latent_model:
             self.model = LatentModel(

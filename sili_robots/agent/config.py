@@ -67,6 +67,9 @@ class AgentConfig:
     #: "bfloat16": SAC's forward passes under CPU autocast (faster on CPUs with bfloat16 units;
     #: weights, gradients and optimizer state stay float32; see sili_robots/agent/sac.py)
     precision: str = "float32"
+    #: the entropy SAC's temperature holds the policy at (default -|A|, SAC's usual choice).
+    #: Lower is more deterministic everywhere; see README "SAC" for when that matters
+    target_entropy: float | None = None
     random_interactions: int = 20  # uniform random actions first (20 x 50 = 1,000 steps)
     # latent model
     latent_lr: float = 1e-3

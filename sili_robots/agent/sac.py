@@ -34,6 +34,7 @@ class SAC:
         gamma: float = 0.99,
         tau: float = 5e-3,
         precision: str = "float32",
+        target_entropy: float | None = None,
     ) -> None:
         if precision not in PRECISIONS:
             raise ValueError(f"precision must be one of {PRECISIONS}, got {precision!r}")
@@ -45,7 +46,7 @@ class SAC:
         self.critic_target.load_state_dict(self.critic.state_dict())
         self.critic_target.requires_grad_(False)
         self.log_alpha = torch.zeros(1, requires_grad=True)
-        self.target_entropy = -float(act_dim)
+        self.target_entropy = -float(act_dim) if target_entropy is None else float(target_entropy)
         self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=lr, fused=True)
         self.critic_opt = torch.optim.Adam(self.critic.parameters(), lr=lr, fused=True)
         self.alpha_opt = torch.optim.Adam([self.log_alpha], lr=lr)
