@@ -1,0 +1,106 @@
+"""Where a Circle run's task reward goes, and what its critic believes at the circle's edge.
+
+Reads finished Circle runs (their ``checkpoint.pt``, which holds the whole replay and the
+networks) and prints, over the last ``--window`` interactions:
+
+* the distance to the opponent summed over three phases of an interaction: the approach (first
+  10 steps: from the start the opponent is 1 away, 0.1 per step), the middle, and the exit
+  (last 10 steps, where a stabilizing ego steps out of the circle), next to the total;
+* the entropy temperature alpha at the end of the run;
+* the critic's min(Q1, Q2) on the last step of an interaction, standing on the held opponent
+  (radius 1), for radial actions that end at radius 0.90 ... 1.10, and the final radius of the
+  policy's own (deterministic) action. The opponent is held by ending on or outside radius 1,
+  so a critic that knows this exactly peaks at or just past 1.00.
+
+    python benchmarks/circle_reward_breakdown.py RUN [RUN ...] [--window 100]
+
+Why: it splits a gap in task reward against Oracle into approach, hold and exit, so a change to
+the method can be aimed at the phase that loses reward.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import torch
+
+from sili_robots.agent import SILIAgent
+from sili_robots.errors import ConfigError
+from sili_robots.runs import load_checkpoint, read_config
+from sili_robots.tasks.circle import CircleEnv
+from sili_robots.training import build_agent, make_run_env
+
+PHASE_STEPS = 10
+RADIAL_ACTIONS = np.linspace(-1.0, 1.0, 9)
+
+
+def load_run(run: Path) -> tuple[SILIAgent, CircleEnv, pd.DataFrame]:
+    cfg = read_config(run)
+    env = make_run_env(cfg)
+    task = env.unwrapped
+    if not isinstance(task, CircleEnv) or task.variant not in ("3", "8"):
+        raise ConfigError(f"{run}: a Circle (3 or 8 goals) run is needed, got task {cfg.task!r}")
+    state = load_checkpoint(run)
+    if state is None:
+        raise ConfigError(f"{run}: no checkpoint.pt")
+    agent = build_agent(cfg, env)
+    agent.load_state_dict(state["agent"])
+    return agent, task, pd.read_csv(run / "metrics.csv")
+
+
+def phase_distances(agent: SILIAgent, window: int) -> dict[str, float]:
+    n = agent.buffer.n
+    dist = -agent.buffer.rew[n - window : n]  # (window, H): the task reward is -distance
+    return {
+        "total": float(dist.sum(1).mean()),
+        "approach": float(dist[:, :PHASE_STEPS].sum(1).mean()),
+        "middle": float(dist[:, PHASE_STEPS:-PHASE_STEPS].sum(1).mean()),
+        "exit": float(dist[:, -PHASE_STEPS:].sum(1).mean()),
+    }
+
+
+def edge_profile(agent: SILIAgent, task: CircleEnv, location: int) -> tuple[np.ndarray, float]:
+    """min Q on the last step from the held opponent's position, for radial actions."""
+    angle = task.angles[location]
+    out = np.array([np.cos(angle), np.sin(angle)], np.float32)  # radial unit vector
+    obs = np.array([*out, (task.horizon - 1) / task.horizon], np.float32)
+    if task.oracle:
+        obs = np.concatenate([obs, out])
+    x = torch.from_numpy(agent.policy_input(obs, agent.buffer.n)).unsqueeze(0)
+    actions = torch.from_numpy(np.outer(RADIAL_ACTIONS, out).astype(np.float32))
+    with torch.no_grad():
+        q = agent.sac.critic(x.expand(len(actions), -1), actions).min(0).values.squeeze(-1)
+        own = agent.sac.act(x, deterministic=True)[0].numpy()
+    final_radius = float(np.linalg.norm(out + 0.1 * own))
+    return q.numpy(), final_radius
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("runs", nargs="+", type=Path)
+    p.add_argument("--window", type=int, default=100)
+    args = p.parse_args()
+    torch.set_num_threads(1)
+    radii = " ".join(f"{1 + 0.1 * a:.3f}" for a in RADIAL_ACTIONS)
+    print(f"edge profile: min Q for final radius {radii}")
+    for run in args.runs:
+        agent, task, metrics = load_run(run)
+        d = phase_distances(agent, args.window)
+        location = int(metrics["strategy_id"].iloc[-1])
+        q, own = edge_profile(agent, task, location)
+        best = 1 + 0.1 * RADIAL_ACTIONS[int(np.argmax(q))]
+        print(
+            f"{run.name}: distance summed: total {d['total']:.2f} = approach {d['approach']:.2f}"
+            f" + middle {d['middle']:.2f} + exit {d['exit']:.2f}; alpha {agent.sac.alpha:.4f}"
+        )
+        print(
+            f"  edge: Q {np.array2string(q - q.max(), precision=2)} (minus its max), "
+            f"argmax radius {best:.3f}, the policy ends at {own:.3f}"
+        )
+
+
+if __name__ == "__main__":
+    main()
