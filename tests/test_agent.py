@@ -167,6 +167,21 @@ def test_target_entropy_sets_where_the_temperature_moves():
     assert agent.sac.target_entropy == -4.0
 
 
+def test_mistyped_settings_fail_by_name():
+    """A --set value of the wrong type is refused up front, naming the setting and the value."""
+    with pytest.raises(ConfigError, match="agent setting lr must be a number, got 'abc'"):
+        method_config("sili", lr="abc")
+    with pytest.raises(ConfigError, match="target_entropy must be a number, got 'x'"):
+        method_config("sili", target_entropy="x")
+    with pytest.raises(ConfigError, match=r"hidden must be a whole number, got 1\.5"):
+        method_config("sili", hidden=1.5)
+    with pytest.raises(ConfigError, match="precision must be a string, got 16"):
+        method_config("sili", precision=16)
+    cfg = method_config("sili", lr=1, hidden=64.0, stability_scale=None, target_entropy=-3)
+    assert (cfg.lr, cfg.hidden, cfg.stability_scale, cfg.target_entropy) == (1.0, 64, None, -3.0)
+    assert isinstance(cfg.hidden, int) and isinstance(cfg.lr, float)
+
+
 def test_latent_model_learns_two_strategies():
     """A random walk with reward -|x - g_z|; the strategy flips when the walk ends left of 0.
     The encoder must recover z^j from tau^{j-1} (z^{j-1} from the rewards, the flip from the

@@ -68,7 +68,7 @@ class AgentConfig:
     #: weights, gradients and optimizer state stay float32; see sili_robots/agent/sac.py)
     precision: str = "float32"
     #: the entropy SAC's temperature holds the policy at (default -|A|, SAC's usual choice).
-    #: Lower is more deterministic everywhere; see README "SAC" for when that matters
+    #: Lower is more deterministic everywhere (measured on Circle in benchmarks/RESULTS.md)
     target_entropy: float | None = None
     random_interactions: int = 20  # uniform random actions first (20 x 50 = 1,000 steps)
     # latent model
@@ -186,6 +186,23 @@ class AgentConfig:
         return self
 
 
+def _typed(name: str, annotation: str, value: Any) -> Any:
+    """``value`` as the setting's declared type, so a mistyped ``--set`` fails here, by name,
+    and not later inside the networks."""
+    is_number = isinstance(value, int | float) and not isinstance(value, bool)
+    if annotation == "float" or (annotation == "float | None" and value is not None):
+        if not is_number:
+            raise ConfigError(f"agent setting {name} must be a number, got {value!r}")
+        return float(value)
+    if annotation == "int" and not (is_number and float(value).is_integer()):
+        raise ConfigError(f"agent setting {name} must be a whole number, got {value!r}")
+    if annotation == "int":
+        return int(value)
+    if annotation == "str" and not isinstance(value, str):
+        raise ConfigError(f"agent setting {name} must be a string, got {value!r}")
+    return value
+
+
 def method_config(method: str, latent: str | None = None, **overrides: Any) -> AgentConfig:
     """The preset for ``method``; ``latent`` defaults to the task's choice (else discrete)."""
     if method not in METHODS:
@@ -197,10 +214,11 @@ def method_config(method: str, latent: str | None = None, **overrides: Any) -> A
         cfg.beta = 1.0
     elif method in ("sac", "oracle"):
         cfg.beta = 0.0
+    types = {f.name: f.type for f in fields(AgentConfig)}
     for k, v in overrides.items():
-        if not hasattr(cfg, k):
+        if k not in types:
             raise ConfigError(f"unknown agent setting {k!r}")
-        setattr(cfg, k, v)
+        setattr(cfg, k, _typed(k, types[k], v))
     if method == "lili" and cfg.latent == "partial":
         cfg.latent = "discrete"  # LILI always learns a latent; b = 0 makes the flag unused
     return cfg.validate()
