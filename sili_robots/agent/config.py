@@ -194,9 +194,9 @@ def _typed(name: str, annotation: str, value: Any) -> Any:
         if not is_number:
             raise ConfigError(f"agent setting {name} must be a number, got {value!r}")
         return float(value)
-    if annotation == "int" and not (is_number and float(value).is_integer()):
-        raise ConfigError(f"agent setting {name} must be a whole number, got {value!r}")
     if annotation == "int":
+        if not (is_number and float(value).is_integer()):
+            raise ConfigError(f"agent setting {name} must be a whole number, got {value!r}")
         return int(value)
     if annotation == "str" and not isinstance(value, str):
         raise ConfigError(f"agent setting {name} must be a string, got {value!r}")
