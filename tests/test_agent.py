@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from sili_robots.agent import BetaSchedule, SILIAgent, method_config
+from sili_robots.agent import AgentConfig, BetaSchedule, SILIAgent, method_config
 from sili_robots.agent.latent import (
     LatentModel,
     category_groups,
@@ -119,6 +119,27 @@ def test_bootstrap_across_boundary_uses_next_interactions_latents_and_first_obs(
     assert hits > 0
 
 
+def _sampled_interactions(agent, n_updates):
+    """The replay index of every interaction in each sampled batch, found by its observations."""
+    x, _, _, _ = agent.sample_batches(n_updates, beta=0.0)
+    rows = x[..., :3].numpy().reshape(n_updates, agent.cfg.batch_interactions, -1, 3)
+    obs = agent.buffer.obs[: agent.buffer.n, :-1]
+    return np.array([[np.where((obs == r[0]).all(-1))[0][0] for r in batch] for batch in rows])
+
+
+def test_recent_fraction_draws_that_part_of_each_batch_from_the_newest_interactions():
+    uniform = _agent(method="lili")
+    _fill(uniform, 40)
+    assert (_sampled_interactions(uniform, 50) < 30).mean() > 0.5  # 3/4 of draws, uniformly
+    recent = _agent(method="lili", recent_fraction=0.5, recent_interactions=10)
+    _fill(recent, 40)
+    j = _sampled_interactions(recent, 50)  # 4 interactions per batch: 2 recent, 2 uniform
+    assert (j[:, :2] >= 30).all()
+    assert (j[:, 2:] < 30).mean() > 0.5
+    with pytest.raises(ConfigError, match=r"recent_fraction must be in \[0, 1\], got 2"):
+        method_config("sili", recent_fraction=2.0)
+
+
 @pytest.mark.parametrize("precision", ["float32", "bfloat16"])
 def test_one_sac_update_lowers_critic_loss_on_a_fixed_batch(precision):
     torch.manual_seed(0)
@@ -177,6 +198,8 @@ def test_mistyped_settings_fail_by_name():
         method_config("sili", hidden=1.5)
     with pytest.raises(ConfigError, match="precision must be a string, got 16"):
         method_config("sili", precision=16)
+    with pytest.raises(ConfigError, match="beta_schedule with --beta-anneal or --beta-schedule"):
+        method_config("sili", beta_schedule="0:0,300:0.5")
     cfg = method_config("sili", lr=1, hidden=64.0, stability_scale=None, target_entropy=-3)
     assert (cfg.lr, cfg.hidden, cfg.stability_scale, cfg.target_entropy) == (1.0, 64, None, -3.0)
     assert isinstance(cfg.hidden, int) and isinstance(cfg.lr, float)
@@ -399,11 +422,32 @@ def test_unknown_stability_distance_is_named():
 
 
 def test_beta_schedule_holds_start_for_the_delay_then_ramps():
-    schedule = BetaSchedule(start=0.0, end=0.5, length=50, delay=250)
+    schedule = BetaSchedule.ramp(start=0.0, end=0.5, length=50, delay=250)
     values = [schedule.value(i) for i in (0, 249, 250, 275, 300, 1000)]
     assert values == pytest.approx([0.0, 0.0, 0.0, 0.25, 0.5, 0.5])
     cfg = method_config("sili", beta_schedule=schedule)
     assert cfg.beta_at(100) == 0.0 and cfg.beta_at(400) == 0.5
-    assert BetaSchedule(1.0, 0.5, 10).value(5) == pytest.approx(0.75)  # no delay: ramp at once
-    with pytest.raises(ConfigError, match="delay must be >= 0"):
-        method_config("sili", beta_schedule=BetaSchedule(0.0, 0.5, 10, delay=-1))
+    assert BetaSchedule.ramp(1.0, 0.5, 10).value(5) == pytest.approx(0.75)  # ramps at once
+    with pytest.raises(ConfigError, match="interaction must be >= 0"):
+        method_config("sili", beta_schedule=BetaSchedule.ramp(0.0, 0.5, 10, delay=-1))
+
+
+def test_beta_schedule_rises_then_falls_through_its_points():
+    schedule = BetaSchedule([(250, 0.0), (300, 0.5), (1500, 0.5), (1600, 0.1)])
+    values = [schedule.value(i) for i in (0, 275, 300, 1000, 1550, 1600, 5000)]
+    assert values == pytest.approx([0.0, 0.25, 0.5, 0.5, 0.3, 0.1, 0.1])
+    with pytest.raises(ConfigError, match="must increase, got 250 after 300"):
+        method_config("sili", beta_schedule=BetaSchedule([(300, 0.5), (250, 0.0)]))
+    with pytest.raises(ConfigError, match=r"b must be in \[0, 1\], got 1.5 at interaction 9"):
+        method_config("sili", beta_schedule=BetaSchedule([(9, 1.5)]))
+
+
+def test_saved_schedules_load_both_forms():
+    """Runs saved with the single-ramp form still resume with the same b at every interaction."""
+    ramp = {"start": 0.0, "end": 0.5, "length": 50, "delay": 250}
+    points = {"points": [[250, 0.0], [300, 0.5], [1500, 0.5], [1600, 0.1]]}
+    old = AgentConfig.from_dict({"beta_schedule": ramp})
+    new = AgentConfig.from_dict({"beta_schedule": points})
+    assert [old.beta_at(i) for i in (249, 275, 2000)] == pytest.approx([0.0, 0.25, 0.5])
+    assert new.beta_at(1550) == pytest.approx(0.3)
+    assert AgentConfig.from_dict(new.to_dict()).beta_schedule == new.beta_schedule

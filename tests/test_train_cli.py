@@ -112,6 +112,13 @@ def test_every_latent_kind_trains(tmp_path, latent):
         (["--task", "circle-3", "--beta-anneal", "2", "0", "10"], "outside the allowed range"),
         (["--task", "circle-3", "--beta-anneal", "0", "0.5"], "START END LENGTH [DELAY]"),
         (["--task", "circle-3", "--beta-anneal", "0", "0.5", "9", "-1"], "need an integer >= 0"),
+        (["--task", "circle-3", "--beta-schedule", "0:0,300:1.5"], "outside the allowed range"),
+        (["--task", "circle-3", "--beta-schedule", "300:0.5,250:0"], "must increase"),
+        (["--task", "circle-3", "--beta-schedule", "300"], "'300' is not INTERACTION:B"),
+        (
+            ["--task", "circle-3", "--beta-anneal", "0", "0.5", "9", "--beta-schedule", "0:0"],
+            "not both",
+        ),
         (["--resume", "/nonexistent"], "is not a run directory"),
     ],
 )

@@ -372,7 +372,12 @@ class SILIAgent:
         transitions (one vectorised gather instead of Python work per update)."""
         b, h = self.buffer, self.horizon
         m, k = self.cfg.batch_interactions, self.cfg.batch_steps
-        j = self.rng.integers(0, b.n, (n_updates, m))[..., None]  # [U, M, 1]
+        j = self.rng.integers(0, b.n, (n_updates, m))  # [U, M]
+        m_recent = round(m * self.cfg.recent_fraction)
+        if m_recent:  # part of each batch from the newest interactions (see AgentConfig)
+            lo = max(0, b.n - self.cfg.recent_interactions)
+            j[:, :m_recent] = self.rng.integers(lo, b.n, (n_updates, m_recent))
+        j = j[..., None]  # [U, M, 1]
         t = self.rng.integers(0, h, (n_updates, m, k))  # [U, M, K]
         j = np.broadcast_to(j, t.shape)
         last = t == h - 1

@@ -28,23 +28,52 @@ PRECISIONS = ("float32", "bfloat16")
 
 @dataclass
 class BetaSchedule:
-    """The stability weight b: ``start`` for the first ``delay`` interactions, then linear to
-    ``end`` over ``length`` interactions. A delay with start 0 lets the latent model learn from
-    a policy that pursues the task (as LILI) before the stability reward, which is noise while
-    the latent is still wrong, starts to shape the policy."""
+    """The stability weight b as a piecewise-linear function of the interaction index.
 
-    start: float
-    end: float
-    length: int  # interactions
-    delay: int = 0  # interactions at b = start before the ramp
+    ``points`` are (interaction, b) knots in increasing interaction order; b is held at the first
+    knot's value before it and at the last knot's value after it. A ramp that starts late (b = 0
+    first) lets the latent model learn from a policy that pursues the task (as LILI) before the
+    stability reward, which is noise while the latent is still wrong, starts to shape the policy;
+    a later knot can lower b again once the opponent is held, so the task term weighs more."""
+
+    points: list[tuple[int, float]]
+
+    @classmethod
+    def ramp(cls, start: float, end: float, length: int, delay: int = 0) -> BetaSchedule:
+        """b = ``start`` for ``delay`` interactions, then linear to ``end`` over ``length``."""
+        return cls([(delay, start), (delay + length, end)])
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> BetaSchedule:
+        """Read a saved schedule; runs saved as a single ramp (start, end, length, delay) too."""
+        if "points" in data:
+            return cls([(int(i), float(b)) for i, b in data["points"]])
+        return cls.ramp(data["start"], data["end"], data["length"], data.get("delay", 0))
 
     def value(self, interaction: int) -> float:
-        if interaction < self.delay:
-            return self.start
-        if self.length <= 0:
-            return self.end
-        frac = min(max((interaction - self.delay) / self.length, 0.0), 1.0)
-        return self.start + frac * (self.end - self.start)
+        first, last = self.points[0], self.points[-1]
+        if interaction <= first[0]:
+            return first[1]
+        for (i0, b0), (i1, b1) in zip(self.points, self.points[1:], strict=False):
+            if interaction < i1:
+                return b0 + (interaction - i0) / (i1 - i0) * (b1 - b0)
+        return last[1]
+
+    def check(self) -> None:
+        """Raise ConfigError naming the first bad knot."""
+        if not self.points:
+            raise ConfigError("beta schedule needs at least one (interaction, b) point")
+        previous = -1
+        for i, b in self.points:
+            if i < 0:
+                raise ConfigError(f"beta schedule interaction must be >= 0, got {i}")
+            if i <= previous:
+                raise ConfigError(
+                    f"beta schedule interactions must increase, got {i} after {previous}"
+                )
+            if not 0.0 <= b <= 1.0:
+                raise ConfigError(f"beta schedule b must be in [0, 1], got {b} at interaction {i}")
+            previous = i
 
 
 @dataclass
@@ -70,6 +99,12 @@ class AgentConfig:
     #: the entropy SAC's temperature holds the policy at (default -|A|, SAC's usual choice).
     #: Lower is more deterministic everywhere (measured on Circle in benchmarks/RESULTS.md)
     target_entropy: float | None = None
+    #: fraction of each RL batch's interactions drawn from the newest ``recent_interactions``
+    #: (the rest uniformly from the whole replay). 0 = uniform (default). A policy that held one
+    #: strategy for a long time has little replay of the others; after a slip, this makes the
+    #: new strategy's on-policy data count sooner
+    recent_fraction: float = 0.0
+    recent_interactions: int = 100
     random_interactions: int = 20  # uniform random actions first (20 x 50 = 1,000 steps)
     # latent model
     latent_lr: float = 1e-3
@@ -136,7 +171,7 @@ class AgentConfig:
         if unknown:
             raise ConfigError(f"unknown agent settings {sorted(unknown)}; allowed: {sorted(known)}")
         if data.get("beta_schedule") is not None:
-            data["beta_schedule"] = BetaSchedule(**data["beta_schedule"])
+            data["beta_schedule"] = BetaSchedule.from_dict(data["beta_schedule"])
         return cls(**data)
 
     def validate(self) -> AgentConfig:
@@ -149,20 +184,17 @@ class AgentConfig:
         if not 0.0 <= self.beta <= 1.0:
             raise ConfigError(f"beta must be in [0, 1], got {self.beta}")
         if self.beta_schedule is not None:
-            s = self.beta_schedule
-            for name, v in (("start", s.start), ("end", s.end)):
-                if not 0.0 <= v <= 1.0:
-                    raise ConfigError(f"beta schedule {name} must be in [0, 1], got {v}")
-            if s.length < 1:
-                raise ConfigError(f"beta schedule length must be >= 1, got {s.length}")
-            if s.delay < 0:
-                raise ConfigError(f"beta schedule delay must be >= 0, got {s.delay}")
+            self.beta_schedule.check()
         for name in ("latent_dim", "hidden", "batch_interactions", "batch_steps", "latent_batch"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"{name} must be >= 1, got {getattr(self, name)}")
         for name in ("updates_per_step", "random_interactions", "latent_updates_per_interaction"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if not 0.0 <= self.recent_fraction <= 1.0:
+            raise ConfigError(f"recent_fraction must be in [0, 1], got {self.recent_fraction}")
+        if self.recent_interactions < 1:
+            raise ConfigError(f"recent_interactions must be >= 1, got {self.recent_interactions}")
         if self.latent_merge_threshold < 0:
             raise ConfigError(
                 f"latent_merge_threshold must be >= 0, got {self.latent_merge_threshold}"
@@ -198,6 +230,8 @@ def _typed(name: str, annotation: str, value: Any) -> Any:
         if not (is_number and float(value).is_integer()):
             raise ConfigError(f"agent setting {name} must be a whole number, got {value!r}")
         return int(value)
+    if annotation == "BetaSchedule | None" and not isinstance(value, BetaSchedule | None):
+        raise ConfigError(f"give {name} with --beta-anneal or --beta-schedule, not {value!r}")
     if annotation == "str" and not isinstance(value, str):
         raise ConfigError(f"agent setting {name} must be a string, got {value!r}")
     return value

@@ -50,12 +50,37 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="START END LENGTH [DELAY]",
         help="b = START for DELAY interactions (default 0), then linear to END over LENGTH",
     )
+    p.add_argument(
+        "--beta-schedule",
+        metavar="I:B,I:B,...",
+        help="b piecewise linear through (interaction, b) points, held before the first and "
+        "after the last; e.g. 250:0,300:0.5,1500:0.5,1600:0.1",
+    )
     p.add_argument("--controller", help="controller for robot tasks (e.g. sawyer-reach: mink)")
     add_override_args(p, scope="")
     p.add_argument("--checkpoint-every", type=positive_int, default=50)
     p.add_argument("--overwrite", action="store_true", help="replace an existing run directory")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(run=run)
+
+
+def parse_beta_schedule(text: str) -> BetaSchedule:
+    """``"250:0,300:0.5"`` -> BetaSchedule([(250, 0.0), (300, 0.5)]), bad points named."""
+    points = []
+    for item in text.split(","):
+        interaction, sep, beta = item.strip().partition(":")
+        try:
+            if not sep:
+                raise argparse.ArgumentTypeError(f"{item.strip()!r} is not INTERACTION:B")
+            points.append((non_negative_int(interaction), unit_float(beta)))
+        except argparse.ArgumentTypeError as err:
+            raise ConfigError(f"--beta-schedule {text!r}: {err}") from None
+    schedule = BetaSchedule(points)
+    try:
+        schedule.check()
+    except ConfigError as err:
+        raise ConfigError(f"--beta-schedule {text!r}: {err}") from None
+    return schedule
 
 
 def config_from_args(args: argparse.Namespace) -> RunConfig:
@@ -71,6 +96,8 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
                 "use --method sili or smirl"
             )
         overrides["beta"] = args.beta
+    if args.beta_anneal and args.beta_schedule:
+        raise ConfigError("give one of --beta-anneal and --beta-schedule, not both")
     if args.beta_anneal:
         if len(args.beta_anneal) not in (3, 4):
             raise ConfigError(
@@ -78,7 +105,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
             )
         start, end, length, *delay = args.beta_anneal
         try:
-            overrides["beta_schedule"] = BetaSchedule(
+            overrides["beta_schedule"] = BetaSchedule.ramp(
                 unit_float(start),
                 unit_float(end),
                 positive_int(length),
@@ -86,6 +113,8 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
             )
         except argparse.ArgumentTypeError as err:
             raise ConfigError(f"--beta-anneal: {err}") from None
+    if args.beta_schedule:
+        overrides["beta_schedule"] = parse_beta_schedule(args.beta_schedule)
     latent = args.latent or task_spec(args.task).default_latent
     agent = method_config(args.method, latent, **overrides)
     env_kwargs = parse_env_kwargs(args.env_kwarg, "--env-kwarg")
