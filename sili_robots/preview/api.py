@@ -238,10 +238,8 @@ def preview(
                 result.html = None
         result.seconds = seconds
         if server is not None:
-            result.url = server.web_url
-            if on_url is not None:
-                on_url(server.web_url)
-            server.serve(serve_seconds)
+            url = result.url = server.web_url
+            server.serve(serve_seconds, on_ready=None if on_url is None else lambda: on_url(url))
         return result
     finally:
         if server is not None:

@@ -19,6 +19,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import meshcat
@@ -105,13 +106,18 @@ class LiveServer:
             self._log.unlink(missing_ok=True)
             self._log = None
 
-    def serve(self, seconds: float | None = None) -> None:
-        """Keep the server up for ``seconds`` (forever when None) or until Ctrl-C/SIGTERM."""
+    def serve(
+        self, seconds: float | None = None, on_ready: Callable[[], None] | None = None
+    ) -> None:
+        """Keep the server up for ``seconds`` (forever when None) or until Ctrl-C/SIGTERM.
+        ``on_ready`` runs once SIGTERM is handled, so a caller told the URL can stop it at once."""
         previous = signal.getsignal(signal.SIGTERM)
         in_main = _in_main_thread()
         if in_main:
             signal.signal(signal.SIGTERM, _raise_exit)
         try:
+            if on_ready is not None:
+                on_ready()
             end = None if seconds is None else time.monotonic() + seconds
             while end is None or time.monotonic() < end:
                 if self.proc is None or self.proc.poll() is not None:
