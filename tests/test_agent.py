@@ -181,7 +181,7 @@ def test_target_entropy_sets_where_the_temperature_moves():
         torch.manual_seed(0)
         sac = SAC(5, 2, hidden=64, target_entropy=target)
         sac.update(x, a, r, x)
-        moved[target] = float(sac.log_alpha)
+        moved[target] = float(sac.log_alpha.detach())
     assert moved[-20.0] < 0.0 < moved[20.0]
     assert SAC(5, 2).target_entropy == -2.0
     agent = SILIAgent(method_config("sac", target_entropy=-4), 3, 2, horizon=10, strategy_dim=2)
