@@ -116,6 +116,10 @@ def test_every_latent_kind_trains(tmp_path, latent):
         (["--task", "circle-3", "--beta-schedule", "300:0.5,250:0"], "must increase"),
         (["--task", "circle-3", "--beta-schedule", "300"], "'300' is not INTERACTION:B"),
         (
+            ["--task", "circle-3", "--method", "lili", "--beta-schedule", "0:0.5"],
+            "--beta-schedule does not apply to method 'lili'",
+        ),
+        (
             ["--task", "circle-3", "--beta-anneal", "0", "0.5", "9", "--beta-schedule", "0:0"],
             "not both",
         ),

@@ -89,12 +89,17 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
             "--task is required (or --resume RUN_DIR); allowed tasks: " + ", ".join(_task_names())
         )
     overrides = parse_env_kwargs(args.agent_set, "--set")
-    if args.beta is not None:
-        if args.method in ("lili", "stable", "sac", "oracle"):
+    for option, given in (
+        ("--beta", args.beta is not None),
+        ("--beta-anneal", bool(args.beta_anneal)),
+        ("--beta-schedule", bool(args.beta_schedule)),
+    ):
+        if given and args.method in ("lili", "stable", "sac", "oracle"):
             raise ConfigError(
-                f"--beta does not apply to method {args.method!r} (its b is fixed); "
+                f"{option} does not apply to method {args.method!r} (its b is fixed); "
                 "use --method sili or smirl"
             )
+    if args.beta is not None:
         overrides["beta"] = args.beta
     if args.beta_anneal and args.beta_schedule:
         raise ConfigError("give one of --beta-anneal and --beta-schedule, not both")
