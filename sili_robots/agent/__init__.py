@@ -1,9 +1,17 @@
 """The learning agent: one SAC + latent-model agent that every method is a configuration of."""
 
 from sili_robots.agent.agent import InteractionStats, SILIAgent
-from sili_robots.agent.config import LATENT_KINDS, METHODS, AgentConfig, BetaSchedule, method_config
+from sili_robots.agent.config import (
+    BETA_METHODS,
+    LATENT_KINDS,
+    METHODS,
+    AgentConfig,
+    BetaSchedule,
+    method_config,
+)
 
 __all__ = [
+    "BETA_METHODS",
     "LATENT_KINDS",
     "METHODS",
     "AgentConfig",

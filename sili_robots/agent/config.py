@@ -15,11 +15,14 @@ Every method of the paper is this one agent with different settings:
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, fields
+from itertools import pairwise
 from typing import Any
 
 from sili_robots.errors import ConfigError
 
 METHODS = ("sili", "lili", "stable", "sac", "oracle", "smirl")
+#: the methods whose b is a setting (the others fix it: LILI 0, Stable 1, SAC and Oracle none)
+BETA_METHODS = ("sili", "smirl")
 #: ``true`` is the diagnostic that feeds the true strategy in place of the predicted latent
 LATENT_KINDS = ("discrete", "continuous", "partial", "true")
 STABILITY_DISTANCES = ("latents", "posterior", "hindsight")
@@ -54,7 +57,7 @@ class BetaSchedule:
         first, last = self.points[0], self.points[-1]
         if interaction <= first[0]:
             return first[1]
-        for (i0, b0), (i1, b1) in zip(self.points, self.points[1:], strict=False):
+        for (i0, b0), (i1, b1) in pairwise(self.points):
             if interaction < i1:
                 return b0 + (interaction - i0) / (i1 - i0) * (b1 - b0)
         return last[1]

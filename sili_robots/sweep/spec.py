@@ -13,14 +13,13 @@ from dataclasses import asdict, dataclass, field
 from functools import cache
 from typing import Any
 
-from sili_robots.agent import LATENT_KINDS, METHODS, method_config
+from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, method_config
 from sili_robots.errors import ConfigError, check_choice
 from sili_robots.runs import RunConfig
 from sili_robots.tasks import TASKS, task_spec
 
 #: methods whose stability weight b is a free parameter (the others fix it: lili/sac/oracle 0,
 #: stable 1); ``--beta`` values multiply only these
-BETA_METHODS = ("sili", "smirl")
 
 
 @dataclass
