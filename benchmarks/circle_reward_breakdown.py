@@ -10,7 +10,11 @@ networks) and prints, over the last ``--window`` interactions:
 * the critic's min(Q1, Q2) on the last step of an interaction, standing on the held opponent
   (radius 1), for radial actions that end at radius 0.90 ... 1.10, and the final radius of the
   policy's own (deterministic) action. The opponent is held by ending on or outside radius 1,
-  so a critic that knows this exactly peaks at or just past 1.00.
+  so a critic that knows this exactly peaks at or just past 1.00;
+* for latent methods, the encoder's side of the same edge: the run's last interaction replayed
+  with only its final position moved radially to radius 0.90 ... 1.10 (last action and reward
+  rewritten to match), and the probability the encoder gives the category it predicts for the
+  unmodified interaction. An encoder that has learned the rule switches category at 1.00.
 
     python benchmarks/circle_reward_breakdown.py RUN [RUN ...] [--window 100]
 
@@ -28,6 +32,7 @@ import pandas as pd
 import torch
 
 from sili_robots.agent import SILIAgent
+from sili_robots.agent.latent import transitions
 from sili_robots.errors import ConfigError
 from sili_robots.runs import load_checkpoint, read_config
 from sili_robots.tasks.circle import CircleEnv
@@ -78,6 +83,36 @@ def edge_profile(agent: SILIAgent, task: CircleEnv, location: int) -> tuple[np.n
     return q.numpy(), final_radius
 
 
+@torch.no_grad()
+def encoder_edge(agent: SILIAgent, task: CircleEnv, location: int) -> np.ndarray | None:
+    """P(the held category) for the last interaction with its final position moved radially."""
+    if agent.model is None or agent.cfg.latent != "discrete":
+        return None
+    j = agent.buffer.n - 1
+    obs = np.repeat(agent.buffer.obs[j : j + 1], len(RADIAL_ACTIONS), 0).copy()
+    act = np.repeat(agent.buffer.act[j : j + 1], len(RADIAL_ACTIONS), 0).copy()
+    rew = np.repeat(agent.buffer.rew[j : j + 1], len(RADIAL_ACTIONS), 0).copy()
+    angle = task.angles[location]
+    out = np.array([np.cos(angle), np.sin(angle)], np.float32)
+    final = np.outer(1 + 0.1 * RADIAL_ACTIONS, out).astype(np.float32)
+    obs[:, -1, :2] = final
+    act[:, -1] = np.clip((final - obs[:, -2, :2]) / 0.1, -1.0, 1.0)
+    rew[:, -1] = -np.linalg.norm(final - out, axis=-1)
+    traj = transitions(torch.from_numpy(obs), torch.from_numpy(act), torch.from_numpy(rew))
+    logits = agent.model.encode_logits(traj)
+    held = int(
+        agent.model.encode_logits(
+            transitions(
+                *(
+                    torch.from_numpy(a[j : j + 1])
+                    for a in (agent.buffer.obs, agent.buffer.act, agent.buffer.rew)
+                )
+            )
+        ).argmax(-1)
+    )
+    return torch.softmax(logits, -1)[:, held].numpy()
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("runs", nargs="+", type=Path)
@@ -100,6 +135,9 @@ def main() -> None:
             f"  edge: Q {np.array2string(q - q.max(), precision=2)} (minus its max), "
             f"argmax radius {best:.3f}, the policy ends at {own:.3f}"
         )
+        p_held = encoder_edge(agent, task, location)
+        if p_held is not None:
+            print(f"  encoder: P(held category) {np.array2string(p_held, precision=2)}")
 
 
 if __name__ == "__main__":
