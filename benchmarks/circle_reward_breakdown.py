@@ -7,6 +7,9 @@ networks) and prints, over the last ``--window`` interactions:
   10 steps: from the start the opponent is 1 away, 0.1 per step), the middle, and the exit
   (last 10 steps, where a stabilizing ego steps out of the circle), next to the total;
 * the entropy temperature alpha at the end of the run;
+* latent changes without a change of the true strategy ("false changes": the policy is then
+  conditioned on a strategy that is not there) and the mean task reward of the interactions
+  right after them, against the interactions after neither kind of change;
 * the critic's min(Q1, Q2) on the last step of an interaction, standing on the held opponent
   (radius 1), for radial actions that end at radius 0.90 ... 1.10, and the final radius of the
   policy's own (deterministic) action. The opponent is held by ending on or outside radius 1,
@@ -65,6 +68,22 @@ def phase_distances(agent: SILIAgent, window: int) -> dict[str, float]:
         "middle": float(dist[:, PHASE_STEPS:-PHASE_STEPS].sum(1).mean()),
         "exit": float(dist[:, -PHASE_STEPS:].sum(1).mean()),
     }
+
+
+def false_changes(metrics: pd.DataFrame, window: int) -> tuple[int, float, float]:
+    """(count, task reward after them, task reward after no change) over the last ``window``."""
+    m = metrics.tail(window + 1).reset_index(drop=True)
+    false = (m["latent_changed"] == 1) & (m["strategy_changed"] == 0)
+    after_false = false.shift(1, fill_value=False)
+    after_none = ((m["latent_changed"] == 0) & (m["strategy_changed"] == 0)).shift(
+        1, fill_value=False
+    )
+    reward = m["task_reward"]
+    return (
+        int(false.iloc[:-1].sum()),
+        float(reward[after_false].mean()),
+        float(reward[after_none].mean()),
+    )
 
 
 def edge_profile(agent: SILIAgent, task: CircleEnv, location: int) -> tuple[np.ndarray, float]:
@@ -126,6 +145,7 @@ def main() -> None:
         d = phase_distances(agent, args.window)
         location = int(metrics["strategy_id"].iloc[-1])
         q, own = edge_profile(agent, task, location)
+        n_false, r_false, r_none = false_changes(metrics, args.window)
         best = 1 + 0.1 * RADIAL_ACTIONS[int(np.argmax(q))]
         print(
             f"{run.name}: distance summed: total {d['total']:.2f} = approach {d['approach']:.2f}"
@@ -134,6 +154,10 @@ def main() -> None:
         print(
             f"  edge: Q {np.array2string(q - q.max(), precision=2)} (minus its max), "
             f"argmax radius {best:.3f}, the policy ends at {own:.3f}"
+        )
+        print(
+            f"  false latent changes {n_false}: task reward after them {r_false:.1f}, "
+            f"after no change {r_none:.1f}"
         )
         p_held = encoder_edge(agent, task, location)
         if p_held is not None:
