@@ -138,7 +138,14 @@ def main() -> None:
     args = p.parse_args()
     t0 = time.perf_counter()
     if args.from_runs is not None:
+        if not args.from_runs.is_dir():
+            p.error(f"--from-runs {args.from_runs}: not a folder")
         dirs = sorted(d for d in args.from_runs.iterdir() if (d / "summary.json").exists())
+        if not dirs:
+            p.error(
+                f"--from-runs {args.from_runs}: no finished runs in it (a run is a folder with a "
+                "summary.json; a sweep keeps them in its runs/ folder)"
+            )
     else:
         jobs = [
             (args.task, m, int(s)) for m in args.methods.split(",") for s in args.seeds.split(",")
