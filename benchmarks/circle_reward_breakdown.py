@@ -6,6 +6,11 @@ networks) and prints, over the last ``--window`` interactions:
 * the distance to the opponent summed over three phases of an interaction: the approach (first
   10 steps: from the start the opponent is 1 away, 0.1 per step), the middle, and the exit
   (last 10 steps, where a stabilizing ego steps out of the circle), next to the total;
+* the location the opponent was held at, and the distance summed by a reference path to it: at
+  each step the action on a 201 x 201 grid of the action box that comes closest to the opponent.
+  The box lets the ego move faster along diagonals, so the locations differ: the top one (90
+  degrees) costs 4.50, the lower two 3.54. Runs that hold different locations are compared
+  against their own location's reference;
 * the entropy temperature alpha at the end of the run;
 * latent changes without a change of the true strategy ("false changes": the policy is then
   conditioned on a strategy that is not there) and the mean task reward of the interactions
@@ -38,7 +43,7 @@ from sili_robots.agent import SILIAgent
 from sili_robots.agent.latent import transitions
 from sili_robots.errors import ConfigError
 from sili_robots.runs import load_checkpoint, read_config
-from sili_robots.tasks.circle import CircleEnv
+from sili_robots.tasks.circle import ARENA, STEP, CircleEnv
 from sili_robots.training import build_agent, make_run_env
 
 PHASE_STEPS = 10
@@ -68,6 +73,21 @@ def phase_distances(agent: SILIAgent, window: int) -> dict[str, float]:
         "middle": float(dist[:, PHASE_STEPS:-PHASE_STEPS].sum(1).mean()),
         "exit": float(dist[:, -PHASE_STEPS:].sum(1).mean()),
     }
+
+
+def reference_cost(task: CircleEnv, location: int) -> float:
+    """Distance summed over an interaction by the per-step closest-approach path."""
+    grid = np.linspace(-1.0, 1.0, 201)
+    actions = np.stack(np.meshgrid(grid, grid), -1).reshape(-1, 2)
+    angle = task.angles[location]
+    goal = np.array([np.cos(angle), np.sin(angle)])
+    pos, total = task.start.astype(float), 0.0
+    for _ in range(task.horizon):
+        nxt = np.clip(pos + STEP * actions, -ARENA, ARENA)
+        dist = np.linalg.norm(nxt - goal, axis=1)
+        k = int(dist.argmin())
+        pos, total = nxt[k], total + float(dist[k])
+    return total
 
 
 def false_changes(metrics: pd.DataFrame, window: int) -> tuple[int, float, float]:
@@ -144,6 +164,7 @@ def main() -> None:
         agent, task, metrics = load_run(run)
         d = phase_distances(agent, args.window)
         location = int(metrics["strategy_id"].iloc[-1])
+        held = metrics["strategy_id"].tail(args.window)
         q, own = edge_profile(agent, task, location)
         n_false, r_false, r_none = false_changes(metrics, args.window)
         best = 1 + 0.1 * RADIAL_ACTIONS[int(np.argmax(q))]
@@ -151,6 +172,14 @@ def main() -> None:
             f"{run.name}: distance summed: total {d['total']:.2f} = approach {d['approach']:.2f}"
             f" + middle {d['middle']:.2f} + exit {d['exit']:.2f}; alpha {agent.sac.alpha:.4f}"
         )
+        if held.nunique() == 1:
+            ref = reference_cost(task, location)
+            print(
+                f"  held location {location} in all {len(held)}: reference path {ref:.2f}, "
+                f"this run {d['total'] / ref:.2f}x it"
+            )
+        else:
+            print(f"  locations over the window: {held.astype(int).value_counts().to_dict()}")
         print(
             f"  edge: Q {np.array2string(q - q.max(), precision=2)} (minus its max), "
             f"argmax radius {best:.3f}, the policy ends at {own:.3f}"
