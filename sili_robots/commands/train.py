@@ -54,7 +54,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--beta-schedule",
         metavar="I:B,I:B,...",
         help="b piecewise linear through (interaction, b) points, held before the first and "
-        "after the last; e.g. 250:0,300:0.5,1500:0.5,1600:0.1",
+        "after the last; e.g. 250:0,300:0.5,1500:0.5,1600:0",
     )
     p.add_argument("--controller", help="controller for robot tasks (e.g. sawyer-reach: mink)")
     add_override_args(p, scope="")
