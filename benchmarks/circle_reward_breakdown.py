@@ -48,6 +48,7 @@ from sili_robots.training import build_agent, make_run_env
 
 PHASE_STEPS = 10
 RADIAL_ACTIONS = np.linspace(-1.0, 1.0, 9)
+FINAL_RADII = 1 + STEP * RADIAL_ACTIONS  # from radius 1, one step of each radial action
 
 
 def load_run(run: Path) -> tuple[SILIAgent, CircleEnv, pd.DataFrame]:
@@ -118,7 +119,7 @@ def edge_profile(agent: SILIAgent, task: CircleEnv, location: int) -> tuple[np.n
     with torch.no_grad():
         q = agent.sac.critic(x.expand(len(actions), -1), actions).min(0).values.squeeze(-1)
         own = agent.sac.act(x, deterministic=True)[0].numpy()
-    final_radius = float(np.linalg.norm(out + 0.1 * own))
+    final_radius = float(np.linalg.norm(out + STEP * own))
     return q.numpy(), final_radius
 
 
@@ -128,28 +129,21 @@ def encoder_edge(agent: SILIAgent, task: CircleEnv, location: int) -> np.ndarray
     if agent.model is None or agent.cfg.latent != "discrete":
         return None
     j = agent.buffer.n - 1
-    obs = np.repeat(agent.buffer.obs[j : j + 1], len(RADIAL_ACTIONS), 0).copy()
-    act = np.repeat(agent.buffer.act[j : j + 1], len(RADIAL_ACTIONS), 0).copy()
-    rew = np.repeat(agent.buffer.rew[j : j + 1], len(RADIAL_ACTIONS), 0).copy()
+    # row 0: the interaction as played; rows 1..: its final position moved to each radius
+    rows = 1 + len(FINAL_RADII)
+    obs, act, rew = (
+        np.repeat(x[j : j + 1], rows, 0)
+        for x in (agent.buffer.obs, agent.buffer.act, agent.buffer.rew)
+    )
     angle = task.angles[location]
     out = np.array([np.cos(angle), np.sin(angle)], np.float32)
-    final = np.outer(1 + 0.1 * RADIAL_ACTIONS, out).astype(np.float32)
-    obs[:, -1, :2] = final
-    act[:, -1] = np.clip((final - obs[:, -2, :2]) / 0.1, -1.0, 1.0)
-    rew[:, -1] = -np.linalg.norm(final - out, axis=-1)
-    traj = transitions(torch.from_numpy(obs), torch.from_numpy(act), torch.from_numpy(rew))
-    logits = agent.model.encode_logits(traj)
-    held = int(
-        agent.model.encode_logits(
-            transitions(
-                *(
-                    torch.from_numpy(a[j : j + 1])
-                    for a in (agent.buffer.obs, agent.buffer.act, agent.buffer.rew)
-                )
-            )
-        ).argmax(-1)
-    )
-    return torch.softmax(logits, -1)[:, held].numpy()
+    final = np.outer(FINAL_RADII, out).astype(np.float32)
+    obs[1:, -1, :2] = final
+    act[1:, -1] = np.clip((final - obs[1:, -2, :2]) / STEP, -1.0, 1.0)
+    rew[1:, -1] = -np.linalg.norm(final - out, axis=-1)
+    logits = agent.model.encode_logits(transitions(*map(torch.from_numpy, (obs, act, rew))))
+    held = int(logits[0].argmax())
+    return torch.softmax(logits[1:], -1)[:, held].numpy()
 
 
 def main() -> None:
@@ -158,7 +152,7 @@ def main() -> None:
     p.add_argument("--window", type=int, default=100)
     args = p.parse_args()
     torch.set_num_threads(1)
-    radii = " ".join(f"{1 + 0.1 * a:.3f}" for a in RADIAL_ACTIONS)
+    radii = " ".join(f"{r:.3f}" for r in FINAL_RADII)
     print(f"edge profile: min Q for final radius {radii}")
     for run in args.runs:
         agent, task, metrics = load_run(run)
@@ -167,7 +161,7 @@ def main() -> None:
         held = metrics["strategy_id"].tail(args.window)
         q, own = edge_profile(agent, task, location)
         n_false, r_false, r_none = false_changes(metrics, args.window)
-        best = 1 + 0.1 * RADIAL_ACTIONS[int(np.argmax(q))]
+        best = FINAL_RADII[int(np.argmax(q))]
         print(
             f"{run.name}: distance summed: total {d['total']:.2f} = approach {d['approach']:.2f}"
             f" + middle {d['middle']:.2f} + exit {d['exit']:.2f}; alpha {agent.sac.alpha:.4f}"

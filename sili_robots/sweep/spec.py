@@ -18,9 +18,6 @@ from sili_robots.errors import ConfigError, check_choice
 from sili_robots.runs import RunConfig
 from sili_robots.tasks import TASKS, task_spec
 
-#: methods whose stability weight b is a free parameter (the others fix it: lili/sac/oracle 0,
-#: stable 1); ``--beta`` values multiply only these
-
 
 @dataclass
 class SweepSpec:
