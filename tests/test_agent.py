@@ -6,7 +6,13 @@ import numpy as np
 import pytest
 import torch
 
-from sili_robots.agent import AgentConfig, BetaSchedule, SILIAgent, method_config
+from sili_robots.agent import (
+    AgentConfig,
+    BetaSchedule,
+    EntropySchedule,
+    SILIAgent,
+    method_config,
+)
 from sili_robots.agent.latent import (
     LatentModel,
     category_groups,
@@ -186,6 +192,29 @@ def test_target_entropy_sets_where_the_temperature_moves():
     assert SAC(5, 2).target_entropy == -2.0
     agent = SILIAgent(method_config("sac", target_entropy=-4), 3, 2, horizon=10, strategy_dim=2)
     assert agent.sac.target_entropy == -4.0
+
+
+def test_target_entropy_schedule_is_applied_at_each_update():
+    """The temperature chases the scheduled target of the interaction being trained."""
+    schedule = EntropySchedule([(4, -2.0), (6, -6.0)])
+    agent = _agent(target_entropy_schedule=schedule, random_interactions=0)
+    assert agent.sac.target_entropy == -2.0
+    _fill(agent, 8)
+    seen = {}
+    for j in (3, 5, 7):
+        agent.update(j)
+        seen[j] = agent.sac.target_entropy
+    assert seen == pytest.approx({3: -2.0, 5: -4.0, 7: -6.0})
+    saved = AgentConfig.from_dict(agent.cfg.to_dict())
+    assert saved.target_entropy_schedule == schedule
+    assert saved.target_entropy_at(5, act_dim=2) == pytest.approx(-4.0)
+    assert method_config("sili").target_entropy_at(5, act_dim=2) == -2.0  # -|A| by default
+    with pytest.raises(ConfigError, match="target entropy schedule: target entropy must be a "):
+        method_config("sili", target_entropy_schedule=EntropySchedule([(0, float("nan"))]))
+    with pytest.raises(ConfigError, match="give one of target_entropy and a target entropy"):
+        method_config("sili", target_entropy=-3, target_entropy_schedule=schedule)
+    with pytest.raises(ConfigError, match="give target_entropy_schedule with --target-entropy-s"):
+        method_config("sili", target_entropy_schedule="1500:-2")
 
 
 def test_mistyped_settings_fail_by_name():
@@ -438,7 +467,7 @@ def test_beta_schedule_rises_then_falls_through_its_points():
     assert values == pytest.approx([0.0, 0.25, 0.5, 0.5, 0.3, 0.1, 0.1])
     with pytest.raises(ConfigError, match="must increase, got 250 after 300"):
         method_config("sili", beta_schedule=BetaSchedule([(300, 0.5), (250, 0.0)]))
-    with pytest.raises(ConfigError, match=r"b must be in \[0, 1\], got 1.5 at interaction 9"):
+    with pytest.raises(ConfigError, match=r"beta schedule: b must be in \[0, 1\], got 1.5 at"):
         method_config("sili", beta_schedule=BetaSchedule([(9, 1.5)]))
 
 

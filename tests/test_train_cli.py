@@ -82,6 +82,18 @@ def test_every_method_trains(tmp_path, method):
     assert (df["latent_category"] == -1).all() == (method in ("sac", "oracle", "smirl"))
 
 
+def test_target_entropy_schedule_is_saved_with_the_run(tmp_path):
+    """Any method takes the schedule (Oracle too, so a late change can be compared fairly)."""
+    out = tmp_path / "oracle"
+    res = _sili(
+        "train", "--task", "circle-3", "--method", "oracle", "--interactions", 3, "--out", out,
+        "--target-entropy-schedule", "0:-2,2:-4", *FAST,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stderr
+    agent = json.loads((out / "config.json").read_text())["run"]["agent"]
+    assert agent["target_entropy_schedule"] == {"points": [[0, -2.0], [2, -4.0]]}
+
+
 @pytest.mark.parametrize("latent", ["continuous", "partial", "true"])
 def test_every_latent_kind_trains(tmp_path, latent):
     out = tmp_path / latent
@@ -114,7 +126,26 @@ def test_every_latent_kind_trains(tmp_path, latent):
         (["--task", "circle-3", "--beta-anneal", "0", "0.5", "9", "-1"], "need an integer >= 0"),
         (["--task", "circle-3", "--beta-schedule", "0:0,300:1.5"], "outside the allowed range"),
         (["--task", "circle-3", "--beta-schedule", "300:0.5,250:0"], "must increase"),
-        (["--task", "circle-3", "--beta-schedule", "300"], "'300' is not INTERACTION:B"),
+        (["--task", "circle-3", "--beta-schedule", "300"], "'300' is not INTERACTION:VALUE"),
+        (
+            ["--task", "circle-3", "--target-entropy-schedule", "1500:-2,1600:x"],
+            "--target-entropy-schedule '1500:-2,1600:x': 'x' is not a number",
+        ),
+        (
+            ["--task", "circle-3", "--target-entropy-schedule", "0:inf"],
+            "'inf' is not a finite number",
+        ),
+        (
+            [
+                "--task",
+                "circle-3",
+                "--target-entropy-schedule",
+                "0:-2",
+                "--set",
+                "target_entropy=-3",
+            ],
+            "give one of target_entropy and a target entropy schedule",
+        ),
         (
             ["--task", "circle-3", "--method", "lili", "--beta-schedule", "0:0.5"],
             "--beta-schedule does not apply to method 'lili'",

@@ -7,6 +7,7 @@ from sili_robots.agent.config import (
     METHODS,
     AgentConfig,
     BetaSchedule,
+    EntropySchedule,
     method_config,
 )
 
@@ -16,6 +17,7 @@ __all__ = [
     "METHODS",
     "AgentConfig",
     "BetaSchedule",
+    "EntropySchedule",
     "InteractionStats",
     "SILIAgent",
     "method_config",

@@ -79,7 +79,7 @@ class SILIAgent:
             cfg.gamma,
             cfg.tau,
             cfg.precision,
-            cfg.target_entropy,
+            cfg.target_entropy_at(0, act_dim),
         )
         self.model: LatentModel | None = None
         if cfg.uses_latent_model:
@@ -331,6 +331,7 @@ class SILIAgent:
         self._update_credit -= n_updates
         if n_updates and self.buffer.n >= 1:
             beta = self.cfg.beta_at(interaction)
+            self.sac.target_entropy = self.cfg.target_entropy_at(interaction, self.act_dim)
             x, a, r, x2 = self.sample_batches(n_updates, beta)
             out = [self.sac.update(x[u], a[u], r[u], x2[u]) for u in range(n_updates)]
             losses["critic_loss"] = float(torch.stack([o["critic_loss"] for o in out]).mean())

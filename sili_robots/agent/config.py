@@ -14,9 +14,10 @@ Every method of the paper is this one agent with different settings:
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field, fields
 from itertools import pairwise
-from typing import Any
+from typing import Any, ClassVar, TypeVar
 
 from sili_robots.errors import ConfigError
 
@@ -29,17 +30,72 @@ STABILITY_DISTANCES = ("latents", "posterior", "hindsight")
 PRECISIONS = ("float32", "bfloat16")
 
 
-@dataclass
-class BetaSchedule:
-    """The stability weight b as a piecewise-linear function of the interaction index.
+ScheduleT = TypeVar("ScheduleT", bound="Schedule")
 
-    ``points`` are (interaction, b) knots in increasing interaction order; b is held at the first
-    knot's value before it and at the last knot's value after it. A ramp that starts late (b = 0
-    first) lets the latent model learn from a policy that pursues the task (as LILI) before the
-    stability reward, which is noise while the latent is still wrong, starts to shape the policy;
-    a later knot can lower b again once the opponent is held, so the task term weighs more."""
+
+@dataclass
+class Schedule:
+    """A setting as a piecewise-linear function of the interaction index.
+
+    ``points`` are (interaction, value) knots in increasing interaction order; the value is held at
+    the first knot's before it and at the last knot's after it. Subclasses name the setting and
+    bound its values, so a bad knot is reported by name."""
 
     points: list[tuple[int, float]]
+    name: ClassVar[str] = "schedule"  # for messages
+    symbol: ClassVar[str] = "value"
+    low: ClassVar[float] = -math.inf
+    high: ClassVar[float] = math.inf
+
+    @classmethod
+    def from_dict(cls: type[ScheduleT], data: dict[str, Any]) -> ScheduleT:
+        return cls([(int(i), float(v)) for i, v in data["points"]])
+
+    def value(self, interaction: int) -> float:
+        first, last = self.points[0], self.points[-1]
+        if interaction <= first[0]:
+            return first[1]
+        for (i0, v0), (i1, v1) in pairwise(self.points):
+            if interaction < i1:
+                return v0 + (interaction - i0) / (i1 - i0) * (v1 - v0)
+        return last[1]
+
+    def check(self) -> None:
+        """Raise ConfigError naming the first bad knot."""
+        name = self.name
+        if not self.points:
+            raise ConfigError(f"{name} needs at least one (interaction, {self.symbol}) point")
+        previous = -1
+        for i, v in self.points:
+            if i < 0:
+                raise ConfigError(f"{name} interaction must be >= 0, got {i}")
+            if i <= previous:
+                raise ConfigError(f"{name} interactions must increase, got {i} after {previous}")
+            if not (math.isfinite(v) and self.low <= v <= self.high):
+                raise ConfigError(
+                    f"{name}: {self.symbol} must be {self.allowed()}, got {v} at interaction {i}"
+                )
+            previous = i
+
+    @classmethod
+    def allowed(cls) -> str:
+        bounded = math.isfinite(cls.low) or math.isfinite(cls.high)
+        return f"in [{cls.low:g}, {cls.high:g}]" if bounded else "a finite number"
+
+
+@dataclass
+class BetaSchedule(Schedule):
+    """The stability weight b over interactions.
+
+    A ramp that starts late (b = 0 first) lets the latent model learn from a policy that pursues
+    the task (as LILI) before the stability reward, which is noise while the latent is still
+    wrong, starts to shape the policy; a later knot can lower b again once the opponent is held,
+    so the task term weighs more."""
+
+    name: ClassVar[str] = "beta schedule"
+    symbol: ClassVar[str] = "b"
+    low: ClassVar[float] = 0.0
+    high: ClassVar[float] = 1.0
 
     @classmethod
     def ramp(cls, start: float, end: float, length: int, delay: int = 0) -> BetaSchedule:
@@ -50,33 +106,21 @@ class BetaSchedule:
     def from_dict(cls, data: dict[str, Any]) -> BetaSchedule:
         """Read a saved schedule; runs saved as a single ramp (start, end, length, delay) too."""
         if "points" in data:
-            return cls([(int(i), float(b)) for i, b in data["points"]])
+            return super().from_dict(data)
         return cls.ramp(data["start"], data["end"], data["length"], data.get("delay", 0))
 
-    def value(self, interaction: int) -> float:
-        first, last = self.points[0], self.points[-1]
-        if interaction <= first[0]:
-            return first[1]
-        for (i0, b0), (i1, b1) in pairwise(self.points):
-            if interaction < i1:
-                return b0 + (interaction - i0) / (i1 - i0) * (b1 - b0)
-        return last[1]
 
-    def check(self) -> None:
-        """Raise ConfigError naming the first bad knot."""
-        if not self.points:
-            raise ConfigError("beta schedule needs at least one (interaction, b) point")
-        previous = -1
-        for i, b in self.points:
-            if i < 0:
-                raise ConfigError(f"beta schedule interaction must be >= 0, got {i}")
-            if i <= previous:
-                raise ConfigError(
-                    f"beta schedule interactions must increase, got {i} after {previous}"
-                )
-            if not 0.0 <= b <= 1.0:
-                raise ConfigError(f"beta schedule b must be in [0, 1], got {b} at interaction {i}")
-            previous = i
+@dataclass
+class EntropySchedule(Schedule):
+    """SAC's target entropy over interactions.
+
+    Exploration matters while the policy finds the opponent and learns to hold it; once it holds,
+    the same entropy keeps the ego jittering around the opponent and forces a wide margin at the
+    circle's edge. Lowering the target late tightens both without starving early exploration
+    (a low target from the start did, see benchmarks/RESULTS.md)."""
+
+    name: ClassVar[str] = "target entropy schedule"
+    symbol: ClassVar[str] = "target entropy"
 
 
 @dataclass
@@ -102,6 +146,9 @@ class AgentConfig:
     #: the entropy SAC's temperature holds the policy at (default -|A|, SAC's usual choice).
     #: Lower is more deterministic everywhere (measured on Circle in benchmarks/RESULTS.md)
     target_entropy: float | None = None
+    #: the target entropy over interactions (``--target-entropy-schedule``); replaces
+    #: ``target_entropy`` when given
+    target_entropy_schedule: EntropySchedule | None = None
     #: fraction of each RL batch's interactions drawn from the newest ``recent_interactions``
     #: (the rest uniformly from the whole replay). 0 = uniform (default). A policy that held one
     #: strategy for a long time has little replay of the others; after a slip, this makes the
@@ -163,6 +210,12 @@ class AgentConfig:
             return self.beta_schedule.value(interaction)
         return self.beta
 
+    def target_entropy_at(self, interaction: int, act_dim: int) -> float:
+        """SAC's target entropy for updates made after ``interaction`` (default -|A|)."""
+        if self.target_entropy_schedule is not None:
+            return self.target_entropy_schedule.value(interaction)
+        return -float(act_dim) if self.target_entropy is None else self.target_entropy
+
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
@@ -175,6 +228,10 @@ class AgentConfig:
             raise ConfigError(f"unknown agent settings {sorted(unknown)}; allowed: {sorted(known)}")
         if data.get("beta_schedule") is not None:
             data["beta_schedule"] = BetaSchedule.from_dict(data["beta_schedule"])
+        if data.get("target_entropy_schedule") is not None:
+            data["target_entropy_schedule"] = EntropySchedule.from_dict(
+                data["target_entropy_schedule"]
+            )
         return cls(**data)
 
     def validate(self) -> AgentConfig:
@@ -188,6 +245,10 @@ class AgentConfig:
             raise ConfigError(f"beta must be in [0, 1], got {self.beta}")
         if self.beta_schedule is not None:
             self.beta_schedule.check()
+        if self.target_entropy_schedule is not None:
+            self.target_entropy_schedule.check()
+            if self.target_entropy is not None:
+                raise ConfigError("give one of target_entropy and a target entropy schedule")
         for name in ("latent_dim", "hidden", "batch_interactions", "batch_steps", "latent_batch"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"{name} must be >= 1, got {getattr(self, name)}")
@@ -235,6 +296,8 @@ def _typed(name: str, annotation: str, value: Any) -> Any:
         return int(value)
     if annotation == "BetaSchedule | None" and not isinstance(value, BetaSchedule | None):
         raise ConfigError(f"give {name} with --beta-anneal or --beta-schedule, not {value!r}")
+    if annotation == "EntropySchedule | None" and not isinstance(value, EntropySchedule | None):
+        raise ConfigError(f"give {name} with --target-entropy-schedule, not {value!r}")
     if annotation == "str" and not isinstance(value, str):
         raise ConfigError(f"agent setting {name} must be a string, got {value!r}")
     return value

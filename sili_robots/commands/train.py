@@ -7,7 +7,15 @@ import json
 import shutil
 from pathlib import Path
 
-from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, BetaSchedule, method_config
+from sili_robots.agent import (
+    BETA_METHODS,
+    LATENT_KINDS,
+    METHODS,
+    BetaSchedule,
+    EntropySchedule,
+    method_config,
+)
+from sili_robots.agent.config import ScheduleT
 from sili_robots.commands.common import (
     add_override_args,
     non_negative_int,
@@ -56,6 +64,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="b piecewise linear through (interaction, b) points, held before the first and "
         "after the last; e.g. 250:0,300:0.5,1500:0.5,1600:0",
     )
+    p.add_argument(
+        "--target-entropy-schedule",
+        metavar="I:E,I:E,...",
+        help="SAC's target entropy piecewise linear through (interaction, entropy) points "
+        "(default -|A| throughout); e.g. 1500:-2,1600:-4",
+    )
     p.add_argument("--controller", help="controller for robot tasks (e.g. sawyer-reach: mink)")
     add_override_args(p, scope="")
     p.add_argument("--checkpoint-every", type=positive_int, default=50)
@@ -64,18 +78,29 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
-def parse_beta_schedule(text: str) -> BetaSchedule:
-    """``"250:0,300:0.5"`` -> BetaSchedule([(250, 0.0), (300, 0.5)]), unparsable points named."""
+def finite_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    return value
+
+
+def parse_schedule(text: str, option: str, kind: type[ScheduleT]) -> ScheduleT:
+    """``"250:0,300:0.5"`` -> kind([(250, 0.0), (300, 0.5)]), unparsable points named."""
+    read_value = unit_float if kind is BetaSchedule else finite_float
     points = []
     for item in text.split(","):
-        interaction, sep, beta = item.strip().partition(":")
+        interaction, sep, value = item.strip().partition(":")
         try:
             if not sep:
-                raise argparse.ArgumentTypeError(f"{item.strip()!r} is not INTERACTION:B")
-            points.append((non_negative_int(interaction), unit_float(beta)))
+                raise argparse.ArgumentTypeError(f"{item.strip()!r} is not INTERACTION:VALUE")
+            points.append((non_negative_int(interaction), read_value(value)))
         except argparse.ArgumentTypeError as err:
-            raise ConfigError(f"--beta-schedule {text!r}: {err}") from None
-    return BetaSchedule(points)  # AgentConfig.validate checks the points' order
+            raise ConfigError(f"{option} {text!r}: {err}") from None
+    return kind(points)  # AgentConfig.validate checks the points' order
 
 
 def config_from_args(args: argparse.Namespace) -> RunConfig:
@@ -114,7 +139,13 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         except argparse.ArgumentTypeError as err:
             raise ConfigError(f"--beta-anneal: {err}") from None
     if args.beta_schedule:
-        overrides["beta_schedule"] = parse_beta_schedule(args.beta_schedule)
+        overrides["beta_schedule"] = parse_schedule(
+            args.beta_schedule, "--beta-schedule", BetaSchedule
+        )
+    if args.target_entropy_schedule:
+        overrides["target_entropy_schedule"] = parse_schedule(
+            args.target_entropy_schedule, "--target-entropy-schedule", EntropySchedule
+        )
     latent = args.latent or task_spec(args.task).default_latent
     agent = method_config(args.method, latent, **overrides)
     env_kwargs = parse_env_kwargs(args.env_kwarg, "--env-kwarg")
