@@ -115,9 +115,10 @@ class EntropySchedule(Schedule):
     """SAC's target entropy over interactions.
 
     Exploration matters while the policy finds the opponent and learns to hold it; once it holds,
-    the same entropy keeps the ego jittering around the opponent and forces a wide margin at the
-    circle's edge. Lowering the target late tightens both without starving early exploration
-    (a low target from the start did, see benchmarks/RESULTS.md)."""
+    the same entropy keeps the ego jittering around the opponent and forces a margin at the
+    circle's edge. A target lowered late tightens both where the noise is the cost (Oracle on
+    Circle) without starving early exploration, which a low target from the start does
+    (benchmarks/RESULTS.md)."""
 
     name: ClassVar[str] = "target entropy schedule"
     symbol: ClassVar[str] = "target entropy"
