@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 from sili_robots.errors import ConfigError
 from sili_robots.tasks import task_spec
@@ -28,14 +29,25 @@ def non_negative_int(text: str) -> int:
     return _int_at_least(text, 0)
 
 
-def unit_float(text: str) -> float:
+def float_in(text: str, low: float = -math.inf, high: float = math.inf) -> float:
+    """A number in [low, high]; with no bounds, any finite number."""
+    bounded = math.isfinite(low) or math.isfinite(high)
+    span = f"[{low:g}, {high:g}]"
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number in [0, 1]") from None
-    if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f"{value} is outside the allowed range [0, 1]")
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a number" + (f" in {span}" if bounded else "")
+        ) from None
+    if not bounded and not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+    if not low <= value <= high:
+        raise argparse.ArgumentTypeError(f"{value} is outside the allowed range {span}")
     return value
+
+
+def unit_float(text: str) -> float:
+    return float_in(text, 0.0, 1.0)
 
 
 def task_name(text: str) -> str:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import shutil
 from pathlib import Path
 
@@ -19,6 +18,7 @@ from sili_robots.agent import (
 from sili_robots.agent.config import ScheduleT
 from sili_robots.commands.common import (
     add_override_args,
+    float_in,
     non_negative_int,
     parse_env_kwargs,
     positive_int,
@@ -79,26 +79,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(run=run)
 
 
-def finite_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
-    return value
-
-
 def parse_schedule(text: str, option: str, kind: type[ScheduleT]) -> ScheduleT:
     """``"250:0,300:0.5"`` -> kind([(250, 0.0), (300, 0.5)]), unparsable points named."""
-    read_value = unit_float if kind is BetaSchedule else finite_float
     points = []
     for item in text.split(","):
         interaction, sep, value = item.strip().partition(":")
         try:
             if not sep:
                 raise argparse.ArgumentTypeError(f"{item.strip()!r} is not INTERACTION:VALUE")
-            points.append((non_negative_int(interaction), read_value(value)))
+            points.append((non_negative_int(interaction), float_in(value, kind.low, kind.high)))
         except argparse.ArgumentTypeError as err:
             raise ConfigError(f"{option} {text!r}: {err}") from None
     return kind(points)  # AgentConfig.validate checks the points' order
