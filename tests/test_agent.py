@@ -213,7 +213,7 @@ def test_target_entropy_schedule_is_applied_at_each_update():
         method_config("sili", target_entropy_schedule=EntropySchedule([(0, float("nan"))]))
     with pytest.raises(ConfigError, match="give one of target_entropy and a target entropy"):
         method_config("sili", target_entropy=-3, target_entropy_schedule=schedule)
-    with pytest.raises(ConfigError, match="target_entropy_schedule with sili train --target-ent"):
+    with pytest.raises(ConfigError, match="target_entropy_schedule with --target-entropy-sch"):
         method_config("sili", target_entropy_schedule="1500:-2")
 
 

@@ -249,6 +249,14 @@ def test_a_second_sweep_on_the_same_directory_is_refused(tmp_path):
         (["--tasks", "circle-3", "--methods", "sili", "--controller", "osc"], "--controller"),
         (["--tasks", "circle-3", "--methods", "sili", "--set", "gamma=3"], "gamma must be"),
         (["--tasks", "circle-3"], "--tasks and --methods are required"),
+        (
+            ["--tasks", "circle-3", "--methods", "sili", "--beta-schedule", "0:0,9:x"],
+            "--beta-schedule '0:0,9:x': 'x' is not a number in [0, 1]",
+        ),
+        (
+            ["--tasks", "circle-3", "--methods", "sac", "--target-entropy-schedule", "0:inf"],
+            "'inf' is not a finite number",
+        ),
         (["--tasks", "circle-3", "--methods", "sili", "--ray-address", "x"], "needs --backend ray"),
     ],
 )
@@ -256,6 +264,24 @@ def test_bad_sweep_input_exits_2_with_the_allowed_values(tmp_path, capsys, args,
     assert main(["sweep", *args, "--out", str(tmp_path / "s")]) == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / "s" / "runs").exists()
+
+
+def test_schedules_given_to_the_sweep_drive_its_runs(tmp_path):
+    out = tmp_path / "s"
+    args = ["--tasks", "circle-3", "--methods", "sili,oracle", "--interactions", 4]
+    args += ["--beta-schedule", "0:0,2:0.5", "--target-entropy-schedule", "0:-2,3:-5"]
+    args += ["--workers", 2, "--no-progress", "--out", out]
+    done = _sili("sweep", *args, *FAST_ARGS)
+    assert done.returncode == 0, done.stderr
+    sili = pd.read_csv(out / "runs" / "circle-3__sili-bschedule__s0" / "metrics.csv")
+    assert sili["beta"].tolist() == [0.0, 0.25, 0.5, 0.5]
+    for name in ("circle-3__sili-bschedule__s0", "circle-3__oracle__s0"):
+        agent = json.loads((out / "runs" / name / "config.json").read_text())["run"]["agent"]
+        assert agent["target_entropy_schedule"] == {"points": [[0, -2.0], [3, -5.0]]}
+    # the sweep records its schedules, so a re-run finds every run done
+    again = _sili("sweep", "--resume", out, "--no-progress")
+    assert again.returncode == 0, again.stderr
+    assert json.loads(again.stdout)["already_done"] == 2
 
 
 def test_resume_of_a_non_sweep_and_changed_settings_exit_2(tiny_sweep, tmp_path, capsys):

@@ -55,6 +55,25 @@ def test_expansion_is_the_cross_product_with_b_only_where_b_is_free():
     assert "circle-3__sili-b0.5__s0" in {r.name for r in expand(_spec(betas=[0.5, 1.0]))}
 
 
+def test_schedules_reach_every_run_and_b_schedules_only_where_b_is_free():
+    spec = _spec(
+        methods=["sili", "lili", "oracle"],
+        beta_schedule=[(250, 0.0), (300, 0.5)],
+        target_entropy_schedule=[(2000, -2.0), (2100, -4.0)],
+    )
+    by_name = {r.name: r.config.agent for r in expand(spec)}
+    names = {"circle-3__sili-bschedule__s0", "circle-3__lili__s0", "circle-3__oracle__s0"}
+    assert set(by_name) == names
+    sili = by_name["circle-3__sili-bschedule__s0"]
+    assert [sili.beta_at(i) for i in (0, 275, 1000)] == [0.0, 0.25, 0.5]
+    assert by_name["circle-3__lili__s0"].beta_schedule is None
+    for agent in by_name.values():
+        assert agent.target_entropy_at(2050, 2) == -3.0
+    # the spec goes through sweep.json as JSON and plans the same runs again
+    again = SweepSpec.from_dict(json.loads(json.dumps(spec.to_dict())))
+    assert [r.config.to_dict() for r in expand(again)] == [r.config.to_dict() for r in expand(spec)]
+
+
 def test_names_are_stable_and_unique():
     spec = _spec(tasks=["circle-3", "speaker-listener"], methods=["sili", "smirl"], seeds=[0, 1, 2])
     a, b = [r.name for r in expand(spec)], [r.name for r in expand(spec)]
@@ -87,6 +106,13 @@ def test_latent_kind_other_than_the_default_is_named():
         ({"methods": ["lili", "sac"], "betas": [0.2]}, "--beta applies to methods sili, smirl"),
         ({"controllers": ["osc"]}, "--controller applies to tasks sawyer-reach"),
         ({"agent_overrides": {"beta": 0.3}}, "use the sweep's --beta"),
+        (
+            {"agent_overrides": {"target_entropy_schedule": {"points": [[0, -2]]}}},
+            "use the sweep's --target-entropy-schedule",
+        ),
+        ({"betas": [0.2], "beta_schedule": [(0, 0.5)]}, "one of --beta and --beta-schedule"),
+        ({"methods": ["lili"], "beta_schedule": [(0, 0.5)]}, "--beta-schedule applies to"),
+        ({"beta_schedule": [(300, 0.5), (250, 0.0)]}, "interactions must increase"),
         ({"agent_overrides": {"hiddden": 3}}, "unknown agent setting 'hiddden'"),
         ({"agent_overrides": {"gamma": 2}}, r"gamma must be in \(0, 1\]"),
         ({"latent": "fuzzy"}, "unknown latent kind 'fuzzy'"),

@@ -298,7 +298,7 @@ def _typed(name: str, annotation: str, value: Any) -> Any:
     if annotation == "BetaSchedule | None" and not isinstance(value, BetaSchedule | None):
         raise ConfigError(f"give {name} with --beta-anneal or --beta-schedule, not {value!r}")
     if annotation == "EntropySchedule | None" and not isinstance(value, EntropySchedule | None):
-        raise ConfigError(f"give {name} with sili train --target-entropy-schedule, not {value!r}")
+        raise ConfigError(f"give {name} with --target-entropy-schedule, not {value!r}")
     if annotation == "str" and not isinstance(value, str):
         raise ConfigError(f"agent setting {name} must be a string, got {value!r}")
     return value

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
+from sili_robots.agent.config import ScheduleT
 from sili_robots.errors import ConfigError
 from sili_robots.tasks import task_spec
 
@@ -48,6 +49,20 @@ def float_in(text: str, low: float = -math.inf, high: float = math.inf) -> float
 
 def unit_float(text: str) -> float:
     return float_in(text, 0.0, 1.0)
+
+
+def parse_schedule(text: str, option: str, kind: type[ScheduleT]) -> ScheduleT:
+    """``"250:0,300:0.5"`` -> kind([(250, 0.0), (300, 0.5)]), unparsable points named."""
+    points = []
+    for item in text.split(","):
+        interaction, sep, value = item.strip().partition(":")
+        try:
+            if not sep:
+                raise argparse.ArgumentTypeError(f"{item.strip()!r} is not INTERACTION:VALUE")
+            points.append((non_negative_int(interaction), float_in(value, kind.low, kind.high)))
+        except argparse.ArgumentTypeError as err:
+            raise ConfigError(f"{option} {text!r}: {err}") from None
+    return kind(points)  # AgentConfig.validate checks the points' order
 
 
 def task_name(text: str) -> str:

@@ -7,8 +7,13 @@ import json
 import os
 from pathlib import Path
 
-from sili_robots.agent import LATENT_KINDS
-from sili_robots.commands.common import add_override_args, parse_env_kwargs, positive_int
+from sili_robots.agent import LATENT_KINDS, BetaSchedule, EntropySchedule
+from sili_robots.commands.common import (
+    add_override_args,
+    parse_env_kwargs,
+    parse_schedule,
+    positive_int,
+)
 from sili_robots.errors import ConfigError
 from sili_robots.sweep.spec import SweepSpec, parse_betas, parse_list, parse_seeds
 
@@ -30,6 +35,18 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--beta",
         metavar="B1,B2,...",
         help="stability weights b to sweep (for sili and smirl; other methods fix b)",
+    )
+    p.add_argument(
+        "--beta-schedule",
+        metavar="I:B,I:B,...",
+        help="b of every sili/smirl run piecewise linear through (interaction, b) points, "
+        "e.g. 250:0,300:0.5,1500:0.5,1600:0 (instead of --beta)",
+    )
+    p.add_argument(
+        "--target-entropy-schedule",
+        metavar="I:E,I:E,...",
+        help="SAC's target entropy of every run piecewise linear through (interaction, entropy) "
+        "points, e.g. 2000:-2,2100:-4",
     )
     p.add_argument(
         "--controller",
@@ -79,12 +96,20 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
         seeds=parse_seeds(args.seeds),
         interactions=args.interactions,
         betas=parse_betas(args.beta) if args.beta is not None else None,
+        beta_schedule=_points(args.beta_schedule, "--beta-schedule", BetaSchedule),
+        target_entropy_schedule=_points(
+            args.target_entropy_schedule, "--target-entropy-schedule", EntropySchedule
+        ),
         controllers=parse_list(args.controller) if args.controller is not None else None,
         latent=args.latent,
         agent_overrides=parse_env_kwargs(args.agent_set, "--set"),
         env_kwargs=parse_env_kwargs(args.env_kwarg, "--env-kwarg"),
         checkpoint_every=args.checkpoint_every,
     )
+
+
+def _points(text: str | None, option: str, kind: type) -> list[tuple[int, float]] | None:
+    return None if text is None else parse_schedule(text, option, kind).points
 
 
 def _specs_and_dir(args: argparse.Namespace) -> tuple[list[SweepSpec], Path]:

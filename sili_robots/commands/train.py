@@ -15,12 +15,11 @@ from sili_robots.agent import (
     EntropySchedule,
     method_config,
 )
-from sili_robots.agent.config import ScheduleT
 from sili_robots.commands.common import (
     add_override_args,
-    float_in,
     non_negative_int,
     parse_env_kwargs,
+    parse_schedule,
     positive_int,
     task_name,
     unit_float,
@@ -77,20 +76,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace an existing run directory")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(run=run)
-
-
-def parse_schedule(text: str, option: str, kind: type[ScheduleT]) -> ScheduleT:
-    """``"250:0,300:0.5"`` -> kind([(250, 0.0), (300, 0.5)]), unparsable points named."""
-    points = []
-    for item in text.split(","):
-        interaction, sep, value = item.strip().partition(":")
-        try:
-            if not sep:
-                raise argparse.ArgumentTypeError(f"{item.strip()!r} is not INTERACTION:VALUE")
-            points.append((non_negative_int(interaction), float_in(value, kind.low, kind.high)))
-        except argparse.ArgumentTypeError as err:
-            raise ConfigError(f"{option} {text!r}: {err}") from None
-    return kind(points)  # AgentConfig.validate checks the points' order
 
 
 def config_from_args(args: argparse.Namespace) -> RunConfig:

@@ -13,7 +13,14 @@ from dataclasses import asdict, dataclass, field
 from functools import cache
 from typing import Any
 
-from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, method_config
+from sili_robots.agent import (
+    BETA_METHODS,
+    LATENT_KINDS,
+    METHODS,
+    BetaSchedule,
+    EntropySchedule,
+    method_config,
+)
 from sili_robots.errors import ConfigError, check_choice
 from sili_robots.runs import RunConfig
 from sili_robots.tasks import TASKS, task_spec
@@ -28,6 +35,10 @@ class SweepSpec:
     seeds: list[int]
     interactions: int
     betas: list[float] | None = None  # None: each method's own b
+    #: (interaction, b) knots of a b schedule for every sili/smirl run (instead of ``betas``)
+    beta_schedule: list[tuple[int, float]] | None = None
+    #: (interaction, target entropy) knots for every run
+    target_entropy_schedule: list[tuple[int, float]] | None = None
     controllers: list[str] | None = None  # None: each task's default
     latent: str | None = None  # None: each task's default latent kind
     agent_overrides: dict[str, Any] = field(default_factory=dict)
@@ -108,18 +119,41 @@ def run_name(
     method: str,
     seed: int,
     *,
-    beta: float | None = None,
+    beta: float | str | None = None,
     controller: str | None = None,
     latent: str | None = None,
 ) -> str:
-    """``task[-controller]__method[-latent][-bB]__sSEED``, e.g. ``circle-3__sili-b0.5__s0``."""
+    """``task[-controller]__method[-latent][-bB]__sSEED``, e.g. ``circle-3__sili-b0.5__s0``
+    (``-bschedule`` when b follows a schedule)."""
     head = task if controller is None else f"{task}-{controller}"
     mid = method
     if latent is not None:
         mid += f"-{latent}"
     if beta is not None:
-        mid += f"-b{format_beta(beta)}"
+        mid += f"-b{beta if isinstance(beta, str) else format_beta(beta)}"
     return f"{head}__{mid}__s{seed}"
+
+
+#: agent settings a sweep sets through its own options, not ``--set``
+SWEEP_OPTIONS = {
+    "beta": "--beta",
+    "beta_schedule": "--beta-schedule",
+    "target_entropy_schedule": "--target-entropy-schedule",
+    "method": "--methods",
+    "latent": "--latent",
+}
+
+
+def schedule_overrides(spec: SweepSpec, method: str) -> dict[str, Any]:
+    """The sweep's schedules as agent settings of one method's runs (b only where b is free)."""
+    out: dict[str, Any] = {}
+    if spec.beta_schedule is not None and method in BETA_METHODS:
+        out["beta_schedule"] = BetaSchedule.from_dict({"points": spec.beta_schedule})
+    if spec.target_entropy_schedule is not None:
+        out["target_entropy_schedule"] = EntropySchedule.from_dict(
+            {"points": spec.target_entropy_schedule}
+        )
+    return out
 
 
 def validate(spec: SweepSpec) -> None:
@@ -139,19 +173,21 @@ def validate(spec: SweepSpec) -> None:
         raise ConfigError(f"interactions must be >= 1, got {spec.interactions}")
     if spec.checkpoint_every < 1:
         raise ConfigError(f"checkpoint_every must be >= 1, got {spec.checkpoint_every}")
-    for key in ("beta", "beta_schedule", "method", "latent"):
+    for key, options in SWEEP_OPTIONS.items():
         if key in spec.agent_overrides:
             raise ConfigError(
-                f"agent setting {key!r} cannot be overridden in a sweep; use the sweep's "
-                "--beta / --methods / --latent"
+                f"agent setting {key!r} cannot be overridden in a sweep; use the sweep's {options}"
             )
+    if spec.betas is not None and spec.beta_schedule is not None:
+        raise ConfigError("give one of --beta and --beta-schedule, not both")
     if "controller" in spec.env_kwargs:
         raise ConfigError("give controllers with --controller, not as a task argument")
-    if spec.betas is not None and not set(spec.methods) & set(BETA_METHODS):
-        raise ConfigError(
-            f"--beta applies to methods {', '.join(BETA_METHODS)} only, none of which is in "
-            f"the sweep ({', '.join(spec.methods)})"
-        )
+    for option, given in (("--beta", spec.betas), ("--beta-schedule", spec.beta_schedule)):
+        if given is not None and not set(spec.methods) & set(BETA_METHODS):
+            raise ConfigError(
+                f"{option} applies to methods {', '.join(BETA_METHODS)} only, none of which is "
+                f"in the sweep ({', '.join(spec.methods)})"
+            )
     if spec.controllers is not None and not any(task_accepts(t, "controller") for t in spec.tasks):
         with_ctrl = [t for t in TASKS if task_accepts(t, "controller")]
         raise ConfigError(
@@ -182,13 +218,15 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                     overrides = dict(spec.agent_overrides)
                     if beta is not None:
                         overrides["beta"] = beta
+                    overrides.update(schedule_overrides(spec, method))
                     agent = method_config(method, latent, **overrides)
+                    label = agent.beta if agent.beta_schedule is None else "schedule"
                     for seed in spec.seeds:
                         name = run_name(
                             tspec.name,
                             method,
                             seed,
-                            beta=agent.beta if method in BETA_METHODS else None,
+                            beta=label if method in BETA_METHODS else None,
                             controller=controller,
                             latent=None if latent == tspec.default_latent else latent,
                         )
