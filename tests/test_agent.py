@@ -1,5 +1,6 @@
 """The SILI agent's pieces, each checked against what it must do."""
 
+import copy
 import io
 
 import numpy as np
@@ -166,6 +167,28 @@ def test_one_sac_update_lowers_critic_loss_on_a_fixed_batch(precision):
     assert out["critic_loss"].dtype == torch.float32
     assert all(p.dtype == torch.float32 for p in sac.critic.parameters())
     assert sac.actor.sample(x)[1].dtype == torch.float32
+
+
+def test_temperature_steps_as_adam_on_the_temperature_loss_alone():
+    """Each update moves log alpha by exactly one Adam step on -log_alpha * (log_pi + target),
+    with log_pi of the policy's own draw in that update (the one the actor loss used)."""
+    torch.manual_seed(0)
+    sac = SAC(5, 2, hidden=32, target_entropy=-1.0)
+    x, a, r, x2 = torch.randn(64, 5), torch.rand(64, 2) * 2 - 1, torch.randn(64), torch.randn(64, 5)
+    ref = sac.log_alpha.detach().clone().requires_grad_(True)
+    ref_opt = torch.optim.Adam([ref], lr=3e-4)
+    for step in range(3):
+        actor = copy.deepcopy(sac.actor)
+        torch.manual_seed(step)
+        sac.update(x, a, r, x2)
+        torch.manual_seed(step)  # the update's two draws: next actions, then the policy's
+        actor.sample(x2)
+        logp = actor.sample(x)[1].detach()
+        ref_opt.zero_grad()
+        (-(ref * (logp + sac.target_entropy)).mean()).backward()
+        ref_opt.step()
+        assert sac.log_alpha.item() == ref.item()
+    assert sac.log_alpha.item() != 0.0
 
 
 def test_bfloat16_precision_runs_the_products_in_bfloat16():

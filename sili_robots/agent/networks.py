@@ -13,7 +13,7 @@ def mlp(inp: int, out: int, hidden: int, layers: int = 2) -> nn.Sequential:
     mods: list[nn.Module] = []
     d = inp
     for _ in range(layers):
-        mods += [nn.Linear(d, hidden), nn.ReLU()]
+        mods += [nn.Linear(d, hidden), nn.ReLU(inplace=True)]
         d = hidden
     mods.append(nn.Linear(d, out))
     return nn.Sequential(*mods)
@@ -29,7 +29,9 @@ class EnsembleLinear(nn.Module):
         self.bias = nn.Parameter(torch.empty(n, 1, out).uniform_(-bound, bound))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:  # x: [n, B, inp]
-        return torch.baddbmm(self.bias, x, self.weight)
+        # bmm, then the bias added in place: baddbmm would first copy the broadcast bias into a
+        # fresh output, one more pass over (and page faults on) a [n, B, out] buffer
+        return torch.bmm(x, self.weight).add_(self.bias)
 
 
 class TwinCritic(nn.Module):
@@ -45,8 +47,8 @@ class TwinCritic(nn.Module):
     def forward(self, x: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
         """Q-values of shape [n, B]."""
         h = torch.cat([x, a], dim=-1).unsqueeze(0).expand(self.n, -1, -1)
-        h = torch.relu(self.l1(h))
-        h = torch.relu(self.l2(h))
+        h = torch.relu_(self.l1(h))  # in place: no second [n, B, hidden] buffer per layer
+        h = torch.relu_(self.l2(h))
         return self.l3(h).squeeze(-1).float()  # float32 even under bfloat16 autocast
 
 
@@ -59,7 +61,10 @@ class Actor(nn.Module):
     def __init__(self, inp: int, act_dim: int, hidden: int) -> None:
         super().__init__()
         self.trunk = nn.Sequential(
-            nn.Linear(inp, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()
+            nn.Linear(inp, hidden),
+            nn.ReLU(inplace=True),
+            nn.Linear(hidden, hidden),
+            nn.ReLU(inplace=True),
         )
         self.head = nn.Linear(hidden, 2 * act_dim)
 

@@ -1,10 +1,10 @@
 """Soft actor-critic (twin critics, Polyak targets, learned entropy temperature).
 
 Readable like CleanRL's SAC, with the per-update work trimmed: both critics are one batched
-network (``TwinCritic``), the target network is updated with one fused ``_foreach_lerp_``, and
-the optimizers are fused Adam, and no gradient is
-computed that no optimizer uses. There are no terminal states
-here: the repeated game never ends, so targets always bootstrap (also across interactions).
+network (``TwinCritic``), the target network is updated with one fused ``_foreach_lerp_``, the
+actor's and critics' optimizers are fused Adam, activations are computed in place, and no
+gradient is computed that no optimizer uses. There are no terminal states here: the repeated
+game never ends, so targets always bootstrap (also across interactions).
 
 ``precision="bfloat16"`` runs the forward passes of an update under CPU autocast: matrix
 products in bfloat16 (on CPUs with bfloat16 units, e.g. AMX, they run faster), while weights,
@@ -79,7 +79,7 @@ class SAC:
 
     def update(
         self, x: torch.Tensor, a: torch.Tensor, r: torch.Tensor, x2: torch.Tensor
-    ) -> dict[str, float]:
+    ) -> dict[str, torch.Tensor]:
         """One gradient step of critic, actor and temperature on a batch of transitions."""
         with torch.no_grad(), self._forward_precision():
             a2, logp2 = self.actor.sample(x2)
