@@ -2,9 +2,10 @@
 
 Readable like CleanRL's SAC, with the per-update work trimmed: both critics are one batched
 network (``TwinCritic``), the target network is updated with one fused ``_foreach_lerp_``, the
-actor's and critics' optimizers are fused Adam, activations are computed in place, and no
-gradient is computed that no optimizer uses. There are no terminal states here: the repeated
-game never ends, so targets always bootstrap (also across interactions).
+actor's and critics' optimizers are fused Adam, actor and temperature losses share one backward
+pass, activations are computed in place, and no gradient is computed that no optimizer uses.
+There are no terminal states here: the repeated game never ends, so targets always bootstrap
+(also across interactions).
 
 ``precision="bfloat16"`` runs the forward passes of an update under CPU autocast: matrix
 products in bfloat16 (on CPUs with bfloat16 units, e.g. AMX, they run faster), while weights,
@@ -95,15 +96,14 @@ class SAC:
         with self._forward_precision():
             a_pi, logp = self.actor.sample(x)
             actor_loss = (alpha * logp - self.critic(x, a_pi).min(0).values).mean()
-        self.actor_opt.zero_grad(set_to_none=True)
-        actor_loss.backward()
-        self.actor_opt.step()
-        self.critic.requires_grad_(True)
-
         alpha_loss = -(self.log_alpha * (logp.detach() + self.target_entropy)).mean()
+        self.actor_opt.zero_grad(set_to_none=True)
         self.alpha_opt.zero_grad(set_to_none=True)
-        alpha_loss.backward()
+        # one backward pass for both: each loss sees the other's variable detached
+        (actor_loss + alpha_loss).backward()
+        self.actor_opt.step()
         self.alpha_opt.step()
+        self.critic.requires_grad_(True)
 
         with torch.no_grad():
             torch._foreach_lerp_(self._target_params, self._critic_params, self.tau)
