@@ -29,8 +29,10 @@ class EnsembleLinear(nn.Module):
         self.bias = nn.Parameter(torch.empty(n, 1, out).uniform_(-bound, bound))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:  # x: [n, B, inp]
-        # bmm, then the bias added in place: baddbmm would first copy the broadcast bias into a
-        # fresh output, one more pass over (and page faults on) a [n, B, out] buffer
+        if torch.is_autocast_enabled("cpu"):  # bfloat16: the bias is added before rounding
+            return torch.baddbmm(self.bias, x, self.weight)
+        # float32: bmm, then the bias added in place (the same result); baddbmm would first copy
+        # the broadcast bias into a fresh output, one more pass over a [n, B, out] buffer
         return torch.bmm(x, self.weight).add_(self.bias)
 
 
