@@ -8,6 +8,7 @@ import os
 from pathlib import Path
 
 from sili_robots.agent import LATENT_KINDS, BetaSchedule, EntropySchedule
+from sili_robots.agent.config import Schedule
 from sili_robots.commands.common import (
     add_override_args,
     parse_env_kwargs,
@@ -108,7 +109,7 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
     )
 
 
-def _points(text: str | None, option: str, kind: type) -> list[tuple[int, float]] | None:
+def _points(text: str | None, option: str, kind: type[Schedule]) -> list[tuple[int, float]] | None:
     return None if text is None else parse_schedule(text, option, kind).points
 
 
