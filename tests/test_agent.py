@@ -10,6 +10,7 @@ import torch
 from sili_robots.agent import (
     AgentConfig,
     BetaSchedule,
+    DiscountSchedule,
     EntropySchedule,
     SILIAgent,
     method_config,
@@ -238,6 +239,35 @@ def test_target_entropy_schedule_is_applied_at_each_update():
         method_config("sili", target_entropy=-3, target_entropy_schedule=schedule)
     with pytest.raises(ConfigError, match="target_entropy_schedule with --target-entropy-sch"):
         method_config("sili", target_entropy_schedule="1500:-2")
+
+
+def test_discount_schedule_sets_the_critic_targets_gamma_at_each_update():
+    """SAC bootstraps with the scheduled gamma of the interaction being trained."""
+    schedule = DiscountSchedule([(4, 0.9), (6, 0.99)])
+    agent = _agent(gamma_schedule=schedule, random_interactions=0)
+    assert agent.sac.gamma == 0.9
+    _fill(agent, 8)
+    seen = {}
+    for j in (3, 5, 7):
+        agent.update(j)
+        seen[j] = agent.sac.gamma
+    assert seen == pytest.approx({3: 0.9, 5: 0.945, 7: 0.99})
+    # the critic's target uses it: with gamma 0 it is the reward alone
+    sac = agent.sac
+    x, a, r = torch.randn(16, agent.in_dim), torch.rand(16, 2) * 2 - 1, torch.randn(16)
+    a2, logp2 = sac.actor.sample(x)
+    sac.gamma = 0.0
+    with torch.no_grad():
+        q = sac.critic(x, a)
+        expected = torch.nn.functional.mse_loss(q, r.expand_as(q)) * 2
+        assert float(sac.critic_loss(x, a, r, x, a2, logp2)) == pytest.approx(float(expected))
+    saved = AgentConfig.from_dict(agent.cfg.to_dict())
+    assert saved.gamma_schedule == schedule and saved.gamma_at(5) == pytest.approx(0.945)
+    assert method_config("sili").gamma_at(5) == 0.99
+    with pytest.raises(ConfigError, match=r"discount schedule: gamma must be in \[0, 1\], got 1.5"):
+        method_config("sili", gamma_schedule=DiscountSchedule([(0, 0.99), (9, 1.5)]))
+    with pytest.raises(ConfigError, match="give gamma_schedule with --discount-schedule"):
+        method_config("sili", gamma_schedule={"points": [[0, 0.99]]})
 
 
 def test_mistyped_settings_fail_by_name():

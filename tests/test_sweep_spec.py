@@ -60,6 +60,7 @@ def test_schedules_reach_every_run_and_b_schedules_only_where_b_is_free():
         methods=["sili", "lili", "oracle"],
         beta_schedule=[(250, 0.0), (300, 0.5)],
         target_entropy_schedule=[(2000, -2.0), (2100, -4.0)],
+        gamma_schedule=[(1600, 0.99), (1700, 0.998)],
     )
     by_name = {r.name: r.config.agent for r in expand(spec)}
     names = {"circle-3__sili-bschedule__s0", "circle-3__lili__s0", "circle-3__oracle__s0"}
@@ -69,6 +70,7 @@ def test_schedules_reach_every_run_and_b_schedules_only_where_b_is_free():
     assert by_name["circle-3__lili__s0"].beta_schedule is None
     for agent in by_name.values():
         assert agent.target_entropy_at(2050, 2) == -3.0
+        assert agent.gamma_at(2000) == 0.998
     # the spec goes through sweep.json as JSON and plans the same runs again
     again = SweepSpec.from_dict(json.loads(json.dumps(spec.to_dict())))
     assert [r.config.to_dict() for r in expand(again)] == [r.config.to_dict() for r in expand(spec)]

@@ -82,16 +82,17 @@ def test_every_method_trains(tmp_path, method):
     assert (df["latent_category"] == -1).all() == (method in ("sac", "oracle", "smirl"))
 
 
-def test_target_entropy_schedule_is_saved_with_the_run(tmp_path):
-    """Any method takes the schedule (Oracle too, so a late change can be compared fairly)."""
+def test_entropy_and_discount_schedules_are_saved_with_the_run(tmp_path):
+    """Any method takes them (Oracle too, so a late change can be compared fairly)."""
     out = tmp_path / "oracle"
     res = _sili(
         "train", "--task", "circle-3", "--method", "oracle", "--interactions", 3, "--out", out,
-        "--target-entropy-schedule", "0:-2,2:-4", *FAST,
+        "--target-entropy-schedule", "0:-2,2:-4", "--discount-schedule", "1:0.99,2:0.998", *FAST,
     )  # fmt: skip
     assert res.returncode == 0, res.stderr
     agent = json.loads((out / "config.json").read_text())["run"]["agent"]
     assert agent["target_entropy_schedule"] == {"points": [[0, -2.0], [2, -4.0]]}
+    assert agent["gamma_schedule"] == {"points": [[1, 0.99], [2, 0.998]]}
 
 
 @pytest.mark.parametrize("latent", ["continuous", "partial", "true"])
@@ -134,6 +135,10 @@ def test_every_latent_kind_trains(tmp_path, latent):
         (
             ["--task", "circle-3", "--target-entropy-schedule", "0:inf"],
             "'inf' is not a finite number",
+        ),
+        (
+            ["--task", "circle-3", "--discount-schedule", "0:0.99,1600:1.2"],
+            "--discount-schedule '0:0.99,1600:1.2': 1.2 is outside the allowed range [0, 1]",
         ),
         (
             [

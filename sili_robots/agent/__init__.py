@@ -7,6 +7,7 @@ from sili_robots.agent.config import (
     METHODS,
     AgentConfig,
     BetaSchedule,
+    DiscountSchedule,
     EntropySchedule,
     method_config,
 )
@@ -17,6 +18,7 @@ __all__ = [
     "METHODS",
     "AgentConfig",
     "BetaSchedule",
+    "DiscountSchedule",
     "EntropySchedule",
     "InteractionStats",
     "SILIAgent",

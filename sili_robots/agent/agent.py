@@ -76,7 +76,7 @@ class SILIAgent:
             act_dim,
             cfg.hidden,
             cfg.lr,
-            cfg.gamma,
+            cfg.gamma_at(0),
             cfg.tau,
             cfg.precision,
             cfg.target_entropy_at(0, act_dim),
@@ -332,6 +332,7 @@ class SILIAgent:
         if n_updates and self.buffer.n >= 1:
             beta = self.cfg.beta_at(interaction)
             self.sac.target_entropy = self.cfg.target_entropy_at(interaction, self.act_dim)
+            self.sac.gamma = self.cfg.gamma_at(interaction)
             x, a, r, x2 = self.sample_batches(n_updates, beta)
             out = [self.sac.update(x[u], a[u], r[u], x2[u]) for u in range(n_updates)]
             losses["critic_loss"] = float(torch.stack([o["critic_loss"] for o in out]).mean())

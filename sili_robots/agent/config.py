@@ -125,6 +125,34 @@ class EntropySchedule(Schedule):
 
 
 @dataclass
+class DiscountSchedule(Schedule):
+    """SAC's discount gamma over interactions.
+
+    gamma^H is what one interaction's value weighs in the one before it (0.99^50 = 0.61). While b
+    pays for holding the opponent that is enough; once b is 0, only the task reward of later
+    interactions pays for holding it, or for moving it on to a cheaper place first, and a larger
+    gamma weighs those later interactions more."""
+
+    name: ClassVar[str] = "discount schedule"
+    symbol: ClassVar[str] = "gamma"
+    low: ClassVar[float] = 0.0
+    high: ClassVar[float] = 1.0
+
+
+#: the agent settings that are schedules, their kind, and the options that give them
+SCHEDULES: dict[str, type[Schedule]] = {
+    "beta_schedule": BetaSchedule,
+    "target_entropy_schedule": EntropySchedule,
+    "gamma_schedule": DiscountSchedule,
+}
+SCHEDULE_OPTIONS = {
+    "beta_schedule": "--beta-anneal or --beta-schedule",
+    "target_entropy_schedule": "--target-entropy-schedule",
+    "gamma_schedule": "--discount-schedule",
+}
+
+
+@dataclass
 class AgentConfig:
     """Everything that defines an agent; saved with every run."""
 
@@ -137,6 +165,8 @@ class AgentConfig:
     # SAC
     lr: float = 3e-4
     gamma: float = 0.99
+    #: gamma over interactions (``--discount-schedule``); replaces ``gamma`` when given
+    gamma_schedule: DiscountSchedule | None = None
     tau: float = 5e-3
     batch_interactions: int = 16  # an RL batch = this many interactions ...
     batch_steps: int = 16  # ... times this many timesteps from each
@@ -217,6 +247,12 @@ class AgentConfig:
             return self.target_entropy_schedule.value(interaction)
         return -float(act_dim) if self.target_entropy is None else self.target_entropy
 
+    def gamma_at(self, interaction: int) -> float:
+        """SAC's discount for updates made after ``interaction``."""
+        if self.gamma_schedule is not None:
+            return self.gamma_schedule.value(interaction)
+        return self.gamma
+
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
@@ -227,12 +263,9 @@ class AgentConfig:
         unknown = set(data) - known
         if unknown:
             raise ConfigError(f"unknown agent settings {sorted(unknown)}; allowed: {sorted(known)}")
-        if data.get("beta_schedule") is not None:
-            data["beta_schedule"] = BetaSchedule.from_dict(data["beta_schedule"])
-        if data.get("target_entropy_schedule") is not None:
-            data["target_entropy_schedule"] = EntropySchedule.from_dict(
-                data["target_entropy_schedule"]
-            )
+        for key, kind in SCHEDULES.items():
+            if data.get(key) is not None:
+                data[key] = kind.from_dict(data[key])
         return cls(**data)
 
     def validate(self) -> AgentConfig:
@@ -244,12 +277,11 @@ class AgentConfig:
             )
         if not 0.0 <= self.beta <= 1.0:
             raise ConfigError(f"beta must be in [0, 1], got {self.beta}")
-        if self.beta_schedule is not None:
-            self.beta_schedule.check()
-        if self.target_entropy_schedule is not None:
-            self.target_entropy_schedule.check()
-            if self.target_entropy is not None:
-                raise ConfigError("give one of target_entropy and a target entropy schedule")
+        for key in SCHEDULES:
+            if getattr(self, key) is not None:
+                getattr(self, key).check()
+        if self.target_entropy_schedule is not None and self.target_entropy is not None:
+            raise ConfigError("give one of target_entropy and a target entropy schedule")
         for name in ("latent_dim", "hidden", "batch_interactions", "batch_steps", "latent_batch"):
             if getattr(self, name) < 1:
                 raise ConfigError(f"{name} must be >= 1, got {getattr(self, name)}")
@@ -295,10 +327,8 @@ def _typed(name: str, annotation: str, value: Any) -> Any:
         if not (is_number and float(value).is_integer()):
             raise ConfigError(f"agent setting {name} must be a whole number, got {value!r}")
         return int(value)
-    if annotation == "BetaSchedule | None" and not isinstance(value, BetaSchedule | None):
-        raise ConfigError(f"give {name} with --beta-anneal or --beta-schedule, not {value!r}")
-    if annotation == "EntropySchedule | None" and not isinstance(value, EntropySchedule | None):
-        raise ConfigError(f"give {name} with --target-entropy-schedule, not {value!r}")
+    if name in SCHEDULES and not isinstance(value, SCHEDULES[name] | None):
+        raise ConfigError(f"give {name} with {SCHEDULE_OPTIONS[name]}, not {value!r}")
     if annotation == "str" and not isinstance(value, str):
         raise ConfigError(f"agent setting {name} must be a string, got {value!r}")
     return value

@@ -7,7 +7,7 @@ import json
 import os
 from pathlib import Path
 
-from sili_robots.agent import LATENT_KINDS, BetaSchedule, EntropySchedule
+from sili_robots.agent import LATENT_KINDS, BetaSchedule, DiscountSchedule, EntropySchedule
 from sili_robots.agent.config import Schedule
 from sili_robots.commands.common import (
     add_override_args,
@@ -48,6 +48,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="I:E,I:E,...",
         help="SAC's target entropy of every run piecewise linear through (interaction, entropy) "
         "points, e.g. 2000:-2,2100:-4",
+    )
+    p.add_argument(
+        "--discount-schedule",
+        metavar="I:G,I:G,...",
+        help="SAC's discount gamma of every run piecewise linear through (interaction, gamma) "
+        "points, e.g. 1600:0.99,1700:0.998",
     )
     p.add_argument(
         "--controller",
@@ -101,6 +107,7 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
         target_entropy_schedule=_points(
             args.target_entropy_schedule, "--target-entropy-schedule", EntropySchedule
         ),
+        gamma_schedule=_points(args.discount_schedule, "--discount-schedule", DiscountSchedule),
         controllers=parse_list(args.controller) if args.controller is not None else None,
         latent=args.latent,
         agent_overrides=parse_env_kwargs(args.agent_set, "--set"),

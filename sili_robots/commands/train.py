@@ -12,6 +12,7 @@ from sili_robots.agent import (
     LATENT_KINDS,
     METHODS,
     BetaSchedule,
+    DiscountSchedule,
     EntropySchedule,
     method_config,
 )
@@ -70,6 +71,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="SAC's target entropy piecewise linear through (interaction, entropy) points "
         "(default -|A| throughout); e.g. 1500:-2,1600:-4",
     )
+    p.add_argument(
+        "--discount-schedule",
+        metavar="I:G,I:G,...",
+        help="SAC's discount gamma piecewise linear through (interaction, gamma) points "
+        "(default 0.99 throughout); e.g. 1600:0.99,1700:0.998",
+    )
     p.add_argument("--controller", help="controller for robot tasks (e.g. sawyer-reach: mink)")
     add_override_args(p, scope="")
     p.add_argument("--checkpoint-every", type=positive_int, default=50)
@@ -120,6 +127,10 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     if args.target_entropy_schedule:
         overrides["target_entropy_schedule"] = parse_schedule(
             args.target_entropy_schedule, "--target-entropy-schedule", EntropySchedule
+        )
+    if args.discount_schedule:
+        overrides["gamma_schedule"] = parse_schedule(
+            args.discount_schedule, "--discount-schedule", DiscountSchedule
         )
     latent = args.latent or task_spec(args.task).default_latent
     agent = method_config(args.method, latent, **overrides)

@@ -13,14 +13,8 @@ from dataclasses import asdict, dataclass, field
 from functools import cache
 from typing import Any
 
-from sili_robots.agent import (
-    BETA_METHODS,
-    LATENT_KINDS,
-    METHODS,
-    BetaSchedule,
-    EntropySchedule,
-    method_config,
-)
+from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, method_config
+from sili_robots.agent.config import SCHEDULES
 from sili_robots.errors import ConfigError, check_choice
 from sili_robots.runs import RunConfig
 from sili_robots.tasks import TASKS, task_spec
@@ -37,8 +31,9 @@ class SweepSpec:
     betas: list[float] | None = None  # None: each method's own b
     #: (interaction, b) knots of a b schedule for every sili/smirl run (instead of ``betas``)
     beta_schedule: list[tuple[int, float]] | None = None
-    #: (interaction, target entropy) knots for every run
+    #: (interaction, target entropy) and (interaction, gamma) knots for every run
     target_entropy_schedule: list[tuple[int, float]] | None = None
+    gamma_schedule: list[tuple[int, float]] | None = None
     controllers: list[str] | None = None  # None: each task's default
     latent: str | None = None  # None: each task's default latent kind
     agent_overrides: dict[str, Any] = field(default_factory=dict)
@@ -139,6 +134,7 @@ SWEEP_OPTIONS = {
     "beta": "--beta",
     "beta_schedule": "--beta-schedule",
     "target_entropy_schedule": "--target-entropy-schedule",
+    "gamma_schedule": "--discount-schedule",
     "method": "--methods",
     "latent": "--latent",
 }
@@ -147,12 +143,10 @@ SWEEP_OPTIONS = {
 def schedule_overrides(spec: SweepSpec, method: str) -> dict[str, Any]:
     """The sweep's schedules as agent settings of one method's runs (b only where b is free)."""
     out: dict[str, Any] = {}
-    if spec.beta_schedule is not None and method in BETA_METHODS:
-        out["beta_schedule"] = BetaSchedule.from_dict({"points": spec.beta_schedule})
-    if spec.target_entropy_schedule is not None:
-        out["target_entropy_schedule"] = EntropySchedule.from_dict(
-            {"points": spec.target_entropy_schedule}
-        )
+    for key, kind in SCHEDULES.items():
+        points = getattr(spec, key)
+        if points is not None and (key != "beta_schedule" or method in BETA_METHODS):
+            out[key] = kind.from_dict({"points": points})
     return out
 
 
