@@ -113,6 +113,10 @@ def test_latent_kind_other_than_the_default_is_named():
             "use the sweep's --target-entropy-schedule",
         ),
         ({"betas": [0.2], "beta_schedule": [(0, 0.5)]}, "one of --beta and --beta-schedule"),
+        (
+            {"gamma_schedule": [(0, 0.99)], "agent_overrides": {"gamma": 0.9}},
+            "one of --set gamma and --discount-schedule",
+        ),
         ({"methods": ["lili"], "beta_schedule": [(0, 0.5)]}, "--beta-schedule applies to"),
         ({"beta_schedule": [(300, 0.5), (250, 0.0)]}, "interactions must increase"),
         ({"agent_overrides": {"hiddden": 3}}, "unknown agent setting 'hiddden'"),

@@ -141,6 +141,10 @@ def test_every_latent_kind_trains(tmp_path, latent):
             "--discount-schedule '0:0.99,1600:1.2': 1.2 is outside the allowed range [0, 1]",
         ),
         (
+            ["--task", "circle-3", "--discount-schedule", "0:0.99", "--set", "gamma=0.9"],
+            "give one of --set gamma and --discount-schedule",
+        ),
+        (
             [
                 "--task",
                 "circle-3",

@@ -129,6 +129,8 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
             args.target_entropy_schedule, "--target-entropy-schedule", EntropySchedule
         )
     if args.discount_schedule:
+        if "gamma" in overrides:
+            raise ConfigError("give one of --set gamma and --discount-schedule, not both")
         overrides["gamma_schedule"] = parse_schedule(
             args.discount_schedule, "--discount-schedule", DiscountSchedule
         )

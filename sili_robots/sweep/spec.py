@@ -174,6 +174,8 @@ def validate(spec: SweepSpec) -> None:
             )
     if spec.betas is not None and spec.beta_schedule is not None:
         raise ConfigError("give one of --beta and --beta-schedule, not both")
+    if spec.gamma_schedule is not None and "gamma" in spec.agent_overrides:
+        raise ConfigError("give one of --set gamma and --discount-schedule, not both")
     if "controller" in spec.env_kwargs:
         raise ConfigError("give controllers with --controller, not as a task argument")
     for option, given in (("--beta", spec.betas), ("--beta-schedule", spec.beta_schedule)):
