@@ -5,7 +5,13 @@ from __future__ import annotations
 import argparse
 import math
 
-from sili_robots.agent.config import ScheduleT
+from sili_robots.agent.config import (
+    BetaSchedule,
+    DiscountSchedule,
+    EntropySchedule,
+    Schedule,
+    ScheduleT,
+)
 from sili_robots.errors import ConfigError
 from sili_robots.tasks import task_spec
 
@@ -63,6 +69,53 @@ def parse_schedule(text: str, option: str, kind: type[ScheduleT]) -> ScheduleT:
         except argparse.ArgumentTypeError as err:
             raise ConfigError(f"{option} {text!r}: {err}") from None
     return kind(points)  # AgentConfig.validate checks the points' order
+
+
+#: the schedule options of ``sili train`` and ``sili sweep``:
+#: option -> (agent setting, kind, metavar, what it sets, example)
+SCHEDULE_ARGS: dict[str, tuple[str, type[Schedule], str, str, str]] = {
+    "--beta-schedule": (
+        "beta_schedule",
+        BetaSchedule,
+        "I:B,I:B,...",
+        "b (sili, smirl)",
+        "250:0,300:0.5,1500:0.5,1600:0",
+    ),
+    "--target-entropy-schedule": (
+        "target_entropy_schedule",
+        EntropySchedule,
+        "I:E,I:E,...",
+        "SAC's target entropy (default -|A| throughout)",
+        "1500:-2,1600:-4",
+    ),
+    "--discount-schedule": (
+        "gamma_schedule",
+        DiscountSchedule,
+        "I:G,I:G,...",
+        "SAC's discount gamma (default 0.99 throughout)",
+        "1600:0.99,1700:0.998",
+    ),
+}
+
+
+def add_schedule_args(p: argparse.ArgumentParser, scope: str) -> None:
+    for option, (_, _, metavar, what, example) in SCHEDULE_ARGS.items():
+        p.add_argument(
+            option,
+            metavar=metavar,
+            help=f"{what}{scope}, piecewise linear through (interaction, value) points, held "
+            f"before the first and after the last; e.g. {example}",
+        )
+
+
+def schedule_args(args: argparse.Namespace) -> dict[str, Schedule]:
+    """The schedule options given, parsed, keyed by their agent setting."""
+    out: dict[str, Schedule] = {}
+    for option, (setting, kind, *_) in SCHEDULE_ARGS.items():
+        text = getattr(args, option[2:].replace("-", "_"))
+        if text:
+            out[setting] = parse_schedule(text, option, kind)
+    return out
 
 
 def task_name(text: str) -> str:

@@ -7,13 +7,13 @@ import json
 import os
 from pathlib import Path
 
-from sili_robots.agent import LATENT_KINDS, BetaSchedule, DiscountSchedule, EntropySchedule
-from sili_robots.agent.config import Schedule
+from sili_robots.agent import LATENT_KINDS
 from sili_robots.commands.common import (
     add_override_args,
+    add_schedule_args,
     parse_env_kwargs,
-    parse_schedule,
     positive_int,
+    schedule_args,
 )
 from sili_robots.errors import ConfigError
 from sili_robots.sweep.spec import SweepSpec, parse_betas, parse_list, parse_seeds
@@ -37,24 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="B1,B2,...",
         help="stability weights b to sweep (for sili and smirl; other methods fix b)",
     )
-    p.add_argument(
-        "--beta-schedule",
-        metavar="I:B,I:B,...",
-        help="b of every sili/smirl run piecewise linear through (interaction, b) points, "
-        "e.g. 250:0,300:0.5,1500:0.5,1600:0 (instead of --beta)",
-    )
-    p.add_argument(
-        "--target-entropy-schedule",
-        metavar="I:E,I:E,...",
-        help="SAC's target entropy of every run piecewise linear through (interaction, entropy) "
-        "points, e.g. 2000:-2,2100:-4",
-    )
-    p.add_argument(
-        "--discount-schedule",
-        metavar="I:G,I:G,...",
-        help="SAC's discount gamma of every run piecewise linear through (interaction, gamma) "
-        "points, e.g. 1600:0.99,1700:0.998",
-    )
+    add_schedule_args(p, scope=" in every run")
     p.add_argument(
         "--controller",
         metavar="C1,C2,...",
@@ -103,21 +86,13 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
         seeds=parse_seeds(args.seeds),
         interactions=args.interactions,
         betas=parse_betas(args.beta) if args.beta is not None else None,
-        beta_schedule=_points(args.beta_schedule, "--beta-schedule", BetaSchedule),
-        target_entropy_schedule=_points(
-            args.target_entropy_schedule, "--target-entropy-schedule", EntropySchedule
-        ),
-        gamma_schedule=_points(args.discount_schedule, "--discount-schedule", DiscountSchedule),
+        **{setting: schedule.points for setting, schedule in schedule_args(args).items()},
         controllers=parse_list(args.controller) if args.controller is not None else None,
         latent=args.latent,
         agent_overrides=parse_env_kwargs(args.agent_set, "--set"),
         env_kwargs=parse_env_kwargs(args.env_kwarg, "--env-kwarg"),
         checkpoint_every=args.checkpoint_every,
     )
-
-
-def _points(text: str | None, option: str, kind: type[Schedule]) -> list[tuple[int, float]] | None:
-    return None if text is None else parse_schedule(text, option, kind).points
 
 
 def _specs_and_dir(args: argparse.Namespace) -> tuple[list[SweepSpec], Path]:

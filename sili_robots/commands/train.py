@@ -12,16 +12,15 @@ from sili_robots.agent import (
     LATENT_KINDS,
     METHODS,
     BetaSchedule,
-    DiscountSchedule,
-    EntropySchedule,
     method_config,
 )
 from sili_robots.commands.common import (
     add_override_args,
+    add_schedule_args,
     non_negative_int,
     parse_env_kwargs,
-    parse_schedule,
     positive_int,
+    schedule_args,
     task_name,
     unit_float,
 )
@@ -59,24 +58,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="START END LENGTH [DELAY]",
         help="b = START for DELAY interactions (default 0), then linear to END over LENGTH",
     )
-    p.add_argument(
-        "--beta-schedule",
-        metavar="I:B,I:B,...",
-        help="b piecewise linear through (interaction, b) points, held before the first and "
-        "after the last; e.g. 250:0,300:0.5,1500:0.5,1600:0",
-    )
-    p.add_argument(
-        "--target-entropy-schedule",
-        metavar="I:E,I:E,...",
-        help="SAC's target entropy piecewise linear through (interaction, entropy) points "
-        "(default -|A| throughout); e.g. 1500:-2,1600:-4",
-    )
-    p.add_argument(
-        "--discount-schedule",
-        metavar="I:G,I:G,...",
-        help="SAC's discount gamma piecewise linear through (interaction, gamma) points "
-        "(default 0.99 throughout); e.g. 1600:0.99,1700:0.998",
-    )
+    add_schedule_args(p, scope="")
     p.add_argument("--controller", help="controller for robot tasks (e.g. sawyer-reach: mink)")
     add_override_args(p, scope="")
     p.add_argument("--checkpoint-every", type=positive_int, default=50)
@@ -120,20 +102,10 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
             )
         except argparse.ArgumentTypeError as err:
             raise ConfigError(f"--beta-anneal: {err}") from None
-    if args.beta_schedule:
-        overrides["beta_schedule"] = parse_schedule(
-            args.beta_schedule, "--beta-schedule", BetaSchedule
-        )
-    if args.target_entropy_schedule:
-        overrides["target_entropy_schedule"] = parse_schedule(
-            args.target_entropy_schedule, "--target-entropy-schedule", EntropySchedule
-        )
-    if args.discount_schedule:
-        if "gamma" in overrides:
-            raise ConfigError("give one of --set gamma and --discount-schedule, not both")
-        overrides["gamma_schedule"] = parse_schedule(
-            args.discount_schedule, "--discount-schedule", DiscountSchedule
-        )
+    schedules = schedule_args(args)
+    if "gamma_schedule" in schedules and "gamma" in overrides:
+        raise ConfigError("give one of --set gamma and --discount-schedule, not both")
+    overrides.update(schedules)
     latent = args.latent or task_spec(args.task).default_latent
     agent = method_config(args.method, latent, **overrides)
     env_kwargs = parse_env_kwargs(args.env_kwarg, "--env-kwarg")
