@@ -12,9 +12,12 @@ networks) and prints, over the last ``--window`` interactions:
   degrees) costs 4.50, the lower two 3.54. Runs that hold different locations are compared
   against their own location's reference;
 * the entropy temperature alpha at the end of the run;
-* latent changes without a change of the true strategy ("false changes": the policy is then
-  conditioned on a strategy that is not there) and the mean task reward of the interactions
-  right after them, against the interactions after neither kind of change;
+* false latent changes: z^j differs from z^{j-1} while the true strategy stayed the same (and
+  did not change one interaction before either, so a late catch-up is not counted), so
+  interaction j is played conditioned on a strategy that is not there; their count, and the
+  mean task reward of those interactions against those played with neither kind of change
+  (``sili_robots.diagnostics.change_masks``), and how many true changes the latent foresaw
+  (z^j changed with the strategy of interaction j) or showed one interaction late;
 * the critic's min(Q1, Q2) on the last step of an interaction, standing on the held opponent
   (radius 1), for radial actions that end at radius 0.90 ... 1.10, and the final radius of the
   policy's own (deterministic) action. The opponent is held by ending on or outside radius 1,
@@ -41,6 +44,7 @@ import torch
 
 from sili_robots.agent import SILIAgent
 from sili_robots.agent.latent import transitions
+from sili_robots.diagnostics import change_detection, change_masks
 from sili_robots.errors import ConfigError
 from sili_robots.runs import load_checkpoint, read_config
 from sili_robots.tasks.circle import ARENA, STEP, CircleEnv
@@ -92,19 +96,15 @@ def reference_cost(task: CircleEnv, location: int) -> float:
 
 
 def false_changes(metrics: pd.DataFrame, window: int) -> tuple[int, float, float]:
-    """(count, task reward after them, task reward after no change) over the last ``window``."""
-    m = metrics.tail(window + 1).reset_index(drop=True)
-    false = (m["latent_changed"] == 1) & (m["strategy_changed"] == 0)
-    after_false = false.shift(1, fill_value=False)
-    after_none = ((m["latent_changed"] == 0) & (m["strategy_changed"] == 0)).shift(
-        1, fill_value=False
-    )
-    reward = m["task_reward"]
-    return (
-        int(false.iloc[:-1].sum()),
-        float(reward[after_false].mean()),
-        float(reward[after_none].mean()),
-    )
+    """(count, task reward of the interactions played with them, task reward of those played
+    with no change of latent or strategy) over the last ``window`` interactions."""
+    masks = change_masks(metrics)
+    settled = ~masks["latent_changes"] & ~masks["true_changes"]
+    rows = np.arange(len(metrics)) >= len(metrics) - window
+    reward = metrics["task_reward"].to_numpy()
+    false = masks["false_alarms"] & rows
+    r_false = float(reward[false].mean()) if false.any() else float("nan")
+    return int(false.sum()), r_false, float(reward[settled & rows].mean())
 
 
 def edge_profile(agent: SILIAgent, task: CircleEnv, location: int) -> tuple[np.ndarray, float]:
@@ -161,6 +161,7 @@ def main() -> None:
         held = metrics["strategy_id"].tail(args.window)
         q, own = edge_profile(agent, task, location)
         n_false, r_false, r_none = false_changes(metrics, args.window)
+        seen = change_detection(metrics, start=len(metrics) - args.window)
         best = FINAL_RADII[int(np.argmax(q))]
         print(
             f"{run.name}: distance summed: total {d['total']:.2f} = approach {d['approach']:.2f}"
@@ -179,8 +180,12 @@ def main() -> None:
             f"argmax radius {best:.3f}, the policy ends at {own:.3f}"
         )
         print(
-            f"  false latent changes {n_false}: task reward after them {r_false:.1f}, "
-            f"after no change {r_none:.1f}"
+            f"  true changes {seen['true_changes']}: the latent foresaw {seen['foreseen']}, "
+            f"showed {seen['late']} one interaction late"
+        )
+        print(
+            f"  false latent changes {n_false}: task reward with them {r_false:.1f}, "
+            f"with no change {r_none:.1f}"
         )
         p_held = encoder_edge(agent, task, location)
         if p_held is not None:

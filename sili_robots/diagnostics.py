@@ -24,6 +24,39 @@ def change_agreement(pred: np.ndarray, true: np.ndarray) -> float:
     return float(np.mean((pred[1:] != pred[:-1]) == (true[1:] != true[:-1])))
 
 
+def change_masks(df: pd.DataFrame) -> dict[str, np.ndarray]:
+    """Per row j (the interaction played with z^j): how the latent met the true strategy.
+
+    ``latent_changes``: z^j differs from z^{j-1}. A true change at row j (``strategy_id``
+    differs from row j-1's) was caused by interaction j-1, so the latent *foresaw* it when
+    z^j = E(tau^{j-1}) differs from z^{j-1}, i.e. when ``latent_category`` of row j-1 differs
+    from row j-2's. ``late``: the latent showed it one interaction later, after playing against
+    the moved opponent (row j against j-1). ``false_alarms``: z^j differs from z^{j-1} with no
+    true change at row j, and it is not such a late catch-up either (no true change at row
+    j-1). Rows 0 and 1 are all False.
+    """
+    sid = df["strategy_id"].to_numpy()
+    cat = df["latent_category"].to_numpy()
+    n = len(df)
+    keys = ("true_changes", "latent_changes", "foreseen", "late", "false_alarms")
+    out = {k: np.zeros(n, bool) for k in keys}
+    if n < 3:
+        return out
+    true = np.r_[False, sid[1:] != sid[:-1]]
+    latent = np.r_[False, False, cat[1:-1] != cat[:-2]]  # z^j differs from z^{j-1}
+    late = np.r_[False, cat[1:] != cat[:-1]]  # z^{j+1} differs from z^j
+    out["true_changes"], out["latent_changes"] = true, latent
+    out["foreseen"] = true & latent
+    out["late"] = true & late & ~latent
+    out["false_alarms"] = latent & ~true & ~np.r_[False, true[:-1]]
+    return out
+
+
+def change_detection(df: pd.DataFrame, start: int = 0) -> dict[str, int]:
+    """Counts of ``change_masks`` from interaction ``start`` on."""
+    return {k: int(v[start:].sum()) for k, v in change_masks(df).items()}
+
+
 def latent_diagnostics(df: pd.DataFrame, window: int = 100) -> dict[str, float]:
     """Over the last ``window`` interactions: how the predicted latent relates to the truth.
 

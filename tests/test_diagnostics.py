@@ -4,7 +4,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from sili_robots.diagnostics import change_agreement, latent_diagnostics, purity
+from sili_robots.diagnostics import (
+    change_agreement,
+    change_detection,
+    latent_diagnostics,
+    purity,
+)
 
 
 def _metrics(categories, strategies, stability_reward=0.0):
@@ -54,3 +59,28 @@ def test_rows_without_a_latent_are_left_out_of_a_mixed_window():
     mixed.loc[2:3, "latent_category"] = -1
     out = latent_diagnostics(mixed, window=100)
     assert out["latent_purity"] == 1.0  # computed on the rows that have a latent
+
+
+def test_change_detection_credits_the_latent_that_foresaw_the_change():
+    strategies = [0, 0, 0, 1, 1, 1, 1, 1, 1]
+    # interaction 2 moved the opponent (true change at row 3). Row j's category is z^{j+1}:
+    # foreseen = row 2 differs from row 1; a latent that needed to see the moved opponent
+    # changes at row 3 instead; row 6 changes with no true change (a false alarm at row 7)
+    foresaw = [5, 5, 7, 7, 7, 7, 7, 7, 7]
+    late = [5, 5, 5, 7, 7, 7, 2, 2, 2]
+    assert change_detection(_metrics(foresaw, strategies)) == {
+        "true_changes": 1,
+        "latent_changes": 1,
+        "foreseen": 1,
+        "late": 0,
+        "false_alarms": 0,
+    }
+    assert change_detection(_metrics(late, strategies)) == {
+        "true_changes": 1,
+        "latent_changes": 2,
+        "foreseen": 0,
+        "late": 1,
+        "false_alarms": 1,
+    }
+    # from interaction 4 on, the change at row 3 is left out
+    assert change_detection(_metrics(late, strategies), start=4)["true_changes"] == 0
