@@ -17,7 +17,9 @@ networks) and prints, over the last ``--window`` interactions:
   interaction j is played conditioned on a strategy that is not there; their count, and the
   mean task reward of those interactions against those played with neither kind of change
   (``sili_robots.diagnostics.change_masks``), and how many true changes the latent foresaw
-  (z^j changed with the strategy of interaction j) or showed one interaction late;
+  (z^j changed with the strategy of interaction j) or showed one interaction late, with the
+  foreseen ones split by how the interaction that caused them ended: clearly inside (final
+  radius below 0.9, an exit inside on purpose) or near the edge (a slip);
 * the critic's min(Q1, Q2) on the last step of an interaction, standing on the held opponent
   (radius 1), for radial actions that end at radius 0.90 ... 1.10, and the final radius of the
   policy's own (deterministic) action. The opponent is held by ending on or outside radius 1,
@@ -53,6 +55,7 @@ from sili_robots.training import build_agent, make_run_env
 PHASE_STEPS = 10
 RADIAL_ACTIONS = np.linspace(-1.0, 1.0, 9)
 FINAL_RADII = 1 + STEP * RADIAL_ACTIONS  # from radius 1, one step of each radial action
+CLEAR_INSIDE = 0.9  # a final radius below this is an exit inside on purpose, not a slip
 
 
 def load_run(run: Path) -> tuple[SILIAgent, CircleEnv, pd.DataFrame]:
@@ -77,6 +80,21 @@ def phase_distances(agent: SILIAgent, window: int) -> dict[str, float]:
         "approach": float(dist[:, :PHASE_STEPS].sum(1).mean()),
         "middle": float(dist[:, PHASE_STEPS:-PHASE_STEPS].sum(1).mean()),
         "exit": float(dist[:, -PHASE_STEPS:].sum(1).mean()),
+    }
+
+
+def foresight_by_exit(agent: SILIAgent, metrics: pd.DataFrame, window: int) -> dict[str, str]:
+    """Foreseen / true changes over the last ``window``, split by how interaction j-1 ended:
+    clearly inside (final radius below ``CLEAR_INSIDE``) or near the edge."""
+    n = min(agent.buffer.n, len(metrics))
+    radius = np.linalg.norm(agent.buffer.obs[:n, -1, :2], axis=-1)
+    masks = change_masks(metrics.iloc[:n])
+    rows = np.flatnonzero(masks["true_changes"][max(n - window, 1) :]) + max(n - window, 1)
+    inside = radius[rows - 1] < CLEAR_INSIDE
+    seen = masks["foreseen"][rows]
+    return {
+        "clearly inside": f"{seen[inside].sum()} of {inside.sum()}",
+        "near the edge": f"{seen[~inside].sum()} of {(~inside).sum()}",
     }
 
 
@@ -162,6 +180,7 @@ def main() -> None:
         q, own = edge_profile(agent, task, location)
         n_false, r_false, r_none = false_changes(metrics, args.window)
         seen = change_detection(metrics, start=len(metrics) - args.window)
+        by_exit = foresight_by_exit(agent, metrics, args.window)
         best = FINAL_RADII[int(np.argmax(q))]
         print(
             f"{run.name}: distance summed: total {d['total']:.2f} = approach {d['approach']:.2f}"
@@ -181,7 +200,9 @@ def main() -> None:
         )
         print(
             f"  true changes {seen['true_changes']}: the latent foresaw {seen['foreseen']}, "
-            f"showed {seen['late']} one interaction late"
+            f"showed {seen['late']} one interaction late; foreseen after ending clearly inside "
+            f"(radius < {CLEAR_INSIDE}) {by_exit['clearly inside']}, near the edge "
+            f"{by_exit['near the edge']}"
         )
         print(
             f"  false latent changes {n_false}: task reward with them {r_false:.1f}, "
