@@ -125,6 +125,23 @@ def false_changes(metrics: pd.DataFrame, window: int) -> tuple[int, float, float
     return int(false.sum()), r_false, float(reward[settled & rows].mean())
 
 
+def latent_changes(agent: SILIAgent, metrics: pd.DataFrame, window: int) -> None:
+    """Print how the latent met the true changes over the last ``window``, and its false ones."""
+    seen = change_detection(metrics, start=len(metrics) - window)
+    by_exit = foresight_by_exit(agent, metrics, window)
+    n_false, r_false, r_none = false_changes(metrics, window)
+    print(
+        f"  true changes {seen['true_changes']}: the latent foresaw {seen['foreseen']}, "
+        f"showed {seen['late']} one interaction late; foreseen after ending clearly inside "
+        f"(radius < {CLEAR_INSIDE}) {by_exit['clearly inside']}, near the edge "
+        f"{by_exit['near the edge']}"
+    )
+    print(
+        f"  false latent changes {n_false}: task reward with them {r_false:.1f}, "
+        f"with no change {r_none:.1f}"
+    )
+
+
 def edge_profile(agent: SILIAgent, task: CircleEnv, location: int) -> tuple[np.ndarray, float]:
     """min Q on the last step from the held opponent's position, for radial actions."""
     angle = task.angles[location]
@@ -178,9 +195,6 @@ def main() -> None:
         location = int(metrics["strategy_id"].iloc[-1])
         held = metrics["strategy_id"].tail(args.window)
         q, own = edge_profile(agent, task, location)
-        n_false, r_false, r_none = false_changes(metrics, args.window)
-        seen = change_detection(metrics, start=len(metrics) - args.window)
-        by_exit = foresight_by_exit(agent, metrics, args.window)
         best = FINAL_RADII[int(np.argmax(q))]
         print(
             f"{run.name}: distance summed: total {d['total']:.2f} = approach {d['approach']:.2f}"
@@ -198,16 +212,8 @@ def main() -> None:
             f"  edge: Q {np.array2string(q - q.max(), precision=2)} (minus its max), "
             f"argmax radius {best:.3f}, the policy ends at {own:.3f}"
         )
-        print(
-            f"  true changes {seen['true_changes']}: the latent foresaw {seen['foreseen']}, "
-            f"showed {seen['late']} one interaction late; foreseen after ending clearly inside "
-            f"(radius < {CLEAR_INSIDE}) {by_exit['clearly inside']}, near the edge "
-            f"{by_exit['near the edge']}"
-        )
-        print(
-            f"  false latent changes {n_false}: task reward with them {r_false:.1f}, "
-            f"with no change {r_none:.1f}"
-        )
+        if (metrics["latent_category"] >= 0).any():  # a discrete latent to compare
+            latent_changes(agent, metrics, args.window)
         p_held = encoder_edge(agent, task, location)
         if p_held is not None:
             print(f"  encoder: P(held category) {np.array2string(p_held, precision=2)}")
