@@ -33,7 +33,7 @@ def change_masks(df: pd.DataFrame) -> dict[str, np.ndarray]:
     from row j-2's. ``late``: the latent showed it one interaction later, after playing against
     the moved opponent (row j against j-1). ``false_alarms``: z^j differs from z^{j-1} with no
     true change at row j, and it is not such a late catch-up either (no true change at row
-    j-1). Rows 0 and 1 are all False.
+    j-1). Rows 0 and 1 have no latent change (there is no z^{j-1} to compare).
     """
     sid = df["strategy_id"].to_numpy()
     cat = df["latent_category"].to_numpy()
