@@ -46,7 +46,7 @@ import torch
 
 from sili_robots.agent import SILIAgent
 from sili_robots.agent.latent import transitions
-from sili_robots.diagnostics import change_detection, change_masks
+from sili_robots.diagnostics import change_masks
 from sili_robots.errors import ConfigError
 from sili_robots.runs import load_checkpoint, read_config
 from sili_robots.tasks.circle import ARENA, STEP, CircleEnv
@@ -83,21 +83,6 @@ def phase_distances(agent: SILIAgent, window: int) -> dict[str, float]:
     }
 
 
-def foresight_by_exit(agent: SILIAgent, metrics: pd.DataFrame, window: int) -> dict[str, str]:
-    """Foreseen / true changes over the last ``window``, split by how interaction j-1 ended:
-    clearly inside (final radius below ``CLEAR_INSIDE``) or near the edge."""
-    n = min(agent.buffer.n, len(metrics))
-    radius = np.linalg.norm(agent.buffer.obs[:n, -1, :2], axis=-1)
-    masks = change_masks(metrics.iloc[:n])
-    rows = np.flatnonzero(masks["true_changes"][max(n - window, 1) :]) + max(n - window, 1)
-    inside = radius[rows - 1] < CLEAR_INSIDE
-    seen = masks["foreseen"][rows]
-    return {
-        "clearly inside": f"{seen[inside].sum()} of {inside.sum()}",
-        "near the edge": f"{seen[~inside].sum()} of {(~inside).sum()}",
-    }
-
-
 def reference_cost(task: CircleEnv, location: int) -> float:
     """Distance summed over an interaction by the per-step closest-approach path."""
     grid = np.linspace(-1.0, 1.0, 201)
@@ -113,32 +98,28 @@ def reference_cost(task: CircleEnv, location: int) -> float:
     return total
 
 
-def false_changes(metrics: pd.DataFrame, window: int) -> tuple[int, float, float]:
-    """(count, task reward of the interactions played with them, task reward of those played
-    with no change of latent or strategy) over the last ``window`` interactions."""
-    masks = change_masks(metrics)
-    settled = ~masks["latent_changes"] & ~masks["true_changes"]
-    rows = np.arange(len(metrics)) >= len(metrics) - window
-    reward = metrics["task_reward"].to_numpy()
-    false = masks["false_alarms"] & rows
-    r_false = float(reward[false].mean()) if false.any() else float("nan")
-    return int(false.sum()), r_false, float(reward[settled & rows].mean())
-
-
 def latent_changes(agent: SILIAgent, metrics: pd.DataFrame, window: int) -> None:
-    """Print how the latent met the true changes over the last ``window``, and its false ones."""
-    seen = change_detection(metrics, start=len(metrics) - window)
-    by_exit = foresight_by_exit(agent, metrics, window)
-    n_false, r_false, r_none = false_changes(metrics, window)
+    """Print how the latent met the true changes over the last ``window``: foreseen (split by
+    how the interaction that caused them ended, clearly inside or near the edge) or late, and
+    its false changes with the task reward of the interactions played with them."""
+    masks = {k: v[-window:] for k, v in change_masks(metrics).items()}
+    true, seen = masks["true_changes"], masks["foreseen"]
+    radius = np.linalg.norm(agent.buffer.obs[: len(metrics), -1, :2], axis=-1)
+    inside = np.r_[np.nan, radius[:-1]][-window:] < CLEAR_INSIDE  # how row j-1 ended
+    edge = true & ~inside
+    false = masks["false_alarms"]
+    settled = ~masks["latent_changes"] & ~true
+    reward = metrics["task_reward"].to_numpy()[-window:]
+    r_false = float(reward[false].mean()) if false.any() else float("nan")
     print(
-        f"  true changes {seen['true_changes']}: the latent foresaw {seen['foreseen']}, "
-        f"showed {seen['late']} one interaction late; foreseen after ending clearly inside "
-        f"(radius < {CLEAR_INSIDE}) {by_exit['clearly inside']}, near the edge "
-        f"{by_exit['near the edge']}"
+        f"  true changes {true.sum()}: the latent foresaw {seen.sum()}, showed "
+        f"{masks['late'].sum()} one interaction late; foreseen after ending clearly inside "
+        f"(radius < {CLEAR_INSIDE}) {seen[inside].sum()} of {(true & inside).sum()}, near the "
+        f"edge {seen[edge].sum()} of {edge.sum()}"
     )
     print(
-        f"  false latent changes {n_false}: task reward with them {r_false:.1f}, "
-        f"with no change {r_none:.1f}"
+        f"  false latent changes {false.sum()}: task reward with them {r_false:.1f}, "
+        f"with no change {reward[settled].mean():.1f}"
     )
 
 
