@@ -148,6 +148,38 @@ def test_recent_fraction_draws_that_part_of_each_batch_from_the_newest_interacti
         method_config("sili", recent_fraction=2.0)
 
 
+def test_change_pairs_are_where_the_sure_posterior_category_changes():
+    agent = _agent(latent_change_fraction=0.25)
+    assert agent.keeps_posteriors and not agent.uses_posterior
+    _fill(agent, 6)
+    assert len(agent.P) == 6  # kept for every stored interaction
+    sure, flat = np.eye(4, dtype=np.float32), np.full(4, 0.25, np.float32)
+    agent.P = np.stack([sure[0], sure[0], sure[1], flat, sure[2], sure[2]])
+    # 1 -> 2 changed; 2 -> 3 and 3 -> 4 involve an interaction that cannot tell (flat)
+    np.testing.assert_array_equal(agent.change_pairs(), [2])
+    with pytest.raises(ConfigError, match=r"latent_change_fraction must be in \[0, 1\], got -1"):
+        method_config("sili", latent_change_fraction=-1.0)
+
+
+def test_latent_change_fraction_draws_that_part_of_each_latent_batch_from_change_pairs():
+    agent = _agent(latent_change_fraction=0.5, latent_batch=8)
+    _fill(agent, 20)
+    agent.P = np.eye(4, dtype=np.float32)[[0] * 10 + [1] * 10]  # one change, at j = 10
+    prevs = []
+    loss = agent.model.loss
+
+    def spy(prev, *args):
+        prevs.append(prev[:, 0, :3].numpy().copy())  # first s of tau^{j-1}
+        return loss(prev, *args)
+
+    agent.model.loss = spy
+    agent.update_latent_model(20)
+    first_obs = agent.buffer.obs[:20, 0]
+    j = np.array([[np.where((first_obs == r).all(-1))[0][0] + 1 for r in p] for p in prevs])
+    assert (j[:, :4] == 10).all()  # half of each batch: the change pair (9, 10)
+    assert (j[:, 4:] != 10).mean() > 0.8  # the rest uniform over 1..19
+
+
 @pytest.mark.parametrize("precision", ["float32", "bfloat16"])
 def test_one_sac_update_lowers_critic_loss_on_a_fixed_batch(precision):
     torch.manual_seed(0)

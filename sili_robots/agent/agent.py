@@ -110,6 +110,10 @@ class SILIAgent:
             and cfg.stability_distance != "latents"
             and cfg.method != "lili"
         )
+        #: P is also what tells ``change_pairs`` where the strategy changed
+        self.keeps_posteriors = self.uses_posterior or (
+            self.model is not None and cfg.latent == "discrete" and cfg.latent_change_fraction > 0
+        )
 
     # ------------------------------------------------------------------ acting
     def policy_input(self, obs: np.ndarray, j: int | None = None) -> np.ndarray:
@@ -154,7 +158,7 @@ class SILIAgent:
         j = self.buffer.add(obs, act, rew, aux, next_first, strategy_id, strategy)
         z_next = self._infer_next_latent(j, next_info)
         self.Z = np.concatenate([self.Z, z_next[None]])
-        if self.uses_posterior:
+        if self.keeps_posteriors and len(self.P) == j:  # else the next refresh fills P
             self.P = np.concatenate([self.P, self._posteriors(np.array([j]))])
         if refresh and self.model is not None and (j + 1) % self.latent_refresh_every == 0:
             self.refresh_latents()
@@ -214,7 +218,7 @@ class SILIAgent:
                 new = new[:, perm]
                 self.relabels += 1
         self.Z = np.concatenate([self.Z[:1], new])
-        if self.uses_posterior:
+        if self.keeps_posteriors:
             scale = self._replay_target_scale()
             self.P = self._in_chunks(lambda idx: self._posteriors(idx, scale), n)
 
@@ -346,8 +350,12 @@ class SILIAgent:
             return float("nan")
         b = self.buffer
         total = 0.0
+        changes = self.change_pairs() if self.cfg.latent_change_fraction > 0 else np.zeros(0, int)
+        m_changes = round(self.cfg.latent_batch * self.cfg.latent_change_fraction)
         for _ in range(steps):
             j = self.rng.integers(1, b.n, self.cfg.latent_batch)
+            if len(changes) and m_changes:
+                j[:m_changes] = self.rng.choice(changes, m_changes)
             prev = transitions(
                 torch.from_numpy(b.obs[j - 1]),
                 torch.from_numpy(b.act[j - 1]),
@@ -366,6 +374,17 @@ class SILIAgent:
             self.model_opt.step()
             total += float(loss.detach())
         return total / steps
+
+    def change_pairs(self, confidence: float = 0.5) -> np.ndarray:
+        """Interactions j whose strategy differs from j-1's by the decoder's posteriors, where
+        both posteriors are sure (max >= ``confidence``): an interaction that does not tell the
+        strategies apart says nothing about a change."""
+        n = min(len(self.P), self.buffer.n)
+        if n < 2:
+            return np.zeros(0, int)
+        category, sure = self.P[:n].argmax(-1), self.P[:n].max(-1) >= confidence
+        changed = (category[1:] != category[:-1]) & sure[1:] & sure[:-1]
+        return np.flatnonzero(changed) + 1
 
     def sample_batches(
         self, n_updates: int, beta: float

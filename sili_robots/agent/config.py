@@ -199,6 +199,12 @@ class AgentConfig:
     #: discrete latents: categories whose decoder heads differ by less than this many target
     #: standard deviations count as one strategy (0 = off; see latent.category_groups)
     latent_merge_threshold: float = 0.5
+    #: discrete latents: fraction of each latent-model batch drawn from the pairs (j-1, j)
+    #: across which the strategy changed, as the decoder's posterior tells it in hindsight
+    #: (0 = uniform pairs). Changes are rare once the opponent is held, so uniform pairs teach
+    #: the encoder little about where in tau^{j-1} a change is decided (e.g. the edge of the
+    #: circle); see ``SILIAgent.change_pairs``
+    latent_change_fraction: float = 0.0
     #: discrete latents: what the stability reward counts as a change of strategy. "latents":
     #: the paper's d(z^j, z^{j+1}), 1 when the encoder's category changed. "posterior": the
     #: probability that the strategy in effect during interaction j (the decoder's posterior
@@ -295,6 +301,10 @@ class AgentConfig:
         if self.latent_merge_threshold < 0:
             raise ConfigError(
                 f"latent_merge_threshold must be >= 0, got {self.latent_merge_threshold}"
+            )
+        if not 0.0 <= self.latent_change_fraction <= 1.0:
+            raise ConfigError(
+                f"latent_change_fraction must be in [0, 1], got {self.latent_change_fraction}"
             )
         if self.precision not in PRECISIONS:
             raise ConfigError(
