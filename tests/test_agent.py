@@ -466,6 +466,30 @@ def test_every_discrete_estimator_trains_encoder_and_decoder(estimator):
     assert model.decoder[-1].weight.grad.abs().sum() > 0  # the decoder learns
 
 
+def test_preact_penalty_pulls_a_saturated_continuous_encoder_back():
+    """Saturated tanh passes no gradient, so only the penalty brings the output back."""
+    prev, obs = torch.randn(8, H, 3 + 2 + 1 + 3), torch.randn(8, H + 1, 3)
+    act, rew = torch.randn(8, H, 2), torch.randn(8, H)
+
+    def trained_output(penalty):
+        torch.manual_seed(0)
+        model = LatentModel(
+            3, 2, latent_dim=4, hidden=16, kind="continuous", preact_penalty=penalty
+        )
+        with torch.no_grad():
+            model.head.bias.fill_(20.0)  # every output deep in tanh's flat tail
+        opt = torch.optim.Adam(model.parameters(), lr=1e-2)
+        for _ in range(20):
+            opt.zero_grad()
+            model.loss(prev, obs[:, :-1], act, obs[:, 1:], rew).backward()
+            opt.step()
+        return model.encode_logits(prev).abs().mean().item()
+
+    assert trained_output(1e-3) < trained_output(0.0) - 0.1
+    with pytest.raises(ConfigError, match="latent_preact_penalty must be >= 0, got -1"):
+        method_config("sili", latent_preact_penalty=-1.0)
+
+
 def test_unknown_estimator_is_named():
     with pytest.raises(ConfigError, match="unknown latent_estimator 'vq'"):
         method_config("sili", latent_estimator="vq")

@@ -91,6 +91,7 @@ class SILIAgent:
                 cfg.latent,
                 cfg.latent_estimator,
                 cfg.latent_usage_bonus,
+                preact_penalty=cfg.latent_preact_penalty,
             )
             self.model_opt = torch.optim.Adam(self.model.parameters(), lr=cfg.latent_lr)
         self.buffer = InteractionBuffer(obs_dim, act_dim, horizon, strategy_dim)

@@ -196,6 +196,9 @@ class AgentConfig:
     #: see sili_robots/agent/latent.py
     latent_estimator: str = "expected"
     latent_usage_bonus: float = 0.1
+    #: continuous latents: weight of mean(pre-tanh output^2) in the latent-model loss, which
+    #: keeps z^j off the corners of the tanh box (0 = off; see sili_robots/agent/latent.py)
+    latent_preact_penalty: float = 0.0
     #: discrete latents: categories whose decoder heads differ by less than this many target
     #: standard deviations count as one strategy (0 = off; see latent.category_groups)
     latent_merge_threshold: float = 0.5
@@ -301,6 +304,10 @@ class AgentConfig:
         if self.latent_merge_threshold < 0:
             raise ConfigError(
                 f"latent_merge_threshold must be >= 0, got {self.latent_merge_threshold}"
+            )
+        if self.latent_preact_penalty < 0:
+            raise ConfigError(
+                f"latent_preact_penalty must be >= 0, got {self.latent_preact_penalty}"
             )
         if not 0.0 <= self.latent_change_fraction <= 1.0:
             raise ConfigError(
