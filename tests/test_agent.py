@@ -486,6 +486,10 @@ def test_preact_penalty_pulls_a_saturated_continuous_encoder_back():
         return model.encode_logits(prev).abs().mean().item()
 
     assert trained_output(1e-3) < trained_output(0.0) - 0.1
+    assert method_config("sili", "continuous").latent_preact_penalty == 1e-3  # the default
+    saved = method_config("sili", "continuous").to_dict()
+    del saved["latent_preact_penalty"]  # a run saved before the setting existed
+    assert AgentConfig.from_dict(saved).latent_preact_penalty == 0.0
     with pytest.raises(ConfigError, match="latent_preact_penalty must be >= 0, got -1"):
         method_config("sili", latent_preact_penalty=-1.0)
 

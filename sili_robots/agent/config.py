@@ -197,8 +197,9 @@ class AgentConfig:
     latent_estimator: str = "expected"
     latent_usage_bonus: float = 0.1
     #: continuous latents: weight of mean(pre-tanh output^2) in the latent-model loss, which
-    #: keeps z^j off the corners of the tanh box (0 = off; see sili_robots/agent/latent.py)
-    latent_preact_penalty: float = 0.0
+    #: keeps z^j off the corners of the tanh box (0 = off; see sili_robots/agent/latent.py).
+    #: Runs saved before this setting existed load with 0, the loss they were trained with
+    latent_preact_penalty: float = 1e-3
     #: discrete latents: categories whose decoder heads differ by less than this many target
     #: standard deviations count as one strategy (0 = off; see latent.category_groups)
     latent_merge_threshold: float = 0.5
@@ -275,6 +276,7 @@ class AgentConfig:
         for key, kind in SCHEDULES.items():
             if data.get(key) is not None:
                 data[key] = kind.from_dict(data[key])
+        data.setdefault("latent_preact_penalty", 0.0)  # saved before it existed: trained without
         return cls(**data)
 
     def validate(self) -> AgentConfig:
