@@ -19,7 +19,8 @@ networks) and prints, over the last ``--window`` interactions:
   (``sili_robots.diagnostics.change_masks``), and how many true changes the latent foresaw
   (z^j changed with the strategy of interaction j) or showed one interaction late, with the
   foreseen ones split by how the interaction that caused them ended: clearly inside (final
-  radius below 0.9, an exit inside on purpose) or near the edge (a slip);
+  radius below 0.9, an exit inside on purpose) or near the edge (a slip); for continuous
+  latents, how far z moved when the strategy changed against when it did not;
 * the critic's min(Q1, Q2) on the last step of an interaction, standing on the held opponent
   (radius 1), for radial actions that end at radius 0.90 ... 1.10, and the final radius of the
   policy's own (deterministic) action. The opponent is held by ending on or outside radius 1,
@@ -123,6 +124,27 @@ def latent_changes(agent: SILIAgent, metrics: pd.DataFrame, window: int) -> None
     )
 
 
+def continuous_latent_changes(metrics: pd.DataFrame, window: int) -> None:
+    """Print how far a continuous latent moved when the true strategy changed and when it did
+    not: ``stability_reward`` of row j is -||z^{j+1} - z^j||, and a true change at row j+1 was
+    caused by interaction j, so a latent that foresees it moves at row j."""
+    rows = metrics.tail(window + 1)
+    moved = -rows["stability_reward"].to_numpy()[:-1]
+    sid = rows["strategy_id"].to_numpy()
+    changed = sid[1:] != sid[:-1]
+    if not changed.any() or changed.all():
+        print(f"  latent distance: {changed.sum()} true changes, nothing to compare")
+        return
+    still = moved[~changed]
+    clear = np.quantile(still, 0.99)
+    print(
+        f"  latent distance ||z^(j+1) - z^j||: median {np.median(moved[changed]):.2f} over "
+        f"{changed.sum()} true changes, {np.median(still):.2f} with none; true changes moved "
+        f"past the 99th percentile of the still ones ({clear:.2f}): "
+        f"{(moved[changed] > clear).sum()} of {changed.sum()}"
+    )
+
+
 def edge_profile(agent: SILIAgent, task: CircleEnv, location: int) -> tuple[np.ndarray, float]:
     """min Q on the last step from the held opponent's position, for radial actions."""
     angle = task.angles[location]
@@ -195,6 +217,8 @@ def main() -> None:
         )
         if (metrics["latent_category"] >= 0).any():  # a discrete latent to compare
             latent_changes(agent, metrics, args.window)
+        elif agent.cfg.latent == "continuous":
+            continuous_latent_changes(metrics, args.window)
         p_held = encoder_edge(agent, task, location)
         if p_held is not None:
             print(f"  encoder: P(held category) {np.array2string(p_held, precision=2)}")
