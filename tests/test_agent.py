@@ -593,3 +593,19 @@ def test_saved_schedules_load_both_forms():
     assert [old.beta_at(i) for i in (249, 275, 2000)] == pytest.approx([0.0, 0.25, 0.5])
     assert new.beta_at(1550) == pytest.approx(0.3)
     assert AgentConfig.from_dict(new.to_dict()).beta_schedule == new.beta_schedule
+
+
+def test_last_step_encoder_reads_the_last_transition_itself():
+    """Pooling alone cannot tell the order of a trajectory's transitions; with ``last_step``
+    the encoder sees which one came last."""
+    torch.manual_seed(0)
+    traj = torch.randn(1, 6, 9)
+    swapped = traj[:, [0, 1, 2, 3, 5, 4]]  # the same set, another last transition
+    pooled = LatentModel(3, 2, 4, 32, "continuous")
+    torch.testing.assert_close(pooled.encode_logits(traj), pooled.encode_logits(swapped))
+    last = LatentModel(3, 2, 4, 32, "continuous", last_step=True)
+    assert not torch.allclose(last.encode_logits(traj), last.encode_logits(swapped))
+    agent = _agent(latent_last_step=True)
+    assert agent.model.last_step and agent.model.head.in_features == 3 * 32
+    with pytest.raises(ConfigError, match="latent_last_step must be true or false, got 1"):
+        method_config("sili", latent_last_step=1)

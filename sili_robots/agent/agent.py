@@ -80,6 +80,7 @@ class SILIAgent:
             cfg.tau,
             cfg.precision,
             cfg.target_entropy_at(0, act_dim),
+            cfg.matmul,
         )
         self.model: LatentModel | None = None
         if cfg.uses_latent_model:
@@ -92,6 +93,8 @@ class SILIAgent:
                 cfg.latent_estimator,
                 cfg.latent_usage_bonus,
                 preact_penalty=cfg.latent_preact_penalty,
+                last_step=cfg.latent_last_step,
+                matmul=cfg.matmul,
             )
             self.model_opt = torch.optim.Adam(self.model.parameters(), lr=cfg.latent_lr)
         self.buffer = InteractionBuffer(obs_dim, act_dim, horizon, strategy_dim)

@@ -19,6 +19,7 @@ from dataclasses import asdict, dataclass, field, fields
 from itertools import pairwise
 from typing import Any, ClassVar, TypeVar
 
+from sili_robots.agent.matmul import MATMULS, default_matmul, onednn_available
 from sili_robots.errors import ConfigError
 
 METHODS = ("sili", "lili", "stable", "sac", "oracle", "smirl")
@@ -174,6 +175,11 @@ class AgentConfig:
     #: "bfloat16": SAC's forward passes under CPU autocast (faster on CPUs with bfloat16 units;
     #: weights, gradients and optimizer state stay float32; see sili_robots/agent/sac.py)
     precision: str = "float32"
+    #: the library of the float32 matrix products of every network: "onednn" or "aten"
+    #: (PyTorch's default BLAS). Both compute in float32; oneDNN is faster where the BLAS is slow
+    #: (sili_robots/agent/matmul.py). The default is onednn where this PyTorch has it; runs saved
+    #: before this setting existed load with aten, the kernels they were trained with
+    matmul: str = field(default_factory=default_matmul)
     #: the entropy SAC's temperature holds the policy at (default -|A|, SAC's usual choice).
     #: Lower is more deterministic everywhere (measured on Circle in benchmarks/RESULTS.md)
     target_entropy: float | None = None
@@ -200,6 +206,9 @@ class AgentConfig:
     #: keeps z^j off the corners of the tanh box (0 = off; see sili_robots/agent/latent.py).
     #: Runs saved before this setting existed load with 0, the loss they were trained with
     latent_preact_penalty: float = 1e-3
+    #: the encoder also sees the last transition of tau^{j-1} on its own, beside the mean- and
+    #: max-pooled features of all of them (see sili_robots/agent/latent.py). Off by default
+    latent_last_step: bool = False
     #: discrete latents: categories whose decoder heads differ by less than this many target
     #: standard deviations count as one strategy (0 = off; see latent.category_groups)
     latent_merge_threshold: float = 0.5
@@ -277,6 +286,7 @@ class AgentConfig:
             if data.get(key) is not None:
                 data[key] = kind.from_dict(data[key])
         data.setdefault("latent_preact_penalty", 0.0)  # saved before it existed: trained without
+        data.setdefault("matmul", "aten")  # likewise: trained on PyTorch's default kernels
         return cls(**data)
 
     def validate(self) -> AgentConfig:
@@ -319,6 +329,13 @@ class AgentConfig:
             raise ConfigError(
                 f"unknown precision {self.precision!r}; allowed: {', '.join(PRECISIONS)}"
             )
+        if self.matmul not in MATMULS:
+            raise ConfigError(f"unknown matmul {self.matmul!r}; allowed: {', '.join(MATMULS)}")
+        if self.matmul == "onednn" and not onednn_available():
+            raise ConfigError(
+                "matmul 'onednn' needs a PyTorch built with oneDNN, which this one is not; "
+                "allowed here: aten"
+            )
         if self.stability_distance not in STABILITY_DISTANCES:
             raise ConfigError(
                 f"unknown stability_distance {self.stability_distance!r}; "
@@ -348,6 +365,8 @@ def _typed(name: str, annotation: str, value: Any) -> Any:
         return int(value)
     if name in SCHEDULES and not isinstance(value, SCHEDULES[name] | None):
         raise ConfigError(f"give {name} with {SCHEDULE_OPTIONS[name]}, not {value!r}")
+    if annotation == "bool" and not isinstance(value, bool):
+        raise ConfigError(f"agent setting {name} must be true or false, got {value!r}")
     if annotation == "str" and not isinstance(value, str):
         raise ConfigError(f"agent setting {name} must be a string, got {value!r}")
     return value

@@ -7,6 +7,13 @@ mean *and* max before a linear head. The pooling is permutation-invariant, uses 
 e.g. the last one whose end position decides the opponent's next move, dominate a feature. The
 time fraction t/H is part of s, so order is still available when it matters.
 
+``last_step`` (the setting ``latent_last_step``) also hands the head the last transition's
+features unpooled, as the original code's fixed subsample of timesteps always included the last
+one. Where the end of an interaction decides the opponent's next strategy (the circle's edge), a
+pooled feature has to single out the last step and the position in one unit; unpooled, the
+head reads the end position directly. On a scripted Circle (3 Goals) replay it foresaw more of
+the moves caused by ending inside (benchmarks/RESULTS.md).
+
 Decoder. Continuous latents are concatenated to (s, a). For discrete latents the decoder has one
 prediction head per category and the one-hot z selects the head: D(s, a, z) = sum_k z_k D_k(s, a),
 the same function class, but a category can only matter by predicting differently.
@@ -53,6 +60,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from sili_robots.agent.matmul import Linear
 from sili_robots.agent.networks import mlp
 
 ESTIMATORS = ("marginal", "expected", "gumbel")
@@ -80,6 +88,8 @@ class LatentModel(nn.Module):
         usage_bonus: float = 0.1,
         evidence_scale: float = 1.0,
         preact_penalty: float = 0.0,
+        last_step: bool = False,
+        matmul: str = "aten",
     ) -> None:
         super().__init__()
         if kind not in ("discrete", "continuous"):
@@ -89,17 +99,21 @@ class LatentModel(nn.Module):
         self.kind, self.estimator, self.usage_bonus = kind, estimator, usage_bonus
         self.evidence_scale = evidence_scale
         self.preact_penalty = preact_penalty
+        self.last_step = last_step
         self.latent_dim = latent_dim
         tr_dim = 2 * obs_dim + act_dim + 1
         self.phi = nn.Sequential(
-            nn.Linear(tr_dim, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU()
+            Linear(tr_dim, hidden, matmul),
+            nn.ReLU(),
+            Linear(hidden, hidden, matmul),
+            nn.ReLU(),
         )
-        self.head = nn.Linear(2 * hidden, latent_dim)
+        self.head = Linear((3 if last_step else 2) * hidden, latent_dim, matmul)
         self.out_dim = obs_dim + 1
         if kind == "discrete":
-            self.decoder = mlp(obs_dim + act_dim, latent_dim * self.out_dim, hidden)
+            self.decoder = mlp(obs_dim + act_dim, latent_dim * self.out_dim, hidden, matmul=matmul)
         else:
-            self.decoder = mlp(obs_dim + act_dim + latent_dim, self.out_dim, hidden)
+            self.decoder = mlp(obs_dim + act_dim + latent_dim, self.out_dim, hidden, matmul=matmul)
 
     @torch.no_grad()
     def relabel(self, perm: torch.Tensor) -> None:
@@ -143,8 +157,10 @@ class LatentModel(nn.Module):
     def encode_logits(self, traj: torch.Tensor) -> torch.Tensor:
         """``traj``: [N, H, tr_dim] -> raw encoder output [N, latent_dim]."""
         h = self.phi(traj)
-        pooled = torch.cat([h.mean(1), h.amax(1)], dim=-1)
-        return self.head(pooled)
+        parts = [h.mean(1), h.amax(1)]
+        if self.last_step:
+            parts.append(h[:, -1])
+        return self.head(torch.cat(parts, dim=-1))
 
     def encode(self, traj: torch.Tensor, sample: bool = False) -> torch.Tensor:
         """The latent z; ``sample`` draws a straight-through Gumbel one-hot (training)."""

@@ -7,28 +7,34 @@ import math
 import torch
 from torch import nn
 
+from sili_robots.agent.matmul import Linear, ensemble_linear
 
-def mlp(inp: int, out: int, hidden: int, layers: int = 2) -> nn.Sequential:
+
+def mlp(inp: int, out: int, hidden: int, layers: int = 2, matmul: str = "aten") -> nn.Sequential:
     """``layers`` hidden layers of ``hidden`` units with ReLU (the paper's 2 x 256)."""
     mods: list[nn.Module] = []
     d = inp
     for _ in range(layers):
-        mods += [nn.Linear(d, hidden), nn.ReLU(inplace=True)]
+        mods += [Linear(d, hidden, matmul), nn.ReLU(inplace=True)]
         d = hidden
-    mods.append(nn.Linear(d, out))
+    mods.append(Linear(d, out, matmul))
     return nn.Sequential(*mods)
 
 
 class EnsembleLinear(nn.Module):
     """``n`` independent linear layers evaluated in one batched matmul."""
 
-    def __init__(self, n: int, inp: int, out: int) -> None:
+    def __init__(self, n: int, inp: int, out: int, matmul: str = "aten") -> None:
         super().__init__()
+        self.matmul = matmul
         bound = 1.0 / math.sqrt(inp)
         self.weight = nn.Parameter(torch.empty(n, inp, out).uniform_(-bound, bound))
         self.bias = nn.Parameter(torch.empty(n, 1, out).uniform_(-bound, bound))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:  # x: [n, B, inp]
+        out = ensemble_linear(x, self.weight, self.bias, self.matmul)
+        if out is not None:
+            return out
         if torch.is_autocast_enabled("cpu"):  # bfloat16: the bias is added before rounding
             return torch.baddbmm(self.bias, x, self.weight)
         # float32: bmm, then the bias added in place (the same result); baddbmm would first copy
@@ -39,12 +45,12 @@ class EnsembleLinear(nn.Module):
 class TwinCritic(nn.Module):
     """Both SAC critics fused: one [2, B, .] batched network instead of two modules."""
 
-    def __init__(self, inp: int, hidden: int, n: int = 2) -> None:
+    def __init__(self, inp: int, hidden: int, n: int = 2, matmul: str = "aten") -> None:
         super().__init__()
         self.n = n
-        self.l1 = EnsembleLinear(n, inp, hidden)
-        self.l2 = EnsembleLinear(n, hidden, hidden)
-        self.l3 = EnsembleLinear(n, hidden, 1)
+        self.l1 = EnsembleLinear(n, inp, hidden, matmul)
+        self.l2 = EnsembleLinear(n, hidden, hidden, matmul)
+        self.l3 = EnsembleLinear(n, hidden, 1, matmul)
 
     def forward(self, x: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
         """Q-values of shape [n, B]."""
@@ -60,15 +66,15 @@ LOG_STD_MIN, LOG_STD_MAX = -5.0, 2.0
 class Actor(nn.Module):
     """tanh-squashed Gaussian policy over actions in [-1, 1]^d (CleanRL's parameterisation)."""
 
-    def __init__(self, inp: int, act_dim: int, hidden: int) -> None:
+    def __init__(self, inp: int, act_dim: int, hidden: int, matmul: str = "aten") -> None:
         super().__init__()
         self.trunk = nn.Sequential(
-            nn.Linear(inp, hidden),
+            Linear(inp, hidden, matmul),
             nn.ReLU(inplace=True),
-            nn.Linear(hidden, hidden),
+            Linear(hidden, hidden, matmul),
             nn.ReLU(inplace=True),
         )
-        self.head = nn.Linear(hidden, 2 * act_dim)
+        self.head = Linear(hidden, 2 * act_dim, matmul)
 
     def forward(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         # float32 even under bfloat16 autocast: the distribution's arithmetic stays exact

@@ -36,14 +36,15 @@ class SAC:
         tau: float = 5e-3,
         precision: str = "float32",
         target_entropy: float | None = None,
+        matmul: str = "aten",
     ) -> None:
         if precision not in PRECISIONS:
             raise ValueError(f"precision must be one of {PRECISIONS}, got {precision!r}")
         self.gamma, self.tau = gamma, tau
         self.precision = precision
-        self.actor = Actor(in_dim, act_dim, hidden)
-        self.critic = TwinCritic(in_dim + act_dim, hidden)
-        self.critic_target = TwinCritic(in_dim + act_dim, hidden)
+        self.actor = Actor(in_dim, act_dim, hidden, matmul)
+        self.critic = TwinCritic(in_dim + act_dim, hidden, matmul=matmul)
+        self.critic_target = TwinCritic(in_dim + act_dim, hidden, matmul=matmul)
         self.critic_target.load_state_dict(self.critic.state_dict())
         self.critic_target.requires_grad_(False)
         self.log_alpha = torch.zeros(1, requires_grad=True)

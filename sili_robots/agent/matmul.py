@@ -1,0 +1,123 @@
+"""Float32 linear layers on oneDNN, the other CPU matrix-product library inside PyTorch.
+
+Why: PyTorch sends float32 matrix products to its BLAS (MKL in the x86 wheels), and on some
+CPUs that runs them well below what the hardware does. Measured on an AMD EPYC (Zen 5, one
+thread): a 256 x 256 x 256 product at 106 GFLOP/s through MKL, 225 GFLOP/s through oneDNN
+(``benchmarks/bench_sac_speed.py --matmul-only``, numbers in benchmarks/RESULTS.md). SAC's update
+is mostly such products, so the kernel library decides much of its speed.
+
+PyTorch reaches oneDNN's float32 matmul only through ``torch.ops.mkldnn._linear_pointwise``,
+the op its own compiler emits for CPU linear layers. That op has no autograd formula, so the
+functions here supply the backward: two more oneDNN products (gradients of the input and of
+the weight) and a sum for the bias. The arithmetic is float32 as before, in another summation
+order: results agree with ``aten`` to rounding, not bit for bit, so ``matmul`` is an agent
+setting saved with each run (a resumed run keeps the kernels it was trained with).
+
+``matmul="aten"`` is PyTorch's default path. Under autocast (``precision="bfloat16"``) layers
+always take it: autocast already sends bfloat16 products to oneDNN.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+MATMULS = ("onednn", "aten")
+#: layers narrower than this stay on ``aten``: for a [B, 256] x [256, 1] product the library
+#: call costs more than the arithmetic (measured: 5 us through aten, 19 us through oneDNN)
+MIN_WIDTH = 16
+
+
+def onednn_available() -> bool:
+    """Whether this PyTorch build has oneDNN's linear op (the x86 and aarch64 wheels do)."""
+    ops = torch.ops.mkldnn
+    return torch.backends.mkldnn.is_available() and hasattr(ops, "_linear_pointwise")
+
+
+def default_matmul() -> str:
+    """``onednn`` where this PyTorch has it, else ``aten``."""
+    return "onednn" if onednn_available() else "aten"
+
+
+def _mm(a: torch.Tensor, b_t: torch.Tensor, bias: torch.Tensor | None = None) -> torch.Tensor:
+    """a @ b_t.T (+ bias) on oneDNN; ``b_t`` is [out, in], as a linear layer's weight."""
+    return torch.ops.mkldnn._linear_pointwise(a, b_t, bias, "none", [], "")
+
+
+class _LinearFunction(torch.autograd.Function):
+    """y = x W^T + b with x [B, in], W [out, in] (``nn.Linear``'s layout)."""
+
+    @staticmethod
+    def forward(ctx, x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
+        ctx.save_for_backward(x, weight)
+        return _mm(x, weight, bias)
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor | None, ...]:
+        x, weight = ctx.saved_tensors
+        grad = grad.contiguous()
+        gx = _mm(grad, weight.t()) if ctx.needs_input_grad[0] else None
+        gw = _mm(grad.t(), x.t()) if ctx.needs_input_grad[1] else None
+        gb = grad.sum(0) if ctx.needs_input_grad[2] else None
+        return gx, gw, gb
+
+
+class _EnsembleFunction(torch.autograd.Function):
+    """y_i = x_i W_i + b_i with x [n, B, in], W [n, in, out], b [n, 1, out] (``EnsembleLinear``)."""
+
+    @staticmethod
+    def forward(ctx, x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor) -> torch.Tensor:
+        ctx.save_for_backward(x, weight)
+        return torch.stack([_mm(x[i], weight[i].t(), bias[i, 0]) for i in range(len(weight))])
+
+    @staticmethod
+    def backward(ctx, grad: torch.Tensor) -> tuple[torch.Tensor | None, ...]:
+        x, weight = ctx.saved_tensors
+        grad = grad.contiguous()
+        n = len(weight)
+        gx = gw = gb = None
+        if ctx.needs_input_grad[0]:
+            gx = torch.stack([_mm(grad[i], weight[i]) for i in range(n)])
+        if ctx.needs_input_grad[1]:
+            gw = torch.stack([_mm(x[i].t(), grad[i].t()) for i in range(n)])
+        if ctx.needs_input_grad[2]:
+            gb = grad.sum(1, keepdim=True)
+        return gx, gw, gb
+
+
+def _on_onednn(matmul: str, out_width: int) -> bool:
+    return matmul == "onednn" and out_width >= MIN_WIDTH and not torch.is_autocast_enabled("cpu")
+
+
+def linear(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor, matmul: str) -> torch.Tensor:
+    """``F.linear(x, weight, bias)``, on oneDNN when ``matmul`` says so; any leading dims."""
+    if not _on_onednn(matmul, weight.shape[0]):
+        return F.linear(x, weight, bias)
+    flat = x.reshape(-1, x.shape[-1])
+    return _LinearFunction.apply(flat, weight, bias).view(*x.shape[:-1], weight.shape[0])
+
+
+def ensemble_linear(
+    x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor, matmul: str
+) -> torch.Tensor | None:
+    """x_i W_i + b_i per ensemble member for ``onednn``, or None where ``aten``'s batched
+    product should do it. Narrow layers (a critic's output) take one ``addmm`` per member:
+    ``bmm`` into a width-1 output is slow (measured: 91 us against 16 us for [2, 256, 256] x
+    [2, 256, 1])."""
+    if matmul != "onednn" or torch.is_autocast_enabled("cpu"):
+        return None
+    if weight.shape[-1] < MIN_WIDTH:
+        return torch.stack([torch.addmm(bias[i], x[i], weight[i]) for i in range(len(weight))])
+    return _EnsembleFunction.apply(x, weight, bias)
+
+
+class Linear(nn.Linear):
+    """``nn.Linear`` (same parameters and state dict) whose products follow ``matmul``."""
+
+    def __init__(self, inp: int, out: int, matmul: str = "aten") -> None:
+        super().__init__(inp, out)
+        self.matmul = matmul
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return linear(x, self.weight, self.bias, self.matmul)
