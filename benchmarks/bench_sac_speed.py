@@ -4,9 +4,12 @@ Same network sizes (2 x 256 actor and twin critics), same batch size and input w
 policy on Circle: state 3 + two 10-d latents), one process, one after the other, same torch
 thread count. Also reports end-to-end interactions per second of ``sili train`` (SILI, Circle 3).
 
-    python benchmarks/bench_sac_speed.py [--updates 300] [--threads 1]
+    python benchmarks/bench_sac_speed.py [--updates 300] [--threads 1] [--rounds 3]
+    python benchmarks/bench_sac_speed.py --matmul-only   # the products alone, per library
 
-Our SAC is timed in float32 (the default, same arithmetic as stable-baselines3) and with
+Our SAC is timed in float32 with its float32 products on oneDNN (``matmul="onednn"``, the
+default where PyTorch has it) and on PyTorch's default BLAS (``matmul="aten"``, the kernels
+stable-baselines3 uses), both the same arithmetic as stable-baselines3, and with
 ``precision="bfloat16"`` (matrix products under CPU autocast).
 """
 
@@ -22,11 +25,20 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+#: our variants: label -> (precision, matmul)
+VARIANTS = {
+    "float32, onednn": ("float32", "onednn"),
+    "float32, aten": ("float32", "aten"),
+    "bfloat16": ("bfloat16", "aten"),
+}
 
-def time_ours(in_dim: int, act_dim: int, batch: int, updates: int, precision: str) -> float:
+
+def time_ours(
+    in_dim: int, act_dim: int, batch: int, updates: int, precision: str, matmul: str
+) -> float:
     from sili_robots.agent.sac import SAC
 
-    sac = SAC(in_dim, act_dim, hidden=256, precision=precision)
+    sac = SAC(in_dim, act_dim, hidden=256, precision=precision, matmul=matmul)
     g = torch.Generator().manual_seed(0)
     x = torch.randn(updates, batch, in_dim, generator=g)
     a = torch.rand(updates, batch, act_dim, generator=g) * 2 - 1
@@ -80,7 +92,7 @@ def time_sb3(in_dim: int, act_dim: int, batch: int, updates: int) -> float:
     return updates / (time.perf_counter() - t)
 
 
-def time_train(interactions: int, precision: str) -> float:
+def time_train(interactions: int, precision: str, matmul: str) -> float:
     from sili_robots.agent import method_config
     from sili_robots.runs import RunConfig
     from sili_robots.training import train
@@ -91,7 +103,9 @@ def time_train(interactions: int, precision: str) -> float:
         "sili",
         0,
         interactions,
-        method_config("sili", "discrete", random_interactions=5, precision=precision),
+        method_config(
+            "sili", "discrete", random_interactions=5, precision=precision, matmul=matmul
+        ),
     )
     t = time.perf_counter()
     train(cfg, out, progress=False)
@@ -100,35 +114,60 @@ def time_train(interactions: int, precision: str) -> float:
     return interactions / dt
 
 
+def time_matmul(m: int, k: int, n: int, matmul: str, repeats: int = 2000) -> float:
+    """GFLOP/s of a float32 [m, k] x [k, n] product plus bias, as a linear layer computes it."""
+    from sili_robots.agent.matmul import linear
+
+    x, w, b = torch.randn(m, k), torch.randn(n, k), torch.randn(n)
+    for _ in range(50):
+        linear(x, w, b, matmul)
+    t = time.perf_counter()
+    for _ in range(repeats):
+        linear(x, w, b, matmul)
+    return 2 * m * k * n * repeats / (time.perf_counter() - t) / 1e9
+
+
+def matmul_only() -> None:
+    print("float32 linear layer, one thread (GFLOP/s; oneDNN / aten)")
+    for m, k, n in ((256, 256, 256), (256, 25, 256), (1600, 256, 256)):
+        aten, dnn = time_matmul(m, k, n, "aten"), time_matmul(m, k, n, "onednn")
+        print(f"  [{m}, {k}] x [{k}, {n}]: aten {aten:6.1f}  onednn {dnn:6.1f}  {dnn / aten:.2f}x")
+
+
 def main() -> None:
     p = argparse.ArgumentParser()
     p.add_argument("--updates", type=int, default=300)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--interactions", type=int, default=30)
     p.add_argument("--rounds", type=int, default=3, help="alternating rounds; medians reported")
+    p.add_argument("--matmul-only", action="store_true", help="time the products alone")
     args = p.parse_args()
     torch.set_num_threads(args.threads)
+    if args.matmul_only:
+        matmul_only()
+        return
     in_dim, act_dim, batch = 3 + 2 * 10, 2, 256
-    rates: dict[str, list[float]] = {"sb3": [], "float32": [], "bfloat16": []}
+    rates: dict[str, list[float]] = {"sb3": [], **{label: [] for label in VARIANTS}}
     for _ in range(args.rounds):  # alternate, so a load change hits all alike
         rates["sb3"].append(time_sb3(in_dim, act_dim, batch, args.updates))
-        for precision in ("float32", "bfloat16"):
-            rates[precision].append(time_ours(in_dim, act_dim, batch, args.updates, precision))
+        for label, (precision, matmul) in VARIANTS.items():
+            rate = time_ours(in_dim, act_dim, batch, args.updates, precision, matmul)
+            rates[label].append(rate)
     med = {k: float(np.median(v)) for k, v in rates.items()}
     sb3 = med["sb3"]
     print(f"torch threads: {args.threads}; batch {batch}; input {in_dim}; 2 x 256 networks")
-    print(f"stable-baselines3 SAC:            {sb3:8.1f} updates/s ({1e3 / sb3:.2f} ms/update)")
-    for precision in ("float32", "bfloat16"):
-        ours = med[precision]
+    print(f"stable-baselines3 SAC:              {sb3:8.1f} updates/s ({1e3 / sb3:.2f} ms/update)")
+    for label in VARIANTS:
+        ours = med[label]
         print(
-            f"sili_robots SAC, {precision:8s}:       {ours:8.1f} updates/s "
+            f"sili_robots SAC, {label:16s}: {ours:8.1f} updates/s "
             f"({1e3 / ours:.2f} ms/update), {ours / sb3:.2f}x stable-baselines3"
         )
     print(f"(medians of {args.rounds} alternating rounds)")
-    for precision in ("float32", "bfloat16"):
-        ips = time_train(args.interactions, precision)
+    for label, (precision, matmul) in VARIANTS.items():
+        ips = time_train(args.interactions, precision, matmul)
         print(
-            f"sili train end to end (circle-3, sili, 1 update/step, {precision}): "
+            f"sili train end to end (circle-3, sili, 1 update/step, {label}): "
             f"{ips:.2f} interactions/s"
         )
 

@@ -47,7 +47,7 @@ import torch
 
 from sili_robots.agent import SILIAgent
 from sili_robots.agent.latent import transitions
-from sili_robots.diagnostics import change_masks
+from sili_robots.diagnostics import change_masks, foresight_by_exit
 from sili_robots.errors import ConfigError
 from sili_robots.runs import load_checkpoint, read_config
 from sili_robots.tasks.circle import ARENA, STEP, CircleEnv
@@ -103,23 +103,21 @@ def latent_changes(agent: SILIAgent, metrics: pd.DataFrame, window: int) -> None
     """Print how the latent met the true changes over the last ``window``: foreseen (split by
     how the interaction that caused them ended, clearly inside or near the edge) or late, and
     its false changes with the task reward of the interactions played with them."""
-    masks = {k: v[-window:] for k, v in change_masks(metrics).items()}
-    true, seen = masks["true_changes"], masks["foreseen"]
     radius = np.linalg.norm(agent.buffer.obs[: len(metrics), -1, :2], axis=-1)
-    inside = np.r_[np.nan, radius[:-1]][-window:] < CLEAR_INSIDE  # how row j-1 ended
-    edge = true & ~inside
-    false = masks["false_alarms"]
-    settled = ~masks["latent_changes"] & ~true
-    reward = metrics["task_reward"].to_numpy()[-window:]
+    start = max(0, len(metrics) - window)
+    c = foresight_by_exit(metrics, radius, CLEAR_INSIDE, start)
+    masks = {k: v[start:] for k, v in change_masks(metrics).items()}
+    false, settled = masks["false_alarms"], ~masks["latent_changes"] & ~masks["true_changes"]
+    reward = metrics["task_reward"].to_numpy()[start:]
     r_false = float(reward[false].mean()) if false.any() else float("nan")
     print(
-        f"  true changes {true.sum()}: the latent foresaw {seen.sum()}, showed "
-        f"{masks['late'].sum()} one interaction late; foreseen after ending clearly inside "
-        f"(radius < {CLEAR_INSIDE}) {seen[inside].sum()} of {(true & inside).sum()}, near the "
-        f"edge {seen[edge].sum()} of {edge.sum()}"
+        f"  true changes {c['true_changes']}: the latent foresaw {c['foreseen']}, showed "
+        f"{c['late']} one interaction late; foreseen after ending clearly inside "
+        f"(radius < {CLEAR_INSIDE}) {c['foreseen_inside']} of {c['inside']}, near the "
+        f"edge {c['foreseen_edge']} of {c['edge']}"
     )
     print(
-        f"  false latent changes {false.sum()}: task reward with them {r_false:.1f}, "
+        f"  false latent changes {c['false_alarms']}: task reward with them {r_false:.1f}, "
         f"with no change {reward[settled].mean():.1f}"
     )
 

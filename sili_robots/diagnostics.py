@@ -88,3 +88,25 @@ def latent_diagnostics(df: pd.DataFrame, window: int = 100) -> dict[str, float]:
         }
     )
     return out
+
+
+def foresight_by_exit(
+    df: pd.DataFrame, end_radius: np.ndarray, clear_inside: float = 0.9, start: int = 0
+) -> dict[str, int]:
+    """``change_detection`` with the true changes split by how the interaction that caused
+    them ended (Circle): clearly inside (``end_radius`` below ``clear_inside``: a move on
+    purpose) or near the edge (a slip). ``end_radius[j]`` is interaction j's final distance
+    from the centre; a true change at row j was caused by row j-1."""
+    masks = {k: v[start:] for k, v in change_masks(df).items()}
+    true, seen = masks["true_changes"], masks["foreseen"]
+    inside = np.r_[np.nan, np.asarray(end_radius)[: len(df) - 1]][start:] < clear_inside
+    return {
+        "true_changes": int(true.sum()),
+        "foreseen": int(seen.sum()),
+        "late": int(masks["late"].sum()),
+        "inside": int((true & inside).sum()),
+        "foreseen_inside": int((seen & inside).sum()),
+        "edge": int((true & ~inside).sum()),
+        "foreseen_edge": int((seen & ~inside).sum()),
+        "false_alarms": int(masks["false_alarms"].sum()),
+    }

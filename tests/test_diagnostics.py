@@ -7,6 +7,7 @@ import pytest
 from sili_robots.diagnostics import (
     change_agreement,
     change_detection,
+    foresight_by_exit,
     latent_diagnostics,
     purity,
 )
@@ -84,3 +85,22 @@ def test_change_detection_credits_the_latent_that_foresaw_the_change():
     }
     # from interaction 4 on, the change at row 3 is left out
     assert change_detection(_metrics(late, strategies), start=4)["true_changes"] == 0
+
+
+def test_foresight_by_exit_splits_true_changes_by_how_the_causing_interaction_ended():
+    strategies = [0, 0, 1, 1, 2, 2, 2]
+    # row 1 ended clearly inside and moved the opponent (foreseen: row 1's category changes);
+    # row 3 slipped at the edge (radius 0.97) and the latent missed it
+    categories = [5, 6, 6, 6, 8, 8, 8]
+    radius = np.array([1.05, 0.5, 1.05, 0.97, 1.05, 1.05, 1.05])
+    assert foresight_by_exit(_metrics(categories, strategies), radius) == {
+        "true_changes": 2,
+        "foreseen": 1,
+        "late": 1,
+        "inside": 1,
+        "foreseen_inside": 1,
+        "edge": 1,
+        "foreseen_edge": 0,
+        "false_alarms": 0,
+    }
+    assert foresight_by_exit(_metrics(categories, strategies), radius, start=3)["inside"] == 0
