@@ -21,6 +21,7 @@ from sili_robots.agent.latent import (
     gumbel_straight_through,
     transitions,
 )
+from sili_robots.agent.matmul import onednn_available
 from sili_robots.agent.sac import SAC
 from sili_robots.errors import ConfigError
 
@@ -180,10 +181,14 @@ def test_latent_change_fraction_draws_that_part_of_each_latent_batch_from_change
     assert (j[:, 4:] != 10).mean() > 0.8  # the rest uniform over 1..19
 
 
-@pytest.mark.parametrize("precision", ["float32", "bfloat16"])
-def test_one_sac_update_lowers_critic_loss_on_a_fixed_batch(precision):
+@pytest.mark.parametrize(
+    "precision,matmul", [("float32", "aten"), ("float32", "onednn"), ("bfloat16", "aten")]
+)
+def test_one_sac_update_lowers_critic_loss_on_a_fixed_batch(precision, matmul):
+    if matmul == "onednn" and not onednn_available():
+        pytest.skip("PyTorch without oneDNN")
     torch.manual_seed(0)
-    sac = SAC(5, 2, hidden=64, lr=1e-3, precision=precision)
+    sac = SAC(5, 2, hidden=64, lr=1e-3, precision=precision, matmul=matmul)
     x, a, r, x2 = (
         torch.randn(128, 5),
         torch.rand(128, 2) * 2 - 1,
