@@ -4,6 +4,7 @@ import json
 
 import pytest
 
+from sili_robots.agent.matmul import default_matmul
 from sili_robots.errors import ConfigError
 from sili_robots.sweep import SweepSpec, expand, parse_betas, parse_seeds, plan
 from sili_robots.sweep.state import check_existing, run_path
@@ -146,6 +147,28 @@ def test_an_existing_run_with_other_settings_is_refused(tmp_path):
     del older["agent"]["smirl_std_floor"]  # written before that setting existed: its default
     (path / "config.json").write_text(json.dumps({"run": older}))
     check_existing(tmp_path, run)
+
+
+def test_a_sweep_records_its_kernel_library_and_older_records_resume_on_aten(tmp_path):
+    spec = _spec()
+    assert spec.agent_overrides["matmul"] == default_matmul()
+    assert SweepSpec.from_dict(spec.to_dict()) == spec
+    recorded = spec.to_dict()
+    del recorded["agent_overrides"]["matmul"]  # an invocation recorded before the setting
+    older = SweepSpec.from_dict(recorded)
+    (run,) = expand(older)
+    assert run.config.agent.matmul == "aten"
+    # its runs, whose config.json has no matmul either, are the same runs: resumable
+    path = run_path(tmp_path, run.name)
+    path.mkdir(parents=True)
+    on_disk = run.config.to_dict()
+    del on_disk["agent"]["matmul"]
+    (path / "config.json").write_text(json.dumps({"run": on_disk}))
+    check_existing(tmp_path, run)
+    (new,) = expand(_spec())
+    if new.config.agent.matmul != "aten":  # planned anew, they would be another sweep
+        with pytest.raises(ConfigError, match=r"agent\.matmul: 'aten' on disk, 'onednn' now"):
+            check_existing(tmp_path, new)
 
 
 def test_plan_unions_specs_and_rejects_a_name_planned_twice_differently():

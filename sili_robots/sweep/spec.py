@@ -15,6 +15,7 @@ from typing import Any
 
 from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, method_config
 from sili_robots.agent.config import SCHEDULES
+from sili_robots.agent.matmul import default_matmul
 from sili_robots.errors import ConfigError, check_choice
 from sili_robots.runs import RunConfig
 from sili_robots.tasks import TASKS, task_spec
@@ -40,12 +41,19 @@ class SweepSpec:
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     checkpoint_every: int = 50
 
+    def __post_init__(self) -> None:
+        # the kernel library is resolved once, when the sweep is planned, and recorded with it
+        # (as a run's config.json records it), so ``--resume`` keeps it on any machine
+        self.agent_overrides = {"matmul": default_matmul(), **self.agent_overrides}
+
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> SweepSpec:
-        return cls(**data)
+        """Read a recorded invocation; one recorded before ``matmul`` existed ran on aten."""
+        overrides = {"matmul": "aten", **data.get("agent_overrides", {})}
+        return cls(**{**data, "agent_overrides": overrides})
 
 
 @dataclass(frozen=True)
