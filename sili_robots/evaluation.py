@@ -32,6 +32,7 @@ class AgentFeedback(gym.Wrapper):
         self._game_state = game_state
         self._steps: list[tuple[np.ndarray, np.ndarray, float]] = []
         self._first_obs: np.ndarray | None = None
+        self._last_obs: np.ndarray | None = None
         self._first_info: dict[str, Any] = {}
 
     def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
@@ -55,11 +56,14 @@ class AgentFeedback(gym.Wrapper):
                     refresh=False,
                 )
         self._steps, self._first_obs, self._first_info = [], obs, info
+        self._last_obs = obs
         return obs, info
 
     def step(self, action: np.ndarray):
         obs, r, term, trunc, info = self.env.step(action)
         self._steps.append((obs, np.asarray(action, np.float32), float(r)))
+        self.agent.observe_step(self._last_obs, action, float(r), obs)
+        self._last_obs = obs
         return obs, r, term, trunc, info
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import time
 from collections import deque
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -56,10 +57,15 @@ def build_agent(cfg: RunConfig, env: gym.Env) -> SILIAgent:
 
 
 def play_interaction(
-    env: gym.Env, obs: np.ndarray, info: dict[str, Any], policy
+    env: gym.Env,
+    obs: np.ndarray,
+    info: dict[str, Any],
+    policy,
+    on_step: Callable[[np.ndarray, np.ndarray, float, np.ndarray], None] | None = None,
 ) -> tuple[dict[str, np.ndarray], np.ndarray, dict[str, Any], bool]:
     """Play one interaction from (obs, info); returns its arrays, the next interaction's first
-    observation and info (after ``reset``), and whether the true strategy changed in it."""
+    observation and info (after ``reset``), and whether the true strategy changed in it.
+    ``on_step(s, a, r, s')`` sees each step as it is played (the agent's latent filter)."""
     task = env.unwrapped
     h = task.horizon
     obs_seq = np.zeros((h + 1, obs.shape[0]), np.float32)
@@ -71,7 +77,10 @@ def play_interaction(
     strategy_id = float(info["strategy_id"])
     for t in range(h):
         a = policy(obs)
+        prev = obs
         obs, r, _, _, info = env.step(a)
+        if on_step is not None:
+            on_step(prev, a, r, obs)
         obs_seq[t + 1], act_seq[t], rew_seq[t] = obs, a, r
         changed |= bool(info["strategy_changed"])
     next_obs, next_info = env.reset()
@@ -114,7 +123,7 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
                 policy = lambda _o: agent.random_action()  # noqa: E731
             else:
                 policy = agent.act
-            data, obs, info, changed = play_interaction(env, obs, info, policy)
+            data, obs, info, changed = play_interaction(env, obs, info, policy, agent.observe_step)
             stats = agent.observe_interaction(
                 data["obs"],
                 data["act"],

@@ -8,9 +8,12 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 from fast_settings import FAST_ARGS
+
+from sili_robots.evaluation import load_trained
 
 FAST = [*FAST_ARGS, "--no-progress"]
 
@@ -245,3 +248,28 @@ def test_extending_a_finished_run_reproduces_the_longer_run(tmp_path):
     res = _sili("train", "--resume", extended, "--interactions", 5, "--no-progress")
     assert res.returncode == 2 and "would shorten" in res.stderr and ">= 12" in res.stderr
     assert "Traceback" not in res.stderr
+
+
+def test_a_filtered_run_records_what_it_acted_on_and_resumes_exactly(tmp_path):
+    args = ["--task", "circle-3", "--seed", 1, "--checkpoint-every", 8, *FAST]
+    args += ["--set", "latent_filter=0.1"]
+    longer, extended = tmp_path / "longer", tmp_path / "extended"
+    assert _sili("train", *args, "--interactions", 24, "--out", longer).returncode == 0
+    assert _sili("train", *args, "--interactions", 16, "--out", extended).returncode == 0
+    res = _sili("train", "--resume", extended, "--interactions", 24, "--no-progress")
+    assert res.returncode == 0, res.stderr
+    a = pd.read_csv(longer / "metrics.csv").drop(columns="wall_time")
+    pd.testing.assert_frame_equal(
+        a, pd.read_csv(extended / "metrics.csv").drop(columns="wall_time")
+    )
+
+    _, env, agent, _ = load_trained(longer)
+    env.close()
+    assert agent.filter_scale is not None and len(agent.ZF) == 24
+    # interactions 20-23 came after the last refresh: their rows are what the policy acted on,
+    # step by step, and the same model replaying them gives the same categories
+    np.testing.assert_array_equal(agent.ZF[20:], agent._filter_rows(np.arange(20, 24)))
+    np.testing.assert_array_equal(agent.ZF[20:, 0], agent.Z[20:24].argmax(-1))  # the prior
+    assert (agent.ZF >= 0).all()  # every row recomputed once the filter runs
+    res = _sili("eval", longer, "--interactions", 2)  # greedy, the filter running step by step
+    assert res.returncode == 0 and "mean_task_reward" in res.stdout, res.stderr

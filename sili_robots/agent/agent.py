@@ -20,6 +20,12 @@ How the learning signal crosses interactions (the paper's Eq. 1 made concrete):
   during an interaction (``_posteriors``, ``_posterior_distance``); same credit, same step.
 * Partial observations: R_stable on each step is -flag(s_{t+1}), the observed "strategy changed"
   flag of the next observation (at the boundary: of interaction j+1's first observation).
+* ``latent_filter`` (discrete latents): within interaction j the policy acts on the filtered
+  category at each step (the encoder's z^j as prior, corrected by the decoder's likelihood of
+  the steps played so far), kept per step in ``ZF``; RL batches put ZF[j, t] in the z^j slot and
+  ZF[j, t+1] in the successor's (at the boundary the successor's latent is the encoder's
+  z^{j+1}, which no step of j+1 has corrected yet). z^{j-1} and the stability reward stay the
+  encoder's.
 * ``latent="true"`` (diagnostic): z^j is the true strategy's encoding and d is 1 when the true
   strategy changed, which isolates influence learning from representation learning.
 """
@@ -37,6 +43,12 @@ from scipy.optimize import linear_sum_assignment
 from sili_robots.agent.buffer import InteractionBuffer
 from sili_robots.agent.config import AgentConfig
 from sili_robots.agent.latent import LatentModel, category_groups, target_scale, transitions
+from sili_robots.agent.latent_filter import (
+    filtered_categories,
+    log_prior,
+    residual_scale,
+    step_logliks,
+)
 from sili_robots.agent.sac import SAC
 from sili_robots.agent.smirl import RunningGaussian
 
@@ -118,14 +130,25 @@ class SILIAgent:
         self.keeps_posteriors = self.uses_posterior or (
             self.model is not None and cfg.latent == "discrete" and cfg.latent_change_fraction > 0
         )
+        #: the within-interaction filter (``latent_filter``): ZF[j, t] is the category the policy
+        #: acted on at step t of stored interaction j (-1: the filter was not running yet, the
+        #: encoder's z^j stands); it starts running at the first latent refresh
+        self.filtering = self.model is not None and cfg.latent_filter > 0
+        self.ZF = np.zeros((0, horizon + 1), np.int16)
+        self.filter_scale: torch.Tensor | None = None
+        self.filter_in_use = np.zeros(0, int)
+        self._live_ll = np.zeros(self.zdim)
+        self._live_cats: list[int] = []
+        self._reset_live()
 
     # ------------------------------------------------------------------ acting
     def policy_input(self, obs: np.ndarray, j: int | None = None) -> np.ndarray:
         """[s, z^j, z^{j-1}] (SILI), [s, z^j] (LILI) or s, for the interaction being played."""
+        live = j is None
         j = self.buffer.n if j is None else j
         parts = [np.asarray(obs, np.float32)]
         if self.n_latents >= 1:
-            parts.append(self.Z[j])
+            parts.append(self._live_latent() if live and self.filtering else self.Z[j])
         if self.n_latents == 2:
             parts.append(self.Z[j - 1] if j >= 1 else np.zeros(self.zdim, np.float32))
         return np.concatenate(parts)
@@ -133,6 +156,37 @@ class SILIAgent:
     def act(self, obs: np.ndarray, deterministic: bool = False) -> np.ndarray:
         x = torch.from_numpy(self.policy_input(obs)).unsqueeze(0)
         return self.sac.act(x, deterministic)[0].numpy()
+
+    def _live_latent(self) -> np.ndarray:
+        """z^j as the filter has it after the steps of the current interaction played so far."""
+        c = self._live_cats[-1] if self._live_cats else -1
+        return self.Z[self.buffer.n] if c < 0 else np.eye(self.zdim, dtype=np.float32)[c]
+
+    def _live_category(self) -> int:
+        if self.filter_scale is None:
+            return -1
+        logp = log_prior(self.Z[self.buffer.n][None], self.filter_in_use, self.cfg.latent_filter)
+        return int((logp[0] + self._live_ll).argmax())
+
+    def _reset_live(self) -> None:
+        """A new interaction: no evidence yet, the filter starts from the encoder's z^j."""
+        if self.filtering:
+            self._live_ll = np.zeros(self.zdim)
+            self._live_cats = [self._live_category()]
+
+    def observe_step(
+        self, obs: np.ndarray, act: np.ndarray, rew: float, next_obs: np.ndarray
+    ) -> None:
+        """One step of the interaction being played: evidence for the filter (no-op without)."""
+        if not self.filtering:
+            return
+        if self.filter_scale is not None:
+            o, a, o2 = (
+                torch.from_numpy(np.asarray(x, np.float32)[None]) for x in (obs, act, next_obs)
+            )
+            r = torch.tensor([float(rew)], dtype=torch.float32)
+            self._live_ll += step_logliks(self.model, o, a, o2, r, self.filter_scale)[0]
+        self._live_cats.append(self._live_category())
 
     def random_action(self) -> np.ndarray:
         return self.rng.uniform(-1.0, 1.0, self.act_dim).astype(np.float32)
@@ -164,9 +218,39 @@ class SILIAgent:
         self.Z = np.concatenate([self.Z, z_next[None]])
         if self.keeps_posteriors and len(self.P) == j:  # else the next refresh fills P
             self.P = np.concatenate([self.P, self._posteriors(np.array([j]))])
+        if self.filtering:
+            cats = self._live_cats
+            if len(cats) != self.horizon + 1:  # not played through observe_step: replay it
+                cats = self._filter_rows(np.array([j]))[0]
+            self.ZF = np.concatenate([self.ZF, np.asarray(cats, np.int16)[None]])
         if refresh and self.model is not None and (j + 1) % self.latent_refresh_every == 0:
             self.refresh_latents()
+        self._reset_live()
         return self._stats(j, next_first)
+
+    @torch.no_grad()
+    def _filter_rows(self, idx: np.ndarray) -> np.ndarray:
+        """[len(idx), H+1] filtered categories of stored interactions (-1 before the filter
+        runs), with the current model and the latents cached in Z."""
+        if self.filter_scale is None:
+            return np.full((len(idx), self.horizon + 1), -1, np.int16)
+        b = self.buffer
+        obs, act, rew = (torch.from_numpy(x[idx]) for x in (b.obs, b.act, b.rew))
+        ll = step_logliks(self.model, obs[:, :-1], act, obs[:, 1:], rew, self.filter_scale)
+        logp = log_prior(self.Z[idx], self.filter_in_use, self.cfg.latent_filter)
+        return filtered_categories(logp, ll).astype(np.int16)
+
+    def _refresh_filter(self) -> None:
+        """The decoder's residual scale on the newest interactions, then every ZF row."""
+        b = self.buffer
+        n = b.n
+        self.filter_in_use = np.unique(self.Z[1 : n + 1].argmax(-1))
+        recent = np.arange(max(0, n - 512), n)
+        obs, act, rew = (torch.from_numpy(x[recent]) for x in (b.obs, b.act, b.rew))
+        self.filter_scale = residual_scale(self.model, obs, act, rew, self.filter_in_use)
+        self.ZF = np.concatenate(
+            [self._filter_rows(np.arange(s, min(s + 512, n))) for s in range(0, n, 512)]
+        )
 
     def _infer_next_latent(self, j: int, next_info: dict[str, Any]) -> np.ndarray:
         if self.cfg.latent == "true":
@@ -225,6 +309,8 @@ class SILIAgent:
         if self.keeps_posteriors:
             scale = self._replay_target_scale()
             self.P = self._in_chunks(lambda idx: self._posteriors(idx, scale), n)
+        if self.filtering and n > 0:
+            self._refresh_filter()
 
     def _replay_target_scale(self) -> torch.Tensor:
         """Per-output standard deviation of the decoder's targets over the whole replay."""
@@ -416,8 +502,12 @@ class SILIAgent:
             zpad = np.concatenate([np.zeros((1, self.zdim), np.float32), self.Z])
             z_prev, z_cur, z_next = zpad[j], zpad[j + 1], zpad[j + 2]  # z^{j-1}, z^j, z^{j+1}
             lz = last[..., None]
-            x = np.concatenate([s, z_cur] + ([z_prev] if self.n_latents == 2 else []), -1)
-            z2_cur = np.where(lz, z_next, z_cur)
+            z_acted, z2_acted = z_cur, z_cur
+            if self.filtering:  # the per-step latents the policy acted on (module docstring)
+                z_acted = self._filtered(j, t, z_cur)
+                z2_acted = self._filtered(j, np.minimum(t + 1, h), z_cur)
+            x = np.concatenate([s, z_acted] + ([z_prev] if self.n_latents == 2 else []), -1)
+            z2_cur = np.where(lz, z_next, z2_acted)
             z2_prev = np.where(lz, z_cur, z_prev)
             x2 = np.concatenate([s2, z2_cur] + ([z2_prev] if self.n_latents == 2 else []), -1)
         shape = (n_updates, m * k)
@@ -427,6 +517,13 @@ class SILIAgent:
             torch.from_numpy(np.ascontiguousarray(r, np.float32).reshape(shape)),
             torch.from_numpy(np.ascontiguousarray(x2, np.float32).reshape(*shape, -1)),
         )
+
+    def _filtered(self, j: np.ndarray, t: np.ndarray, z_encoder: np.ndarray) -> np.ndarray:
+        """The filter's latent at step t of stored interaction j (the encoder's where it was
+        not running)."""
+        cats = self.ZF[j, t]
+        onehot = np.eye(self.zdim, dtype=np.float32)[np.maximum(cats, 0)]
+        return np.where(cats[..., None] >= 0, onehot, z_encoder)
 
     def _stability_rewards(
         self, j: np.ndarray, t: np.ndarray, last: np.ndarray, s2: np.ndarray
@@ -455,6 +552,11 @@ class SILIAgent:
             "update_credit": self._update_credit,
             "category_map": self.category_map.copy(),
             "posteriors": self.P.copy(),
+            "filter": {
+                "ZF": self.ZF.copy(),
+                "scale": self.filter_scale,
+                "in_use": self.filter_in_use.copy(),
+            },
         }
         if self.model is not None:
             state["model"] = self.model.state_dict()
@@ -474,3 +576,8 @@ class SILIAgent:
         if self.model is not None:
             self.model.load_state_dict(state["model"])
             self.model_opt.load_state_dict(state["model_opt"])
+        if self.filtering:
+            f = state["filter"]
+            self.ZF = np.asarray(f["ZF"], np.int16)
+            self.filter_scale, self.filter_in_use = f["scale"], np.asarray(f["in_use"], int)
+        self._reset_live()

@@ -1,0 +1,155 @@
+"""The within-interaction latent filter (``latent_filter``): prior from the encoder, evidence from
+the decoder heads, the per-step latents the policy and the critic see, and runs that use it."""
+
+import numpy as np
+import pytest
+import torch
+
+from sili_robots.agent import SILIAgent, method_config
+from sili_robots.agent.latent_filter import LOGLIK_FLOOR, filtered_categories, log_prior
+from sili_robots.errors import ConfigError
+
+H = 5
+
+
+def _agent(**kw):
+    cfg = method_config(
+        "sili",
+        "discrete",
+        latent_dim=4,
+        hidden=32,
+        batch_interactions=4,
+        batch_steps=H,
+        latent_filter=0.2,
+        **kw,
+    )
+    return SILIAgent(cfg, obs_dim=3, act_dim=2, horizon=H, strategy_dim=2, seed=0)
+
+
+def _constant_heads(agent):
+    """Category k predicts standing still and reward 5k on every step."""
+    with torch.no_grad():
+        last = agent.model.decoder[-1]
+        last.weight.zero_()
+        last.bias.zero_()
+        last.bias.view(4, 4)[:, -1] = torch.tensor([0.0, 5.0, 10.0, 15.0])
+
+
+def _store(agent, reward, obs=None):
+    obs = np.ones((H + 1, 3), np.float32) if obs is None else obs
+    agent.observe_interaction(
+        obs,
+        np.zeros((H, 2), np.float32),
+        np.full(H, reward, np.float32),
+        obs[0],
+        0.0,
+        np.zeros(2, np.float32),
+        {"strategy": np.zeros(2, np.float32)},
+        refresh=False,
+    )
+
+
+def test_log_prior_puts_one_minus_eps_on_the_encoders_category():
+    in_use = np.array([0, 2])
+    logp = log_prior(np.array([[0, 0, 1, 0], [0, 0, 0, 0]], np.float32), in_use, 0.1)
+    np.testing.assert_allclose(np.exp(logp[0]), [0.05, 0, 0.95, 0])
+    np.testing.assert_allclose(np.exp(logp[1]), [0.5, 0, 0.5, 0])  # no prediction: uniform
+    assert np.isneginf(logp[:, [1, 3]]).all()
+
+
+def test_filtered_category_switches_once_the_evidence_outweighs_the_prior():
+    logp = np.log(np.array([[0.9, 0.1]]))  # log odds 2.2 for category 0
+    ll = np.array([[[-1.0, 0.0]] * 4])  # each step favours category 1 by 1 nat
+    # before each step and after the last: 2.2, 1.2, 0.2 for 0, then -0.8, -1.8
+    np.testing.assert_array_equal(filtered_categories(logp, ll)[0], [0, 0, 0, 1, 1])
+
+
+def test_policy_acts_on_the_corrected_latent_within_the_interaction():
+    agent = _agent()
+    _constant_heads(agent)
+    for reward in (0.0, 5.0, 0.0, 5.0):  # categories 0 and 1 shown, so both are in use
+        _store(agent, reward)
+    agent.Z = np.eye(4, dtype=np.float32)[[0, 0, 1, 0, 0]]  # z^4 (the next one) predicts 0
+    agent.refresh_latents = lambda: None  # keep the hand-set Z; the filter is what is tested
+    agent._refresh_filter()
+    np.testing.assert_array_equal(agent.filter_in_use, [0, 1])
+    # the heads fit exactly: the noise scale is its floor, so one step decides
+    np.testing.assert_array_equal(agent.ZF[1], [0, 1, 1, 1, 1, 1])  # predicted 0, showed 1
+    np.testing.assert_array_equal(agent.ZF[2], [1, 0, 0, 0, 0, 0])  # predicted 1, showed 0
+    np.testing.assert_array_equal(agent.ZF[3], [0, 1, 1, 1, 1, 1])
+    agent._reset_live()
+    obs = np.ones(3, np.float32)
+    z_slot = slice(3, 7)
+    np.testing.assert_array_equal(agent.policy_input(obs)[z_slot], [1, 0, 0, 0])
+    agent.observe_step(obs, np.zeros(2, np.float32), 5.0, obs)  # the reward of category 1
+    np.testing.assert_array_equal(agent.policy_input(obs)[z_slot], [0, 1, 0, 0])
+    # the stored interaction's z^j (not the live one) when asked for by index
+    np.testing.assert_array_equal(agent.policy_input(obs, j=4)[z_slot], [1, 0, 0, 0])
+    assert agent._live_ll[0] == pytest.approx(-LOGLIK_FLOOR)  # one step: floored evidence
+
+
+def test_filter_does_not_act_before_the_first_refresh():
+    agent = _agent()
+    _store(agent, 5.0)
+    assert agent.filter_scale is None
+    np.testing.assert_array_equal(agent.ZF, np.full((1, H + 1), -1))
+    agent.observe_step(np.ones(3, np.float32), np.zeros(2, np.float32), 5.0, np.ones(3))
+    np.testing.assert_array_equal(agent.policy_input(np.ones(3, np.float32))[3:7], agent.Z[1])
+
+
+def test_rl_batches_use_the_per_step_latents_and_the_encoders_at_the_boundary():
+    agent = _agent()
+    rng = np.random.default_rng(0)
+    for _ in range(4):
+        _store(agent, 0.0, rng.normal(size=(H + 1, 3)).astype(np.float32))
+    agent.Z = np.eye(4, dtype=np.float32)[[0, 1, 2, 3, 0]]
+    agent.ZF = rng.integers(0, 4, (4, H + 1)).astype(np.int16)
+    agent.ZF[0] = -1  # filter not running: the encoder's z^0 stands
+    x, _, _, x2 = agent.sample_batches(40, beta=0.5)
+    x, x2 = x.reshape(-1, x.shape[-1]).numpy(), x2.reshape(-1, x2.shape[-1]).numpy()
+    b, eye = agent.buffer, np.eye(4)
+    seen_boundary = seen_inside = 0
+    for row, row2 in zip(x, x2, strict=True):
+        j, t = (int(i[0]) for i in np.where((b.obs[: b.n, :-1] == row[:3]).all(-1)))
+        acted = agent.Z[j] if j == 0 else eye[agent.ZF[j, t]]
+        np.testing.assert_array_equal(row[3:7], acted)
+        np.testing.assert_array_equal(row[7:11], agent.Z[j - 1] if j else np.zeros(4))
+        if t == H - 1:
+            seen_boundary += 1
+            np.testing.assert_array_equal(row2[3:7], agent.Z[j + 1])  # the encoder's z^{j+1}
+            np.testing.assert_array_equal(row2[7:11], agent.Z[j])  # and its z^j as previous
+        else:
+            seen_inside += 1
+            nxt = agent.Z[j] if j == 0 else eye[agent.ZF[j, t + 1]]
+            np.testing.assert_array_equal(row2[3:7], nxt)
+    assert seen_boundary and seen_inside
+
+
+def test_filter_state_survives_a_checkpoint():
+    agent = _agent()
+    _constant_heads(agent)
+    for reward in (0.0, 5.0, 0.0):
+        _store(agent, reward)
+    agent.Z = np.eye(4, dtype=np.float32)[[0, 0, 1, 0]]
+    agent._refresh_filter()
+    other = _agent()
+    other.load_state_dict(agent.state_dict())
+    np.testing.assert_array_equal(other.ZF, agent.ZF)
+    np.testing.assert_array_equal(other.filter_in_use, agent.filter_in_use)
+    torch.testing.assert_close(other.filter_scale, agent.filter_scale)
+
+
+@pytest.mark.parametrize(
+    "settings, message",
+    [
+        ({"latent_filter": 1.0}, r"latent_filter must be in \[0, 1\), got 1.0"),
+        ({"latent_filter": 0.1, "latent": "continuous"}, "needs discrete latents"),
+    ],
+)
+def test_bad_filter_settings_are_named(settings, message):
+    settings = dict(settings)
+    latent = settings.pop("latent", "discrete")
+    with pytest.raises(ConfigError, match=message):
+        method_config("sili", latent, **settings)
+    with pytest.raises(ConfigError, match="needs discrete latents"):
+        method_config("sac", latent_filter=0.1)
