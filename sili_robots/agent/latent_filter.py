@@ -16,6 +16,12 @@ interactions (its best head), so an inaccurate decoder corrects little. Each ste
 log-likelihood is floored at ``-LOGLIK_FLOOR`` so one state the decoder never saw cannot decide
 alone. The policy acts on the posterior's argmax at step t; the critic learns on the same
 per-step latents, recomputed with the current model whenever the encoder's are.
+
+Measured on Circle (3 Goals), 3 seeds x 3,000 interactions (benchmarks/RESULTS.md): learning
+starts faster and a wrong z^j is corrected within 2-6 steps, but the final task reward is worse
+than without the filter (-11.1 against -7.6): the categories split one strategy over several
+heads, and the filter hops between them on noise in outputs every head predicts alike. Off by
+default.
 """
 
 from __future__ import annotations
