@@ -137,6 +137,9 @@ class SILIAgent:
         self.ZF = np.zeros((0, horizon + 1), np.int16)
         self.filter_scale: torch.Tensor | None = None
         self.filter_in_use = np.zeros(0, int)
+        #: the interaction being played: log prior (None before the filter runs), evidence so
+        #: far, and the category acted on before each step
+        self._live_logp: np.ndarray | None = None
         self._live_ll = np.zeros(self.zdim)
         self._live_cats: list[int] = []
         self._reset_live()
@@ -159,20 +162,24 @@ class SILIAgent:
 
     def _live_latent(self) -> np.ndarray:
         """z^j as the filter has it after the steps of the current interaction played so far."""
-        c = self._live_cats[-1] if self._live_cats else -1
+        c = self._live_cats[-1]
         return self.Z[self.buffer.n] if c < 0 else np.eye(self.zdim, dtype=np.float32)[c]
 
     def _live_category(self) -> int:
-        if self.filter_scale is None:
+        if self._live_logp is None:
             return -1
-        logp = log_prior(self.Z[self.buffer.n][None], self.filter_in_use, self.cfg.latent_filter)
-        return int((logp[0] + self._live_ll).argmax())
+        return int((self._live_logp + self._live_ll).argmax())
 
     def _reset_live(self) -> None:
         """A new interaction: no evidence yet, the filter starts from the encoder's z^j."""
-        if self.filtering:
-            self._live_ll = np.zeros(self.zdim)
-            self._live_cats = [self._live_category()]
+        if not self.filtering:
+            return
+        self._live_ll = np.zeros(self.zdim)
+        self._live_logp = None
+        if self.filter_scale is not None:
+            z = self.Z[self.buffer.n][None]
+            self._live_logp = log_prior(z, self.filter_in_use, self.cfg.latent_filter)[0]
+        self._live_cats = [self._live_category()]
 
     def observe_step(
         self, obs: np.ndarray, act: np.ndarray, rew: float, next_obs: np.ndarray
@@ -180,7 +187,7 @@ class SILIAgent:
         """One step of the interaction being played: evidence for the filter (no-op without)."""
         if not self.filtering:
             return
-        if self.filter_scale is not None:
+        if self._live_logp is not None:
             o, a, o2 = (
                 torch.from_numpy(np.asarray(x, np.float32)[None]) for x in (obs, act, next_obs)
             )
@@ -248,9 +255,7 @@ class SILIAgent:
         recent = np.arange(max(0, n - 512), n)
         obs, act, rew = (torch.from_numpy(x[recent]) for x in (b.obs, b.act, b.rew))
         self.filter_scale = residual_scale(self.model, obs, act, rew, self.filter_in_use)
-        self.ZF = np.concatenate(
-            [self._filter_rows(np.arange(s, min(s + 512, n))) for s in range(0, n, 512)]
-        )
+        self.ZF = self._in_chunks(self._filter_rows, n)
 
     def _infer_next_latent(self, j: int, next_info: dict[str, Any]) -> np.ndarray:
         if self.cfg.latent == "true":

@@ -151,9 +151,21 @@ class LatentModel(nn.Module):
     ) -> torch.Tensor:
         """[N, k]: log p(tau | k) of each interaction under each category's decoder head, a
         unit-variance Gaussian on targets in units of ``scale`` (constants dropped)."""
+        return self.step_log_likelihoods(obs, act, next_obs, rew, scale).sum(1)
+
+    @torch.no_grad()
+    def step_log_likelihoods(
+        self,
+        obs: torch.Tensor,
+        act: torch.Tensor,
+        next_obs: torch.Tensor,
+        rew: torch.Tensor,
+        scale: torch.Tensor,
+    ) -> torch.Tensor:
+        """[..., k]: the same log-likelihood for each transition on its own."""
         target = decoder_targets(obs, next_obs, rew) / scale
-        heads = self._heads(obs, act) / scale  # [N, H, k, out]
-        return -0.5 * (heads - target.unsqueeze(-2)).pow(2).sum(-1).sum(1)
+        heads = self._heads(obs, act) / scale  # [..., k, out]
+        return -0.5 * (heads - target.unsqueeze(-2)).pow(2).sum(-1)
 
     def encode_logits(self, traj: torch.Tensor) -> torch.Tensor:
         """``traj``: [N, H, tr_dim] -> raw encoder output [N, latent_dim]."""

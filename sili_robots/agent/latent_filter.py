@@ -46,11 +46,9 @@ def step_logliks(
     rew: torch.Tensor,
     scale: torch.Tensor,
 ) -> np.ndarray:
-    """[..., k]: each category's Gaussian log-likelihood (unit variance in units of ``scale``,
-    constants dropped, floored) of each transition's [s' - s, r]."""
-    target = decoder_targets(obs, next_obs, rew) / scale
-    heads = model._heads(obs, act) / scale  # [..., k, out]
-    ll = -0.5 * (heads - target.unsqueeze(-2)).pow(2).sum(-1)
+    """[..., k]: each category's Gaussian log-likelihood of each transition's [s' - s, r]
+    (``LatentModel.step_log_likelihoods``), floored."""
+    ll = model.step_log_likelihoods(obs, act, next_obs, rew, scale)
     return ll.clamp(min=-LOGLIK_FLOOR).numpy()
 
 
@@ -67,9 +65,8 @@ def residual_scale(
     prev, nxt = obs[:, :-1], obs[:, 1:]
     ref = target_scale(prev, nxt, rew)
     target = decoder_targets(prev, nxt, rew)
-    sq = (model._heads(prev, act)[..., torch.from_numpy(in_use), :] - target.unsqueeze(-2)).pow(
-        2
-    )  # [N,H,k',o]
+    heads = model._heads(prev, act)[..., torch.from_numpy(in_use), :]  # [N, H, k', out]
+    sq = (heads - target.unsqueeze(-2)).pow(2)
     best = (sq / ref.pow(2)).sum(-1).sum(1).argmin(-1)  # [N]
     rows = sq[torch.arange(len(best)), :, best]  # [N, H, out]
     rms = rows.reshape(-1, rows.shape[-1]).mean(0).sqrt()
