@@ -339,7 +339,8 @@ class SILIAgent:
         obs, act, rew = (torch.from_numpy(x[idx]) for x in (b.obs, b.act, b.rew))
         if scale is None:
             scale = self._replay_target_scale()
-        loglik = self.model.log_likelihoods(obs[:, :-1], act, obs[:, 1:], rew, scale).numpy()
+        loglik = self.model.step_log_likelihoods(obs[:, :-1], act, obs[:, 1:], rew, scale)
+        loglik = loglik.sum(1).numpy()  # log p(tau | k) of each interaction
         post = np.zeros((len(idx), self.zdim), np.float32)
         ll = loglik[:, in_use]
         ll = np.exp(ll - ll.max(-1, keepdims=True))

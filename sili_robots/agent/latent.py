@@ -141,19 +141,6 @@ class LatentModel(nn.Module):
         return diff.pow(2).mean(0).sqrt().amax(-1)
 
     @torch.no_grad()
-    def log_likelihoods(
-        self,
-        obs: torch.Tensor,
-        act: torch.Tensor,
-        next_obs: torch.Tensor,
-        rew: torch.Tensor,
-        scale: torch.Tensor,
-    ) -> torch.Tensor:
-        """[N, k]: log p(tau | k) of each interaction under each category's decoder head, a
-        unit-variance Gaussian on targets in units of ``scale`` (constants dropped)."""
-        return self.step_log_likelihoods(obs, act, next_obs, rew, scale).sum(1)
-
-    @torch.no_grad()
     def step_log_likelihoods(
         self,
         obs: torch.Tensor,
@@ -162,7 +149,8 @@ class LatentModel(nn.Module):
         rew: torch.Tensor,
         scale: torch.Tensor,
     ) -> torch.Tensor:
-        """[..., k]: the same log-likelihood for each transition on its own."""
+        """[..., k]: log p(s' - s, r | s, a, k) of each transition under each category's decoder
+        head, a unit-variance Gaussian on targets in units of ``scale`` (constants dropped)."""
         target = decoder_targets(obs, next_obs, rew) / scale
         heads = self._heads(obs, act) / scale  # [..., k, out]
         return -0.5 * (heads - target.unsqueeze(-2)).pow(2).sum(-1)
