@@ -614,3 +614,24 @@ def test_last_step_encoder_reads_the_last_transition_itself():
     assert agent.model.last_step and agent.model.head.in_features == 3 * 32
     with pytest.raises(ConfigError, match="latent_last_step must be true or false, got 1"):
         method_config("sili", latent_last_step=1)
+
+
+def test_refreshes_use_few_batch_sizes_and_the_same_latents(monkeypatch):
+    """Every distinct batch shape costs memory for the rest of a run (oneDNN kernels,
+    allocator fragments), so refreshes pad their chunks to a few sizes."""
+    import sili_robots.agent.agent as agent_module
+
+    monkeypatch.setattr(agent_module, "REFRESH_CHUNK", 8)
+    agent = _agent(latent="continuous")
+    encode, sizes = agent._encode, []
+    agent._encode = lambda idx: sizes.append(len(idx)) or encode(idx)
+    for n in range(1, 22):
+        _fill(agent, 1)
+        agent.refresh_latents()
+        assert agent.buffer.n == n and len(agent.Z) == n + 1
+    assert set(sizes) == {1, 2, 4, 8}
+    one_by_one = np.concatenate([encode(np.array([j])) for j in range(21)])
+    np.testing.assert_allclose(agent.Z[1:], one_by_one, atol=1e-6)
+    np.testing.assert_array_equal(agent_module.pad_rows(np.arange(5)), [0, 1, 2, 3, 4, 4, 4, 4])
+    assert [agent_module.padded_size(m) for m in (3, 64, 65, 130, 512)] == [4, 64, 128, 192, 512]
+    assert agent_module.largest_power_of_two(700) == 512

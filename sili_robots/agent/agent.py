@@ -52,6 +52,24 @@ from sili_robots.agent.latent_filter import (
 from sili_robots.agent.sac import SAC
 from sili_robots.agent.smirl import RunningGaussian
 
+REFRESH_CHUNK = 512  # interactions per batch when recomputing latents over the replay
+
+
+def largest_power_of_two(n: int) -> int:
+    """The largest power of two <= n (n >= 1)."""
+    return 1 << (n.bit_length() - 1)
+
+
+def padded_size(m: int) -> int:
+    """A batch of ``m`` rows runs as the next power of two up to 64, else the next multiple of
+    64: at most 14 shapes for chunks of up to 512, and at most 63 extra rows."""
+    return 1 << max(m - 1, 0).bit_length() if m <= 64 else -(-m // 64) * 64
+
+
+def pad_rows(idx: np.ndarray) -> np.ndarray:
+    """``idx`` with its last entry repeated up to ``padded_size`` entries."""
+    return np.pad(idx, (0, padded_size(len(idx)) - len(idx)), mode="edge")
+
 
 @dataclass
 class InteractionStats:
@@ -252,7 +270,7 @@ class SILIAgent:
         b = self.buffer
         n = b.n
         self.filter_in_use = np.unique(self.Z[1 : n + 1].argmax(-1))
-        recent = np.arange(max(0, n - 512), n)
+        recent = np.arange(n - min(REFRESH_CHUNK, largest_power_of_two(n)), n)  # few shapes
         obs, act, rew = (torch.from_numpy(x[recent]) for x in (b.obs, b.act, b.rew))
         self.filter_scale = residual_scale(self.model, obs, act, rew, self.filter_in_use)
         self.ZF = self._in_chunks(self._filter_rows, n)
@@ -367,11 +385,16 @@ class SILIAgent:
         return self._in_chunks(self._encode, n)
 
     def _in_chunks(self, fn: Callable[[np.ndarray], np.ndarray], n: int) -> np.ndarray:
-        """``fn`` over stored interactions 0..n-1 in chunks of 512, rows concatenated."""
-        return np.concatenate(
-            [fn(np.arange(s, min(s + 512, n))) for s in range(0, n, 512)]
-            or [np.zeros((0, self.zdim), np.float32)]
-        )
+        """``fn`` over stored interactions 0..n-1 in chunks of ``REFRESH_CHUNK``, rows
+        concatenated. Each chunk is padded (``pad_rows``; the extra rows dropped), so a run's
+        refreshes use at most 14 batch shapes: every new shape leaves memory behind (oneDNN's
+        kernels for it and the allocator's fragments), and a new last chunk at each refresh grew
+        a run by gigabytes."""
+        parts = [np.zeros((0, self.zdim), np.float32)] if n == 0 else []
+        for start in range(0, n, REFRESH_CHUNK):
+            idx = np.arange(start, min(start + REFRESH_CHUNK, n))
+            parts.append(fn(pad_rows(idx))[: len(idx)])
+        return np.concatenate(parts)
 
     def _stats(self, j: int, next_first: np.ndarray) -> InteractionStats:
         if self.cfg.latent == "partial":

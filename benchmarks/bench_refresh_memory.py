@@ -1,0 +1,105 @@
+"""Resident memory of a run's latent refreshes: chunks padded to powers of two (the agent)
+against unpadded chunks (the reference: the agent before the padding), each in a fresh process.
+
+A refresh recomputes every cached latent (and, with ``latent_filter``, every per-step category)
+over the replay in chunks of 512 interactions; the last chunk's size changes at every refresh.
+Each new batch shape leaves memory behind in the process, so this measures what a real
+agent holds after N interactions of a run, refreshing every 10 as in training. The stored
+interactions are random (memory does not depend on their values) and no SAC update runs (its
+batches have one fixed shape). Both variants must produce the same latents; the script checks.
+
+    python benchmarks/bench_refresh_memory.py [--interactions 1500] [--configs continuous,filter]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+CONFIGS = {
+    "continuous": {"latent": "continuous", "latent_last_step": True},
+    "filter": {"latent": "discrete", "latent_last_step": True, "latent_filter": 0.1},
+}
+H, OBS, ACT = 50, 3, 2  # Circle's interaction length and sizes
+
+
+def rss_mib() -> float:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def measure(config: str, padded: bool, interactions: int) -> dict:
+    """One variant in this process: RSS after every 250 interactions, time, final latents."""
+    import torch
+
+    import sili_robots.agent.agent as agent_module
+    from sili_robots.agent import SILIAgent, method_config
+
+    torch.set_num_threads(1)
+    if not padded:
+        agent_module.pad_rows = lambda idx: idx  # the reference: chunks as they come ...
+        agent_module.largest_power_of_two = lambda n: n  # ... and the filter's scale on all n
+    cfg = method_config("sili", **CONFIGS[config])
+    agent = SILIAgent(cfg, obs_dim=OBS, act_dim=ACT, horizon=H, strategy_dim=2, seed=0)
+    rng = np.random.default_rng(0)
+    rss, start = {}, time.perf_counter()
+    for j in range(interactions):
+        agent.observe_interaction(
+            rng.normal(size=(H + 1, OBS)).astype(np.float32),
+            rng.uniform(-1, 1, (H, ACT)).astype(np.float32),
+            rng.normal(size=H).astype(np.float32),
+            rng.normal(size=OBS).astype(np.float32),
+            float(j % 3),
+            np.zeros(2, np.float32),
+            {"strategy": np.zeros(2, np.float32)},
+        )
+        if (j + 1) % 250 == 0:
+            rss[j + 1] = round(rss_mib())
+    return {
+        "rss": rss,
+        "seconds": time.perf_counter() - start,
+        "Z": agent.Z.tolist(),
+        "ZF": agent.ZF.tolist() if agent.filtering else [],
+    }
+
+
+def run_child(config: str, padded: bool, interactions: int) -> dict:
+    cmd = [sys.executable, __file__, "--child", config, str(int(padded)), str(interactions)]
+    return json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True).stdout)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    p.add_argument("--interactions", type=int, default=1500)
+    p.add_argument("--configs", default="continuous,filter")
+    p.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    args = p.parse_args()
+    if args.child:
+        config, padded, n = args.child
+        print(json.dumps(measure(config, padded == "1", int(n))))
+        return
+    for config in args.configs.split(","):
+        if config not in CONFIGS:
+            p.error(f"unknown config {config!r}; allowed: {', '.join(CONFIGS)}")
+        ref = run_child(config, False, args.interactions)
+        new = run_child(config, True, args.interactions)
+        print(f"{config}: resident MiB after N interactions (unpadded reference -> padded)")
+        for n in ref["rss"]:
+            r, a = ref["rss"][n], new["rss"][n]
+            print(f"  {n:>5}: {r:>6} -> {a:>6}   ({r / a:.1f}x less)")
+        dz = np.abs(np.array(ref["Z"]) - np.array(new["Z"])).max()
+        same_zf = ref["ZF"] == new["ZF"]
+        print(
+            f"  time {ref['seconds']:.0f} s -> {new['seconds']:.0f} s; latents max difference "
+            f"{dz:.1e}; filtered categories identical: {same_zf}"
+        )
+
+
+if __name__ == "__main__":
+    main()
