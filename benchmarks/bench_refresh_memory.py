@@ -1,5 +1,6 @@
-"""Resident memory of a run's latent refreshes: chunks padded to powers of two (the agent)
-against unpadded chunks (the reference: the agent before the padding), each in a fresh process.
+"""Resident memory of a run's latent refreshes: chunks padded to a few sizes (the agent,
+``pad_rows``) against unpadded chunks (the reference: the agent before the padding), each in a
+fresh process.
 
 A refresh recomputes every cached latent (and, with ``latent_filter``, every per-step category)
 over the replay in chunks of 512 interactions; the last chunk's size changes at every refresh.
