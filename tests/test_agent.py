@@ -12,6 +12,7 @@ from sili_robots.agent import (
     BetaSchedule,
     DiscountSchedule,
     EntropySchedule,
+    LearningRateSchedule,
     SILIAgent,
     method_config,
 )
@@ -305,6 +306,31 @@ def test_discount_schedule_sets_the_critic_targets_gamma_at_each_update():
         method_config("sili", gamma_schedule=DiscountSchedule([(0, 0.99), (9, 1.5)]))
     with pytest.raises(ConfigError, match="give gamma_schedule with --discount-schedule"):
         method_config("sili", gamma_schedule={"points": [[0, 0.99]]})
+
+
+def test_lr_schedule_sets_every_sac_optimizers_step_size_at_each_update():
+    """A late smaller step: actor, critics and temperature all take the scheduled rate."""
+    schedule = LearningRateSchedule([(4, 3e-4), (6, 3e-5)])
+    agent = _agent(lr_schedule=schedule, random_interactions=0)
+    sac = agent.sac
+    optimizers = (sac.actor_opt, sac.critic_opt, sac.alpha_opt)
+    assert {g["lr"] for o in optimizers for g in o.param_groups} == {3e-4}
+    _fill(agent, 8)
+    seen, moved = {}, {}
+    for j in (3, 5, 7):
+        before = [p.detach().clone() for p in sac.actor.parameters()]
+        agent.update(j)
+        (seen[j],) = {g["lr"] for o in optimizers for g in o.param_groups}
+        after = sac.actor.parameters()
+        moved[j] = max(float((p - q).abs().max()) for p, q in zip(after, before, strict=True))
+    # Adam's steps scale with the rate: a tenth of it moves the weights far less
+    assert moved[7] < moved[3] / 3, moved
+    assert seen == pytest.approx({3: 3e-4, 5: 1.65e-4, 7: 3e-5})
+    saved = AgentConfig.from_dict(agent.cfg.to_dict())
+    assert saved.lr_schedule == schedule and saved.lr_at(5) == pytest.approx(1.65e-4)
+    assert method_config("sili").lr_at(5) == 3e-4
+    with pytest.raises(ConfigError, match=r"learning rate must be in \[0, 1\], got -0.1"):
+        method_config("sili", lr_schedule=LearningRateSchedule([(0, 3e-4), (9, -0.1)]))
 
 
 def test_mistyped_settings_fail_by_name():

@@ -62,6 +62,7 @@ def test_schedules_reach_every_run_and_b_schedules_only_where_b_is_free():
         beta_schedule=[(250, 0.0), (300, 0.5)],
         target_entropy_schedule=[(2000, -2.0), (2100, -4.0)],
         gamma_schedule=[(1600, 0.99), (1700, 0.998)],
+        lr_schedule=[(2200, 3e-4), (2400, 3e-5)],
     )
     by_name = {r.name: r.config.agent for r in expand(spec)}
     names = {"circle-3__sili-bschedule__s0", "circle-3__lili__s0", "circle-3__oracle__s0"}
@@ -72,6 +73,7 @@ def test_schedules_reach_every_run_and_b_schedules_only_where_b_is_free():
     for agent in by_name.values():
         assert agent.target_entropy_at(2050, 2) == -3.0
         assert agent.gamma_at(2000) == 0.998
+        assert agent.lr_at(2300) == pytest.approx(1.65e-4)
     # the spec goes through sweep.json as JSON and plans the same runs again
     again = SweepSpec.from_dict(json.loads(json.dumps(spec.to_dict())))
     assert [r.config.to_dict() for r in expand(again)] == [r.config.to_dict() for r in expand(spec)]
@@ -117,6 +119,10 @@ def test_latent_kind_other_than_the_default_is_named():
         (
             {"gamma_schedule": [(0, 0.99)], "agent_overrides": {"gamma": 0.9}},
             "one of --set gamma and --discount-schedule",
+        ),
+        (
+            {"lr_schedule": [(0, 3e-4)], "agent_overrides": {"lr": 1e-3}},
+            "one of --set lr and --lr-schedule",
         ),
         ({"methods": ["lili"], "beta_schedule": [(0, 0.5)]}, "--beta-schedule applies to"),
         ({"beta_schedule": [(300, 0.5), (250, 0.0)]}, "interactions must increase"),

@@ -85,17 +85,19 @@ def test_every_method_trains(tmp_path, method):
     assert (df["latent_category"] == -1).all() == (method in ("sac", "oracle", "smirl"))
 
 
-def test_entropy_and_discount_schedules_are_saved_with_the_run(tmp_path):
+def test_entropy_discount_and_lr_schedules_are_saved_with_the_run(tmp_path):
     """Any method takes them (Oracle too, so a late change can be compared fairly)."""
     out = tmp_path / "oracle"
     res = _sili(
         "train", "--task", "circle-3", "--method", "oracle", "--interactions", 3, "--out", out,
-        "--target-entropy-schedule", "0:-2,2:-4", "--discount-schedule", "1:0.99,2:0.998", *FAST,
+        "--target-entropy-schedule", "0:-2,2:-4", "--discount-schedule", "1:0.99,2:0.998",
+        "--lr-schedule", "1:3e-4,2:3e-5", *FAST,
     )  # fmt: skip
     assert res.returncode == 0, res.stderr
     agent = json.loads((out / "config.json").read_text())["run"]["agent"]
     assert agent["target_entropy_schedule"] == {"points": [[0, -2.0], [2, -4.0]]}
     assert agent["gamma_schedule"] == {"points": [[1, 0.99], [2, 0.998]]}
+    assert agent["lr_schedule"] == {"points": [[1, 3e-4], [2, 3e-5]]}
 
 
 @pytest.mark.parametrize("latent", ["continuous", "partial", "true"])
@@ -146,6 +148,14 @@ def test_every_latent_kind_trains(tmp_path, latent):
         (
             ["--task", "circle-3", "--discount-schedule", "0:0.99", "--set", "gamma=0.9"],
             "give one of --set gamma and --discount-schedule",
+        ),
+        (
+            ["--task", "circle-3", "--lr-schedule", "0:3e-4,2200:-1"],
+            "--lr-schedule '0:3e-4,2200:-1': -1.0 is outside the allowed range [0, 1]",
+        ),
+        (
+            ["--task", "circle-3", "--lr-schedule", "0:3e-4", "--set", "lr=1e-3"],
+            "give one of --set lr and --lr-schedule",
         ),
         (
             [

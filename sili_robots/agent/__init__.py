@@ -9,6 +9,7 @@ from sili_robots.agent.config import (
     BetaSchedule,
     DiscountSchedule,
     EntropySchedule,
+    LearningRateSchedule,
     method_config,
 )
 
@@ -21,6 +22,7 @@ __all__ = [
     "DiscountSchedule",
     "EntropySchedule",
     "InteractionStats",
+    "LearningRateSchedule",
     "SILIAgent",
     "method_config",
 ]

@@ -105,7 +105,7 @@ class SILIAgent:
             self.in_dim,
             act_dim,
             cfg.hidden,
-            cfg.lr,
+            cfg.lr_at(0),
             cfg.gamma_at(0),
             cfg.tau,
             cfg.precision,
@@ -456,6 +456,7 @@ class SILIAgent:
             beta = self.cfg.beta_at(interaction)
             self.sac.target_entropy = self.cfg.target_entropy_at(interaction, self.act_dim)
             self.sac.gamma = self.cfg.gamma_at(interaction)
+            self.sac.set_lr(self.cfg.lr_at(interaction))
             x, a, r, x2 = self.sample_batches(n_updates, beta)
             out = [self.sac.update(x[u], a[u], r[u], x2[u]) for u in range(n_updates)]
             losses["critic_loss"] = float(torch.stack([o["critic_loss"] for o in out]).mean())

@@ -140,16 +140,32 @@ class DiscountSchedule(Schedule):
     high: ClassVar[float] = 1.0
 
 
+@dataclass
+class LearningRateSchedule(Schedule):
+    """SAC's learning rate (actor, critics and temperature) over interactions.
+
+    Once the policy is near-deterministic and holds the opponent, what still moves its last step
+    across the edge is the drift of its own mean under continued updates; a smaller step size late
+    lets the mean settle where the critic puts it."""
+
+    name: ClassVar[str] = "learning rate schedule"
+    symbol: ClassVar[str] = "learning rate"
+    low: ClassVar[float] = 0.0
+    high: ClassVar[float] = 1.0
+
+
 #: the agent settings that are schedules, their kind, and the options that give them
 SCHEDULES: dict[str, type[Schedule]] = {
     "beta_schedule": BetaSchedule,
     "target_entropy_schedule": EntropySchedule,
     "gamma_schedule": DiscountSchedule,
+    "lr_schedule": LearningRateSchedule,
 }
 SCHEDULE_OPTIONS = {
     "beta_schedule": "--beta-anneal or --beta-schedule",
     "target_entropy_schedule": "--target-entropy-schedule",
     "gamma_schedule": "--discount-schedule",
+    "lr_schedule": "--lr-schedule",
 }
 
 
@@ -165,6 +181,8 @@ class AgentConfig:
     hidden: int = 256
     # SAC
     lr: float = 3e-4
+    #: SAC's learning rate over interactions (``--lr-schedule``); replaces ``lr`` when given
+    lr_schedule: LearningRateSchedule | None = None
     gamma: float = 0.99
     #: gamma over interactions (``--discount-schedule``); replaces ``gamma`` when given
     gamma_schedule: DiscountSchedule | None = None
@@ -277,6 +295,12 @@ class AgentConfig:
         if self.gamma_schedule is not None:
             return self.gamma_schedule.value(interaction)
         return self.gamma
+
+    def lr_at(self, interaction: int) -> float:
+        """SAC's learning rate for updates made after ``interaction``."""
+        if self.lr_schedule is not None:
+            return self.lr_schedule.value(interaction)
+        return self.lr
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

@@ -55,6 +55,12 @@ class SAC:
         self._critic_params = list(self.critic.parameters())
         self._target_params = list(self.critic_target.parameters())
 
+    def set_lr(self, lr: float) -> None:
+        """The step size of all three optimizers (a learning rate schedule sets it per update)."""
+        for opt in (self.actor_opt, self.critic_opt, self.alpha_opt):
+            for group in opt.param_groups:
+                group["lr"] = lr
+
     def _forward_precision(self) -> torch.autocast | nullcontext:
         if self.precision == "bfloat16":
             return torch.autocast("cpu", dtype=torch.bfloat16)

@@ -9,6 +9,7 @@ from sili_robots.agent.config import (
     BetaSchedule,
     DiscountSchedule,
     EntropySchedule,
+    LearningRateSchedule,
     Schedule,
     ScheduleT,
 )
@@ -94,6 +95,13 @@ SCHEDULE_ARGS: dict[str, tuple[str, type[Schedule], str, str, str]] = {
         "I:G,I:G,...",
         "SAC's discount gamma (default 0.99 throughout)",
         "1600:0.99,1700:0.998",
+    ),
+    "--lr-schedule": (
+        "lr_schedule",
+        LearningRateSchedule,
+        "I:LR,I:LR,...",
+        "SAC's learning rate (default 3e-4 throughout)",
+        "2200:3e-4,2400:3e-5",
     ),
 }
 

@@ -105,6 +105,8 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     schedules = schedule_args(args)
     if "gamma_schedule" in schedules and "gamma" in overrides:
         raise ConfigError("give one of --set gamma and --discount-schedule, not both")
+    if "lr_schedule" in schedules and "lr" in overrides:
+        raise ConfigError("give one of --set lr and --lr-schedule, not both")
     overrides.update(schedules)
     latent = args.latent or task_spec(args.task).default_latent
     agent = method_config(args.method, latent, **overrides)

@@ -32,9 +32,11 @@ class SweepSpec:
     betas: list[float] | None = None  # None: each method's own b
     #: (interaction, b) knots of a b schedule for every sili/smirl run (instead of ``betas``)
     beta_schedule: list[tuple[int, float]] | None = None
-    #: (interaction, target entropy) and (interaction, gamma) knots for every run
+    #: (interaction, target entropy), (interaction, gamma) and (interaction, SAC learning rate)
+    #: knots for every run
     target_entropy_schedule: list[tuple[int, float]] | None = None
     gamma_schedule: list[tuple[int, float]] | None = None
+    lr_schedule: list[tuple[int, float]] | None = None
     controllers: list[str] | None = None  # None: each task's default
     latent: str | None = None  # None: each task's default latent kind
     agent_overrides: dict[str, Any] = field(default_factory=dict)
@@ -143,6 +145,7 @@ SWEEP_OPTIONS = {
     "beta_schedule": "--beta-schedule",
     "target_entropy_schedule": "--target-entropy-schedule",
     "gamma_schedule": "--discount-schedule",
+    "lr_schedule": "--lr-schedule",
     "method": "--methods",
     "latent": "--latent",
 }
@@ -184,6 +187,8 @@ def validate(spec: SweepSpec) -> None:
         raise ConfigError("give one of --beta and --beta-schedule, not both")
     if spec.gamma_schedule is not None and "gamma" in spec.agent_overrides:
         raise ConfigError("give one of --set gamma and --discount-schedule, not both")
+    if spec.lr_schedule is not None and "lr" in spec.agent_overrides:
+        raise ConfigError("give one of --set lr and --lr-schedule, not both")
     if "controller" in spec.env_kwargs:
         raise ConfigError("give controllers with --controller, not as a task argument")
     for option, given in (("--beta", spec.betas), ("--beta-schedule", spec.beta_schedule)):
