@@ -15,6 +15,7 @@ Every method of the paper is this one agent with different settings:
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field, fields
 from itertools import pairwise
 from typing import Any, ClassVar, TypeVar
@@ -167,6 +168,16 @@ SCHEDULE_OPTIONS = {
     "gamma_schedule": "--discount-schedule",
     "lr_schedule": "--lr-schedule",
 }
+#: schedules that replace a plain setting, which may then not be given as well
+SCHEDULE_REPLACES = {"gamma_schedule": "gamma", "lr_schedule": "lr"}
+
+
+def check_schedule_overrides(schedules: Iterable[str], overrides: dict[str, Any]) -> None:
+    """Refuse a schedule given together with ``--set`` of the setting it replaces."""
+    for key in schedules:
+        setting = SCHEDULE_REPLACES.get(key)
+        if setting in overrides:
+            raise ConfigError(f"give one of --set {setting} and {SCHEDULE_OPTIONS[key]}, not both")
 
 
 @dataclass

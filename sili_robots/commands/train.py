@@ -14,6 +14,7 @@ from sili_robots.agent import (
     BetaSchedule,
     method_config,
 )
+from sili_robots.agent.config import check_schedule_overrides
 from sili_robots.commands.common import (
     add_override_args,
     add_schedule_args,
@@ -103,10 +104,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         except argparse.ArgumentTypeError as err:
             raise ConfigError(f"--beta-anneal: {err}") from None
     schedules = schedule_args(args)
-    if "gamma_schedule" in schedules and "gamma" in overrides:
-        raise ConfigError("give one of --set gamma and --discount-schedule, not both")
-    if "lr_schedule" in schedules and "lr" in overrides:
-        raise ConfigError("give one of --set lr and --lr-schedule, not both")
+    check_schedule_overrides(schedules, overrides)
     overrides.update(schedules)
     latent = args.latent or task_spec(args.task).default_latent
     agent = method_config(args.method, latent, **overrides)

@@ -14,7 +14,7 @@ from functools import cache
 from typing import Any
 
 from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, method_config
-from sili_robots.agent.config import SCHEDULES
+from sili_robots.agent.config import SCHEDULES, check_schedule_overrides
 from sili_robots.agent.matmul import default_matmul
 from sili_robots.errors import ConfigError, check_choice
 from sili_robots.runs import RunConfig
@@ -185,10 +185,8 @@ def validate(spec: SweepSpec) -> None:
             )
     if spec.betas is not None and spec.beta_schedule is not None:
         raise ConfigError("give one of --beta and --beta-schedule, not both")
-    if spec.gamma_schedule is not None and "gamma" in spec.agent_overrides:
-        raise ConfigError("give one of --set gamma and --discount-schedule, not both")
-    if spec.lr_schedule is not None and "lr" in spec.agent_overrides:
-        raise ConfigError("give one of --set lr and --lr-schedule, not both")
+    given = [key for key in SCHEDULES if getattr(spec, key) is not None]
+    check_schedule_overrides(given, spec.agent_overrides)
     if "controller" in spec.env_kwargs:
         raise ConfigError("give controllers with --controller, not as a task argument")
     for option, given in (("--beta", spec.betas), ("--beta-schedule", spec.beta_schedule)):
