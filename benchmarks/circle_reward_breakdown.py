@@ -24,7 +24,9 @@ networks) and prints, over the last ``--window`` interactions:
 * the critic's min(Q1, Q2) on the last step of an interaction, standing on the held opponent
   (radius 1), for radial actions that end at radius 0.90 ... 1.10, and the final radius of the
   policy's own (deterministic) action. The opponent is held by ending on or outside radius 1,
-  so a critic that knows this exactly peaks at or just past 1.00;
+  so a critic that knows this exactly peaks at or just past 1.00, and where the interactions
+  actually played ended (mean, spread and nearest to the centre): the margin a policy needs
+  grows with that spread;
 * for latent methods, the encoder's side of the same edge: the run's last interaction replayed
   with only its final position moved radially to radius 0.90 ... 1.10 (last action and reward
   rewritten to match), and the probability the encoder gives the category it predicts for the
@@ -99,11 +101,16 @@ def reference_cost(task: CircleEnv, location: int) -> float:
     return total
 
 
+def final_radii(agent: SILIAgent) -> np.ndarray:
+    """Where each interaction in the replay ended: the ego's distance from the centre."""
+    return np.linalg.norm(agent.buffer.obs[: agent.buffer.n, -1, :2], axis=-1)
+
+
 def latent_changes(agent: SILIAgent, metrics: pd.DataFrame, window: int) -> None:
     """Print how the latent met the true changes over the last ``window``: foreseen (split by
     how the interaction that caused them ended, clearly inside or near the edge) or late, and
     its false changes with the task reward of the interactions played with them."""
-    radius = np.linalg.norm(agent.buffer.obs[: len(metrics), -1, :2], axis=-1)
+    radius = final_radii(agent)[: len(metrics)]
     start = max(0, len(metrics) - window)
     c = foresight_by_exit(metrics, radius, CLEAR_INSIDE, start)
     masks = {k: v[start:] for k, v in change_masks(metrics).items()}
@@ -212,6 +219,11 @@ def main() -> None:
         print(
             f"  edge: Q {np.array2string(q - q.max(), precision=2)} (minus its max), "
             f"argmax radius {best:.3f}, the policy ends at {own:.3f}"
+        )
+        ended = final_radii(agent)[-args.window :]
+        print(
+            f"  the interactions played ended at radius {ended.mean():.3f} +- {ended.std():.3f} "
+            f"(min {ended.min():.3f})"
         )
         if (metrics["latent_category"] >= 0).any():  # a discrete latent to compare
             latent_changes(agent, metrics, args.window)
