@@ -30,7 +30,17 @@ networks) and prints, over the last ``--window`` interactions:
 * for latent methods, the encoder's side of the same edge: the run's last interaction replayed
   with only its final position moved radially to radius 0.90 ... 1.10 (last action and reward
   rewritten to match), and the probability the encoder gives the category it predicts for the
-  unmodified interaction. An encoder that has learned the rule switches category at 1.00.
+  unmodified interaction. An encoder that has learned the rule switches category at 1.00;
+* for latent methods, what ending nearer the circle would cost: the last interaction replayed
+  with its exit (last 10 steps) scaled radially so that it ends at radius 0.90 ... 1.40
+  (each step's distance outside radius 1 scaled by one factor, directions kept, actions and
+  rewards rewritten to match), how far the encoder's z^{j+1} then lies from the one it gives
+  the interaction as played, and the task reward of the next interaction played greedily on
+  that z^{j+1} (and the played z^j) against the opponent where that ending leaves it (moved on
+  below radius 1, held from 1 out). An encoder that has learned the rule gives the played
+  z^{j+1} and reward from 1.00 out and a z^{j+1} that finds the moved opponent below it; one
+  that changes gradually across the edge makes every ending near it cost the next
+  interaction, and the policy's margin outside the circle pays for that.
 
     python benchmarks/circle_reward_breakdown.py RUN [RUN ...] [--window 100]
 
@@ -59,6 +69,7 @@ PHASE_STEPS = 10
 RADIAL_ACTIONS = np.linspace(-1.0, 1.0, 9)
 FINAL_RADII = 1 + STEP * RADIAL_ACTIONS  # from radius 1, one step of each radial action
 CLEAR_INSIDE = 0.9  # a final radius below this is an exit inside on purpose, not a slip
+EXIT_RADII = np.array([0.90, 0.95, 0.99, 1.01, 1.05, 1.10, 1.15, 1.20, 1.30, 1.40])
 
 
 def load_run(run: Path) -> tuple[SILIAgent, CircleEnv, pd.DataFrame]:
@@ -166,27 +177,78 @@ def edge_profile(agent: SILIAgent, task: CircleEnv, location: int) -> tuple[np.n
     return q.numpy(), final_radius
 
 
-@torch.no_grad()
-def encoder_edge(agent: SILIAgent, task: CircleEnv, location: int) -> np.ndarray | None:
-    """P(the held category) for the last interaction with its final position moved radially."""
-    if agent.model is None or agent.cfg.latent != "discrete":
-        return None
+def rewritten_last_interaction(
+    agent: SILIAgent, task: CircleEnv, location: int, positions: np.ndarray, steps: int
+) -> torch.Tensor:
+    """The last stored interaction as transitions: row 0 as played, then one row per entry of
+    ``positions`` ([rows, steps, 2]), which replaces its last ``steps`` positions (the actions
+    and rewards of those steps rewritten to match)."""
     j = agent.buffer.n - 1
-    # row 0: the interaction as played; rows 1..: its final position moved to each radius
-    rows = 1 + len(FINAL_RADII)
+    rows = 1 + len(positions)
     obs, act, rew = (
         np.repeat(x[j : j + 1], rows, 0)
         for x in (agent.buffer.obs, agent.buffer.act, agent.buffer.rew)
     )
     angle = task.angles[location]
+    opponent = np.array([np.cos(angle), np.sin(angle)], np.float32)
+    obs[1:, -steps:, :2] = positions
+    act[1:, -steps:] = np.clip((obs[1:, 1:, :2] - obs[1:, :-1, :2])[:, -steps:] / STEP, -1, 1)
+    rew[1:, -steps:] = -np.linalg.norm(positions - opponent, axis=-1)
+    return transitions(*map(torch.from_numpy, (obs, act, rew)))
+
+
+@torch.no_grad()
+def encoder_edge(agent: SILIAgent, task: CircleEnv, location: int) -> np.ndarray | None:
+    """P(the held category) for the last interaction with its final position moved radially."""
+    if agent.model is None or agent.cfg.latent != "discrete":
+        return None
+    angle = task.angles[location]
     out = np.array([np.cos(angle), np.sin(angle)], np.float32)
-    final = np.outer(FINAL_RADII, out).astype(np.float32)
-    obs[1:, -1, :2] = final
-    act[1:, -1] = np.clip((final - obs[1:, -2, :2]) / STEP, -1.0, 1.0)
-    rew[1:, -1] = -np.linalg.norm(final - out, axis=-1)
-    logits = agent.model.encode_logits(transitions(*map(torch.from_numpy, (obs, act, rew))))
+    finals = np.outer(FINAL_RADII, out).astype(np.float32)[:, None]
+    logits = agent.model.encode_logits(rewritten_last_interaction(agent, task, location, finals, 1))
     held = int(logits[0].argmax())
     return torch.softmax(logits[1:], -1)[:, held].numpy()
+
+
+@torch.no_grad()
+def greedy_interaction(agent: SILIAgent, task: CircleEnv, location: int, z: np.ndarray) -> float:
+    """Task reward of one interaction played with the deterministic action on latents ``z``
+    (z^j then z^{j-1}, as the policy reads them) against the opponent at ``location``."""
+    obs, _ = task.reset(options={"restart": True})
+    task.location = location
+    total = 0.0
+    for _ in range(task.horizon):
+        x = torch.from_numpy(np.concatenate([obs, z]).astype(np.float32)).unsqueeze(0)
+        obs, reward, _, _, _ = task.step(agent.sac.act(x, deterministic=True)[0].numpy())
+        total += reward
+    return total
+
+
+@torch.no_grad()
+def ending_cost(
+    agent: SILIAgent, task: CircleEnv, location: int
+) -> tuple[np.ndarray, np.ndarray, float] | None:
+    """For the last interaction's exit scaled to end at each of ``EXIT_RADII``: how far
+    z^{j+1} lies from the played one, and the next interaction's greedy task reward on it
+    against the opponent where that ending leaves it (then the reward as played). None for
+    runs without a latent model."""
+    if agent.model is None:
+        return None
+    n = agent.buffer.n
+    exit_path = agent.buffer.obs[n - 1, -PHASE_STEPS:, :2]
+    radius = np.linalg.norm(exit_path, axis=-1, keepdims=True)
+    scale = (EXIT_RADII - 1) / (radius[-1] - 1)  # of each step's distance outside radius 1
+    paths = exit_path / radius * (1 + (radius - 1) * scale[:, None, None])
+    traj = rewritten_last_interaction(agent, task, location, paths.astype(np.float32), PHASE_STEPS)
+    z = agent._grouped(agent.model.encode(traj).numpy())
+    previous = [agent.Z[n - 1]] if agent.n_latents == 2 else []
+    moved_on = (location + 1) % len(task.angles)  # where ending inside sends the opponent
+    where = [location] + [moved_on if task.ends_inside(p[-1]) else location for p in paths]
+    rewards = [
+        greedy_interaction(agent, task, loc, np.concatenate([zk, *previous]))
+        for zk, loc in zip(z, where, strict=True)
+    ]
+    return np.linalg.norm(z[1:] - z[0], axis=-1), np.array(rewards[1:]), rewards[0]
 
 
 def main() -> None:
@@ -232,6 +294,19 @@ def main() -> None:
         p_held = encoder_edge(agent, task, location)
         if p_held is not None:
             print(f"  encoder: P(held category) {np.array2string(p_held, precision=2)}")
+        cost = ending_cost(agent, task, location)
+        if cost is not None and held.nunique() == 1:
+            dz, rewards, played = cost
+            radii, moved = (
+                np.array2string(x, precision=2, floatmode="fixed") for x in (EXIT_RADII, dz)
+            )
+            print(
+                f"  last interaction's exit scaled to end at radius {radii}: z^(j+1) moves by "
+                f"{moved} from the played one; the greedy next interaction, against the "
+                f"opponent where that ending leaves it, scores "
+                f"{np.array2string(rewards, precision=1, floatmode='fixed')} "
+                f"(as played: {played:.2f})"
+            )
 
 
 if __name__ == "__main__":
