@@ -40,7 +40,9 @@ networks) and prints, over the last ``--window`` interactions:
   below radius 1, held from 1 out). An encoder that has learned the rule gives the played
   z^{j+1} and reward from 1.00 out and a z^{j+1} that finds the moved opponent below it; one
   that changes gradually across the edge makes every ending near it cost the next
-  interaction, and the policy's margin outside the circle pays for that.
+  interaction, and the policy's margin outside the circle pays for that. Next to it, how many
+  interactions of the whole replay ended within 0.05 of the edge near the held location, on
+  each side: the examples the encoder has to learn the edge from.
 
     python benchmarks/circle_reward_breakdown.py RUN [RUN ...] [--window 100]
 
@@ -69,6 +71,7 @@ PHASE_STEPS = 10
 RADIAL_ACTIONS = np.linspace(-1.0, 1.0, 9)
 FINAL_RADII = 1 + STEP * RADIAL_ACTIONS  # from radius 1, one step of each radial action
 CLEAR_INSIDE = 0.9  # a final radius below this is an exit inside on purpose, not a slip
+EDGE_BAND = 0.05  # endings this close to radius 1 are where the encoder must tell the sides apart
 EXIT_RADII = np.array([0.90, 0.95, 0.99, 1.01, 1.05, 1.10, 1.15, 1.20, 1.30, 1.40])
 
 
@@ -115,6 +118,23 @@ def reference_cost(task: CircleEnv, location: int) -> float:
 def final_radii(agent: SILIAgent) -> np.ndarray:
     """Where each interaction in the replay ended: the ego's distance from the centre."""
     return np.linalg.norm(agent.buffer.obs[: agent.buffer.n, -1, :2], axis=-1)
+
+
+def edge_examples(
+    agent: SILIAgent, task: CircleEnv, metrics: pd.DataFrame, location: int
+) -> tuple[int, int]:
+    """How many stored interactions against the opponent at ``location`` ended within
+    ``EDGE_BAND`` of its edge near it (within 30 degrees): inside (each moved it on) and
+    outside (each held it). They are all the encoder has to learn where the edge is."""
+    n = min(len(metrics), agent.buffer.n)
+    final = agent.buffer.obs[:n, -1, :2]
+    radius = np.linalg.norm(final, axis=-1)
+    angle = task.angles[location]
+    near = final @ np.array([np.cos(angle), np.sin(angle)]) > radius * np.cos(np.pi / 6)
+    there = near & (metrics["strategy_id"].to_numpy()[:n] == location)
+    inside = there & (radius >= 1 - EDGE_BAND) & (radius < 1)
+    outside = there & (radius >= 1) & (radius < 1 + EDGE_BAND)
+    return int(inside.sum()), int(outside.sum())
 
 
 def latent_changes(agent: SILIAgent, metrics: pd.DataFrame, window: int) -> None:
@@ -298,7 +318,8 @@ def main() -> None:
         if cost is not None and held.nunique() == 1:
             dz, rewards, played = cost
             radii, moved = (
-                np.array2string(x, precision=2, floatmode="fixed") for x in (EXIT_RADII, dz)
+                np.array2string(x, precision=2, floatmode="fixed", suppress_small=True)
+                for x in (EXIT_RADII, dz)
             )
             print(
                 f"  last interaction's exit scaled to end at radius {radii}: z^(j+1) moves by "
@@ -306,6 +327,11 @@ def main() -> None:
                 f"opponent where that ending leaves it, scores "
                 f"{np.array2string(rewards, precision=1, floatmode='fixed')} "
                 f"(as played: {played:.2f})"
+            )
+            inside, outside = edge_examples(agent, task, metrics, location)
+            print(
+                f"  the replay's endings near this location within {EDGE_BAND} of the edge: "
+                f"{inside} inside (each moved the opponent on), {outside} outside"
             )
 
 
