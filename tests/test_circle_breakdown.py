@@ -1,0 +1,96 @@
+"""The Circle breakdown's counterfactual endings, on a short real run: the rewritten interaction
+ends where asked, endings inside are played against the opponent moved on, and the replay's
+endings near the edge are counted on the right side."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pytest
+import torch
+from fast_settings import FAST_ARGS
+
+from sili_robots.cli import main
+from sili_robots.tasks.circle import STEP
+
+SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "circle_reward_breakdown.py"
+
+
+@pytest.fixture(scope="module")
+def breakdown() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("circle_reward_breakdown", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("breakdown") / "run"
+    args = ["train", "--task", "circle-3", "--method", "sili", "--latent", "continuous"]
+    args += ["--interactions", "8", "--seed", "0", "--out", str(out), "--no-progress"]
+    assert main([*args, "--set", "latent_last_step=true", *FAST_ARGS]) == 0
+    return out
+
+
+def test_rewritten_interaction_ends_where_asked(breakdown: ModuleType, run: Path) -> None:
+    agent, task, _ = breakdown.load_run(run)
+    location = 0
+    goal = np.array([np.cos(task.angles[location]), np.sin(task.angles[location])])
+    finals = np.array([[[0.0, 0.95]], [[0.0, 1.07]]], np.float32)
+    traj = breakdown.rewritten_last_interaction(agent, task, location, finals, 1)
+    b, j = agent.buffer, agent.buffer.n - 1
+    obs_dim = b.obs.shape[-1]
+    played = torch.cat(
+        [torch.from_numpy(x[j]) for x in (b.obs[:, :-1], b.act, b.rew[..., None], b.obs[:, 1:])],
+        -1,
+    )
+    assert torch.equal(traj[0], played)  # row 0 is the interaction as played
+    last = traj[1:, -1]
+    next_pos = last[:, -obs_dim:][:, :2].numpy()
+    np.testing.assert_allclose(next_pos, finals[:, 0])
+    reward = last[:, obs_dim + 2].numpy()  # after s (obs_dim) and a (2)
+    np.testing.assert_allclose(reward, -np.linalg.norm(finals[:, 0] - goal, axis=-1), rtol=1e-6)
+    action = last[:, obs_dim : obs_dim + 2].numpy()
+    prev = last[:, :2].numpy()
+    expected = np.clip((finals[:, 0] - prev) / STEP, -1, 1)
+    np.testing.assert_allclose(action, expected, rtol=1e-5, atol=1e-6)
+    assert torch.equal(traj[1:, :-1], played[None, :-1].expand(2, -1, -1))  # earlier steps kept
+
+
+def test_ending_inside_is_played_against_the_moved_on_opponent(
+    breakdown: ModuleType, run: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    agent, task, _ = breakdown.load_run(run)
+    played_at: list[int] = []
+
+    def record(agent: object, task: object, location: int, z: np.ndarray) -> float:
+        played_at.append(location)
+        return -float(location)
+
+    monkeypatch.setattr(breakdown, "greedy_interaction", record)
+    dz, rewards, as_played = breakdown.ending_cost(agent, task, 2)
+    radii = breakdown.EXIT_RADII
+    assert dz.shape == rewards.shape == radii.shape
+    assert played_at[0] == 2 and as_played == -2.0
+    np.testing.assert_array_equal(played_at[1:], np.where(radii < 1, 0, 2))  # 2 -> 0 moved on
+
+
+def test_edge_examples_count_each_side_near_the_location(breakdown: ModuleType, run: Path) -> None:
+    agent, task, metrics = breakdown.load_run(run)
+    location = 1
+    direction = np.array([np.cos(task.angles[location]), np.sin(task.angles[location])])
+    other = np.array([np.cos(task.angles[0]), np.sin(task.angles[0])])
+    agent.buffer.obs[:, -1, :2] = 0.0  # every stored interaction ends at the centre ...
+    placed = {0: 0.97 * direction, 1: 1.03 * direction, 2: 1.04 * direction, 3: 0.98 * other}
+    placed |= {4: 1.2 * direction}  # ... but these (4: outside the band)
+    for j, final in placed.items():
+        agent.buffer.obs[j, -1, :2] = final
+    metrics["strategy_id"] = location
+    metrics.loc[2, "strategy_id"] = 0  # the opponent was elsewhere: not an example
+    assert breakdown.edge_examples(agent, task, metrics, location) == (1, 1)
