@@ -75,6 +75,12 @@ EDGE_BAND = 0.05  # endings this close to radius 1 are where the encoder must te
 EXIT_RADII = np.array([0.90, 0.95, 0.99, 1.01, 1.05, 1.10, 1.15, 1.20, 1.30, 1.40])
 
 
+def location_direction(task: CircleEnv, location: int) -> np.ndarray:
+    """Unit vector to a location on the circle (the opponent's position when it is there)."""
+    angle = task.angles[location]
+    return np.array([np.cos(angle), np.sin(angle)], np.float32)
+
+
 def load_run(run: Path) -> tuple[SILIAgent, CircleEnv, pd.DataFrame]:
     cfg = read_config(run)
     env = make_run_env(cfg)
@@ -104,8 +110,7 @@ def reference_cost(task: CircleEnv, location: int) -> float:
     """Distance summed over an interaction by the per-step closest-approach path."""
     grid = np.linspace(-1.0, 1.0, 201)
     actions = np.stack(np.meshgrid(grid, grid), -1).reshape(-1, 2)
-    angle = task.angles[location]
-    goal = np.array([np.cos(angle), np.sin(angle)])
+    goal = location_direction(task, location)
     pos, total = task.start.astype(float), 0.0
     for _ in range(task.horizon):
         nxt = np.clip(pos + STEP * actions, -ARENA, ARENA)
@@ -127,10 +132,9 @@ def edge_examples(
     ``EDGE_BAND`` of its edge near it (within 30 degrees): inside (each moved it on) and
     outside (each held it). They are all the encoder has to learn where the edge is."""
     n = min(len(metrics), agent.buffer.n)
+    radius = final_radii(agent)[:n]
     final = agent.buffer.obs[:n, -1, :2]
-    radius = np.linalg.norm(final, axis=-1)
-    angle = task.angles[location]
-    near = final @ np.array([np.cos(angle), np.sin(angle)]) > radius * np.cos(np.pi / 6)
+    near = final @ location_direction(task, location) > radius * np.cos(np.pi / 6)
     there = near & (metrics["strategy_id"].to_numpy()[:n] == location)
     inside = there & (radius >= 1 - EDGE_BAND) & (radius < 1)
     outside = there & (radius >= 1) & (radius < 1 + EDGE_BAND)
@@ -183,8 +187,7 @@ def continuous_latent_changes(metrics: pd.DataFrame, window: int) -> None:
 
 def edge_profile(agent: SILIAgent, task: CircleEnv, location: int) -> tuple[np.ndarray, float]:
     """min Q on the last step from the held opponent's position, for radial actions."""
-    angle = task.angles[location]
-    out = np.array([np.cos(angle), np.sin(angle)], np.float32)  # radial unit vector
+    out = location_direction(task, location)  # radial unit vector
     obs = np.array([*out, (task.horizon - 1) / task.horizon], np.float32)
     if task.oracle:
         obs = np.concatenate([obs, out])
@@ -209,8 +212,7 @@ def rewritten_last_interaction(
         np.repeat(x[j : j + 1], rows, 0)
         for x in (agent.buffer.obs, agent.buffer.act, agent.buffer.rew)
     )
-    angle = task.angles[location]
-    opponent = np.array([np.cos(angle), np.sin(angle)], np.float32)
+    opponent = location_direction(task, location)
     obs[1:, -steps:, :2] = positions
     act[1:, -steps:] = np.clip((obs[1:, 1:, :2] - obs[1:, :-1, :2])[:, -steps:] / STEP, -1, 1)
     rew[1:, -steps:] = -np.linalg.norm(positions - opponent, axis=-1)
@@ -222,8 +224,7 @@ def encoder_edge(agent: SILIAgent, task: CircleEnv, location: int) -> np.ndarray
     """P(the held category) for the last interaction with its final position moved radially."""
     if agent.model is None or agent.cfg.latent != "discrete":
         return None
-    angle = task.angles[location]
-    out = np.array([np.cos(angle), np.sin(angle)], np.float32)
+    out = location_direction(task, location)
     finals = np.outer(FINAL_RADII, out).astype(np.float32)[:, None]
     logits = agent.model.encode_logits(rewritten_last_interaction(agent, task, location, finals, 1))
     held = int(logits[0].argmax())
@@ -314,8 +315,8 @@ def main() -> None:
         p_held = encoder_edge(agent, task, location)
         if p_held is not None:
             print(f"  encoder: P(held category) {np.array2string(p_held, precision=2)}")
-        cost = ending_cost(agent, task, location)
-        if cost is not None and held.nunique() == 1:
+        cost = ending_cost(agent, task, location) if held.nunique() == 1 else None
+        if cost is not None:
             dz, rewards, played = cost
             radii, moved = (
                 np.array2string(x, precision=2, floatmode="fixed", suppress_small=True)
