@@ -6,7 +6,12 @@ import pytest
 import torch
 
 from sili_robots.agent import SILIAgent, method_config
-from sili_robots.agent.latent_filter import LOGLIK_FLOOR, filtered_categories, log_prior
+from sili_robots.agent.latent_filter import (
+    LOGLIK_FLOOR,
+    filtered_categories,
+    log_prior,
+    medoid_candidates,
+)
 from sili_robots.errors import ConfigError
 
 H = 5
@@ -143,7 +148,8 @@ def test_filter_state_survives_a_checkpoint():
     "settings, message",
     [
         ({"latent_filter": 1.0}, r"latent_filter must be in \[0, 1\), got 1.0"),
-        ({"latent_filter": 0.1, "latent": "continuous"}, "needs discrete latents"),
+        ({"latent_filter": 0.1, "latent": "partial"}, "needs learned latents"),
+        ({"latent_filter": 0.1, "latent_filter_start": -1}, "latent_filter_start must be >= 0"),
     ],
 )
 def test_bad_filter_settings_are_named(settings, message):
@@ -151,5 +157,136 @@ def test_bad_filter_settings_are_named(settings, message):
     latent = settings.pop("latent", "discrete")
     with pytest.raises(ConfigError, match=message):
         method_config("sili", latent, **settings)
-    with pytest.raises(ConfigError, match="needs discrete latents"):
+    with pytest.raises(ConfigError, match="needs learned latents"):
         method_config("sac", latent_filter=0.1)
+    assert method_config("sili", "continuous", latent_filter=0.1).latent_filter == 0.1
+
+
+# ---------------------------------------------------------------- continuous latents
+
+EPS = 0.2
+
+
+def _continuous_agent(**kw):
+    cfg = method_config(
+        "sili",
+        "continuous",
+        latent_dim=2,
+        hidden=32,
+        batch_interactions=4,
+        batch_steps=H,
+        **{"latent_filter": EPS, **kw},
+    )
+    return SILIAgent(cfg, obs_dim=3, act_dim=2, horizon=H, strategy_dim=2, seed=0)
+
+
+def _reward_from_z(agent):
+    """D(s, a, z) predicts standing still and reward 10 z_0 (z_0 in [-1, 1])."""
+    with torch.no_grad():
+        first, second, last = agent.model.decoder[0], agent.model.decoder[2], agent.model.decoder[4]
+        for layer in (first, second, last):
+            layer.weight.zero_()
+            layer.bias.zero_()
+        first.weight[0, 3 + 2] = 1.0  # input (s, a, z): z_0 is input 5
+        first.bias[0] = 2.0  # z_0 + 2 > 0 passes the ReLUs unchanged
+        second.weight[0, 0] = 1.0
+        last.weight[-1, 0] = 10.0
+        last.bias[-1] = -20.0
+
+
+def test_medoid_candidates_are_encoder_latents_one_per_cluster():
+    rng = np.random.default_rng(0)
+    centres = np.array([[0.8, 0.0], [-0.5, 0.5], [0.0, -0.9]], np.float32)
+    z = (centres[rng.integers(0, 3, 300)] + 0.02 * rng.normal(size=(300, 2))).astype(np.float32)
+    cands = medoid_candidates(z, 8, seed=3)
+    assert 3 <= len(cands) <= 8
+    assert all((z == c).all(-1).any() for c in cands)  # actual rows, never a centroid
+    nearest = np.linalg.norm(cands[:, None] - centres[None], axis=-1).argmin(-1)
+    assert set(nearest) == {0, 1, 2}  # every strategy has a candidate
+    np.testing.assert_array_equal(cands, medoid_candidates(z, 8, seed=3))  # reproducible
+    assert len(medoid_candidates(z[:1].repeat(5, 0), 8, seed=0)) == 1  # no duplicates
+
+
+def _stored_continuous_agent(**kw):
+    """Four interactions stored with rewards 0, 5, -5, 5, played on latents 0 (no history),
+    -0.5, 0.5, 0.5: the first and last predicted right, the two between wrong; z^4 (the next)
+    predicts 5."""
+    agent = _continuous_agent(**kw)
+    _reward_from_z(agent)
+    for reward in (0.0, 5.0, -5.0, 5.0):
+        _store(agent, reward)
+    agent.Z = np.array([[0, 0], [-0.5, 0], [0.5, 0], [0.5, 0], [0.5, 0]], np.float32)
+    return agent
+
+
+def test_continuous_filter_switches_to_the_latent_that_explains_the_steps():
+    agent = _stored_continuous_agent()
+    agent._refresh_filter()
+    np.testing.assert_array_equal(agent.filter_candidates, [[-0.5, 0], [0.5, 0]])
+    # residual scale of the reward: two wrong interactions of four, each off by 10
+    scale = float(agent.filter_scale[-1])
+    assert scale == pytest.approx(10 * np.sqrt(1 / 2), rel=1e-5)
+    per_step = min(0.5 * (10 / scale) ** 2, LOGLIK_FLOOR)  # evidence against z^j per step
+    prior_odds = np.log((1 - EPS) / (EPS / 2))
+    switch = int(np.ceil(prior_odds / per_step + 1e-9))  # steps until the evidence wins
+    assert 0 < switch < H
+    np.testing.assert_array_equal(agent.ZF[0], [-1] * (H + 1))  # right all along
+    np.testing.assert_array_equal(agent.ZF[1], [-1] * switch + [1] * (H + 1 - switch))
+    np.testing.assert_array_equal(agent.ZF[2], [-1] * switch + [0] * (H + 1 - switch))
+    # a candidate that predicts the same as z^j (0.5) never takes over from it
+    np.testing.assert_array_equal(agent.ZF[3], [-1] * (H + 1))
+
+    agent._reset_live()
+    obs, act = np.ones(3, np.float32), np.zeros(2, np.float32)
+    z_slot = slice(3, 5)
+    np.testing.assert_array_equal(agent.policy_input(obs)[z_slot], [0.5, 0])  # the encoder's
+    for _ in range(switch):
+        np.testing.assert_array_equal(agent.policy_input(obs)[z_slot], [0.5, 0])
+        agent.observe_step(obs, act, -5.0, obs)  # the reward of z_0 = -0.5
+    np.testing.assert_array_equal(agent.policy_input(obs)[z_slot], [-0.5, 0])
+    np.testing.assert_array_equal(agent.policy_input(obs, j=1)[z_slot], [-0.5, 0])  # stored z^1
+
+
+def test_continuous_rl_batches_put_the_candidate_acted_on_in_the_z_slot():
+    agent = _stored_continuous_agent()
+    agent._refresh_filter()
+    rng = np.random.default_rng(0)
+    agent.buffer.obs[: agent.buffer.n] = rng.normal(size=agent.buffer.obs[:4].shape)
+    agent.ZF = rng.integers(-1, 2, (4, H + 1)).astype(np.int16)
+    x, _, _, x2 = agent.sample_batches(40, beta=0.0)
+    x, x2 = x.reshape(-1, x.shape[-1]).numpy(), x2.reshape(-1, x2.shape[-1]).numpy()
+    b = agent.buffer
+    seen = {-1: 0, 0: 0, 1: 0}
+    for row, row2 in zip(x, x2, strict=True):
+        j, t = (int(i[0]) for i in np.where((b.obs[: b.n, :-1] == row[:3]).all(-1)))
+        c = int(agent.ZF[j, t])
+        seen[c] += 1
+        np.testing.assert_array_equal(row[3:5], agent.Z[j] if c < 0 else agent.filter_candidates[c])
+        if t == H - 1:
+            np.testing.assert_array_equal(row2[3:5], agent.Z[j + 1])
+    assert all(seen.values())
+
+
+@pytest.mark.parametrize("start, running", [(0, True), (100, False)])
+def test_a_checkpoint_without_the_filter_starts_it_as_a_run_would(start, running):
+    plain = _stored_continuous_agent(latent_filter=0.0)
+    agent = _continuous_agent(latent_filter_start=start)
+    agent.load_state_dict(plain.state_dict())
+    assert len(agent.ZF) == 4
+    if running:
+        reference = _stored_continuous_agent()
+        reference._refresh_filter()
+        np.testing.assert_array_equal(agent.ZF, reference.ZF)
+        np.testing.assert_array_equal(agent.filter_candidates, reference.filter_candidates)
+        assert agent._live_logp is not None
+    else:
+        assert agent.filter_scale is None and (agent.ZF == -1).all()
+        agent.refresh_latents()  # still before the start: the filter stays off
+        assert agent.filter_scale is None
+        x, _, _, _ = agent.sample_batches(2, beta=0.0)  # RL batches on the encoder's latents
+        z_rows = {tuple(r) for r in agent.Z[:4]}
+        assert {tuple(r) for r in x.reshape(-1, x.shape[-1])[:, 3:5].numpy()} <= z_rows
+    restored = _continuous_agent(latent_filter_start=start)
+    restored.load_state_dict(agent.state_dict())
+    np.testing.assert_array_equal(restored.ZF, agent.ZF)
+    np.testing.assert_array_equal(restored.filter_candidates, agent.filter_candidates)

@@ -260,6 +260,33 @@ def test_extending_a_finished_run_reproduces_the_longer_run(tmp_path):
     assert "Traceback" not in res.stderr
 
 
+def test_a_continuous_filter_started_late_leaves_the_run_unchanged_before_it(tmp_path):
+    args = ["--task", "circle-3", "--latent", "continuous", "--seed", 2, *FAST]
+    args += ["--checkpoint-every", 8, "--interactions", 24]
+    plain, filtered = tmp_path / "plain", tmp_path / "filtered"
+    assert _sili("train", *args, "--out", plain).returncode == 0
+    filter_args = ["--set", "latent_filter=0.05", "--set", "latent_filter_start=16"]
+    assert _sili("train", *args, *filter_args, "--out", filtered).returncode == 0
+    a = pd.read_csv(plain / "metrics.csv").drop(columns="wall_time")
+    b = pd.read_csv(filtered / "metrics.csv").drop(columns="wall_time")
+    # the filter starts at the refresh after interaction 19 (20 stored): row 19 logs the first
+    # updates on its latents, and every row before it is the unfiltered run's
+    pd.testing.assert_frame_equal(a.iloc[:19], b.iloc[:19])
+    assert not a.iloc[19:].equals(b.iloc[19:])
+
+    _, env, agent, _ = load_trained(filtered)
+    env.close()
+    assert agent.filter_scale is not None and len(agent.filter_candidates) >= 2
+    assert len(agent.ZF) == 24
+    # candidates are latents the encoder produced; every step acted on z^j or one of them
+    assert all((agent.Z[1:] == c).all(-1).any() for c in agent.filter_candidates)
+    n_candidates = len(agent.filter_candidates)
+    assert agent.ZF.min() >= -1 and agent.ZF.max() < n_candidates
+    np.testing.assert_array_equal(agent.ZF[:, 0], -1)  # no evidence yet: the encoder's z^j
+    res = _sili("eval", filtered, "--interactions", 2)  # greedy, the filter running step by step
+    assert res.returncode == 0 and "mean_task_reward" in res.stdout, res.stderr
+
+
 def test_a_filtered_run_records_what_it_acted_on_and_resumes_exactly(tmp_path):
     args = ["--task", "circle-3", "--seed", 1, "--checkpoint-every", 8, *FAST]
     args += ["--set", "latent_filter=0.1"]

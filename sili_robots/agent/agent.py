@@ -20,12 +20,13 @@ How the learning signal crosses interactions (the paper's Eq. 1 made concrete):
   during an interaction (``_posteriors``, ``_posterior_distance``); same credit, same step.
 * Partial observations: R_stable on each step is -flag(s_{t+1}), the observed "strategy changed"
   flag of the next observation (at the boundary: of interaction j+1's first observation).
-* ``latent_filter`` (discrete latents): within interaction j the policy acts on the filtered
-  category at each step (the encoder's z^j as prior, corrected by the decoder's likelihood of
-  the steps played so far), kept per step in ``ZF``; RL batches put ZF[j, t] in the z^j slot and
-  ZF[j, t+1] in the successor's (at the boundary the successor's latent is the encoder's
-  z^{j+1}, which no step of j+1 has corrected yet). z^{j-1} and the stability reward stay the
-  encoder's.
+* ``latent_filter``: within interaction j the policy acts on the filtered latent at each step
+  (the encoder's z^j as prior, corrected by the decoder's likelihood of the steps played so
+  far): a category for discrete latents, for continuous ones the encoder's z^j or one of the
+  candidate latents ``filter_candidates`` (medoids of the cached latents). It is kept per step
+  in ``ZF`` (-1: the encoder's z^j); RL batches put ZF[j, t] in the z^j slot and ZF[j, t+1] in
+  the successor's (at the boundary the successor's latent is the encoder's z^{j+1}, which no
+  step of j+1 has corrected yet). z^{j-1} and the stability reward stay the encoder's.
 * ``latent="true"`` (diagnostic): z^j is the true strategy's encoding and d is 1 when the true
   strategy changed, which isolates influence learning from representation learning.
 """
@@ -44,8 +45,13 @@ from sili_robots.agent.buffer import InteractionBuffer
 from sili_robots.agent.config import AgentConfig
 from sili_robots.agent.latent import LatentModel, category_groups, target_scale, transitions
 from sili_robots.agent.latent_filter import (
+    FILTER_CANDIDATES,
+    continuous_residual_scale,
+    continuous_step_logliks,
     filtered_categories,
     log_prior,
+    medoid_candidates,
+    option_log_prior,
     residual_scale,
     step_logliks,
 )
@@ -148,13 +154,16 @@ class SILIAgent:
         self.keeps_posteriors = self.uses_posterior or (
             self.model is not None and cfg.latent == "discrete" and cfg.latent_change_fraction > 0
         )
-        #: the within-interaction filter (``latent_filter``): ZF[j, t] is the category the policy
-        #: acted on at step t of stored interaction j (-1: the filter was not running yet, the
-        #: encoder's z^j stands); it starts running at the first latent refresh
+        #: the within-interaction filter (``latent_filter``): ZF[j, t] is the category (discrete)
+        #: or the index into ``filter_candidates`` (continuous) the policy acted on at step t of
+        #: stored interaction j (-1: the encoder's z^j stands, as before the filter runs); it
+        #: starts running at the first latent refresh from ``latent_filter_start`` on
         self.filtering = self.model is not None and cfg.latent_filter > 0
+        self.continuous_filter = self.filtering and cfg.latent == "continuous"
         self.ZF = np.zeros((0, horizon + 1), np.int16)
         self.filter_scale: torch.Tensor | None = None
         self.filter_in_use = np.zeros(0, int)
+        self.filter_candidates = np.zeros((0, self.zdim), np.float32)
         #: the interaction being played: log prior (None before the filter runs), evidence so
         #: far, and the category acted on before each step
         self._live_logp: np.ndarray | None = None
@@ -181,12 +190,22 @@ class SILIAgent:
     def _live_latent(self) -> np.ndarray:
         """z^j as the filter has it after the steps of the current interaction played so far."""
         c = self._live_cats[-1]
-        return self.Z[self.buffer.n] if c < 0 else np.eye(self.zdim, dtype=np.float32)[c]
+        if c < 0:
+            return self.Z[self.buffer.n]
+        if self.continuous_filter:
+            return self.filter_candidates[c]
+        return np.eye(self.zdim, dtype=np.float32)[c]
 
     def _live_category(self) -> int:
         if self._live_logp is None:
             return -1
-        return int((self._live_logp + self._live_ll).argmax())
+        best = int((self._live_logp + self._live_ll).argmax())
+        return best - 1 if self.continuous_filter else best  # option 0: the encoder's z^j
+
+    def _filter_options(self, idx: np.ndarray) -> torch.Tensor:
+        """[N, 1 + C, d] (continuous filter): each interaction's z^j, then the candidates."""
+        cands = np.broadcast_to(self.filter_candidates, (len(idx), *self.filter_candidates.shape))
+        return torch.from_numpy(np.concatenate([self.Z[idx][:, None], cands], 1))
 
     def _reset_live(self) -> None:
         """A new interaction: no evidence yet, the filter starts from the encoder's z^j."""
@@ -194,7 +213,11 @@ class SILIAgent:
             return
         self._live_ll = np.zeros(self.zdim)
         self._live_logp = None
-        if self.filter_scale is not None:
+        if self.filter_scale is not None and self.continuous_filter:
+            c = len(self.filter_candidates)
+            self._live_ll = np.zeros(1 + c)
+            self._live_logp = option_log_prior(c, self.cfg.latent_filter)
+        elif self.filter_scale is not None:
             z = self.Z[self.buffer.n][None]
             self._live_logp = log_prior(z, self.filter_in_use, self.cfg.latent_filter)[0]
         self._live_cats = [self._live_category()]
@@ -210,7 +233,14 @@ class SILIAgent:
                 torch.from_numpy(np.asarray(x, np.float32)[None]) for x in (obs, act, next_obs)
             )
             r = torch.tensor([float(rew)], dtype=torch.float32)
-            self._live_ll += step_logliks(self.model, o, a, o2, r, self.filter_scale)[0]
+            if self.continuous_filter:
+                opts = self._filter_options(np.array([self.buffer.n]))
+                o, a, o2, r = (x[None] for x in (o, a, o2, r))  # one interaction of one step
+                self._live_ll += continuous_step_logliks(
+                    self.model, o, a, o2, r, opts, self.filter_scale
+                )[0, 0]
+            else:
+                self._live_ll += step_logliks(self.model, o, a, o2, r, self.filter_scale)[0]
         self._live_cats.append(self._live_category())
 
     def random_action(self) -> np.ndarray:
@@ -261,7 +291,14 @@ class SILIAgent:
             return np.full((len(idx), self.horizon + 1), -1, np.int16)
         b = self.buffer
         obs, act, rew = (torch.from_numpy(x[idx]) for x in (b.obs, b.act, b.rew))
-        ll = step_logliks(self.model, obs[:, :-1], act, obs[:, 1:], rew, self.filter_scale)
+        prev, nxt = obs[:, :-1], obs[:, 1:]
+        if self.continuous_filter:
+            opts = self._filter_options(idx)
+            ll = continuous_step_logliks(self.model, prev, act, nxt, rew, opts, self.filter_scale)
+            logp = option_log_prior(len(self.filter_candidates), self.cfg.latent_filter)
+            logp = np.broadcast_to(logp, (len(idx), len(logp)))
+            return (filtered_categories(logp, ll) - 1).astype(np.int16)
+        ll = step_logliks(self.model, prev, act, nxt, rew, self.filter_scale)
         logp = log_prior(self.Z[idx], self.filter_in_use, self.cfg.latent_filter)
         return filtered_categories(logp, ll).astype(np.int16)
 
@@ -269,10 +306,15 @@ class SILIAgent:
         """The decoder's residual scale on the newest interactions, then every ZF row."""
         b = self.buffer
         n = b.n
-        self.filter_in_use = np.unique(self.Z[1 : n + 1].argmax(-1))
         recent = np.arange(n - min(REFRESH_CHUNK, largest_power_of_two(n)), n)  # few shapes
         obs, act, rew = (torch.from_numpy(x[recent]) for x in (b.obs, b.act, b.rew))
-        self.filter_scale = residual_scale(self.model, obs, act, rew, self.filter_in_use)
+        if self.continuous_filter:
+            self.filter_candidates = medoid_candidates(self.Z[1 : n + 1], FILTER_CANDIDATES, n)
+            z = torch.from_numpy(self.Z[recent])
+            self.filter_scale = continuous_residual_scale(self.model, obs, act, rew, z)
+        else:
+            self.filter_in_use = np.unique(self.Z[1 : n + 1].argmax(-1))
+            self.filter_scale = residual_scale(self.model, obs, act, rew, self.filter_in_use)
         self.ZF = self._in_chunks(self._filter_rows, n)
 
     def _infer_next_latent(self, j: int, next_info: dict[str, Any]) -> np.ndarray:
@@ -332,7 +374,7 @@ class SILIAgent:
         if self.keeps_posteriors:
             scale = self._replay_target_scale()
             self.P = self._in_chunks(lambda idx: self._posteriors(idx, scale), n)
-        if self.filtering and n > 0:
+        if self.filtering and n > 0 and n >= self.cfg.latent_filter_start:
             self._refresh_filter()
 
     def _replay_target_scale(self) -> torch.Tensor:
@@ -552,8 +594,13 @@ class SILIAgent:
         """The filter's latent at step t of stored interaction j (the encoder's where it was
         not running)."""
         cats = self.ZF[j, t]
-        onehot = np.eye(self.zdim, dtype=np.float32)[np.maximum(cats, 0)]
-        return np.where(cats[..., None] >= 0, onehot, z_encoder)
+        if self.continuous_filter:
+            if not len(self.filter_candidates):  # not running yet: every row is the encoder's
+                return z_encoder
+            chosen = self.filter_candidates[np.maximum(cats, 0)]
+        else:
+            chosen = np.eye(self.zdim, dtype=np.float32)[np.maximum(cats, 0)]
+        return np.where(cats[..., None] >= 0, chosen, z_encoder)
 
     def _stability_rewards(
         self, j: np.ndarray, t: np.ndarray, last: np.ndarray, s2: np.ndarray
@@ -586,6 +633,7 @@ class SILIAgent:
                 "ZF": self.ZF.copy(),
                 "scale": self.filter_scale,
                 "in_use": self.filter_in_use.copy(),
+                "candidates": self.filter_candidates.copy(),
             },
         }
         if self.model is not None:
@@ -610,4 +658,18 @@ class SILIAgent:
             f = state["filter"]
             self.ZF = np.asarray(f["ZF"], np.int16)
             self.filter_scale, self.filter_in_use = f["scale"], np.asarray(f["in_use"], int)
+            cands = f.get("candidates", np.zeros((0, self.zdim)))
+            self.filter_candidates = np.asarray(cands, np.float32)
+            if len(self.ZF) != self.buffer.n:  # saved without the filter: start it as a run would
+                self._start_filter_late()
         self._reset_live()
+
+    def _start_filter_late(self) -> None:
+        """The filter's state for a checkpoint saved without it: what a run with the filter
+        would hold at this point (no ZF rows yet before ``latent_filter_start``, else the state
+        of a refresh)."""
+        n = self.buffer.n
+        self.filter_scale = None
+        self.ZF = np.full((n, self.horizon + 1), -1, np.int16)
+        if n > 0 and n >= self.cfg.latent_filter_start:
+            self._refresh_filter()

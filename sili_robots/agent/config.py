@@ -247,12 +247,16 @@ class AgentConfig:
     #: the encoder little about where in tau^{j-1} a change is decided (e.g. the edge of the
     #: circle); see ``SILIAgent.change_pairs``
     latent_change_fraction: float = 0.0
-    #: discrete latents: the prior probability eps that the strategy in effect differs from the
-    #: encoder's z^j. Above 0 the policy acts on a within-interaction filter, the posterior over
-    #: the categories given z^j and the steps played so far under each decoder head, and the
-    #: critic learns on the same per-step latents (0 = off, the paper's fixed z^j; see
+    #: the prior probability eps that the strategy in effect differs from the encoder's z^j.
+    #: Above 0 the policy acts on a within-interaction filter, the posterior given z^j and the
+    #: steps played so far under the decoder (over the categories of discrete latents, over
+    #: z^j and encoder latents of other strategies for continuous ones), and the critic learns
+    #: on the same per-step latents (0 = off, the paper's fixed z^j; see
     #: sili_robots/agent/latent_filter.py)
     latent_filter: float = 0.0
+    #: the filter runs from the first latent refresh at or after this many interactions (0: the
+    #: first refresh), e.g. once the policy has learned to reach each strategy
+    latent_filter_start: int = 0
     #: discrete latents: what the stability reward counts as a change of strategy. "latents":
     #: the paper's d(z^j, z^{j+1}), 1 when the encoder's category changed. "posterior": the
     #: probability that the strategy in effect during interaction j (the decoder's posterior
@@ -368,11 +372,17 @@ class AgentConfig:
             )
         if not 0.0 <= self.latent_filter < 1.0:
             raise ConfigError(f"latent_filter must be in [0, 1), got {self.latent_filter}")
-        if self.latent_filter > 0 and not (self.uses_latent_model and self.latent == "discrete"):
+        if self.latent_filter > 0 and not (
+            self.uses_latent_model and self.latent in ("discrete", "continuous")
+        ):
             raise ConfigError(
-                f"latent_filter {self.latent_filter} needs discrete latents of a method with a "
-                f"latent model (sili, lili, stable with --latent discrete), got method "
+                f"latent_filter {self.latent_filter} needs learned latents (discrete or "
+                f"continuous) of a method with a latent model (sili, lili, stable), got method "
                 f"{self.method!r} with latent {self.latent!r}; allowed otherwise: 0"
+            )
+        if self.latent_filter_start < 0:
+            raise ConfigError(
+                f"latent_filter_start must be >= 0 interactions, got {self.latent_filter_start}"
             )
         if self.precision not in PRECISIONS:
             raise ConfigError(

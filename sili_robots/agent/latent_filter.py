@@ -22,12 +22,24 @@ starts faster and a wrong z^j is corrected within 2-6 steps, but the final task 
 than without the filter (-11.1 against -7.6): the categories split one strategy over several
 heads, and the filter hops between them on noise in outputs every head predicts alike. Off by
 default.
+
+Continuous latents have no heads to choose between, so the alternatives are latents the encoder
+has produced: the medoids of ``FILTER_CANDIDATES`` k-means clusters of every cached z (one per
+strategy seen, and more), each an actual encoder output, so the policy never acts on a latent
+off the encoder's range. The options at step t are the encoder's z^j (prior 1 - eps) and the
+candidates (eps shared), each scored by the Gaussian likelihood of the steps so far under
+D(s, a, z). A sibling candidate of the strategy z^j already stands for predicts the same and
+cannot overturn the prior; and where it wins, it is a latent near z^j, so the policy's input
+moves little (the hopping that hurt the discrete filter).
 """
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import torch
+from scipy.cluster.vq import kmeans2
 
 from sili_robots.agent.latent import LatentModel, decoder_targets, target_scale
 
@@ -35,6 +47,8 @@ from sili_robots.agent.latent import LatentModel, decoder_targets, target_scale
 LOGLIK_FLOOR = 10.0
 #: the residual scale never drops below this fraction of the targets' own standard deviation
 SCALE_FLOOR = 1e-2
+#: continuous latents: how many encoder latents (k-means medoids) the filter may switch to
+FILTER_CANDIDATES = 8
 
 
 @torch.no_grad()
@@ -93,3 +107,54 @@ def filtered_categories(logp: np.ndarray, ll: np.ndarray) -> np.ndarray:
     n, _, k = ll.shape
     cum = np.concatenate([np.zeros((n, 1, k)), np.cumsum(ll, axis=1)], axis=1)
     return (logp[:, None, :] + cum).argmax(-1)
+
+
+def medoid_candidates(z: np.ndarray, k: int, seed: int) -> np.ndarray:
+    """[<= k, d]: the latent of ``z`` [N, d] nearest to each of k k-means centres (k-means++
+    seeded by ``seed``, so a refresh is reproducible), duplicates dropped, in order of first
+    occurrence in ``z``."""
+    k = min(k, len(np.unique(z, axis=0)))
+    with warnings.catch_warnings():  # an empty cluster only means fewer distinct candidates
+        warnings.simplefilter("ignore")
+        centres, _ = kmeans2(z.astype(np.float64), k, minit="++", seed=np.random.default_rng(seed))
+    nearest = ((z[None] - centres[:, None]) ** 2).sum(-1).argmin(-1)
+    return z[np.unique(nearest)]
+
+
+def option_log_prior(n_candidates: int, eps: float) -> np.ndarray:
+    """[1 + C]: log prior of the options (the encoder's z^j, then the candidates)."""
+    return np.log(np.array([1.0 - eps] + [eps / n_candidates] * n_candidates))
+
+
+@torch.no_grad()
+def continuous_step_logliks(
+    model: LatentModel,
+    obs: torch.Tensor,
+    act: torch.Tensor,
+    next_obs: torch.Tensor,
+    rew: torch.Tensor,
+    options: torch.Tensor,
+    scale: torch.Tensor,
+) -> np.ndarray:
+    """[N, T, K]: the Gaussian log-likelihood (targets in units of ``scale``, constants dropped)
+    of each transition of obs [N, T, o] under D(s, a, z) for each of the options [N, K, d] (one
+    decoder pass per option, so the activations stay the size of one batch), floored."""
+    target = decoder_targets(obs, next_obs, rew) / scale
+    ll = [
+        -0.5 * ((model.decode(obs, act, options[:, i]) / scale - target) ** 2).sum(-1)
+        for i in range(options.shape[1])
+    ]
+    return torch.stack(ll, -1).clamp(min=-LOGLIK_FLOOR).numpy()
+
+
+@torch.no_grad()
+def continuous_residual_scale(
+    model: LatentModel, obs: torch.Tensor, act: torch.Tensor, rew: torch.Tensor, z: torch.Tensor
+) -> torch.Tensor:
+    """Per output, the root-mean-square error of D(s, a, z^j) on interactions obs [N, H+1, o]
+    under their own encoder latents z [N, d], floored like ``residual_scale``."""
+    prev, nxt = obs[:, :-1], obs[:, 1:]
+    ref = target_scale(prev, nxt, rew)
+    err = model.decode(prev, act, z) - decoder_targets(prev, nxt, rew)
+    rms = err.reshape(-1, err.shape[-1]).pow(2).mean(0).sqrt()
+    return torch.maximum(rms, SCALE_FLOOR * ref)
