@@ -35,6 +35,7 @@ METRIC_COLUMNS = (
     "actor_loss",
     "alpha",
     "wall_time",
+    "filter_step",
 )
 
 

@@ -147,6 +147,7 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
                     "latent_changed": int(stats.latent_changed),
                     "beta": cfg.agent.beta_at(j),
                     "wall_time": elapsed0 + time.perf_counter() - t0,
+                    "filter_step": stats.filter_step,
                     **losses,
                 }
             )

@@ -245,6 +245,20 @@ def test_continuous_filter_switches_to_the_latent_that_explains_the_steps():
         agent.observe_step(obs, act, -5.0, obs)  # the reward of z_0 = -0.5
     np.testing.assert_array_equal(agent.policy_input(obs)[z_slot], [-0.5, 0])
     np.testing.assert_array_equal(agent.policy_input(obs, j=1)[z_slot], [-0.5, 0])  # stored z^1
+    for _ in range(H - switch):
+        agent.observe_step(obs, act, -5.0, obs)
+    stats = agent.observe_interaction(
+        np.ones((H + 1, 3), np.float32),
+        np.zeros((H, 2), np.float32),
+        np.full(H, -5.0, np.float32),
+        obs,
+        0.0,
+        np.zeros(2, np.float32),
+        {},
+        refresh=False,
+    )
+    assert stats.filter_step == switch  # the step it first acted on another latent
+    np.testing.assert_array_equal(agent.ZF[4], [-1] * switch + [0] * (H + 1 - switch))
 
 
 def test_continuous_rl_batches_put_the_candidate_acted_on_in_the_z_slot():

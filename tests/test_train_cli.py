@@ -273,6 +273,8 @@ def test_a_continuous_filter_started_late_leaves_the_run_unchanged_before_it(tmp
     # updates on its latents, and every row before it is the unfiltered run's
     pd.testing.assert_frame_equal(a.iloc[:19], b.iloc[:19])
     assert not a.iloc[19:].equals(b.iloc[19:])
+    assert (b["filter_step"].iloc[:20] == -1).all()  # played before the filter ran
+    assert b["filter_step"].between(-1, 50).all()
 
     _, env, agent, _ = load_trained(filtered)
     env.close()

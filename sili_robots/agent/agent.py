@@ -84,6 +84,9 @@ class InteractionStats:
     stability_reward: float  # R_stable as the agent measured it (before weighting by b)
     latent_category: int  # argmax of z^{j+1} (-1 when there is no discrete latent)
     latent_changed: bool  # the agent's own latent changed between j and j+1
+    #: ``latent_filter``: the first step at which the policy acted on another latent than the
+    #: one it started the interaction on (-1: never, or no filter)
+    filter_step: int = -1
 
 
 class SILIAgent:
@@ -269,6 +272,7 @@ class SILIAgent:
             aux = self.smirl.log_likelihood(obs[1:]).astype(np.float32)
             self.smirl.update(obs[1:])
         j = self.buffer.add(obs, act, rew, aux, next_first, strategy_id, strategy)
+        filter_step = -1
         z_next = self._infer_next_latent(j, next_info)
         self.Z = np.concatenate([self.Z, z_next[None]])
         if self.keeps_posteriors and len(self.P) == j:  # else the next refresh fills P
@@ -278,10 +282,14 @@ class SILIAgent:
             if len(cats) != self.horizon + 1:  # not played through observe_step: replay it
                 cats = self._filter_rows(np.array([j]))[0]
             self.ZF = np.concatenate([self.ZF, np.asarray(cats, np.int16)[None]])
+            moved = np.flatnonzero(self.ZF[j] != self.ZF[j, 0])  # as acted, before a refresh
+            filter_step = int(moved[0]) if len(moved) else -1
         if refresh and self.model is not None and (j + 1) % self.latent_refresh_every == 0:
             self.refresh_latents()
         self._reset_live()
-        return self._stats(j, next_first)
+        stats = self._stats(j, next_first)
+        stats.filter_step = filter_step
+        return stats
 
     @torch.no_grad()
     def _filter_rows(self, idx: np.ndarray) -> np.ndarray:
