@@ -110,3 +110,35 @@ def foresight_by_exit(
         "foreseen_edge": int((seen & ~inside).sum()),
         "false_alarms": int(masks["false_alarms"].sum()),
     }
+
+
+def filter_corrections(df: pd.DataFrame, start: int = 0) -> dict[str, float]:
+    """How the within-interaction filter (``latent_filter``, column ``filter_step``) met the
+    opponent's moves, from interaction ``start`` on.
+
+    Row j was played against a moved opponent when its ``strategy_id`` differs from row j-1's;
+    there a correction (``filter_step`` >= 0) is what the filter is for, unless z^j foresaw the
+    move. On the other rows a correction is a false alarm: the policy left a right z^j.
+    """
+    sid = df["strategy_id"].to_numpy()
+    step = df["filter_step"].to_numpy() if "filter_step" in df else np.full(len(df), -1)
+    reward = df["task_reward"].to_numpy()
+    moved = np.r_[False, sid[1:] != sid[:-1]][start:]
+    step, reward = step[start:], reward[start:]
+    corrected = step >= 0
+
+    def mean(x: np.ndarray) -> float:
+        return float(x.mean()) if len(x) else float("nan")
+
+    return {
+        "moved": int(moved.sum()),
+        "moved_corrected": int((moved & corrected).sum()),
+        "median_step_moved": float(np.median(step[moved & corrected]))
+        if (moved & corrected).any()
+        else float("nan"),
+        "reward_moved": mean(reward[moved]),
+        "held": int((~moved).sum()),
+        "false_alarms": int((~moved & corrected).sum()),
+        "reward_false_alarms": mean(reward[~moved & corrected]),
+        "reward_held": mean(reward[~moved]),
+    }

@@ -7,6 +7,7 @@ import pytest
 from sili_robots.diagnostics import (
     change_agreement,
     change_detection,
+    filter_corrections,
     foresight_by_exit,
     latent_diagnostics,
     purity,
@@ -104,3 +105,22 @@ def test_foresight_by_exit_splits_true_changes_by_how_the_causing_interaction_en
         "false_alarms": 0,
     }
     assert foresight_by_exit(_metrics(categories, strategies), radius, start=3)["inside"] == 0
+
+
+def test_filter_corrections_split_moves_from_false_alarms():
+    df = pd.DataFrame(
+        {
+            "strategy_id": [0, 0, 1, 1, 2, 2, 2],
+            "filter_step": [-1, 3, 2, -1, -1, 5, -1],
+            "task_reward": [-5.0, -6.0, -9.0, -5.0, -30.0, -7.0, -5.0],
+        }
+    )
+    out = filter_corrections(df, start=1)
+    # moves before rows 2 (corrected at step 2) and 4 (not corrected); false alarms at 1 and 5
+    assert out["moved"] == 2 and out["moved_corrected"] == 1
+    assert out["median_step_moved"] == 2.0
+    assert out["reward_moved"] == pytest.approx(-19.5)
+    assert out["held"] == 4 and out["false_alarms"] == 2
+    assert out["reward_false_alarms"] == pytest.approx(-6.5)
+    assert out["reward_held"] == pytest.approx(-5.75)
+    assert filter_corrections(df.drop(columns="filter_step"))["false_alarms"] == 0  # no filter
