@@ -11,6 +11,7 @@ from sili_robots.agent.latent_filter import (
     filtered_categories,
     log_prior,
     medoid_candidates,
+    target_norm,
 )
 from sili_robots.errors import ConfigError
 
@@ -181,7 +182,14 @@ def _continuous_agent(**kw):
 
 
 def _reward_from_z(agent):
-    """D(s, a, z) predicts standing still and reward 10 z_0 (z_0 in [-1, 1])."""
+    """D(s, a, z) predicts standing still and reward 10 z_0 (z_0 in [-1, 1]), in the units the
+    continuous decoder is trained in: targets standardised by the replay's mean and std."""
+    b = agent.buffer
+    mean, std = (
+        float(x[-1])
+        for x in target_norm(torch.from_numpy(b.obs[: b.n]), torch.from_numpy(b.rew[: b.n]))
+    )
+    slope, offset = 10.0 / std, -mean / std  # standardised reward = slope * z_0 + offset
     with torch.no_grad():
         first, second, last = agent.model.decoder[0], agent.model.decoder[2], agent.model.decoder[4]
         for layer in (first, second, last):
@@ -190,8 +198,8 @@ def _reward_from_z(agent):
         first.weight[0, 3 + 2] = 1.0  # input (s, a, z): z_0 is input 5
         first.bias[0] = 2.0  # z_0 + 2 > 0 passes the ReLUs unchanged
         second.weight[0, 0] = 1.0
-        last.weight[-1, 0] = 10.0
-        last.bias[-1] = -20.0
+        last.weight[-1, 0] = slope
+        last.bias[-1] = offset - 2.0 * slope
 
 
 def test_medoid_candidates_are_encoder_latents_one_per_cluster():
@@ -212,9 +220,9 @@ def _stored_continuous_agent(**kw):
     -0.5, 0.5, 0.5: the first and last predicted right, the two between wrong; z^4 (the next)
     predicts 5."""
     agent = _continuous_agent(**kw)
-    _reward_from_z(agent)
     for reward in (0.0, 5.0, -5.0, 5.0):
         _store(agent, reward)
+    _reward_from_z(agent)
     agent.Z = np.array([[0, 0], [-0.5, 0], [0.5, 0], [0.5, 0], [0.5, 0]], np.float32)
     return agent
 

@@ -54,6 +54,7 @@ from sili_robots.agent.latent_filter import (
     option_log_prior,
     residual_scale,
     step_logliks,
+    target_norm,
 )
 from sili_robots.agent.sac import SAC
 from sili_robots.agent.smirl import RunningGaussian
@@ -167,6 +168,7 @@ class SILIAgent:
         self.filter_scale: torch.Tensor | None = None
         self.filter_in_use = np.zeros(0, int)
         self.filter_candidates = np.zeros((0, self.zdim), np.float32)
+        self.filter_norm: tuple[torch.Tensor, torch.Tensor] | None = None  # continuous decoder
         #: the interaction being played: log prior (None before the filter runs), evidence so
         #: far, and the category acted on before each step
         self._live_logp: np.ndarray | None = None
@@ -240,7 +242,7 @@ class SILIAgent:
                 opts = self._filter_options(np.array([self.buffer.n]))
                 o, a, o2, r = (x[None] for x in (o, a, o2, r))  # one interaction of one step
                 self._live_ll += continuous_step_logliks(
-                    self.model, o, a, o2, r, opts, self.filter_scale
+                    self.model, o, a, o2, r, opts, self.filter_scale, self.filter_norm
                 )[0, 0]
             else:
                 self._live_ll += step_logliks(self.model, o, a, o2, r, self.filter_scale)[0]
@@ -302,7 +304,8 @@ class SILIAgent:
         prev, nxt = obs[:, :-1], obs[:, 1:]
         if self.continuous_filter:
             opts = self._filter_options(idx)
-            ll = continuous_step_logliks(self.model, prev, act, nxt, rew, opts, self.filter_scale)
+            scale, norm = self.filter_scale, self.filter_norm
+            ll = continuous_step_logliks(self.model, prev, act, nxt, rew, opts, scale, norm)
             logp = option_log_prior(len(self.filter_candidates), self.cfg.latent_filter)
             logp = np.broadcast_to(logp, (len(idx), len(logp)))
             return (filtered_categories(logp, ll) - 1).astype(np.int16)
@@ -318,8 +321,10 @@ class SILIAgent:
         obs, act, rew = (torch.from_numpy(x[recent]) for x in (b.obs, b.act, b.rew))
         if self.continuous_filter:
             self.filter_candidates = medoid_candidates(self.Z[1 : n + 1], FILTER_CANDIDATES, n)
+            self.filter_norm = target_norm(torch.from_numpy(b.obs[:n]), torch.from_numpy(b.rew[:n]))
             z = torch.from_numpy(self.Z[recent])
-            self.filter_scale = continuous_residual_scale(self.model, obs, act, rew, z)
+            norm = self.filter_norm
+            self.filter_scale = continuous_residual_scale(self.model, obs, act, rew, z, norm)
         else:
             self.filter_in_use = np.unique(self.Z[1 : n + 1].argmax(-1))
             self.filter_scale = residual_scale(self.model, obs, act, rew, self.filter_in_use)
@@ -642,6 +647,7 @@ class SILIAgent:
                 "scale": self.filter_scale,
                 "in_use": self.filter_in_use.copy(),
                 "candidates": self.filter_candidates.copy(),
+                "norm": self.filter_norm,
             },
         }
         if self.model is not None:
@@ -668,6 +674,7 @@ class SILIAgent:
             self.filter_scale, self.filter_in_use = f["scale"], np.asarray(f["in_use"], int)
             cands = f.get("candidates", np.zeros((0, self.zdim)))
             self.filter_candidates = np.asarray(cands, np.float32)
+            self.filter_norm = f.get("norm")
             if len(self.ZF) != self.buffer.n:  # saved without the filter: start it as a run would
                 self._start_filter_late()
         self._reset_live()

@@ -126,6 +126,27 @@ def option_log_prior(n_candidates: int, eps: float) -> np.ndarray:
     return np.log(np.array([1.0 - eps] + [eps / n_candidates] * n_candidates))
 
 
+TargetNorm = tuple[torch.Tensor, torch.Tensor]
+
+
+def target_norm(obs: torch.Tensor, rew: torch.Tensor) -> TargetNorm:
+    """Per-output mean and standard deviation of the decoder's targets on interactions
+    obs [N, H+1, o] (rew [N, H]): a continuous decoder is trained on targets standardised by
+    its batch (``LatentModel.loss``), and batches are drawn uniformly from the replay, so the
+    replay's statistics turn its output back into (s' - s, r)."""
+    prev, nxt = obs[:, :-1], obs[:, 1:]
+    target = decoder_targets(prev, nxt, rew)
+    return target.reshape(-1, target.shape[-1]).mean(0), target_scale(prev, nxt, rew)
+
+
+def continuous_predictions(
+    model: LatentModel, obs: torch.Tensor, act: torch.Tensor, z: torch.Tensor, norm: TargetNorm
+) -> torch.Tensor:
+    """D(s, a, z) in the units of (s' - s, r)."""
+    mean, std = norm
+    return model.decode(obs, act, z) * std + mean
+
+
 @torch.no_grad()
 def continuous_step_logliks(
     model: LatentModel,
@@ -135,13 +156,17 @@ def continuous_step_logliks(
     rew: torch.Tensor,
     options: torch.Tensor,
     scale: torch.Tensor,
+    norm: TargetNorm,
 ) -> np.ndarray:
     """[N, T, K]: the Gaussian log-likelihood (targets in units of ``scale``, constants dropped)
     of each transition of obs [N, T, o] under D(s, a, z) for each of the options [N, K, d] (one
     decoder pass per option, so the activations stay the size of one batch), floored."""
-    target = decoder_targets(obs, next_obs, rew) / scale
+    target = decoder_targets(obs, next_obs, rew)
     ll = [
-        -0.5 * ((model.decode(obs, act, options[:, i]) / scale - target) ** 2).sum(-1)
+        -0.5
+        * (
+            ((continuous_predictions(model, obs, act, options[:, i], norm) - target) / scale) ** 2
+        ).sum(-1)
         for i in range(options.shape[1])
     ]
     return torch.stack(ll, -1).clamp(min=-LOGLIK_FLOOR).numpy()
@@ -149,12 +174,17 @@ def continuous_step_logliks(
 
 @torch.no_grad()
 def continuous_residual_scale(
-    model: LatentModel, obs: torch.Tensor, act: torch.Tensor, rew: torch.Tensor, z: torch.Tensor
+    model: LatentModel,
+    obs: torch.Tensor,
+    act: torch.Tensor,
+    rew: torch.Tensor,
+    z: torch.Tensor,
+    norm: TargetNorm,
 ) -> torch.Tensor:
     """Per output, the root-mean-square error of D(s, a, z^j) on interactions obs [N, H+1, o]
     under their own encoder latents z [N, d], floored like ``residual_scale``."""
     prev, nxt = obs[:, :-1], obs[:, 1:]
     ref = target_scale(prev, nxt, rew)
-    err = model.decode(prev, act, z) - decoder_targets(prev, nxt, rew)
+    err = continuous_predictions(model, prev, act, z, norm) - decoder_targets(prev, nxt, rew)
     rms = err.reshape(-1, err.shape[-1]).pow(2).mean(0).sqrt()
     return torch.maximum(rms, SCALE_FLOOR * ref)
