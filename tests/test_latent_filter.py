@@ -151,6 +151,7 @@ def test_filter_state_survives_a_checkpoint():
         ({"latent_filter": 1.0}, r"latent_filter must be in \[0, 1\), got 1.0"),
         ({"latent_filter": 0.1, "latent": "partial"}, "needs learned latents"),
         ({"latent_filter": 0.1, "latent_filter_start": -1}, "latent_filter_start must be >= 0"),
+        ({"latent_filter": 0.1, "latent_filter_noise": -0.5}, "latent_filter_noise must be >= 0"),
     ],
 )
 def test_bad_filter_settings_are_named(settings, message):
@@ -231,9 +232,10 @@ def test_continuous_filter_switches_to_the_latent_that_explains_the_steps():
     agent = _stored_continuous_agent()
     agent._refresh_filter()
     np.testing.assert_array_equal(agent.filter_candidates, [[-0.5, 0], [0.5, 0]])
-    # residual scale of the reward: two wrong interactions of four, each off by 10
+    # residual scale of the reward, under the best candidate of each interaction: it explains
+    # every one but the first (reward 0, off by 5 under either candidate)
     scale = float(agent.filter_scale[-1])
-    assert scale == pytest.approx(10 * np.sqrt(1 / 2), rel=1e-5)
+    assert scale == pytest.approx(5 * np.sqrt(1 / 4), rel=1e-5)
     per_step = min(0.5 * (10 / scale) ** 2, LOGLIK_FLOOR)  # evidence against z^j per step
     prior_odds = np.log((1 - EPS) / (EPS / 2))
     switch = int(np.ceil(prior_odds / per_step + 1e-9))  # steps until the evidence wins
@@ -312,3 +314,18 @@ def test_a_checkpoint_without_the_filter_starts_it_as_a_run_would(start, running
     restored.load_state_dict(agent.state_dict())
     np.testing.assert_array_equal(restored.ZF, agent.ZF)
     np.testing.assert_array_equal(restored.filter_candidates, agent.filter_candidates)
+
+
+def test_a_broader_noise_scale_needs_more_steps_of_evidence():
+    """``latent_filter_noise``: the scale is that fraction of the targets' std, so the same wrong
+    interaction takes longer to overturn z^j, and an error as large as a strategy's still does."""
+    agent = _stored_continuous_agent(latent_filter_noise=1.5)
+    agent._refresh_filter()
+    b = agent.buffer
+    _, std = target_norm(torch.from_numpy(b.obs[: b.n]), torch.from_numpy(b.rew[: b.n]))
+    torch.testing.assert_close(agent.filter_scale, 1.5 * std)
+    per_step = min(0.5 * (10 / float(agent.filter_scale[-1])) ** 2, LOGLIK_FLOOR)
+    switch = int(np.ceil(np.log((1 - EPS) / (EPS / 2)) / per_step + 1e-9))
+    assert switch == 2  # one step with the residual scale (the test above), two here
+    np.testing.assert_array_equal(agent.ZF[1], [-1] * switch + [1] * (H + 1 - switch))
+    np.testing.assert_array_equal(agent.ZF[3], [-1] * (H + 1))

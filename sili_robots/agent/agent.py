@@ -314,20 +314,29 @@ class SILIAgent:
         return filtered_categories(logp, ll).astype(np.int16)
 
     def _refresh_filter(self) -> None:
-        """The decoder's residual scale on the newest interactions, then every ZF row."""
+        """The candidates and the noise scale (``latent_filter_noise`` times the targets' std,
+        or the decoder's residual on the newest interactions), then every ZF row."""
         b = self.buffer
         n = b.n
         recent = np.arange(n - min(REFRESH_CHUNK, largest_power_of_two(n)), n)  # few shapes
         obs, act, rew = (torch.from_numpy(x[recent]) for x in (b.obs, b.act, b.rew))
+        noise = self.cfg.latent_filter_noise
         if self.continuous_filter:
             self.filter_candidates = medoid_candidates(self.Z[1 : n + 1], FILTER_CANDIDATES, n)
             self.filter_norm = target_norm(torch.from_numpy(b.obs[:n]), torch.from_numpy(b.rew[:n]))
-            z = torch.from_numpy(self.Z[recent])
-            norm = self.filter_norm
-            self.filter_scale = continuous_residual_scale(self.model, obs, act, rew, z, norm)
+            cands, norm = torch.from_numpy(self.filter_candidates), self.filter_norm
+            if noise > 0:
+                self.filter_scale = noise * norm[1]
+            else:
+                self.filter_scale = continuous_residual_scale(
+                    self.model, obs, act, rew, cands, norm
+                )
         else:
             self.filter_in_use = np.unique(self.Z[1 : n + 1].argmax(-1))
-            self.filter_scale = residual_scale(self.model, obs, act, rew, self.filter_in_use)
+            if noise > 0:
+                self.filter_scale = noise * self._replay_target_scale()
+            else:
+                self.filter_scale = residual_scale(self.model, obs, act, rew, self.filter_in_use)
         self.ZF = self._in_chunks(self._filter_rows, n)
 
     def _infer_next_latent(self, j: int, next_info: dict[str, Any]) -> np.ndarray:

@@ -257,6 +257,12 @@ class AgentConfig:
     #: the filter runs from the first latent refresh at or after this many interactions (0: the
     #: first refresh), e.g. once the policy has learned to reach each strategy
     latent_filter_start: int = 0
+    #: the filter's noise scale per output: 0 = the decoder's own residual error (on its newest
+    #: interactions), s > 0 = s times the targets' standard deviation over the replay. The
+    #: residual treats every step as independent evidence, but a decoder's errors within an
+    #: interaction are correlated (a bias over its 50 steps), so at that scale small biases add
+    #: up to a switch; a broader scale lets only differences as large as a strategy's count
+    latent_filter_noise: float = 0.0
     #: discrete latents: what the stability reward counts as a change of strategy. "latents":
     #: the paper's d(z^j, z^{j+1}), 1 when the encoder's category changed. "posterior": the
     #: probability that the strategy in effect during interaction j (the decoder's posterior
@@ -379,6 +385,11 @@ class AgentConfig:
                 f"latent_filter {self.latent_filter} needs learned latents (discrete or "
                 f"continuous) of a method with a latent model (sili, lili, stable), got method "
                 f"{self.method!r} with latent {self.latent!r}; allowed otherwise: 0"
+            )
+        if self.latent_filter_noise < 0:
+            raise ConfigError(
+                f"latent_filter_noise must be >= 0 (0: the decoder's residual), "
+                f"got {self.latent_filter_noise}"
             )
         if self.latent_filter_start < 0:
             raise ConfigError(

@@ -178,13 +178,25 @@ def continuous_residual_scale(
     obs: torch.Tensor,
     act: torch.Tensor,
     rew: torch.Tensor,
-    z: torch.Tensor,
+    candidates: torch.Tensor,
     norm: TargetNorm,
 ) -> torch.Tensor:
-    """Per output, the root-mean-square error of D(s, a, z^j) on interactions obs [N, H+1, o]
-    under their own encoder latents z [N, d], floored like ``residual_scale``."""
+    """Per output, the root-mean-square error of D(s, a, z) on interactions obs [N, H+1, o],
+    each under the candidate latent [C, d] that explains it best (as ``residual_scale`` takes
+    the best head), floored like it. Under its own z^j the decoder fits outputs the strategy
+    does not touch (the ego's own motion) far more tightly than under another latent of the
+    same strategy; at that scale the filter would leave a right z^j on such noise."""
     prev, nxt = obs[:, :-1], obs[:, 1:]
     ref = target_scale(prev, nxt, rew)
-    err = continuous_predictions(model, prev, act, z, norm) - decoder_targets(prev, nxt, rew)
-    rms = err.reshape(-1, err.shape[-1]).pow(2).mean(0).sqrt()
+    target = decoder_targets(prev, nxt, rew)
+    sq = torch.stack(
+        [
+            (continuous_predictions(model, prev, act, c.expand(len(obs), -1), norm) - target) ** 2
+            for c in candidates
+        ],
+        2,
+    )  # [N, H, C, out]
+    best = (sq / ref.pow(2)).sum(-1).sum(1).argmin(-1)  # [N]
+    rows = sq[torch.arange(len(best)), :, best]  # [N, H, out]
+    rms = rows.reshape(-1, rows.shape[-1]).mean(0).sqrt()
     return torch.maximum(rms, SCALE_FLOOR * ref)
