@@ -1,5 +1,5 @@
-"""Within-interaction latent filter (discrete latents): the encoder's z^j as a prior, corrected
-step by step by how well each decoder head explains the interaction played so far.
+"""Within-interaction latent filter: the encoder's z^j as a prior, corrected step by step by how
+well the decoder explains the interaction played so far under each alternative.
 
 Why. z^j = E(tau^{j-1}) is fixed before interaction j begins. When it is wrong (the opponent
 moved after an ending the encoder read as a hold) the policy pursues the wrong strategy for the
@@ -12,7 +12,11 @@ step or two. Measured on Circle (3 Goals), such an interaction costs -45 to -73 
 
 with prior (1 - eps) on the encoder's category and eps spread over every category in use
 (eps = ``latent_filter``), and sigma the decoder's own residual scale per output on recent
-interactions (its best head), so an inaccurate decoder corrects little. Each step's
+interactions (its best head), so an inaccurate decoder corrects little, or, with
+``latent_filter_noise`` s > 0, s times the targets' standard deviation. The residual treats the
+steps of an interaction as independent evidence, but the decoder's errors within one are
+correlated (a small bias over all of its steps), and at that scale such biases add up to a
+switch away from a right z^j. Each step's
 log-likelihood is floored at ``-LOGLIK_FLOOR`` so one state the decoder never saw cannot decide
 alone. The policy acts on the posterior's argmax at step t; the critic learns on the same
 per-step latents, recomputed with the current model whenever the encoder's are.
@@ -28,9 +32,10 @@ has produced: the medoids of ``FILTER_CANDIDATES`` k-means clusters of every cac
 strategy seen, and more), each an actual encoder output, so the policy never acts on a latent
 off the encoder's range. The options at step t are the encoder's z^j (prior 1 - eps) and the
 candidates (eps shared), each scored by the Gaussian likelihood of the steps so far under
-D(s, a, z). A sibling candidate of the strategy z^j already stands for predicts the same and
-cannot overturn the prior; and where it wins, it is a latent near z^j, so the policy's input
-moves little (the hopping that hurt the discrete filter).
+D(s, a, z) (in target units: a continuous decoder is trained on standardised targets, see
+``target_norm``). A candidate of the strategy z^j already stands for predicts nearly the same,
+so with a broad enough noise scale it cannot overturn the prior; where it does win, it is a
+latent near z^j, so the policy's input moves little.
 """
 
 from __future__ import annotations
