@@ -94,3 +94,23 @@ def test_edge_examples_count_each_side_near_the_location(breakdown: ModuleType, 
     metrics["strategy_id"] = location
     metrics.loc[2, "strategy_id"] = 0  # the opponent was elsewhere: not an example
     assert breakdown.edge_examples(agent, task, metrics, location) == (1, 1)
+
+
+SLIP_SCRIPT = SCRIPT.parent / "circle_slip_cost.py"
+
+
+def test_slip_cost_plays_the_held_and_the_moved_on_opponent(run: Path) -> None:
+    spec = importlib.util.spec_from_file_location("circle_slip_cost", SLIP_SCRIPT)
+    slip = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(slip)
+    out = slip.slip_costs(run, eps=0.01, noise=0.25, plays=1)
+    plain, filtered = out["no filter"], out["filter"]
+    assert all(step == -1 for rows in plain.values() for _, step in rows)  # never leaves z
+    # deterministic plays: the opponent's location decides the reward ...
+    assert plain["held"][-1][0] != pytest.approx(plain["moved on"][-1][0])
+    # ... and a filter that never leaves z plays exactly as the policy without it
+    for case in ("held", "moved on"):
+        reward, step = filtered[case][-1]
+        assert -1 <= step < 50
+        if step == -1:
+            assert reward == pytest.approx(plain[case][-1][0])
