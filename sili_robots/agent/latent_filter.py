@@ -36,6 +36,13 @@ D(s, a, z) (in target units: a continuous decoder is trained on standardised tar
 ``target_norm``). A candidate of the strategy z^j already stands for predicts nearly the same,
 so with a broad enough noise scale it cannot overturn the prior; where it does win, it is a
 latent near z^j, so the policy's input moves little.
+
+Measured on Circle (3 Goals), 3 seeds x 3,000 interactions, continuous latents with eps 0.01,
+noise 0.25, from interaction 1,600 (benchmarks/RESULTS.md, arm R): a slip (the opponent moved,
+z^j still names the held location) is found at step 2-3 and costs about 12 instead of 83; the
+filter left a right z^j in 7 and 1 of ~1,400 interactions on two seeds and 36 on the third
+(mostly while its policy was learning to reach a location it had just moved the opponent to);
+and the final task reward is within 15% of Oracle's (-5.00 against -4.39).
 """
 
 from __future__ import annotations
