@@ -26,6 +26,7 @@ import numpy as np
 import torch
 
 from sili_robots.agent import SILIAgent
+from sili_robots.agent.latent_filter import first_departure
 from sili_robots.evaluation import load_trained
 from sili_robots.tasks.circle import CircleEnv
 
@@ -45,10 +46,7 @@ def play(
         next_obs, reward, _, _, _ = task.step(action)
         agent.observe_step(obs, action, reward, next_obs)
         obs, total = next_obs, total + reward
-    if not agent.filtering:
-        return total, -1
-    moved = np.flatnonzero(np.array(agent._live_cats) != agent._live_cats[0])
-    return total, int(moved[0]) if len(moved) else -1
+    return total, first_departure(agent._live_cats) if agent.filtering else -1
 
 
 def with_filter(agent: SILIAgent, eps: float, noise: float) -> SILIAgent:
@@ -56,8 +54,6 @@ def with_filter(agent: SILIAgent, eps: float, noise: float) -> SILIAgent:
     agent.cfg = dataclasses.replace(
         agent.cfg, latent_filter=eps, latent_filter_noise=noise, latent_filter_start=0
     )
-    agent.filtering = True
-    agent.continuous_filter = agent.cfg.latent == "continuous"
     agent._start_filter_late()
     return agent
 
@@ -74,7 +70,7 @@ def slip_costs(
         if label == "filter":
             with_filter(agent, eps, noise)
         else:
-            agent.filtering = False
+            agent.cfg = dataclasses.replace(agent.cfg, latent_filter=0.0)
         held = int(game["fields"]["location"])
         where = {"held": held, "moved on": (held + 1) % len(task.angles)}
         out[label] = {

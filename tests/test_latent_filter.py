@@ -18,16 +18,18 @@ from sili_robots.errors import ConfigError
 H = 5
 
 
-def _agent(**kw):
+EPS = 0.2
+
+
+def _agent(latent="discrete", latent_dim=4, **kw):
     cfg = method_config(
         "sili",
-        "discrete",
-        latent_dim=4,
+        latent,
+        latent_dim=latent_dim,
         hidden=32,
         batch_interactions=4,
         batch_steps=H,
-        latent_filter=0.2,
-        **kw,
+        **{"latent_filter": EPS, **kw},
     )
     return SILIAgent(cfg, obs_dim=3, act_dim=2, horizon=H, strategy_dim=2, seed=0)
 
@@ -166,20 +168,9 @@ def test_bad_filter_settings_are_named(settings, message):
 
 # ---------------------------------------------------------------- continuous latents
 
-EPS = 0.2
-
 
 def _continuous_agent(**kw):
-    cfg = method_config(
-        "sili",
-        "continuous",
-        latent_dim=2,
-        hidden=32,
-        batch_interactions=4,
-        batch_steps=H,
-        **{"latent_filter": EPS, **kw},
-    )
-    return SILIAgent(cfg, obs_dim=3, act_dim=2, horizon=H, strategy_dim=2, seed=0)
+    return _agent("continuous", latent_dim=2, **kw)
 
 
 def _reward_from_z(agent):

@@ -49,6 +49,7 @@ from sili_robots.agent.latent_filter import (
     continuous_residual_scale,
     continuous_step_logliks,
     filtered_categories,
+    first_departure,
     log_prior,
     medoid_candidates,
     option_log_prior,
@@ -162,19 +163,27 @@ class SILIAgent:
         #: or the index into ``filter_candidates`` (continuous) the policy acted on at step t of
         #: stored interaction j (-1: the encoder's z^j stands, as before the filter runs); it
         #: starts running at the first latent refresh from ``latent_filter_start`` on
-        self.filtering = self.model is not None and cfg.latent_filter > 0
-        self.continuous_filter = self.filtering and cfg.latent == "continuous"
         self.ZF = np.zeros((0, horizon + 1), np.int16)
         self.filter_scale: torch.Tensor | None = None
         self.filter_in_use = np.zeros(0, int)
         self.filter_candidates = np.zeros((0, self.zdim), np.float32)
         self.filter_norm: tuple[torch.Tensor, torch.Tensor] | None = None  # continuous decoder
         #: the interaction being played: log prior (None before the filter runs), evidence so
-        #: far, and the category acted on before each step
+        #: far, the category acted on before each step, and (continuous) its options' latents
+        self._live_options: torch.Tensor | None = None
         self._live_logp: np.ndarray | None = None
         self._live_ll = np.zeros(self.zdim)
         self._live_cats: list[int] = []
         self._reset_live()
+
+    @property
+    def filtering(self) -> bool:
+        """Whether the within-interaction filter is configured (``latent_filter`` > 0)."""
+        return self.model is not None and self.cfg.latent_filter > 0
+
+    @property
+    def continuous_filter(self) -> bool:
+        return self.filtering and self.cfg.latent == "continuous"
 
     # ------------------------------------------------------------------ acting
     def policy_input(self, obs: np.ndarray, j: int | None = None) -> np.ndarray:
@@ -219,9 +228,9 @@ class SILIAgent:
         self._live_ll = np.zeros(self.zdim)
         self._live_logp = None
         if self.filter_scale is not None and self.continuous_filter:
-            c = len(self.filter_candidates)
-            self._live_ll = np.zeros(1 + c)
-            self._live_logp = option_log_prior(c, self.cfg.latent_filter)
+            self._live_options = self._filter_options(np.array([self.buffer.n]))
+            self._live_ll = np.zeros(self._live_options.shape[1])
+            self._live_logp = option_log_prior(len(self.filter_candidates), self.cfg.latent_filter)
         elif self.filter_scale is not None:
             z = self.Z[self.buffer.n][None]
             self._live_logp = log_prior(z, self.filter_in_use, self.cfg.latent_filter)[0]
@@ -239,10 +248,9 @@ class SILIAgent:
             )
             r = torch.tensor([float(rew)], dtype=torch.float32)
             if self.continuous_filter:
-                opts = self._filter_options(np.array([self.buffer.n]))
                 o, a, o2, r = (x[None] for x in (o, a, o2, r))  # one interaction of one step
                 self._live_ll += continuous_step_logliks(
-                    self.model, o, a, o2, r, opts, self.filter_scale, self.filter_norm
+                    self.model, o, a, o2, r, self._live_options, self.filter_scale, self.filter_norm
                 )[0, 0]
             else:
                 self._live_ll += step_logliks(self.model, o, a, o2, r, self.filter_scale)[0]
@@ -284,8 +292,7 @@ class SILIAgent:
             if len(cats) != self.horizon + 1:  # not played through observe_step: replay it
                 cats = self._filter_rows(np.array([j]))[0]
             self.ZF = np.concatenate([self.ZF, np.asarray(cats, np.int16)[None]])
-            moved = np.flatnonzero(self.ZF[j] != self.ZF[j, 0])  # as acted, before a refresh
-            filter_step = int(moved[0]) if len(moved) else -1
+            filter_step = first_departure(self.ZF[j])  # as acted, before a refresh
         if refresh and self.model is not None and (j + 1) % self.latent_refresh_every == 0:
             self.refresh_latents()
         self._reset_live()

@@ -121,6 +121,13 @@ def filtered_categories(logp: np.ndarray, ll: np.ndarray) -> np.ndarray:
     return (logp[:, None, :] + cum).argmax(-1)
 
 
+def first_departure(cats: np.ndarray) -> int:
+    """The first step at which the latent acted on (``ZF`` row, or the live one) differs from the
+    one the interaction started on; -1 if it never does."""
+    moved = np.flatnonzero(np.asarray(cats) != cats[0])
+    return int(moved[0]) if len(moved) else -1
+
+
 def medoid_candidates(z: np.ndarray, k: int, seed: int) -> np.ndarray:
     """[<= k, d]: the latent of ``z`` [N, d] nearest to each of k k-means centres (k-means++
     seeded by ``seed``, so a refresh is reproducible), duplicates dropped, in order of first
