@@ -14,7 +14,9 @@ import gymnasium as gym
 import numpy as np
 
 from sili_robots.agent import SILIAgent
+from sili_robots.build import build_agent, make_run_env, observed_as
 from sili_robots.errors import ConfigError
+from sili_robots.rollout import run_interactions
 from sili_robots.runs import RunConfig, load_checkpoint, read_config
 from sili_robots.tasks.base import resume_game
 
@@ -69,8 +71,6 @@ class AgentFeedback(gym.Wrapper):
 
 def load_trained(run_dir: Path) -> tuple[RunConfig, gym.Env, SILIAgent, dict[str, Any]]:
     """Rebuild a run's env and agent from its config and last checkpoint."""
-    from sili_robots.training import build_agent, make_run_env
-
     cfg = read_config(run_dir)
     state = load_checkpoint(run_dir)
     if state is None:
@@ -85,26 +85,22 @@ def policy_from_run(
     run_dir: Path,
 ) -> tuple[str, dict[str, Any], Callable[[gym.Env], tuple[gym.Env, Callable]]]:
     """(task name, env kwargs, make_policy) where ``make_policy(env)`` returns the env to step
-    (a wrapper feeding the agent) and a deterministic ``policy(env, obs) -> action``."""
-    from sili_robots.training import run_env_kwargs
-
+    (the task as the method observes it, feeding the agent) and a deterministic
+    ``policy(env, obs) -> action``."""
     cfg = read_config(run_dir)
-    kwargs = run_env_kwargs(cfg)
 
     def make_policy(env: gym.Env) -> tuple[gym.Env, Callable]:
         _, own_env, agent, game = load_trained(run_dir)
         own_env.close()
-        wrapped = AgentFeedback(env, agent, game)
+        wrapped = AgentFeedback(observed_as(env, cfg), agent, game)
         return wrapped, lambda _env, obs: agent.act(obs, deterministic=True)
 
-    return cfg.task, kwargs, make_policy
+    return cfg.task, dict(cfg.env_kwargs), make_policy
 
 
 def evaluate(run_dir: Path, interactions: int) -> dict[str, float]:
     """Mean task reward and fraction of interactions whose true strategy stayed the same,
     acting deterministically (no exploration, no learning)."""
-    from sili_robots.rollout import run_interactions
-
     _, env, agent, game = load_trained(run_dir)
     wrapped = AgentFeedback(env, agent, game)
     try:

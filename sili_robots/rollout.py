@@ -1,12 +1,39 @@
-"""Roll a policy through a repeated game and summarise it per interaction."""
+"""The one rollout loop: play whole interactions of a repeated game with any policy.
+
+``play_interaction`` is used by training, evaluation, previews and ``sili rollout``;
+``run_interactions`` plays several from a (re)started game and summarises each.
+"""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
+
+#: called after each step: (obs, action, reward, next_obs, info)
+StepCallback = Callable[[np.ndarray, np.ndarray, float, np.ndarray, dict[str, Any]], None]
+
+
+@dataclass
+class Interaction:
+    """One played interaction: its arrays, and where the game went after it."""
+
+    obs: np.ndarray  # [H+1, o]
+    act: np.ndarray  # [H, a]
+    rew: np.ndarray  # [H] task rewards
+    strategy: np.ndarray  # the true strategy's encoding during it
+    strategy_id: float  # at its start
+    end_strategy_id: float  # after its last step (differs where z may change within one)
+    strategy_changed: bool  # the true strategy changed at its start or within it
+    next_obs: np.ndarray | None  # the next interaction's first observation (after reset)
+    next_info: dict[str, Any] | None
+
+    @property
+    def task_reward(self) -> float:
+        return float(self.rew.sum())
 
 
 @dataclass
@@ -19,6 +46,38 @@ class InteractionSummary:
     strategy_id: float
 
 
+def play_interaction(
+    env: gym.Env,
+    obs: np.ndarray,
+    info: dict[str, Any],
+    policy: Callable[[np.ndarray], np.ndarray],
+    on_step: StepCallback | None = None,
+    reset: bool = True,
+) -> Interaction:
+    """Play one interaction from (obs, info) to its end; with ``reset`` begin the next one."""
+    h = env.unwrapped.horizon
+    obs_seq = np.zeros((h + 1, obs.shape[0]), np.float32)
+    act_seq = np.zeros((h, env.action_space.shape[0]), np.float32)
+    rew_seq = np.zeros(h, np.float32)
+    obs_seq[0] = obs
+    changed = bool(info["strategy_changed"])
+    strategy = np.asarray(info["strategy"], np.float32)
+    strategy_id = float(info["strategy_id"])
+    for t in range(h):
+        a = policy(obs)
+        prev = obs
+        obs, r, _, _, info = env.step(a)
+        if on_step is not None:
+            on_step(prev, a, float(r), obs, info)
+        obs_seq[t + 1], act_seq[t], rew_seq[t] = obs, a, r
+        changed |= bool(info["strategy_changed"])
+    end_id = float(info["strategy_id"])
+    next_obs, next_info = env.reset() if reset else (None, None)
+    return Interaction(
+        obs_seq, act_seq, rew_seq, strategy, strategy_id, end_id, changed, next_obs, next_info
+    )
+
+
 def run_interactions(
     env: gym.Env,
     policy: Callable[[gym.Env, np.ndarray], np.ndarray],
@@ -26,22 +85,19 @@ def run_interactions(
     seed: int | None = 0,
     on_step: Callable[[np.ndarray, dict], None] | None = None,
 ) -> list[InteractionSummary]:
-    """Play ``interactions`` whole interactions, restarting the game with ``seed``."""
+    """Play ``interactions`` whole interactions, restarting the game with ``seed``;
+    ``on_step(obs, info)`` sees each step's outcome."""
     out: list[InteractionSummary] = []
     obs, info = env.reset(seed=seed)
     env.action_space.seed(seed)
+    step = None if on_step is None else (lambda _o, _a, _r, o2, i: on_step(o2, i))
     for j in range(interactions):
-        if j > 0:
-            obs, info = env.reset()
-        changed = bool(info["strategy_changed"])
-        total = 0.0
-        done = False
-        while not done:
-            obs, reward, terminated, truncated, info = env.step(policy(env, obs))
-            if on_step is not None:
-                on_step(obs, info)
-            total += float(reward)
-            changed |= bool(info["strategy_changed"])
-            done = terminated or truncated
-        out.append(InteractionSummary(j, total, changed, float(info["strategy_id"])))
+        last = j == interactions - 1
+        played = play_interaction(env, obs, info, lambda o: policy(env, o), step, reset=not last)
+        out.append(
+            InteractionSummary(
+                j, played.task_reward, played.strategy_changed, played.end_strategy_id
+            )
+        )
+        obs, info = played.next_obs, played.next_info
     return out

@@ -17,8 +17,10 @@ from typing import Any
 
 import torch
 
-from sili_robots.agent.config import AgentConfig
+from sili_robots.addons.config import AddonsConfig
+from sili_robots.agent.config import AgentConfig, set_path
 from sili_robots.errors import ConfigError
+from sili_robots.migrations import migrate_agent_state, migrate_run, setting_path
 
 CONFIG, METRICS, CHECKPOINT, SUMMARY = "config.json", "metrics.csv", "checkpoint.pt", "summary.json"
 METRIC_COLUMNS = (
@@ -48,19 +50,30 @@ class RunConfig:
     seed: int
     interactions: int
     agent: AgentConfig
+    addons: AddonsConfig = field(default_factory=AddonsConfig)
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     checkpoint_every: int = 50
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
         d["agent"] = self.agent.to_dict()
+        d["addons"] = self.addons.to_dict()
         return d
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> RunConfig:
-        d = dict(d)
+        d = dict(migrate_run(d))
         d["agent"] = AgentConfig.from_dict(d["agent"])
+        d["addons"] = AddonsConfig.from_dict(d.get("addons", {}))
         return cls(**d)
+
+    def set(self, name: str, value: Any) -> None:
+        """Set an agent or add-on setting by dotted path (or an earlier flat name)."""
+        path = setting_path(name)
+        if path.startswith("addons."):
+            set_path(self.addons, path.removeprefix("addons."), value, prefix="addons.")
+        else:
+            set_path(self.agent, path, value)
 
 
 def versions() -> dict[str, str]:
@@ -78,8 +91,19 @@ def versions() -> dict[str, str]:
     }
 
 
+def make_run_dir(run_dir: Path) -> None:
+    """Create a run directory, or ConfigError naming it when it cannot be."""
+    try:
+        Path(run_dir).mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ConfigError(
+            f"cannot create the run directory {run_dir}: {err.strerror or err}; "
+            "give --out a directory that can be written"
+        ) from None
+
+
 def write_config(run_dir: Path, cfg: RunConfig) -> None:
-    run_dir.mkdir(parents=True, exist_ok=True)
+    make_run_dir(run_dir)
     payload = {"run": cfg.to_dict(), "versions": versions()}
     (run_dir / CONFIG).write_text(json.dumps(payload, indent=2, sort_keys=True))
 
@@ -133,7 +157,10 @@ def save_checkpoint(run_dir: Path, state: dict[str, Any]) -> None:
 
 
 def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
+    """The last checkpoint (in today's layout), or None before the first."""
     path = Path(run_dir) / CHECKPOINT
     if not path.is_file():
         return None
-    return torch.load(path, weights_only=False)
+    state = torch.load(path, weights_only=False)
+    state["agent"] = migrate_agent_state(state["agent"])
+    return state

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import time
 from collections import deque
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -13,10 +12,11 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from sili_robots.agent import SILIAgent
+from sili_robots.build import build_agent, make_run_env
 from sili_robots.diagnostics import latent_diagnostics
 from sili_robots.errors import ConfigError
 from sili_robots.progress import TrainingProgress
+from sili_robots.rollout import play_interaction
 from sili_robots.runs import (
     SUMMARY,
     MetricsWriter,
@@ -26,79 +26,23 @@ from sili_robots.runs import (
     save_checkpoint,
     write_config,
 )
-from sili_robots.tasks import make_task
 from sili_robots.tasks.base import resume_game
 
 
-def run_env_kwargs(cfg: RunConfig) -> dict[str, Any]:
-    """The task as this method sees it: Oracle observes z; partial observation sees the flag."""
-    kwargs = dict(cfg.env_kwargs)
-    if cfg.method == "oracle":
-        kwargs["oracle"] = True
-    if cfg.agent.latent == "partial" and cfg.method in ("sili", "stable"):
-        kwargs["strategy_flag"] = True
-    return kwargs
-
-
-def make_run_env(cfg: RunConfig) -> gym.Env:
-    return make_task(cfg.task, **run_env_kwargs(cfg))
-
-
-def build_agent(cfg: RunConfig, env: gym.Env) -> SILIAgent:
-    task = env.unwrapped
-    return SILIAgent(
-        cfg.agent,
-        env.observation_space.shape[0],
-        env.action_space.shape[0],
-        task.horizon,
-        task.strategy_dim,
-        seed=cfg.seed,
-    )
-
-
-def play_interaction(
-    env: gym.Env,
-    obs: np.ndarray,
-    info: dict[str, Any],
-    policy,
-    on_step: Callable[[np.ndarray, np.ndarray, float, np.ndarray], None] | None = None,
-) -> tuple[dict[str, np.ndarray], np.ndarray, dict[str, Any], bool]:
-    """Play one interaction from (obs, info); returns its arrays, the next interaction's first
-    observation and info (after ``reset``), and whether the true strategy changed in it.
-    ``on_step(s, a, r, s')`` sees each step as it is played (the agent's latent filter)."""
-    task = env.unwrapped
-    h = task.horizon
-    obs_seq = np.zeros((h + 1, obs.shape[0]), np.float32)
-    act_seq = np.zeros((h, env.action_space.shape[0]), np.float32)
-    rew_seq = np.zeros(h, np.float32)
-    obs_seq[0] = obs
-    changed = bool(info["strategy_changed"])
-    strategy = np.asarray(info["strategy"], np.float32)
-    strategy_id = float(info["strategy_id"])
-    for t in range(h):
-        a = policy(obs)
-        prev = obs
-        obs, r, _, _, info = env.step(a)
-        if on_step is not None:
-            on_step(prev, a, r, obs)
-        obs_seq[t + 1], act_seq[t], rew_seq[t] = obs, a, r
-        changed |= bool(info["strategy_changed"])
-    next_obs, next_info = env.reset()
-    data = {
-        "obs": obs_seq,
-        "act": act_seq,
-        "rew": rew_seq,
-        "strategy": strategy,
-        "strategy_id": strategy_id,
-    }
-    return data, next_obs, next_info, changed
-
-
-def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = True) -> Path:
-    """Train ``cfg`` into ``run_dir``; with ``resume`` continue from its last checkpoint."""
+def train(
+    cfg: RunConfig,
+    run_dir: Path,
+    resume: bool = False,
+    progress: bool = True,
+    env: gym.Env | None = None,
+) -> Path:
+    """Train ``cfg`` into ``run_dir``; with ``resume`` continue from its last checkpoint.
+    ``env``: the task instance to train on, as the method observes it (default: built from
+    ``cfg``; a given one is left open)."""
     run_dir = Path(run_dir)
     torch.set_num_threads(1)
-    env = make_run_env(cfg)
+    own_env = env is None
+    env = make_run_env(cfg) if env is None else env
     agent = build_agent(cfg, env)
     state = load_checkpoint(run_dir) if resume else None
     if state is None:
@@ -117,37 +61,39 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
     bar = TrainingProgress(
         cfg.interactions, start, enabled=progress, label=f"{cfg.task} {cfg.method} seed {cfg.seed}"
     )
+    watching = agent.watches_steps  # only add-ons that need each step as it is played
     try:
         for j in range(start, cfg.interactions):
-            if j < cfg.agent.random_interactions:
+            if j < cfg.agent.sac.random_interactions:
                 policy = lambda _o: agent.random_action()  # noqa: E731
             else:
                 policy = agent.act
-            data, obs, info, changed = play_interaction(env, obs, info, policy, agent.observe_step)
+            watch = (lambda s, a, r, s2, _i: agent.observe_step(s, a, r, s2)) if watching else None
+            played = play_interaction(env, obs, info, policy, watch)
+            obs, info = played.next_obs, played.next_info
             stats = agent.observe_interaction(
-                data["obs"],
-                data["act"],
-                data["rew"],
+                played.obs,
+                played.act,
+                played.rew,
                 obs,
-                data["strategy_id"],
-                data["strategy"],
+                played.strategy_id,
+                played.strategy,
                 info,
             )
-            losses = agent.update(j, rl=j + 1 >= cfg.agent.random_interactions)
-            task_reward = float(data["rew"].sum())
-            recent.append((task_reward, changed))
+            losses = agent.update(j, rl=j + 1 >= cfg.agent.sac.random_interactions)
+            recent.append((played.task_reward, played.strategy_changed))
             metrics.write(
                 {
                     "interaction": j,
-                    "task_reward": task_reward,
+                    "task_reward": played.task_reward,
                     "stability_reward": stats.stability_reward,
-                    "strategy_changed": int(changed),
-                    "strategy_id": data["strategy_id"],
+                    "strategy_changed": int(played.strategy_changed),
+                    "strategy_id": played.strategy_id,
                     "latent_category": stats.latent_category,
                     "latent_changed": int(stats.latent_changed),
-                    "beta": cfg.agent.beta_at(j),
+                    "beta": agent.beta,
                     "wall_time": elapsed0 + time.perf_counter() - t0,
-                    "filter_step": stats.filter_step,
+                    "filter_step": stats.extra.get("filter_step", -1),
                     **losses,
                 }
             )
@@ -166,7 +112,8 @@ def train(cfg: RunConfig, run_dir: Path, resume: bool = False, progress: bool = 
     finally:
         bar.close()
         metrics.close()
-        env.close()
+        if own_env:
+            env.close()
     write_summary(run_dir)
     return run_dir
 

@@ -1,295 +1,120 @@
-"""Agent configuration: one dataclass, and the methods as presets of it.
+"""Agent configuration: typed sections whose types carry the allowed values.
 
-Every method of the paper is this one agent with different settings:
-
-| method  | latent model | policy input        | reward                                  |
-|---------|--------------|---------------------|-----------------------------------------|
-| sili    | yes          | s, z^j, z^{j-1}     | (1-b) R_task + b R_stable               |
-| lili    | yes          | s, z^j              | R_task (b = 0)                          |
-| stable  | yes          | s, z^j, z^{j-1}     | R_stable (b = 1)                        |
-| sac     | no           | s                   | R_task                                  |
-| oracle  | no           | s + true z          | R_task                                  |
-| smirl   | no           | s                   | (1-b) R_task + b log p(s) (SMiRL)       |
+``AgentConfig`` = the method, the latent kind, the networks' width and matrix-product library,
+and three sections: ``sac`` (the RL learner), ``model`` (the latent strategy model) and ``sili``
+(the stability reward). A float setting may be a ``Schedule`` over interactions. Every method of
+the paper is a preset of it (``sili_robots/agent/methods.py``). Settings are addressed by dotted
+paths (``sac.lr``, ``model.dim``, ``sili.beta``); ``set_path`` converts and checks a value by the
+field's declared type, so a bad value is reported by name with what is allowed.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Iterable
-from dataclasses import asdict, dataclass, field, fields
-from itertools import pairwise
-from typing import Any, ClassVar, TypeVar
+import types
+import typing
+from dataclasses import dataclass, field, fields
+from typing import Any, Literal
 
-from sili_robots.agent.matmul import MATMULS, default_matmul, onednn_available
+from sili_robots.agent.matmul import default_matmul, onednn_available
+from sili_robots.agent.schedule import Schedule, Scheduled, span, value_at
 from sili_robots.errors import ConfigError
 
-METHODS = ("sili", "lili", "stable", "sac", "oracle", "smirl")
-#: the methods whose b is a setting (the others fix it: LILI 0, Stable 1, SAC and Oracle none)
-BETA_METHODS = ("sili", "smirl")
-#: ``true`` is the diagnostic that feeds the true strategy in place of the predicted latent
-LATENT_KINDS = ("discrete", "continuous", "partial", "true")
-STABILITY_DISTANCES = ("latents", "posterior", "hindsight")
-PRECISIONS = ("float32", "bfloat16")
+Method = Literal["sili", "lili", "stable", "sac", "oracle", "smirl"]
+#: ``none``: no latent (SAC, Oracle, SMiRL); ``true``: the diagnostic that feeds the true strategy
+LatentKind = Literal["discrete", "continuous", "partial", "true", "none"]
+Estimator = Literal["expected", "marginal", "gumbel"]
+Precision = Literal["float32", "bfloat16"]
+Matmul = Literal["onednn", "aten"]
+#: where R_stable is paid: ``boundary`` = -scale d(z^j, z^{j+1}) on the last step of interaction
+#: j (the change it caused); ``per_step`` = the paper's -d(z^j, z^{j-1}) on every step of j
+Credit = Literal["boundary", "per_step"]
+
+METHODS: tuple[str, ...] = typing.get_args(Method)
+LATENT_KINDS: tuple[str, ...] = typing.get_args(LatentKind)
 
 
-ScheduleT = TypeVar("ScheduleT", bound="Schedule")
-
-
-@dataclass
-class Schedule:
-    """A setting as a piecewise-linear function of the interaction index.
-
-    ``points`` are (interaction, value) knots in increasing interaction order; the value is held at
-    the first knot's before it and at the last knot's after it. Subclasses name the setting and
-    bound its values, so a bad knot is reported by name."""
-
-    points: list[tuple[int, float]]
-    name: ClassVar[str] = "schedule"  # for messages
-    symbol: ClassVar[str] = "value"
-    low: ClassVar[float] = -math.inf
-    high: ClassVar[float] = math.inf
-
-    @classmethod
-    def from_dict(cls: type[ScheduleT], data: dict[str, Any]) -> ScheduleT:
-        return cls([(int(i), float(v)) for i, v in data["points"]])
-
-    def value(self, interaction: int) -> float:
-        first, last = self.points[0], self.points[-1]
-        if interaction <= first[0]:
-            return first[1]
-        for (i0, v0), (i1, v1) in pairwise(self.points):
-            if interaction < i1:
-                return v0 + (interaction - i0) / (i1 - i0) * (v1 - v0)
-        return last[1]
-
-    def check(self) -> None:
-        """Raise ConfigError naming the first bad knot."""
-        name = self.name
-        if not self.points:
-            raise ConfigError(f"{name} needs at least one (interaction, {self.symbol}) point")
-        previous = -1
-        for i, v in self.points:
-            if i < 0:
-                raise ConfigError(f"{name} interaction must be >= 0, got {i}")
-            if i <= previous:
-                raise ConfigError(f"{name} interactions must increase, got {i} after {previous}")
-            if not (math.isfinite(v) and self.low <= v <= self.high):
-                raise ConfigError(
-                    f"{name}: {self.symbol} must be {self.allowed()}, got {v} at interaction {i}"
-                )
-            previous = i
-
-    @classmethod
-    def allowed(cls) -> str:
-        bounded = math.isfinite(cls.low) or math.isfinite(cls.high)
-        return f"in [{cls.low:g}, {cls.high:g}]" if bounded else "a finite number"
+def setting(default: Any, low: float = -math.inf, high: float = math.inf, **kw: Any) -> Any:
+    """A dataclass field with an allowed range (checked by ``check``)."""
+    return field(default=default, metadata={"low": low, "high": high}, **kw)
 
 
 @dataclass
-class BetaSchedule(Schedule):
-    """The stability weight b over interactions.
+class SACConfig:
+    """Soft actor-critic: 2 x ``hidden`` actor and twin critics, Polyak targets, learned alpha."""
 
-    A ramp that starts late (b = 0 first) lets the latent model learn from a policy that pursues
-    the task (as LILI) before the stability reward, which is noise while the latent is still
-    wrong, starts to shape the policy; a later knot can lower b again once the opponent is held,
-    so the task term weighs more."""
-
-    name: ClassVar[str] = "beta schedule"
-    symbol: ClassVar[str] = "b"
-    low: ClassVar[float] = 0.0
-    high: ClassVar[float] = 1.0
-
-    @classmethod
-    def ramp(cls, start: float, end: float, length: int, delay: int = 0) -> BetaSchedule:
-        """b = ``start`` for ``delay`` interactions, then linear to ``end`` over ``length``."""
-        return cls([(delay, start), (delay + length, end)])
-
-    @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> BetaSchedule:
-        """Read a saved schedule; runs saved as a single ramp (start, end, length, delay) too."""
-        if "points" in data:
-            return super().from_dict(data)
-        return cls.ramp(data["start"], data["end"], data["length"], data.get("delay", 0))
+    lr: Scheduled = setting(3e-4, 0.0, 1.0)
+    gamma: Scheduled = setting(0.99, 1e-9, 1.0)
+    tau: Scheduled = setting(5e-3, 0.0, 1.0)
+    #: the entropy the temperature holds the policy at; None = -|A|, SAC's usual choice
+    target_entropy: Scheduled | None = None
+    batch_interactions: int = setting(16, 1)  # an RL batch = this many interactions ...
+    batch_steps: int = setting(16, 1)  # ... times this many timesteps from each
+    updates_per_step: Scheduled = setting(1.0, 0.0)
+    random_interactions: int = setting(20, 0)  # uniform random actions first (20 x 50 steps)
+    #: ``bfloat16``: forward passes under CPU autocast (weights, gradients stay float32)
+    precision: Precision = "float32"
 
 
 @dataclass
-class EntropySchedule(Schedule):
-    """SAC's target entropy over interactions.
+class LatentModelConfig:
+    """Encoder E(tau^{j-1}) -> z^j and decoder D(s, a, z^j) -> (s' - s, r)."""
 
-    Exploration matters while the policy finds the opponent and learns to hold it; once it holds,
-    the same entropy keeps the ego jittering around the opponent and forces a margin at the
-    circle's edge. A target lowered late tightens both where the noise is the cost (Oracle on
-    Circle) without starving early exploration, which a low target from the start does
-    (benchmarks/RESULTS.md)."""
-
-    name: ClassVar[str] = "target entropy schedule"
-    symbol: ClassVar[str] = "target entropy"
-
-
-@dataclass
-class DiscountSchedule(Schedule):
-    """SAC's discount gamma over interactions.
-
-    gamma^H is what one interaction's value weighs in the one before it (0.99^50 = 0.61). While b
-    pays for holding the opponent that is enough; once b is 0, only the task reward of later
-    interactions pays for holding it, or for moving it on to a cheaper place first, and a larger
-    gamma weighs those later interactions more."""
-
-    name: ClassVar[str] = "discount schedule"
-    symbol: ClassVar[str] = "gamma"
-    low: ClassVar[float] = 0.0
-    high: ClassVar[float] = 1.0
+    dim: int = setting(10, 1)
+    lr: Scheduled = setting(1e-3, 0.0, 1.0)
+    updates_per_interaction: int = setting(20, 0)
+    batch: int = setting(32, 1)  # consecutive interaction pairs per update
+    #: discrete latents: ``expected`` (exact expectation over categories), ``marginal`` or
+    #: ``gumbel`` (the paper's straight-through Gumbel-Softmax); see agent/latent.py
+    estimator: Estimator = "expected"
+    #: discrete latents: z^j as a Gumbel-max sample of the encoder's categorical (the paper's
+    #: Eq. for z^j) instead of its argmax
+    sample: bool = False
+    usage_bonus: Scheduled = setting(0.1, 0.0)
+    #: continuous latents: weight of mean(pre-tanh output^2), keeps z off the tanh corners
+    preact_penalty: Scheduled = setting(1e-3, 0.0)
+    #: discrete latents: heads closer than this (target std units) are one strategy (0 = off)
+    merge_threshold: float = setting(0.5, 0.0)
+    refresh_every: int = setting(10, 1)  # cached latents recomputed every this many interactions
 
 
 @dataclass
-class LearningRateSchedule(Schedule):
-    """SAC's learning rate (actor, critics and temperature) over interactions.
+class StabilityConfig:
+    """R = (1 - b) R_task + b R_stable."""
 
-    Once the policy is near-deterministic and holds the opponent, what still moves its last step
-    across the edge is the drift of its own mean under continued updates; a smaller step size late
-    lets the mean settle where the critic puts it."""
-
-    name: ClassVar[str] = "learning rate schedule"
-    symbol: ClassVar[str] = "learning rate"
-    low: ClassVar[float] = 0.0
-    high: ClassVar[float] = 1.0
-
-
-#: the agent settings that are schedules, their kind, and the options that give them
-SCHEDULES: dict[str, type[Schedule]] = {
-    "beta_schedule": BetaSchedule,
-    "target_entropy_schedule": EntropySchedule,
-    "gamma_schedule": DiscountSchedule,
-    "lr_schedule": LearningRateSchedule,
-}
-SCHEDULE_OPTIONS = {
-    "beta_schedule": "--beta-anneal or --beta-schedule",
-    "target_entropy_schedule": "--target-entropy-schedule",
-    "gamma_schedule": "--discount-schedule",
-    "lr_schedule": "--lr-schedule",
-}
-#: schedules that replace a plain setting, which may then not be given as well
-SCHEDULE_REPLACES = {"gamma_schedule": "gamma", "lr_schedule": "lr"}
-
-
-def check_schedule_overrides(schedules: Iterable[str], overrides: dict[str, Any]) -> None:
-    """Refuse a schedule given together with ``--set`` of the setting it replaces."""
-    for key in schedules:
-        setting = SCHEDULE_REPLACES.get(key)
-        if setting in overrides:
-            raise ConfigError(f"give one of --set {setting} and {SCHEDULE_OPTIONS[key]}, not both")
+    beta: Scheduled = setting(0.5, 0.0, 1.0)
+    #: boundary credit: the term paid on interaction j's last step is scale x R_stable
+    #: (None = H, the paper's per-step R_stable summed over one interaction)
+    scale: float | None = setting(None, 0.0)
+    credit: Credit = "boundary"
+    smirl_std_floor: float = setting(0.05, 1e-9)  # SMiRL's density: std floor
 
 
 @dataclass
 class AgentConfig:
     """Everything that defines an agent; saved with every run."""
 
-    method: str = "sili"
-    latent: str = "discrete"
-    beta: float = 0.5
-    beta_schedule: BetaSchedule | None = None
-    latent_dim: int = 10
-    hidden: int = 256
-    # SAC
-    lr: float = 3e-4
-    #: SAC's learning rate over interactions (``--lr-schedule``); replaces ``lr`` when given
-    lr_schedule: LearningRateSchedule | None = None
-    gamma: float = 0.99
-    #: gamma over interactions (``--discount-schedule``); replaces ``gamma`` when given
-    gamma_schedule: DiscountSchedule | None = None
-    tau: float = 5e-3
-    batch_interactions: int = 16  # an RL batch = this many interactions ...
-    batch_steps: int = 16  # ... times this many timesteps from each
-    updates_per_step: float = 1.0  # SAC gradient updates per environment step
-    #: "bfloat16": SAC's forward passes under CPU autocast (faster on CPUs with bfloat16 units;
-    #: weights, gradients and optimizer state stay float32; see sili_robots/agent/sac.py)
-    precision: str = "float32"
-    #: the library of the float32 matrix products of every network: "onednn" or "aten"
-    #: (PyTorch's default BLAS). Both compute in float32; oneDNN is faster where the BLAS is slow
-    #: (sili_robots/agent/matmul.py). The default is onednn where this PyTorch has it; runs saved
-    #: before this setting existed load with aten, the kernels they were trained with
-    matmul: str = field(default_factory=default_matmul)
-    #: the entropy SAC's temperature holds the policy at (default -|A|, SAC's usual choice).
-    #: Lower is more deterministic everywhere (measured on Circle in benchmarks/RESULTS.md)
-    target_entropy: float | None = None
-    #: the target entropy over interactions (``--target-entropy-schedule``); replaces
-    #: ``target_entropy`` when given
-    target_entropy_schedule: EntropySchedule | None = None
-    #: fraction of each RL batch's interactions drawn from the newest ``recent_interactions``
-    #: (the rest uniformly from the whole replay). 0 = uniform (default). A policy that held one
-    #: strategy for a long time has little replay of the others; after a slip, this makes the
-    #: new strategy's on-policy data count sooner
-    recent_fraction: float = 0.0
-    recent_interactions: int = 100
-    random_interactions: int = 20  # uniform random actions first (20 x 50 = 1,000 steps)
-    # latent model
-    latent_lr: float = 1e-3
-    latent_updates_per_interaction: int = 20
-    latent_batch: int = 32  # consecutive interaction pairs per latent-model update
-    #: discrete latents: "expected" (exact expectation over categories, default), "marginal"
-    #: (exact marginal likelihood) or "gumbel" (the paper's straight-through Gumbel-Softmax);
-    #: see sili_robots/agent/latent.py
-    latent_estimator: str = "expected"
-    latent_usage_bonus: float = 0.1
-    #: continuous latents: weight of mean(pre-tanh output^2) in the latent-model loss, which
-    #: keeps z^j off the corners of the tanh box (0 = off; see sili_robots/agent/latent.py).
-    #: Runs saved before this setting existed load with 0, the loss they were trained with
-    latent_preact_penalty: float = 1e-3
-    #: the encoder also sees the last transition of tau^{j-1} on its own, beside the mean- and
-    #: max-pooled features of all of them (see sili_robots/agent/latent.py). Off by default
-    latent_last_step: bool = False
-    #: discrete latents: categories whose decoder heads differ by less than this many target
-    #: standard deviations count as one strategy (0 = off; see latent.category_groups)
-    latent_merge_threshold: float = 0.5
-    #: discrete latents: fraction of each latent-model batch drawn from the pairs (j-1, j)
-    #: across which the strategy changed, as the decoder's posterior tells it in hindsight
-    #: (0 = uniform pairs). Changes are rare once the opponent is held, so uniform pairs teach
-    #: the encoder little about where in tau^{j-1} a change is decided (e.g. the edge of the
-    #: circle); see ``SILIAgent.change_pairs``
-    latent_change_fraction: float = 0.0
-    #: the prior probability eps that the strategy in effect differs from the encoder's z^j.
-    #: Above 0 the policy acts on a within-interaction filter, the posterior given z^j and the
-    #: steps played so far under the decoder (over the categories of discrete latents, over
-    #: z^j and encoder latents of other strategies for continuous ones), and the critic learns
-    #: on the same per-step latents (0 = off, the paper's fixed z^j; see
-    #: sili_robots/agent/latent_filter.py)
-    latent_filter: float = 0.0
-    #: the filter runs from the first latent refresh at or after this many interactions (0: the
-    #: first refresh), e.g. once the policy has learned to reach each strategy
-    latent_filter_start: int = 0
-    #: the filter's noise scale per output: 0 = the decoder's own residual error (on its newest
-    #: interactions), s > 0 = s times the targets' standard deviation over the replay. The
-    #: residual treats every step as independent evidence, but a decoder's errors within an
-    #: interaction are correlated (a bias over its 50 steps), so at that scale small biases add
-    #: up to a switch; a broader scale lets only differences as large as a strategy's count
-    latent_filter_noise: float = 0.0
-    #: discrete latents: what the stability reward counts as a change of strategy. "latents":
-    #: the paper's d(z^j, z^{j+1}), 1 when the encoder's category changed. "posterior": the
-    #: probability that the strategy in effect during interaction j (the decoder's posterior
-    #: given that interaction) differs from the predicted z^{j+1}. "hindsight": the probability
-    #: that the strategies in effect during j and j+1 differ (see sili_robots/agent/agent.py)
-    stability_distance: str = "latents"
-    #: total stability reward credited per interaction = stability_scale * R_stable
-    #: (default: the horizon, i.e. the paper's per-step R_stable summed over the interaction)
-    stability_scale: float | None = None
-    # SMiRL
-    smirl_std_floor: float = 0.05
-    extra: dict[str, Any] = field(default_factory=dict)
+    method: Method = "sili"
+    latent: LatentKind = "discrete"
+    hidden: int = setting(256, 1)  # every network is 2 x hidden
+    #: float32 matrix-product library of every network (agent/matmul.py)
+    matmul: Matmul = field(default_factory=default_matmul)
+    sac: SACConfig = field(default_factory=SACConfig)
+    model: LatentModelConfig = field(default_factory=LatentModelConfig)
+    sili: StabilityConfig = field(default_factory=StabilityConfig)
+    #: the named profile the settings started from ("package" or "paper")
+    profile: str = "package"
 
     # ------------------------------------------------------------------ derived
     @property
     def uses_latent_model(self) -> bool:
-        return self.method in ("sili", "lili", "stable") and self.latent in (
-            "discrete",
-            "continuous",
-        )
+        return self.latent in ("discrete", "continuous")
 
     @property
     def latent_width(self) -> int:
         """Width of one latent as fed to the policy (0 when the policy sees none)."""
-        if self.method not in ("sili", "lili", "stable") or self.latent == "partial":
-            return 0
-        return self.latent_dim
+        return self.model.dim if self.latent in ("discrete", "continuous", "true") else 0
 
     @property
     def policy_latents(self) -> int:
@@ -298,166 +123,181 @@ class AgentConfig:
             return 0
         return 1 if self.method == "lili" else 2
 
-    def beta_at(self, interaction: int) -> float:
-        if self.method in ("sac", "oracle"):
-            return 0.0
-        if self.beta_schedule is not None:
-            return self.beta_schedule.value(interaction)
-        return self.beta
-
-    def target_entropy_at(self, interaction: int, act_dim: int) -> float:
-        """SAC's target entropy for updates made after ``interaction`` (default -|A|)."""
-        if self.target_entropy_schedule is not None:
-            return self.target_entropy_schedule.value(interaction)
-        return -float(act_dim) if self.target_entropy is None else self.target_entropy
-
-    def gamma_at(self, interaction: int) -> float:
-        """SAC's discount for updates made after ``interaction``."""
-        if self.gamma_schedule is not None:
-            return self.gamma_schedule.value(interaction)
-        return self.gamma
-
-    def lr_at(self, interaction: int) -> float:
-        """SAC's learning rate for updates made after ``interaction``."""
-        if self.lr_schedule is not None:
-            return self.lr_schedule.value(interaction)
-        return self.lr
-
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        return to_plain(self)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> AgentConfig:
-        data = dict(data)
-        known = {f.name for f in fields(cls)}
-        unknown = set(data) - known
-        if unknown:
-            raise ConfigError(f"unknown agent settings {sorted(unknown)}; allowed: {sorted(known)}")
-        for key, kind in SCHEDULES.items():
-            if data.get(key) is not None:
-                data[key] = kind.from_dict(data[key])
-        data.setdefault("latent_preact_penalty", 0.0)  # saved before it existed: trained without
-        data.setdefault("matmul", "aten")  # likewise: trained on PyTorch's default kernels
-        return cls(**data)
+        return from_plain(cls, data, "agent")
 
     def validate(self) -> AgentConfig:
-        if self.method not in METHODS:
-            raise ConfigError(f"unknown method {self.method!r}; allowed: {', '.join(METHODS)}")
-        if self.latent not in LATENT_KINDS:
-            raise ConfigError(
-                f"unknown latent kind {self.latent!r}; allowed: {', '.join(LATENT_KINDS)}"
-            )
-        if not 0.0 <= self.beta <= 1.0:
-            raise ConfigError(f"beta must be in [0, 1], got {self.beta}")
-        for key in SCHEDULES:
-            if getattr(self, key) is not None:
-                getattr(self, key).check()
-        if self.target_entropy_schedule is not None and self.target_entropy is not None:
-            raise ConfigError("give one of target_entropy and a target entropy schedule")
-        for name in ("latent_dim", "hidden", "batch_interactions", "batch_steps", "latent_batch"):
-            if getattr(self, name) < 1:
-                raise ConfigError(f"{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("updates_per_step", "random_interactions", "latent_updates_per_interaction"):
-            if getattr(self, name) < 0:
-                raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
-        if not 0.0 <= self.recent_fraction <= 1.0:
-            raise ConfigError(f"recent_fraction must be in [0, 1], got {self.recent_fraction}")
-        if self.recent_interactions < 1:
-            raise ConfigError(f"recent_interactions must be >= 1, got {self.recent_interactions}")
-        if self.latent_merge_threshold < 0:
-            raise ConfigError(
-                f"latent_merge_threshold must be >= 0, got {self.latent_merge_threshold}"
-            )
-        if self.latent_preact_penalty < 0:
-            raise ConfigError(
-                f"latent_preact_penalty must be >= 0, got {self.latent_preact_penalty}"
-            )
-        if not 0.0 <= self.latent_change_fraction <= 1.0:
-            raise ConfigError(
-                f"latent_change_fraction must be in [0, 1], got {self.latent_change_fraction}"
-            )
-        if not 0.0 <= self.latent_filter < 1.0:
-            raise ConfigError(f"latent_filter must be in [0, 1), got {self.latent_filter}")
-        if self.latent_filter > 0 and not (
-            self.uses_latent_model and self.latent in ("discrete", "continuous")
-        ):
-            raise ConfigError(
-                f"latent_filter {self.latent_filter} needs learned latents (discrete or "
-                f"continuous) of a method with a latent model (sili, lili, stable), got method "
-                f"{self.method!r} with latent {self.latent!r}; allowed otherwise: 0"
-            )
-        if self.latent_filter_noise < 0:
-            raise ConfigError(
-                f"latent_filter_noise must be >= 0 (0: the decoder's residual), "
-                f"got {self.latent_filter_noise}"
-            )
-        if self.latent_filter_start < 0:
-            raise ConfigError(
-                f"latent_filter_start must be >= 0 interactions, got {self.latent_filter_start}"
-            )
-        if self.precision not in PRECISIONS:
-            raise ConfigError(
-                f"unknown precision {self.precision!r}; allowed: {', '.join(PRECISIONS)}"
-            )
-        if self.matmul not in MATMULS:
-            raise ConfigError(f"unknown matmul {self.matmul!r}; allowed: {', '.join(MATMULS)}")
+        check(self, "")
         if self.matmul == "onednn" and not onednn_available():
             raise ConfigError(
                 "matmul 'onednn' needs a PyTorch built with oneDNN, which this one is not; "
                 "allowed here: aten"
             )
-        if self.stability_distance not in STABILITY_DISTANCES:
-            raise ConfigError(
-                f"unknown stability_distance {self.stability_distance!r}; "
-                f"allowed: {', '.join(STABILITY_DISTANCES)}"
-            )
-        if self.latent_estimator not in ("expected", "marginal", "gumbel"):
-            raise ConfigError(
-                f"unknown latent_estimator {self.latent_estimator!r}; "
-                "allowed: expected, marginal, gumbel"
-            )
-        if not 0.0 < self.gamma <= 1.0:
-            raise ConfigError(f"gamma must be in (0, 1], got {self.gamma}")
         return self
 
 
-def _typed(name: str, annotation: str, value: Any) -> Any:
-    """``value`` as the setting's declared type, so a mistyped ``--set`` fails here, by name,
-    and not later inside the networks."""
+# ---------------------------------------------------------------------- generic typed access
+def _hints(cls: type) -> dict[str, Any]:
+    return typing.get_type_hints(cls)
+
+
+def _allowed(tp: Any) -> str:
+    args = typing.get_args(tp)
+    if typing.get_origin(tp) is Literal:
+        return "one of " + ", ".join(map(str, args))
+    names = [getattr(a, "__name__", str(a)) for a in args] or [getattr(tp, "__name__", str(tp))]
+    return " or ".join(n.replace("NoneType", "null") for n in names)
+
+
+def convert(name: str, tp: Any, value: Any) -> Any:
+    """``value`` as a field of type ``tp``, or ConfigError naming ``name`` and what is allowed."""
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin is Literal:
+        if value not in args:
+            raise ConfigError(f"unknown {name} {value!r}; allowed: {', '.join(map(str, args))}")
+        return value
+    if args and origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        if isinstance(value, Schedule) and Schedule in args:
+            return value
+        if isinstance(value, dict) and Schedule in args and "points" in value:
+            return Schedule.from_dict(value)
+        for kind in (float, int, bool, str):
+            if kind in args:
+                return convert(name, kind, value)
+        raise ConfigError(f"setting {name} must be {_allowed(tp)}, got {value!r}")
     is_number = isinstance(value, int | float) and not isinstance(value, bool)
-    if annotation == "float" or (annotation == "float | None" and value is not None):
+    if tp is float:
         if not is_number:
-            raise ConfigError(f"agent setting {name} must be a number, got {value!r}")
+            raise ConfigError(f"setting {name} must be a number, got {value!r}")
         return float(value)
-    if annotation == "int":
+    if tp is int:
         if not (is_number and float(value).is_integer()):
-            raise ConfigError(f"agent setting {name} must be a whole number, got {value!r}")
+            raise ConfigError(f"setting {name} must be a whole number, got {value!r}")
         return int(value)
-    if name in SCHEDULES and not isinstance(value, SCHEDULES[name] | None):
-        raise ConfigError(f"give {name} with {SCHEDULE_OPTIONS[name]}, not {value!r}")
-    if annotation == "bool" and not isinstance(value, bool):
-        raise ConfigError(f"agent setting {name} must be true or false, got {value!r}")
-    if annotation == "str" and not isinstance(value, str):
-        raise ConfigError(f"agent setting {name} must be a string, got {value!r}")
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"setting {name} must be true or false, got {value!r}")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"setting {name} must be a string, got {value!r}")
+        return value
+    if dataclasses.is_dataclass(tp):
+        if not isinstance(value, dict):
+            raise ConfigError(f"setting {name} is a section; give its fields, got {value!r}")
+        return from_plain(tp, value, name)
     return value
 
 
-def method_config(method: str, latent: str | None = None, **overrides: Any) -> AgentConfig:
-    """The preset for ``method``; ``latent`` defaults to the task's choice (else discrete)."""
-    if method not in METHODS:
-        raise ConfigError(f"unknown method {method!r}; allowed: {', '.join(METHODS)}")
-    cfg = AgentConfig(method=method, latent=latent or "discrete")
-    if method == "lili":
-        cfg.beta = 0.0
-    elif method == "stable":
-        cfg.beta = 1.0
-    elif method in ("sac", "oracle"):
-        cfg.beta = 0.0
-    types = {f.name: f.type for f in fields(AgentConfig)}
-    for k, v in overrides.items():
-        if k not in types:
-            raise ConfigError(f"unknown agent setting {k!r}")
-        setattr(cfg, k, _typed(k, types[k], v))
-    if method == "lili" and cfg.latent == "partial":
-        cfg.latent = "discrete"  # LILI always learns a latent; b = 0 makes the flag unused
-    return cfg.validate()
+def check(obj: Any, prefix: str) -> None:
+    """Every field of a config dataclass within its declared type and range (recursively)."""
+    hints = _hints(type(obj))
+    for f in fields(obj):
+        name = f"{prefix}{f.name}"
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(value):
+            check(value, name + ".")
+            continue
+        convert(name, hints[f.name], value)  # type and Literal membership
+        low, high = f.metadata.get("low", -math.inf), f.metadata.get("high", math.inf)
+        if isinstance(value, Schedule):
+            value.check(name, low, high)
+        elif (
+            isinstance(value, int | float)
+            and not isinstance(value, bool)
+            and (not (low <= value <= high) or math.isnan(value))
+        ):
+            raise ConfigError(f"{name} must be {_range(low, high, hints[f.name])}, got {value}")
+
+
+def _range(low: float, high: float, tp: Any) -> str:
+    if tp is int or (math.isfinite(low) and not math.isfinite(high)):
+        return f">= {low:g}"
+    return span(low, high)
+
+
+def get_path(obj: Any, path: str) -> Any:
+    for part in path.split("."):
+        obj = getattr(obj, part)
+    return obj
+
+
+def paths(cls: type, prefix: str = "") -> list[str]:
+    """Every leaf setting's dotted path, in declaration order."""
+    out: list[str] = []
+    hints = _hints(cls)
+    for f in fields(cls):
+        tp = hints[f.name]
+        if dataclasses.is_dataclass(tp):
+            out += paths(tp, f"{prefix}{f.name}.")
+        else:
+            out.append(f"{prefix}{f.name}")
+    return out
+
+
+def set_path(obj: Any, path: str, value: Any, prefix: str = "") -> None:
+    """Set a dotted path, converting ``value`` by the field's type; unknown paths are named."""
+    *sections, leaf = path.split(".")
+    target = obj
+    for part in sections:
+        if not dataclasses.is_dataclass(target) or part not in {f.name for f in fields(target)}:
+            raise ConfigError(f"unknown setting {prefix}{path!r}; allowed: {_listing(obj, prefix)}")
+        target = getattr(target, part)
+    names = {f.name for f in fields(target)}
+    hints = _hints(type(target))
+    if leaf not in names or dataclasses.is_dataclass(hints[leaf]):
+        raise ConfigError(f"unknown setting {prefix}{path!r}; allowed: {_listing(obj, prefix)}")
+    setattr(target, leaf, convert(prefix + path, hints[leaf], value))
+
+
+def _listing(obj: Any, prefix: str) -> str:
+    return ", ".join(prefix + p for p in paths(type(obj)))
+
+
+def to_plain(obj: Any) -> Any:
+    """A config dataclass as JSON-ready dicts (schedules as {"points": ...})."""
+    if isinstance(obj, Schedule):
+        return obj.to_dict()
+    if dataclasses.is_dataclass(obj):
+        return {f.name: to_plain(getattr(obj, f.name)) for f in fields(obj)}
+    return obj
+
+
+def from_plain(cls: type, data: dict[str, Any], name: str) -> Any:
+    """The dataclass ``cls`` from ``to_plain``'s output; unknown keys are named."""
+    known = {f.name for f in fields(cls)}
+    unknown = set(data) - known
+    if unknown:
+        raise ConfigError(f"unknown {name} settings {sorted(unknown)}; allowed: {sorted(known)}")
+    hints = _hints(cls)
+    return cls(**{k: convert(f"{name}.{k}", hints[k], v) for k, v in data.items()})
+
+
+def resolved(cfg: Any, interaction: int) -> Any:
+    """A copy of a config with every schedule replaced by its value at ``interaction``."""
+    changes = {}
+    for f in fields(cfg):
+        value = getattr(cfg, f.name)
+        if dataclasses.is_dataclass(value):
+            changes[f.name] = resolved(value, interaction)
+        elif isinstance(value, Schedule):
+            changes[f.name] = value_at(value, interaction)
+    return dataclasses.replace(cfg, **changes)
+
+
+def scheduled_paths(cfg: Any, prefix: str = "") -> list[str]:
+    """The dotted paths of the settings given as schedules."""
+    out: list[str] = []
+    for f in fields(cfg):
+        value = getattr(cfg, f.name)
+        if dataclasses.is_dataclass(value):
+            out += scheduled_paths(value, f"{prefix}{f.name}.")
+        elif isinstance(value, Schedule):
+            out.append(prefix + f.name)
+    return out

@@ -7,13 +7,9 @@ mean *and* max before a linear head. The pooling is permutation-invariant, uses 
 e.g. the last one whose end position decides the opponent's next move, dominate a feature. The
 time fraction t/H is part of s, so order is still available when it matters.
 
-``last_step`` (the setting ``latent_last_step``) also hands the head the last transition's
-features unpooled, as the original code's fixed subsample of timesteps always included the last
-one. Where the end of an interaction decides the opponent's next strategy (the circle's edge), a
-pooled feature has to single out the last step and the position in one unit; unpooled, the
-head reads the end position directly. In Circle (3 Goals) runs it foresaw 96-97% of the
-opponent's moves (pooled: 52-67%); on a scripted replay it missed fewer moves caused by ending
-clearly inside but more slips at the edge, so it is off by default (benchmarks/RESULTS.md).
+``readouts`` are further functions of the per-step features handed to the head beside the
+pooled ones; the ``last_step`` add-on (sili_robots/addons/last_step.py) uses one to read the last
+transition unpooled.
 
 Decoder. Continuous latents are concatenated to (s, a). For discrete latents the decoder has one
 prediction head per category and the one-hot z selects the head: D(s, a, z) = sum_k z_k D_k(s, a),
@@ -57,6 +53,8 @@ kept the purity and raised the agreement to 0.83 (numbers in benchmarks/RESULTS.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -89,7 +87,7 @@ class LatentModel(nn.Module):
         usage_bonus: float = 0.1,
         evidence_scale: float = 1.0,
         preact_penalty: float = 0.0,
-        last_step: bool = False,
+        readouts: Sequence[Callable[[torch.Tensor], torch.Tensor]] = (),
         matmul: str = "aten",
     ) -> None:
         super().__init__()
@@ -100,7 +98,7 @@ class LatentModel(nn.Module):
         self.kind, self.estimator, self.usage_bonus = kind, estimator, usage_bonus
         self.evidence_scale = evidence_scale
         self.preact_penalty = preact_penalty
-        self.last_step = last_step
+        self.readouts = list(readouts)
         self.latent_dim = latent_dim
         tr_dim = 2 * obs_dim + act_dim + 1
         self.phi = nn.Sequential(
@@ -109,7 +107,7 @@ class LatentModel(nn.Module):
             Linear(hidden, hidden, matmul),
             nn.ReLU(),
         )
-        self.head = Linear((3 if last_step else 2) * hidden, latent_dim, matmul)
+        self.head = Linear((2 + len(self.readouts)) * hidden, latent_dim, matmul)
         self.out_dim = obs_dim + 1
         if kind == "discrete":
             self.decoder = mlp(obs_dim + act_dim, latent_dim * self.out_dim, hidden, matmul=matmul)
@@ -158,9 +156,7 @@ class LatentModel(nn.Module):
     def encode_logits(self, traj: torch.Tensor) -> torch.Tensor:
         """``traj``: [N, H, tr_dim] -> raw encoder output [N, latent_dim]."""
         h = self.phi(traj)
-        parts = [h.mean(1), h.amax(1)]
-        if self.last_step:
-            parts.append(h[:, -1])
+        parts = [h.mean(1), h.amax(1), *(readout(h) for readout in self.readouts)]
         return self.head(torch.cat(parts, dim=-1))
 
     def encode(self, traj: torch.Tensor, sample: bool = False) -> torch.Tensor:

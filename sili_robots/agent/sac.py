@@ -14,13 +14,16 @@ gradients, optimizer state and losses stay float32. Off by default: it changes t
 
 from __future__ import annotations
 
+import typing
 from contextlib import nullcontext
 
 import torch
 import torch.nn.functional as F
 
-from sili_robots.agent.config import PRECISIONS
+from sili_robots.agent.config import Precision
 from sili_robots.agent.networks import Actor, TwinCritic
+
+PRECISIONS = typing.get_args(Precision)
 
 
 class SAC:

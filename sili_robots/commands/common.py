@@ -4,16 +4,13 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
+from typing import Any
 
-from sili_robots.agent.config import (
-    BetaSchedule,
-    DiscountSchedule,
-    EntropySchedule,
-    LearningRateSchedule,
-    Schedule,
-    ScheduleT,
-)
+from sili_robots.agent.schedule import Schedule
+from sili_robots.build import is_class_path, task_class
 from sili_robots.errors import ConfigError
+from sili_robots.migrations import setting_path
 from sili_robots.tasks import task_spec
 
 
@@ -58,76 +55,92 @@ def unit_float(text: str) -> float:
     return float_in(text, 0.0, 1.0)
 
 
-def parse_schedule(text: str, option: str, kind: type[ScheduleT]) -> ScheduleT:
-    """``"250:0,300:0.5"`` -> kind([(250, 0.0), (300, 0.5)]), unparsable points named."""
+def parse_schedule(text: str, option: str, low: float = -math.inf, high: float = math.inf):
+    """``"250:0,300:0.5"`` -> Schedule(((250, 0.0), (300, 0.5))), unparsable points named."""
     points = []
     for item in text.split(","):
         interaction, sep, value = item.strip().partition(":")
         try:
             if not sep:
                 raise argparse.ArgumentTypeError(f"{item.strip()!r} is not INTERACTION:VALUE")
-            points.append((non_negative_int(interaction), float_in(value, kind.low, kind.high)))
+            points.append((non_negative_int(interaction), float_in(value, low, high)))
         except argparse.ArgumentTypeError as err:
             raise ConfigError(f"{option} {text!r}: {err}") from None
-    return kind(points)  # AgentConfig.validate checks the points' order
+    return Schedule(tuple(points))  # the config's check names a bad order
 
 
-#: the schedule options of ``sili train`` and ``sili sweep``:
-#: option -> (agent setting, kind, metavar, what it sets, example)
-SCHEDULE_ARGS: dict[str, tuple[str, type[Schedule], str, str, str]] = {
+#: schedule options of ``sili train`` and ``sili sweep``:
+#: option -> (setting path, metavar, what it sets, example, low, high)
+SCHEDULE_ARGS: dict[str, tuple[str, str, str, str, float, float]] = {
     "--beta-schedule": (
-        "beta_schedule",
-        BetaSchedule,
-        "I:B,I:B,...",
-        "b (sili, smirl)",
-        "250:0,300:0.5,1500:0.5,1600:0",
+        "sili.beta", "I:B,I:B,...", "b (sili, smirl)", "250:0,300:0.5,1500:0.5,1600:0", 0.0, 1.0
     ),
     "--target-entropy-schedule": (
-        "target_entropy_schedule",
-        EntropySchedule,
+        "sac.target_entropy",
         "I:E,I:E,...",
         "SAC's target entropy (default -|A| throughout)",
         "1500:-2,1600:-4",
+        -math.inf,
+        math.inf,
     ),
     "--discount-schedule": (
-        "gamma_schedule",
-        DiscountSchedule,
-        "I:G,I:G,...",
-        "SAC's discount gamma (default 0.99 throughout)",
-        "1600:0.99,1700:0.998",
+        "sac.gamma", "I:G,I:G,...", "SAC's discount gamma (default 0.99)", "1600:0.99,1700:0.998",
+        0.0, 1.0,
     ),
     "--lr-schedule": (
-        "lr_schedule",
-        LearningRateSchedule,
-        "I:LR,I:LR,...",
-        "SAC's learning rate (default 3e-4 throughout)",
-        "2200:3e-4,2400:3e-5",
+        "sac.lr", "I:LR,I:LR,...", "SAC's learning rate (default 3e-4)", "2200:3e-4,2400:3e-5",
+        0.0, 1.0,
     ),
 }
 
 
 def add_schedule_args(p: argparse.ArgumentParser, scope: str) -> None:
-    for option, (_, _, metavar, what, example) in SCHEDULE_ARGS.items():
+    for option, (_, metavar, what, example, *_) in SCHEDULE_ARGS.items():
         p.add_argument(
             option,
             metavar=metavar,
             help=f"{what}{scope}, piecewise linear through (interaction, value) points, held "
-            f"before the first and after the last; e.g. {example}",
+            f"before the first and after the last; e.g. {example} (any float setting takes "
+            "the same form through --set PATH=I:V,I:V)",
         )
 
 
 def schedule_args(args: argparse.Namespace) -> dict[str, Schedule]:
-    """The schedule options given, parsed, keyed by their agent setting."""
+    """The schedule options given, parsed, keyed by their setting path."""
     out: dict[str, Schedule] = {}
-    for option, (setting, kind, *_) in SCHEDULE_ARGS.items():
+    for option, (path, _, _, _, low, high) in SCHEDULE_ARGS.items():
         text = getattr(args, option[2:].replace("-", "_"))
         if text:
-            out[setting] = parse_schedule(text, option, kind)
+            out[path] = parse_schedule(text, option, low, high)
     return out
 
 
+def check_schedule_overrides(schedules: dict[str, Schedule], settings: dict[str, Any]) -> None:
+    """Refuse a schedule option given together with ``--set`` of the setting it schedules."""
+    given = {setting_path(name): name for name in settings}
+    for option, (path, *_) in SCHEDULE_ARGS.items():
+        if path in schedules and path in given:
+            raise ConfigError(f"give one of --set {given[path]} and {option}, not both")
+
+
+def parse_settings(items: list[str]) -> dict[str, Any]:
+    """``--set KEY=VALUE`` pairs: JSON values, ``I:V,I:V`` as a schedule, else a string."""
+    out = parse_env_kwargs(items, "--set")
+    for key, value in out.items():
+        if isinstance(value, str) and SCHEDULE_TEXT.fullmatch(value):
+            out[key] = parse_schedule(value, f"--set {key}")
+    return out
+
+
+SCHEDULE_TEXT = re.compile(r"\s*\d+\s*:[^,]+(,\s*\d+\s*:[^,]+)*")
+
+
 def task_name(text: str) -> str:
+    """A registered task's CLI name, or a user's ``package.module:ClassName`` (checked)."""
     try:
+        if is_class_path(text):
+            task_class(text)
+            return text
         return task_spec(text).name
     except ConfigError as err:
         raise argparse.ArgumentTypeError(str(err)) from None

@@ -12,11 +12,18 @@ from sili_robots.commands.common import (
     add_override_args,
     add_schedule_args,
     parse_env_kwargs,
+    parse_settings,
     positive_int,
     schedule_args,
 )
 from sili_robots.errors import ConfigError
-from sili_robots.sweep.spec import SweepSpec, parse_betas, parse_list, parse_seeds
+from sili_robots.sweep.spec import (
+    SWEEP_SCHEDULES,
+    SweepSpec,
+    parse_betas,
+    parse_list,
+    parse_seeds,
+)
 
 BACKENDS = ("local", "ray")
 
@@ -80,16 +87,21 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
     if not args.tasks or not args.methods:
         raise ConfigError("--tasks and --methods are required (or --resume SWEEP_DIR)")
     methods = list(METHODS) if args.methods.strip() == "all" else parse_list(args.methods)
+    schedules = schedule_args(args)
     return SweepSpec(
         tasks=parse_list(args.tasks),
         methods=methods,
         seeds=parse_seeds(args.seeds),
         interactions=args.interactions,
         betas=parse_betas(args.beta) if args.beta is not None else None,
-        **{setting: schedule.points for setting, schedule in schedule_args(args).items()},
+        **{
+            field: [list(p) for p in schedules[path].points]
+            for field, (path, _) in SWEEP_SCHEDULES.items()
+            if path in schedules
+        },
         controllers=parse_list(args.controller) if args.controller is not None else None,
         latent=args.latent,
-        agent_overrides=parse_env_kwargs(args.agent_set, "--set"),
+        agent_overrides=parse_settings(args.agent_set),
         env_kwargs=parse_env_kwargs(args.env_kwarg, "--env-kwarg"),
         checkpoint_every=args.checkpoint_every,
     )

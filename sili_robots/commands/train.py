@@ -7,33 +7,38 @@ import json
 import shutil
 from pathlib import Path
 
-from sili_robots.agent import (
-    BETA_METHODS,
-    LATENT_KINDS,
-    METHODS,
-    BetaSchedule,
-    method_config,
-)
-from sili_robots.agent.config import check_schedule_overrides
+from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, PROFILES, Schedule
+from sili_robots.build import make_run_config
 from sili_robots.commands.common import (
     add_override_args,
     add_schedule_args,
+    check_schedule_overrides,
     non_negative_int,
     parse_env_kwargs,
+    parse_settings,
     positive_int,
     schedule_args,
     task_name,
     unit_float,
 )
 from sili_robots.errors import ConfigError
-from sili_robots.runs import CONFIG, RunConfig, read_config
-from sili_robots.tasks import task_spec
+from sili_robots.runs import CONFIG, RunConfig, make_run_dir, read_config
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("train", help="train a method on a task (or --resume a run)")
-    p.add_argument("--task", type=task_name, help="task name, e.g. circle-3")
+    p.add_argument(
+        "--task",
+        type=task_name,
+        help="task name, e.g. circle-3, or a task class as package.module:ClassName",
+    )
     p.add_argument("--method", default="sili", choices=METHODS)
+    p.add_argument(
+        "--profile",
+        default="package",
+        choices=PROFILES,
+        help="starting settings: the package's defaults, or the paper's appendix exactly",
+    )
     p.add_argument(
         "--latent",
         choices=LATENT_KINDS,
@@ -73,7 +78,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         raise ConfigError(
             "--task is required (or --resume RUN_DIR); allowed tasks: " + ", ".join(_task_names())
         )
-    overrides = parse_env_kwargs(args.agent_set, "--set")
+    settings = parse_settings(args.agent_set)
     for option, given in (
         ("--beta", args.beta is not None),
         ("--beta-anneal", bool(args.beta_anneal)),
@@ -85,41 +90,44 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
                 f"use --method {' or '.join(BETA_METHODS)}"
             )
     if args.beta is not None:
-        overrides["beta"] = args.beta
+        settings["sili.beta"] = args.beta
     if args.beta_anneal and args.beta_schedule:
         raise ConfigError("give one of --beta-anneal and --beta-schedule, not both")
-    if args.beta_anneal:
-        if len(args.beta_anneal) not in (3, 4):
-            raise ConfigError(
-                f"--beta-anneal takes START END LENGTH [DELAY], got {' '.join(args.beta_anneal)}"
-            )
-        start, end, length, *delay = args.beta_anneal
-        try:
-            overrides["beta_schedule"] = BetaSchedule.ramp(
-                unit_float(start),
-                unit_float(end),
-                positive_int(length),
-                non_negative_int(delay[0]) if delay else 0,
-            )
-        except argparse.ArgumentTypeError as err:
-            raise ConfigError(f"--beta-anneal: {err}") from None
     schedules = schedule_args(args)
-    check_schedule_overrides(schedules, overrides)
-    overrides.update(schedules)
-    latent = args.latent or task_spec(args.task).default_latent
-    agent = method_config(args.method, latent, **overrides)
+    if args.beta_anneal:
+        schedules["sili.beta"] = beta_anneal(args.beta_anneal)
+    check_schedule_overrides(schedules, settings)
+    settings.update(schedules)
     env_kwargs = parse_env_kwargs(args.env_kwarg, "--env-kwarg")
     if args.controller is not None:
         env_kwargs["controller"] = args.controller
-    return RunConfig(
-        task=args.task,
-        method=args.method,
-        seed=args.seed,
-        interactions=args.interactions or 1000,
-        agent=agent,
+    return make_run_config(
+        args.task,
+        args.method,
+        args.seed,
+        args.interactions or 1000,
+        latent=args.latent,
+        profile=args.profile,
+        settings=settings,
         env_kwargs=env_kwargs,
         checkpoint_every=args.checkpoint_every,
     )
+
+
+def beta_anneal(words: list[str]) -> Schedule:
+    """``--beta-anneal START END LENGTH [DELAY]`` as a schedule of b."""
+    if len(words) not in (3, 4):
+        raise ConfigError(f"--beta-anneal takes START END LENGTH [DELAY], got {' '.join(words)}")
+    start, end, length, *delay = words
+    try:
+        return Schedule.ramp(
+            unit_float(start),
+            unit_float(end),
+            positive_int(length),
+            non_negative_int(delay[0]) if delay else 0,
+        )
+    except argparse.ArgumentTypeError as err:
+        raise ConfigError(f"--beta-anneal: {err}") from None
 
 
 def _task_names() -> list[str]:
@@ -148,6 +156,7 @@ def run(args: argparse.Namespace) -> int:
                 )
             shutil.rmtree(args.out)
         _check_env_builds(cfg)
+        make_run_dir(args.out)
         run_dir = train(cfg, args.out, progress=not args.no_progress)
     summary = write_summary(run_dir)
     print(json.dumps({"run_dir": str(run_dir), **summary}, indent=2))
@@ -156,7 +165,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _check_env_builds(cfg: RunConfig) -> None:
     """Fail fast, with the task's own message, on bad task arguments (e.g. a controller)."""
-    from sili_robots.training import make_run_env
+    from sili_robots.build import make_run_env
 
     try:
         env = make_run_env(cfg)

@@ -9,14 +9,15 @@ from __future__ import annotations
 
 import importlib
 import inspect
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from functools import cache
 from typing import Any
 
-from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, method_config
-from sili_robots.agent.config import SCHEDULES, check_schedule_overrides
+from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, Schedule
 from sili_robots.agent.matmul import default_matmul
+from sili_robots.build import make_run_config
 from sili_robots.errors import ConfigError, check_choice
+from sili_robots.migrations import setting_path
 from sili_robots.runs import RunConfig
 from sili_robots.tasks import TASKS, task_spec
 
@@ -139,25 +140,28 @@ def run_name(
     return f"{head}__{mid}__s{seed}"
 
 
-#: agent settings a sweep sets through its own options, not ``--set``
+#: settings a sweep sets through its own options, not ``--set``
 SWEEP_OPTIONS = {
-    "beta": "--beta",
-    "beta_schedule": "--beta-schedule",
-    "target_entropy_schedule": "--target-entropy-schedule",
-    "gamma_schedule": "--discount-schedule",
-    "lr_schedule": "--lr-schedule",
+    "sili.beta": "--beta or --beta-schedule",
     "method": "--methods",
     "latent": "--latent",
+}
+#: the sweep's schedule fields -> the setting each schedules, and its option
+SWEEP_SCHEDULES = {
+    "beta_schedule": ("sili.beta", "--beta-schedule"),
+    "target_entropy_schedule": ("sac.target_entropy", "--target-entropy-schedule"),
+    "gamma_schedule": ("sac.gamma", "--discount-schedule"),
+    "lr_schedule": ("sac.lr", "--lr-schedule"),
 }
 
 
 def schedule_overrides(spec: SweepSpec, method: str) -> dict[str, Any]:
-    """The sweep's schedules as agent settings of one method's runs (b only where b is free)."""
+    """The sweep's schedules as settings of one method's runs (b only where b is free)."""
     out: dict[str, Any] = {}
-    for key, kind in SCHEDULES.items():
+    for key, (path, _) in SWEEP_SCHEDULES.items():
         points = getattr(spec, key)
         if points is not None and (key != "beta_schedule" or method in BETA_METHODS):
-            out[key] = kind.from_dict({"points": points})
+            out[path] = Schedule(tuple(tuple(p) for p in points))
     return out
 
 
@@ -178,15 +182,18 @@ def validate(spec: SweepSpec) -> None:
         raise ConfigError(f"interactions must be >= 1, got {spec.interactions}")
     if spec.checkpoint_every < 1:
         raise ConfigError(f"checkpoint_every must be >= 1, got {spec.checkpoint_every}")
-    for key, options in SWEEP_OPTIONS.items():
-        if key in spec.agent_overrides:
+    given = {setting_path(k): k for k in spec.agent_overrides}
+    for path, options in SWEEP_OPTIONS.items():
+        if path in given:
             raise ConfigError(
-                f"agent setting {key!r} cannot be overridden in a sweep; use the sweep's {options}"
+                f"agent setting {given[path]!r} cannot be overridden in a sweep; use the "
+                f"sweep's {options}"
             )
     if spec.betas is not None and spec.beta_schedule is not None:
         raise ConfigError("give one of --beta and --beta-schedule, not both")
-    given = [key for key in SCHEDULES if getattr(spec, key) is not None]
-    check_schedule_overrides(given, spec.agent_overrides)
+    for key, (path, option) in SWEEP_SCHEDULES.items():
+        if getattr(spec, key) is not None and path in given:
+            raise ConfigError(f"give one of --set {given[path]} and {option}, not both")
     if "controller" in spec.env_kwargs:
         raise ConfigError("give controllers with --controller, not as a task argument")
     for option, given in (("--beta", spec.betas), ("--beta-schedule", spec.beta_schedule)):
@@ -210,6 +217,7 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
     for task in spec.tasks:
         tspec = task_spec(task)
         latent = spec.latent or tspec.default_latent
+        learned = ("sili", "lili", "stable")
         controllers: list[str | None] = [None]
         if spec.controllers is not None and task_accepts(tspec.name, "controller"):
             controllers = list(spec.controllers)
@@ -222,12 +230,19 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                 if method in BETA_METHODS:
                     betas = list(spec.betas) if spec.betas is not None else [None]
                 for beta in betas:
-                    overrides = dict(spec.agent_overrides)
+                    settings = dict(spec.agent_overrides)
                     if beta is not None:
-                        overrides["beta"] = beta
-                    overrides.update(schedule_overrides(spec, method))
-                    agent = method_config(method, latent, **overrides)
-                    label = agent.beta if agent.beta_schedule is None else "schedule"
+                        settings["sili.beta"] = beta
+                    settings.update(schedule_overrides(spec, method))
+                    base = make_run_config(
+                        tspec.name,
+                        method,
+                        latent=spec.latent if method in learned else None,
+                        settings=settings,
+                        env_kwargs=env_kwargs,
+                    )
+                    b = base.agent.sili.beta
+                    label = "schedule" if isinstance(b, Schedule) else b
                     for seed in spec.seeds:
                         name = run_name(
                             tspec.name,
@@ -237,13 +252,10 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                             controller=controller,
                             latent=None if latent == tspec.default_latent else latent,
                         )
-                        cfg = RunConfig(
-                            task=tspec.name,
-                            method=method,
+                        cfg = replace(
+                            base,
                             seed=seed,
                             interactions=spec.interactions,
-                            agent=agent,
-                            env_kwargs=env_kwargs,
                             checkpoint_every=spec.checkpoint_every,
                         )
                         runs.append(PlannedRun(name, cfg))

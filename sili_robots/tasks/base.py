@@ -116,9 +116,13 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         options = dict(options or {})
-        unknown = set(options) - {"restart"}
+        unknown = set(options) - {"restart", "restore"}
         if unknown:
-            raise ConfigError(f"unknown reset options {sorted(unknown)}; allowed: ['restart']")
+            raise ConfigError(
+                f"unknown reset options {sorted(unknown)}; allowed: ['restart', 'restore']"
+            )
+        if options.get("restore") is not None:
+            return self.restore_game_state(options["restore"])
         restart = seed is not None or bool(options.get("restart", False)) or not self._started
         if restart:
             self.interaction = 0
@@ -244,6 +248,7 @@ def _same(a: StrategyId | None, b: StrategyId | None) -> bool:
 
 
 def resume_game(env: gym.Env, state: dict[str, Any]) -> tuple[np.ndarray, dict[str, Any]]:
-    """Restore a saved game through any wrappers (they see a reset first, as they require)."""
+    """Restore a saved game through any wrappers (each sees a reset, as they require, and
+    shapes the restored observation as it shapes any other)."""
     env.reset()
-    return env.unwrapped.restore_game_state(state)
+    return env.reset(options={"restore": state})

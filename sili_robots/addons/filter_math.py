@@ -1,4 +1,4 @@
-"""Within-interaction latent filter: the encoder's z^j as a prior, corrected step by step by how
+"""The latent filter's mathematics: the encoder's z^j as a prior, corrected step by step by how
 well the decoder explains the interaction played so far under each alternative.
 
 Why. z^j = E(tau^{j-1}) is fixed before interaction j begins. When it is wrong (the opponent

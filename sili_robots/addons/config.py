@@ -1,0 +1,78 @@
+"""Settings of the research add-ons, one section each; all off by default (the paper's agent)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+from sili_robots.agent.config import AgentConfig, check, from_plain, setting, to_plain
+from sili_robots.errors import ConfigError
+
+StabilityDistance = Literal["latents", "posterior", "hindsight"]
+
+
+@dataclass
+class FilterConfig:
+    """Within-interaction latent filter (addons/latent_filter.py)."""
+
+    #: prior probability that the strategy in effect differs from the encoder's z^j (0 = off)
+    eps: float = setting(0.0, 0.0, 0.999999)
+    #: the filter runs from the first latent refresh at or after this many interactions
+    start: int = setting(0, 0)
+    #: noise scale per output: 0 = the decoder's residual, s > 0 = s x the targets' std
+    noise: float = setting(0.0, 0.0)
+
+
+@dataclass
+class RecentConfig:
+    """Part of each RL batch from the newest interactions (addons/recent.py)."""
+
+    fraction: float = setting(0.0, 0.0, 1.0)  # 0 = uniform over the whole replay
+    interactions: int = setting(100, 1)
+
+
+@dataclass
+class AddonsConfig:
+    """Every research add-on's settings; ``active`` lists the ones switched on."""
+
+    #: the encoder also reads the last transition unpooled (addons/last_step.py)
+    last_step: bool = False
+    #: discrete latents: fraction of each latent-model batch from pairs across which the
+    #: strategy changed by the decoder's hindsight posterior (addons/posteriors.py)
+    change_fraction: float = setting(0.0, 0.0, 1.0)
+    #: discrete latents: what R_stable counts as a change (addons/posteriors.py)
+    stability_distance: StabilityDistance = "latents"
+    recent: RecentConfig = field(default_factory=RecentConfig)
+    filter: FilterConfig = field(default_factory=FilterConfig)
+
+    def active(self) -> list[str]:
+        on = []
+        if self.last_step:
+            on.append("last_step")
+        if self.change_fraction > 0 or self.stability_distance != "latents":
+            on.append("posteriors")
+        if self.recent.fraction > 0:
+            on.append("recent")
+        if self.filter.eps > 0:
+            on.append("latent_filter")
+        return on
+
+    def to_dict(self) -> dict[str, Any]:
+        return to_plain(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> AddonsConfig:
+        return from_plain(cls, data, "addons")
+
+    def validate(self, agent: AgentConfig) -> AddonsConfig:
+        check(self, "addons.")
+        learned = agent.uses_latent_model
+        for name in self.active():
+            if name == "recent" or learned:
+                continue
+            raise ConfigError(
+                f"add-on {name} needs learned latents (discrete or continuous) of a method "
+                f"with a latent model (sili, lili, stable), got method {agent.method!r} with "
+                f"latent {agent.latent!r}; switch it off for this method"
+            )
+        return self

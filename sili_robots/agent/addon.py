@@ -1,0 +1,113 @@
+"""The extension point for research add-ons: hooks the agent calls, none of them required.
+
+An add-on subclasses ``AgentAddon`` and overrides the hooks it needs. The agent collects, per
+hook, only the add-ons that override it, so a hook nobody overrides costs nothing: with no
+add-ons the agent runs the paper's algorithm and none of their code, per step or per update.
+Add-ons live outside ``sili_robots/agent/`` (in ``sili_robots/addons/``) and are wired in by
+configuration (``sili_robots.addons.build_addons``); they may read the agent's public state
+(``buffer``, ``latents``, ``model``, ``cfg``, ``rng``).
+
+Hooks, in the order the agent calls them:
+
+- ``encoder_readouts``: extra per-interaction features for the encoder's head, at construction.
+- ``begin_interaction``: a new interaction starts (after construction, each interaction, load).
+- ``acting_latent`` / ``observe_step``: per step, z^j as the policy should act on it now, and
+  each step played (the only per-step hooks).
+- ``interaction_stored(j)``: interaction j is stored and z^{j+1} cached; returns metric columns.
+- ``latents_refreshed``: the cached latents were recomputed with the current encoder.
+- ``before_update(interaction)``: settings for the updates after ``interaction``.
+- ``latent_pairs`` / ``rl_interactions``: which stored interactions a batch draws.
+- ``batch_latents``: z^j per sampled step as the policy acted on it.
+- ``stability_distance``: d(z^j, z^{j+1}) replaced (training and metrics alike).
+- ``state_dict`` / ``load_state_dict``: checkpoints.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, ClassVar
+
+import numpy as np
+import torch
+
+if TYPE_CHECKING:
+    from sili_robots.agent.agent import SILIAgent
+
+HOOKS = (
+    "encoder_readouts",
+    "begin_interaction",
+    "acting_latent",
+    "observe_step",
+    "interaction_stored",
+    "latents_refreshed",
+    "before_update",
+    "latent_pairs",
+    "rl_interactions",
+    "batch_latents",
+    "stability_distance",
+)
+
+
+class AgentAddon:
+    """Base class: every hook is a no-op; override what the add-on changes."""
+
+    name: ClassVar[str] = "addon"
+    agent: SILIAgent
+
+    def attach(self, agent: SILIAgent) -> None:
+        self.agent = agent
+
+    def encoder_readouts(self) -> list[Callable[[torch.Tensor], torch.Tensor]]:
+        """Functions of the per-step features [N, H, hidden] -> [N, hidden] for the head."""
+        return []
+
+    def begin_interaction(self) -> None:
+        pass
+
+    def acting_latent(self) -> np.ndarray | None:
+        """z^j for the step about to be played (None: the encoder's)."""
+        return None
+
+    def observe_step(
+        self, obs: np.ndarray, act: np.ndarray, rew: float, next_obs: np.ndarray
+    ) -> None:
+        pass
+
+    def interaction_stored(self, j: int) -> dict[str, float]:
+        return {}
+
+    def latents_refreshed(self) -> None:
+        pass
+
+    def before_update(self, interaction: int) -> None:
+        pass
+
+    def latent_pairs(self, j: np.ndarray) -> np.ndarray:
+        """Interactions j of a latent-model batch of pairs (j-1, j)."""
+        return j
+
+    def rl_interactions(self, j: np.ndarray) -> np.ndarray:
+        """Interactions [U, M] of the RL batches."""
+        return j
+
+    def batch_latents(
+        self, j: np.ndarray, t: np.ndarray, z: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """z^j at steps t and t+1 of stored interactions j as acted on (None: ``z`` both)."""
+        return None
+
+    def stability_distance(self, j: np.ndarray) -> np.ndarray | None:
+        """d for the change after each stored interaction j (None: the latents' distance)."""
+        return None
+
+    def state_dict(self) -> dict[str, Any]:
+        return {}
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        pass
+
+
+def overriding(addons: list[AgentAddon], hook: str) -> list[AgentAddon]:
+    """The add-ons whose class overrides ``hook``."""
+    base = getattr(AgentAddon, hook)
+    return [a for a in addons if getattr(type(a), hook) is not base]

@@ -1,0 +1,122 @@
+"""Every method of the paper is a preset of one agent; each preset fixes what defines it.
+
+| method  | latent model | policy input        | reward                                  |
+|---------|--------------|---------------------|-----------------------------------------|
+| sili    | yes          | s, z^j, z^{j-1}     | (1-b) R_task + b R_stable               |
+| lili    | yes          | s, z^j              | R_task (b = 0)                          |
+| stable  | yes          | s, z^j, z^{j-1}     | R_stable (b = 1)                        |
+| sac     | no           | s                   | R_task                                  |
+| oracle  | no           | s + true z          | R_task                                  |
+| smirl   | no           | s                   | (1-b) R_task + b log p(s) (SMiRL)       |
+
+Two profiles give the starting settings: ``package`` (the defaults of ``AgentConfig``) and
+``paper`` (the paper's appendix exactly: discrete latents by straight-through Gumbel-Softmax at
+temperature 1, z^j sampled as its Eq. for z^j says, b = 0.5 constant, 2 x 256 networks, latent
+dimension 10, R_stable = -d(z^j, z^{j-1}) on every step, no grouping of categories).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from sili_robots.agent.config import AgentConfig, get_path, set_path
+from sili_robots.errors import ConfigError
+
+#: the methods whose b is a setting (the others fix it)
+BETA_METHODS = ("sili", "smirl")
+PROFILES = ("package", "paper")
+
+
+@dataclass(frozen=True)
+class Preset:
+    """What a method fixes: setting path -> (value, why)."""
+
+    fixed: dict[str, tuple[Any, str]]
+
+
+PRESETS: dict[str, Preset] = {
+    "sili": Preset({}),
+    "lili": Preset({"sili.beta": (0.0, "LILI is SILI without the stability reward (b = 0)")}),
+    "stable": Preset({"sili.beta": (1.0, "Stable optimises the stability reward only (b = 1)")}),
+    "sac": Preset(
+        {
+            "sili.beta": (0.0, "SAC optimises the task reward only"),
+            "latent": ("none", "SAC conditions on the state only, no latent"),
+        }
+    ),
+    "oracle": Preset(
+        {
+            "sili.beta": (0.0, "Oracle optimises the task reward only"),
+            "latent": ("none", "Oracle observes the true strategy instead of a latent"),
+        }
+    ),
+    "smirl": Preset({"latent": ("none", "SMiRL's stability is a state density, no latent")}),
+}
+
+#: the paper's appendix (the latent kind stays the task's: discrete, continuous or partial)
+PAPER_PROFILE: dict[str, Any] = {
+    "hidden": 256,
+    "model.dim": 10,
+    "model.estimator": "gumbel",
+    "model.sample": True,
+    "model.usage_bonus": 0.0,
+    "model.merge_threshold": 0.0,
+    "sili.beta": 0.5,
+    "sili.credit": "per_step",
+    "sili.scale": None,
+}
+
+
+def method_config(
+    method: str,
+    latent: str | None = None,
+    profile: str = "package",
+    overrides: dict[str, Any] | None = None,
+    task_latent: str | None = None,
+) -> AgentConfig:
+    """The preset for ``method`` in ``profile``, with ``overrides`` (dotted paths) applied.
+
+    ``latent`` is the user's choice of latent kind; without it the task's (``task_latent``, else
+    discrete). Overriding what the method fixes raises ConfigError naming the method, the
+    setting and why."""
+    if method not in PRESETS:
+        raise ConfigError(f"unknown method {method!r}; allowed: {', '.join(PRESETS)}")
+    if profile not in PROFILES:
+        raise ConfigError(f"unknown profile {profile!r}; allowed: {', '.join(PROFILES)}")
+    cfg = AgentConfig(method=method, profile=profile)
+    if profile == "paper":
+        for path, value in PAPER_PROFILE.items():
+            set_path(cfg, path, value)
+    given = dict(overrides or {})
+    if latent is not None:
+        given["latent"] = latent
+    fixed = PRESETS[method].fixed
+    if "latent" not in fixed and "latent" not in given:
+        kind = task_latent or "discrete"
+        given["latent"] = kind
+    if method == "lili" and given.get("latent") == "partial":
+        given["latent"] = "discrete"  # LILI always learns a latent; b = 0 leaves the flag unused
+    for path, value in given.items():
+        if path in fixed and value != fixed[path][0]:
+            want, why = fixed[path]
+            raise ConfigError(
+                f"method {method!r} fixes {path} = {want!r} ({why}); got {value!r}: "
+                f"drop the setting or choose another method"
+            )
+        set_path(cfg, path, value)
+    for path, (value, _) in fixed.items():
+        set_path(cfg, path, value)
+    return cfg.validate()
+
+
+def fixed_value(method: str, path: str) -> Any:
+    """What ``method`` fixes ``path`` to (KeyError when it does not)."""
+    return PRESETS[method].fixed[path][0]
+
+
+def check_fixed(cfg: AgentConfig) -> None:
+    """A config (e.g. read back from disk) still honours its method's preset."""
+    for path, (want, why) in PRESETS[cfg.method].fixed.items():
+        if get_path(cfg, path) != want:
+            raise ConfigError(f"method {cfg.method!r} fixes {path} = {want!r} ({why})")

@@ -1,0 +1,85 @@
+"""A float setting as a piecewise-linear function of the interaction index.
+
+Any float setting of the agent (b, SAC's learning rate, discount, target entropy, ...) may be
+given as a ``Schedule`` instead of a number. ``value_at`` reads either; the ``schedules``
+add-on (sili_robots/addons/schedules.py) applies the scheduled values before each update.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from itertools import pairwise
+from typing import Any
+
+from sili_robots.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """(interaction, value) knots in increasing interaction order; the value is held at the
+    first knot's before it and at the last knot's after it."""
+
+    points: tuple[tuple[int, float], ...]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "points", tuple((int(i), float(v)) for i, v in self.points))
+
+    @classmethod
+    def ramp(cls, start: float, end: float, length: int, delay: int = 0) -> Schedule:
+        """``start`` for ``delay`` interactions, then linear to ``end`` over ``length``."""
+        return cls(((delay, start), (delay + length, end)))
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Schedule:
+        """Read a saved schedule; a single ramp (start, end, length, delay) too."""
+        if "points" in data:
+            return cls(tuple(data["points"]))
+        return cls.ramp(data["start"], data["end"], data["length"], data.get("delay", 0))
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"points": [list(p) for p in self.points]}
+
+    def value(self, interaction: int) -> float:
+        first, last = self.points[0], self.points[-1]
+        if interaction <= first[0]:
+            return first[1]
+        for (i0, v0), (i1, v1) in pairwise(self.points):
+            if interaction < i1:
+                return v0 + (interaction - i0) / (i1 - i0) * (v1 - v0)
+        return last[1]
+
+    def check(self, name: str, low: float = -math.inf, high: float = math.inf) -> None:
+        """Raise ConfigError naming the setting and the first bad knot."""
+        if not self.points:
+            raise ConfigError(f"schedule of {name} needs at least one (interaction, value) point")
+        previous = -1
+        for i, v in self.points:
+            if i < 0:
+                raise ConfigError(f"schedule of {name}: interaction must be >= 0, got {i}")
+            if i <= previous:
+                raise ConfigError(
+                    f"schedule of {name}: interactions must increase, got {i} after {previous}"
+                )
+            if not (math.isfinite(v) and low <= v <= high):
+                raise ConfigError(
+                    f"schedule of {name}: value must be {span(low, high)}, got {v} at "
+                    f"interaction {i}"
+                )
+            previous = i
+
+
+Scheduled = float | Schedule
+
+
+def value_at(setting: Scheduled | None, interaction: int) -> float | None:
+    """A setting's value at ``interaction``, whether a number or a schedule."""
+    if isinstance(setting, Schedule):
+        return setting.value(interaction)
+    return setting
+
+
+def span(low: float, high: float) -> str:
+    if math.isfinite(low) or math.isfinite(high):
+        return f"in [{low:g}, {high:g}]"
+    return "a finite number"

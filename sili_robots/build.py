@@ -1,0 +1,128 @@
+"""The one place that builds a run's environment and agent from its ``RunConfig``.
+
+A task is a registered name or gymnasium id (``circle-3``, ``sili/Circle3-v1``) or a user's
+own task class as ``package.module:ClassName`` (a ``RepeatedInteractionEnv`` subclass). The
+method decides how the task is observed: Oracle through ``OracleObservation``, partial
+observation (SILI and Stable with ``latent="partial"``) through ``StrategyFlag``.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+import gymnasium as gym
+
+from sili_robots.addons import build_addons
+from sili_robots.agent import SILIAgent, method_config
+from sili_robots.errors import ConfigError
+from sili_robots.migrations import setting_path
+from sili_robots.runs import RunConfig
+from sili_robots.tasks import RepeatedInteractionEnv, make_task, task_spec
+from sili_robots.wrappers import OracleObservation, StrategyFlag
+
+
+def task_class(path: str) -> type[RepeatedInteractionEnv]:
+    """A user's task class from ``package.module:ClassName``."""
+    module_name, _, class_name = path.partition(":")
+    try:
+        obj: Any = importlib.import_module(module_name)
+        for part in class_name.split("."):
+            obj = getattr(obj, part)
+    except (ImportError, AttributeError, ValueError) as err:
+        raise ConfigError(
+            f"cannot load task class {path!r} ({err}); give a registered task or "
+            "package.module:ClassName of a RepeatedInteractionEnv subclass"
+        ) from None
+    if not (isinstance(obj, type) and issubclass(obj, RepeatedInteractionEnv)):
+        raise ConfigError(f"{path!r} is not a RepeatedInteractionEnv subclass")
+    return obj
+
+
+def is_class_path(task: str) -> bool:
+    return ":" in task and "/" not in task
+
+
+def task_name_of(env: gym.Env) -> str:
+    """How a run records an environment instance: its registered id, else its class path."""
+    spec = env.spec if env.spec is not None else env.unwrapped.spec
+    if spec is not None:
+        try:
+            return task_spec(spec.id).gym_id
+        except ConfigError:
+            pass
+    cls = type(env.unwrapped)
+    return f"{cls.__module__}:{cls.__qualname__}"
+
+
+def make_env(task: str, **kwargs: Any) -> gym.Env:
+    """A task by name, gymnasium id or class path; ``kwargs`` go to its constructor."""
+    if is_class_path(task):
+        return task_class(task)(**kwargs)
+    return make_task(task, **kwargs)
+
+
+def default_latent(task: str) -> str:
+    """The latent kind the paper uses on a task (discrete for a user's task)."""
+    return "discrete" if is_class_path(task) else task_spec(task).default_latent
+
+
+def observed_as(env: gym.Env, cfg: RunConfig) -> gym.Env:
+    """``env`` as the method observes it."""
+    if cfg.method == "oracle":
+        return OracleObservation(env)
+    if cfg.agent.latent == "partial" and cfg.method in ("sili", "stable"):
+        return StrategyFlag(env)
+    return env
+
+
+def make_run_env(cfg: RunConfig) -> gym.Env:
+    return observed_as(make_env(cfg.task, **cfg.env_kwargs), cfg)
+
+
+def build_agent(cfg: RunConfig, env: gym.Env) -> SILIAgent:
+    task = env.unwrapped
+    return SILIAgent(
+        cfg.agent,
+        env.observation_space.shape[0],
+        env.action_space.shape[0],
+        task.horizon,
+        task.strategy_dim,
+        seed=cfg.seed,
+        addons=build_addons(cfg.addons, cfg.agent),
+    )
+
+
+def make_run_config(
+    task: str,
+    method: str,
+    seed: int = 0,
+    interactions: int = 1000,
+    *,
+    latent: str | None = None,
+    profile: str = "package",
+    settings: dict[str, Any] | None = None,
+    env_kwargs: dict[str, Any] | None = None,
+    checkpoint_every: int = 50,
+) -> RunConfig:
+    """A run's full config: the method's preset in ``profile``, then ``settings`` (dotted paths
+    or earlier flat names; ``addons.*`` for the add-ons), checked as a whole."""
+    agent_settings: dict[str, Any] = {}
+    addon_settings: dict[str, Any] = {}
+    for name, value in (settings or {}).items():
+        path = setting_path(name)
+        (addon_settings if path.startswith("addons.") else agent_settings)[path] = value
+    agent = method_config(method, latent, profile, agent_settings, default_latent(task))
+    cfg = RunConfig(
+        task=task,
+        method=method,
+        seed=seed,
+        interactions=interactions,
+        agent=agent,
+        env_kwargs=dict(env_kwargs or {}),
+        checkpoint_every=checkpoint_every,
+    )
+    for path, value in addon_settings.items():
+        cfg.set(path, value)
+    cfg.addons.validate(cfg.agent)
+    return cfg
