@@ -201,7 +201,7 @@ def check(obj: Any, prefix: str) -> None:
     for f in fields(obj):
         name = f"{prefix}{f.name}"
         value = getattr(obj, f.name)
-        if dataclasses.is_dataclass(value):
+        if _is_section(value):
             check(value, name + ".")
             continue
         convert(name, hints[f.name], value)  # type and Literal membership
@@ -220,6 +220,11 @@ def _range(low: float, high: float, tp: Any) -> str:
     if tp is int or (math.isfinite(low) and not math.isfinite(high)):
         return f">= {low:g}"
     return span(low, high)
+
+
+def _is_section(value: Any) -> bool:
+    """A nested config section (a dataclass instance that is not a schedule)."""
+    return dataclasses.is_dataclass(value) and not isinstance(value, Schedule | type)
 
 
 def get_path(obj: Any, path: str) -> Any:
@@ -284,7 +289,7 @@ def resolved(cfg: Any, interaction: int) -> Any:
     changes = {}
     for f in fields(cfg):
         value = getattr(cfg, f.name)
-        if dataclasses.is_dataclass(value):
+        if _is_section(value):
             changes[f.name] = resolved(value, interaction)
         elif isinstance(value, Schedule):
             changes[f.name] = value_at(value, interaction)
@@ -296,7 +301,7 @@ def scheduled_paths(cfg: Any, prefix: str = "") -> list[str]:
     out: list[str] = []
     for f in fields(cfg):
         value = getattr(cfg, f.name)
-        if dataclasses.is_dataclass(value):
+        if _is_section(value):
             out += scheduled_paths(value, f"{prefix}{f.name}.")
         elif isinstance(value, Schedule):
             out.append(prefix + f.name)
