@@ -6,16 +6,12 @@ import io
 import numpy as np
 import pytest
 import torch
+from agent_helpers import make_agent, run_config
 
-from sili_robots.agent import (
-    AgentConfig,
-    BetaSchedule,
-    DiscountSchedule,
-    EntropySchedule,
-    LearningRateSchedule,
-    SILIAgent,
-    method_config,
-)
+from sili_robots.addons.last_step import last_transition
+from sili_robots.addons.latent_filter import largest_power_of_two
+from sili_robots.addons.posteriors import HindsightPosteriors
+from sili_robots.agent import AgentConfig, Schedule, SILIAgent
 from sili_robots.agent.latent import (
     LatentModel,
     category_groups,
@@ -25,15 +21,23 @@ from sili_robots.agent.latent import (
 from sili_robots.agent.matmul import onednn_available
 from sili_robots.agent.sac import SAC
 from sili_robots.errors import ConfigError
+from sili_robots.migrations import migrate_run
 
 H = 5
 
 
-def _agent(method="sili", latent="discrete", **kw):
-    cfg = method_config(
-        method, latent, latent_dim=4, hidden=32, batch_interactions=4, batch_steps=H, **kw
-    )
-    return SILIAgent(cfg, obs_dim=3, act_dim=2, horizon=H, strategy_dim=2, seed=0)
+def _agent(method="sili", latent=None, **kw):
+    settings = {"latent_dim": 4, "hidden": 32, "batch_interactions": 4, "batch_steps": H, **kw}
+    return make_agent(method, latent, horizon=H, **settings)
+
+
+def method_config(method="sili", latent=None, **settings):
+    """The agent config of a method with settings by their flat names."""
+    return run_config(method, latent, **settings).agent
+
+
+def _posteriors(agent):
+    return agent.addon(HindsightPosteriors)
 
 
 def _fill(agent, n, flags=None):
@@ -94,7 +98,7 @@ def test_partial_stability_reward_is_the_observed_flag_each_step():
     # reward = -flag of the next observation, whatever the step
     np.testing.assert_allclose(r[0].numpy(), -x2[0, :, 2].numpy())
     assert agent.n_latents == 0 and x.shape[-1] == 3
-    stats = agent._stats(0, np.array([0, 0, 1], np.float32))
+    stats = agent._stats(0, np.array([0, 0, 1], np.float32), {})
     assert stats.stability_reward == -3.0  # flags at t=2, t=5 and the boundary
 
 
@@ -132,7 +136,7 @@ def test_bootstrap_across_boundary_uses_next_interactions_latents_and_first_obs(
 def _sampled_interactions(agent, n_updates):
     """The replay index of every interaction in each sampled batch, found by its observations."""
     x, _, _, _ = agent.sample_batches(n_updates, beta=0.0)
-    rows = x[..., :3].numpy().reshape(n_updates, agent.cfg.batch_interactions, -1, 3)
+    rows = x[..., :3].numpy().reshape(n_updates, agent.cfg.sac.batch_interactions, -1, 3)
     obs = agent.buffer.obs[: agent.buffer.n, :-1]
     return np.array([[np.where((obs == r[0]).all(-1))[0][0] for r in batch] for batch in rows])
 
@@ -146,27 +150,28 @@ def test_recent_fraction_draws_that_part_of_each_batch_from_the_newest_interacti
     j = _sampled_interactions(recent, 50)  # 4 interactions per batch: 2 recent, 2 uniform
     assert (j[:, :2] >= 30).all()
     assert (j[:, 2:] < 30).mean() > 0.5
-    with pytest.raises(ConfigError, match=r"recent_fraction must be in \[0, 1\], got 2"):
+    with pytest.raises(ConfigError, match=r"addons.recent.fraction must be in \[0, 1\], got 2"):
         method_config("sili", recent_fraction=2.0)
 
 
 def test_change_pairs_are_where_the_sure_posterior_category_changes():
     agent = _agent(latent_change_fraction=0.25)
-    assert agent.keeps_posteriors and not agent.uses_posterior
+    post = _posteriors(agent)
+    assert not post.replaces_distance
     _fill(agent, 6)
-    assert len(agent.P) == 6  # kept for every stored interaction
+    assert len(post.P) == 6  # kept for every stored interaction
     sure, flat = np.eye(4, dtype=np.float32), np.full(4, 0.25, np.float32)
-    agent.P = np.stack([sure[0], sure[0], sure[1], flat, sure[2], sure[2]])
+    post.P = np.stack([sure[0], sure[0], sure[1], flat, sure[2], sure[2]])
     # 1 -> 2 changed; 2 -> 3 and 3 -> 4 involve an interaction that cannot tell (flat)
-    np.testing.assert_array_equal(agent.change_pairs(), [2])
-    with pytest.raises(ConfigError, match=r"latent_change_fraction must be in \[0, 1\], got -1"):
+    np.testing.assert_array_equal(post.change_pairs(), [2])
+    with pytest.raises(ConfigError, match=r"change_fraction must be in \[0, 1\], got -1"):
         method_config("sili", latent_change_fraction=-1.0)
 
 
 def test_latent_change_fraction_draws_that_part_of_each_latent_batch_from_change_pairs():
     agent = _agent(latent_change_fraction=0.5, latent_batch=8)
     _fill(agent, 20)
-    agent.P = np.eye(4, dtype=np.float32)[[0] * 10 + [1] * 10]  # one change, at j = 10
+    _posteriors(agent).P = np.eye(4, dtype=np.float32)[[0] * 10 + [1] * 10]  # one change: j = 10
     prevs = []
     loss = agent.model.loss
 
@@ -237,7 +242,7 @@ def test_bfloat16_precision_runs_the_products_in_bfloat16():
     sac.update(torch.randn(8, 5), torch.zeros(8, 2), torch.zeros(8), torch.randn(8, 5))
     hook.remove()
     assert seen and all(d == torch.bfloat16 for d in seen)
-    with pytest.raises(ConfigError, match="unknown precision 'fp8'; allowed: float32, bfloat16"):
+    with pytest.raises(ConfigError, match=r"unknown sac.precision 'fp8'; allowed: float32, bf"):
         method_config("sili", precision="fp8")
 
 
@@ -254,11 +259,15 @@ def test_target_entropy_sets_where_the_temperature_moves():
     assert SAC(5, 2).target_entropy == -2.0
     agent = SILIAgent(method_config("sac", target_entropy=-4), 3, 2, horizon=10, strategy_dim=2)
     assert agent.sac.target_entropy == -4.0
+    agent = SILIAgent(method_config("sac"), 3, 2, horizon=10, strategy_dim=2)
+    assert agent.sac.target_entropy == -2.0  # -|A| by default
+    agent = SILIAgent(method_config("sac", target_entropy=-4), 3, 2, horizon=10, strategy_dim=2)
+    assert agent.sac.target_entropy == -4.0
 
 
 def test_target_entropy_schedule_is_applied_at_each_update():
     """The temperature chases the scheduled target of the interaction being trained."""
-    schedule = EntropySchedule([(4, -2.0), (6, -6.0)])
+    schedule = Schedule([(4, -2.0), (6, -6.0)])
     agent = _agent(target_entropy_schedule=schedule, random_interactions=0)
     assert agent.sac.target_entropy == -2.0
     _fill(agent, 8)
@@ -268,20 +277,17 @@ def test_target_entropy_schedule_is_applied_at_each_update():
         seen[j] = agent.sac.target_entropy
     assert seen == pytest.approx({3: -2.0, 5: -4.0, 7: -6.0})
     saved = AgentConfig.from_dict(agent.cfg.to_dict())
-    assert saved.target_entropy_schedule == schedule
-    assert saved.target_entropy_at(5, act_dim=2) == pytest.approx(-4.0)
-    assert method_config("sili").target_entropy_at(5, act_dim=2) == -2.0  # -|A| by default
-    with pytest.raises(ConfigError, match="target entropy schedule: target entropy must be a "):
-        method_config("sili", target_entropy_schedule=EntropySchedule([(0, float("nan"))]))
-    with pytest.raises(ConfigError, match="give one of target_entropy and a target entropy"):
-        method_config("sili", target_entropy=-3, target_entropy_schedule=schedule)
-    with pytest.raises(ConfigError, match="target_entropy_schedule with --target-entropy-sch"):
+    assert saved.sac.target_entropy == schedule
+    assert saved.sac.target_entropy.value(5) == pytest.approx(-4.0)
+    with pytest.raises(ConfigError, match=r"schedule of sac.target_entropy: value must be a "):
+        method_config("sili", target_entropy_schedule=Schedule([(0, float("nan"))]))
+    with pytest.raises(ConfigError, match=r"sac.target_entropy must be .*, got '1500:-2'"):
         method_config("sili", target_entropy_schedule="1500:-2")
 
 
 def test_discount_schedule_sets_the_critic_targets_gamma_at_each_update():
     """SAC bootstraps with the scheduled gamma of the interaction being trained."""
-    schedule = DiscountSchedule([(4, 0.9), (6, 0.99)])
+    schedule = Schedule([(4, 0.9), (6, 0.99)])
     agent = _agent(gamma_schedule=schedule, random_interactions=0)
     assert agent.sac.gamma == 0.9
     _fill(agent, 8)
@@ -300,17 +306,15 @@ def test_discount_schedule_sets_the_critic_targets_gamma_at_each_update():
         expected = torch.nn.functional.mse_loss(q, r.expand_as(q)) * 2
         assert float(sac.critic_loss(x, a, r, x, a2, logp2)) == pytest.approx(float(expected))
     saved = AgentConfig.from_dict(agent.cfg.to_dict())
-    assert saved.gamma_schedule == schedule and saved.gamma_at(5) == pytest.approx(0.945)
-    assert method_config("sili").gamma_at(5) == 0.99
-    with pytest.raises(ConfigError, match=r"discount schedule: gamma must be in \[0, 1\], got 1.5"):
-        method_config("sili", gamma_schedule=DiscountSchedule([(0, 0.99), (9, 1.5)]))
-    with pytest.raises(ConfigError, match="give gamma_schedule with --discount-schedule"):
-        method_config("sili", gamma_schedule={"points": [[0, 0.99]]})
+    assert saved.sac.gamma == schedule and saved.sac.gamma.value(5) == pytest.approx(0.945)
+    assert method_config("sili").sac.gamma == 0.99
+    with pytest.raises(ConfigError, match=r"schedule of sac.gamma: value must be in \[1e-09, 1\]"):
+        method_config("sili", gamma_schedule=Schedule([(0, 0.99), (9, 1.5)]))
 
 
 def test_lr_schedule_sets_every_sac_optimizers_step_size_at_each_update():
     """A late smaller step: actor, critics and temperature all take the scheduled rate."""
-    schedule = LearningRateSchedule([(4, 3e-4), (6, 3e-5)])
+    schedule = Schedule([(4, 3e-4), (6, 3e-5)])
     agent = _agent(lr_schedule=schedule, random_interactions=0)
     sac = agent.sac
     optimizers = (sac.actor_opt, sac.critic_opt, sac.alpha_opt)
@@ -327,27 +331,29 @@ def test_lr_schedule_sets_every_sac_optimizers_step_size_at_each_update():
     assert moved[7] < moved[3] / 3, moved
     assert seen == pytest.approx({3: 3e-4, 5: 1.65e-4, 7: 3e-5})
     saved = AgentConfig.from_dict(agent.cfg.to_dict())
-    assert saved.lr_schedule == schedule and saved.lr_at(5) == pytest.approx(1.65e-4)
-    assert method_config("sili").lr_at(5) == 3e-4
-    with pytest.raises(ConfigError, match=r"learning rate must be in \[0, 1\], got -0.1"):
-        method_config("sili", lr_schedule=LearningRateSchedule([(0, 3e-4), (9, -0.1)]))
+    assert saved.sac.lr == schedule and saved.sac.lr.value(5) == pytest.approx(1.65e-4)
+    assert method_config("sili").sac.lr == 3e-4
+    with pytest.raises(ConfigError, match=r"value must be in \[0, 1\], got -0.1"):
+        method_config("sili", lr_schedule=Schedule([(0, 3e-4), (9, -0.1)]))
 
 
 def test_mistyped_settings_fail_by_name():
     """A --set value of the wrong type is refused up front, naming the setting and the value."""
-    with pytest.raises(ConfigError, match="agent setting lr must be a number, got 'abc'"):
+    with pytest.raises(ConfigError, match=r"setting sac.lr must be a number, got 'abc'"):
         method_config("sili", lr="abc")
-    with pytest.raises(ConfigError, match="target_entropy must be a number, got 'x'"):
+    with pytest.raises(ConfigError, match=r"target_entropy must be .*, got 'x'"):
         method_config("sili", target_entropy="x")
     with pytest.raises(ConfigError, match=r"hidden must be a whole number, got 1\.5"):
         method_config("sili", hidden=1.5)
-    with pytest.raises(ConfigError, match="precision must be a string, got 16"):
+    with pytest.raises(ConfigError, match=r"unknown sac.precision 16; allowed: float32, bf"):
         method_config("sili", precision=16)
-    with pytest.raises(ConfigError, match="beta_schedule with --beta-anneal or --beta-schedule"):
+    with pytest.raises(ConfigError, match=r"sili.beta must be .*, got '0:0,300:0.5'"):
         method_config("sili", beta_schedule="0:0,300:0.5")
+    with pytest.raises(ConfigError, match=r"unknown setting 'sac.lrr'; allowed: .*sac.lr"):
+        method_config("sili", sac__lrr=1.0)
     cfg = method_config("sili", lr=1, hidden=64.0, stability_scale=None, target_entropy=-3)
-    assert (cfg.lr, cfg.hidden, cfg.stability_scale, cfg.target_entropy) == (1.0, 64, None, -3.0)
-    assert isinstance(cfg.hidden, int) and isinstance(cfg.lr, float)
+    assert (cfg.sac.lr, cfg.hidden, cfg.sili.scale, cfg.sac.target_entropy) == (1.0, 64, None, -3)
+    assert isinstance(cfg.hidden, int) and isinstance(cfg.sac.lr, float)
 
 
 def test_latent_model_learns_two_strategies():
@@ -418,16 +424,16 @@ def test_methods_condition_on_the_right_inputs():
     assert _agent("sili").in_dim == 3 + 2 * 4
     assert _agent("lili").in_dim == 3 + 4
     assert _agent("sac").in_dim == 3
-    assert _agent("stable").cfg.beta == 1.0
-    assert _agent("lili").cfg.beta == 0.0
+    assert _agent("stable").cfg.sili.beta == 1.0
+    assert _agent("lili").cfg.sili.beta == 0.0
 
 
 def test_bad_config_is_named():
-    with pytest.raises(ConfigError, match=r"beta must be in \[0, 1\], got 1.5"):
+    with pytest.raises(ConfigError, match=r"sili.beta must be in \[0, 1\], got 1.5"):
         method_config("sili", beta=1.5)
     with pytest.raises(ConfigError, match="unknown method 'ppo'"):
         method_config("ppo")
-    with pytest.raises(ConfigError, match="unknown latent kind 'fuzzy'"):
+    with pytest.raises(ConfigError, match="unknown latent 'fuzzy'"):
         method_config("sili", "fuzzy")
 
 
@@ -447,11 +453,11 @@ def test_relabel_keeps_the_function_and_refresh_keeps_category_names():
     agent = _agent()
     _fill(agent, 12)
     agent.refresh_latents()
-    cached, relabels = agent.Z.argmax(-1).copy(), agent.relabels
+    cached, relabels = agent.Z.argmax(-1).copy(), agent.latents.relabels
     agent.model.relabel(torch.tensor([1, 2, 3, 0]))  # as if training had shuffled the names
     agent.refresh_latents()
     np.testing.assert_array_equal(agent.Z.argmax(-1)[1:], cached[1:])
-    assert agent.relabels == relabels + 1
+    assert agent.latents.relabels == relabels + 1
 
 
 def test_categories_with_the_same_behaviour_count_as_one_strategy():
@@ -517,23 +523,24 @@ def test_preact_penalty_pulls_a_saturated_continuous_encoder_back():
         return model.encode_logits(prev).abs().mean().item()
 
     assert trained_output(1e-3) < trained_output(0.0) - 0.1
-    assert method_config("sili", "continuous").latent_preact_penalty == 1e-3  # the default
-    saved = method_config("sili", "continuous").to_dict()
-    del saved["latent_preact_penalty"]  # a run saved before the setting existed
-    assert AgentConfig.from_dict(saved).latent_preact_penalty == 0.0
-    with pytest.raises(ConfigError, match="latent_preact_penalty must be >= 0, got -1"):
+    assert method_config("sili", "continuous").model.preact_penalty == 1e-3  # the default
+    saved = {"method": "sili", "latent": "continuous", "latent_dim": 10}  # the flat layout
+    run = migrate_run({"agent": saved})  # of a run saved before the setting existed
+    assert AgentConfig.from_dict(run["agent"]).model.preact_penalty == 0.0
+    with pytest.raises(ConfigError, match=r"model.preact_penalty must be >= 0, got -1"):
         method_config("sili", latent_preact_penalty=-1.0)
 
 
 def test_unknown_estimator_is_named():
-    with pytest.raises(ConfigError, match="unknown latent_estimator 'vq'"):
+    with pytest.raises(ConfigError, match=r"unknown model.estimator 'vq'"):
         method_config("sili", latent_estimator="vq")
 
 
 def test_posterior_stability_pays_only_for_a_strategy_shown_to_stay():
     """stability_distance="posterior": d = 1 - P(strategy during j = predicted z^{j+1})."""
     agent = _agent(stability_distance="posterior")
-    assert agent.uses_posterior
+    post = _posteriors(agent)
+    assert post.replaces_distance
     with torch.no_grad():  # constant heads: category k predicts s' - s = 0 and reward 5k
         last = agent.model.decoder[-1]
         last.weight.zero_()
@@ -554,23 +561,23 @@ def test_posterior_stability_pays_only_for_a_strategy_shown_to_stay():
             refresh=False,
         )
     agent.Z = np.eye(4, dtype=np.float32)[[0, 0, 1, 0]]  # categories in use: 0 and 1
-    agent.P = agent._posteriors(np.arange(3))
-    np.testing.assert_allclose(agent.P[:, :2], [[1, 0], [0, 1], [0.5, 0.5]], atol=1e-6)
-    assert np.all(agent.P[:, 2:] == 0)  # categories not in use get no mass
+    post.P = post.posteriors(np.arange(3))
+    np.testing.assert_allclose(post.P[:, :2], [[1, 0], [0, 1], [0.5, 0.5]], atol=1e-6)
+    assert np.all(post.P[:, 2:] == 0)  # categories not in use get no mass
     # z^1 = 0 predicted after interaction 0 (which showed 0): stayed; z^2 = 1 after interaction 1
     # (which showed 1): stayed; z^3 = 0 after an interaction that cannot tell: half a change
     j, t = np.arange(3)[:, None], np.full((3, 1), H - 1)
     r = agent._stability_rewards(j, t, t == H - 1, np.zeros((3, 1, 3)))
     np.testing.assert_allclose(r[:, 0], [0, 0, -0.5 * agent.stability_scale], atol=1e-5)
     agent.Z = np.eye(4, dtype=np.float32)[[0, 1, 0, 0]]  # now both predictions say "changed"
-    agent.P = agent._posteriors(np.arange(3))
+    post.P = post.posteriors(np.arange(3))
     r = agent._stability_rewards(j, t, t == H - 1, np.zeros((3, 1, 3)))
     np.testing.assert_allclose(r[:2, 0], [-agent.stability_scale] * 2, atol=1e-5)
-    assert agent._stats(1, obs[0]).stability_reward == pytest.approx(-1.0, abs=1e-5)
+    assert agent._stats(1, obs[0], {}).stability_reward == pytest.approx(-1.0, abs=1e-5)
     # the posteriors survive a checkpoint round trip
     other = _agent(stability_distance="posterior")
     other.load_state_dict(agent.state_dict())
-    np.testing.assert_array_equal(other.P, agent.P)
+    np.testing.assert_array_equal(_posteriors(other).P, post.P)
 
 
 def test_hindsight_stability_compares_the_strategies_in_effect_in_both_interactions():
@@ -578,7 +585,7 @@ def test_hindsight_stability_compares_the_strategies_in_effect_in_both_interacti
     agent = _agent(stability_distance="hindsight")
     _fill(agent, 3)
     agent.Z = np.eye(4, dtype=np.float32)[[0, 0, 0, 1]]
-    agent.P = np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0.5, 0.5, 0, 0]], np.float32)
+    _posteriors(agent).P = np.array([[1, 0, 0, 0], [0, 1, 0, 0], [0.5, 0.5, 0, 0]], np.float32)
     j, t = np.arange(3)[:, None], np.full((3, 1), H - 1)
     r = agent._stability_rewards(j, t, t == H - 1, np.zeros((3, 1, 3)))
     # 0 -> 1: changed for sure; 1 -> half/half: half; the newest (no successor yet) against the
@@ -590,40 +597,46 @@ def test_hindsight_stability_compares_the_strategies_in_effect_in_both_interacti
 
 
 def test_unknown_stability_distance_is_named():
-    with pytest.raises(ConfigError, match=r"unknown stability_distance 'kl'.*latents, posterior"):
+    with pytest.raises(
+        ConfigError, match=r"unknown addons.stability_distance 'kl'.*latents, posterior"
+    ):
         method_config("sili", stability_distance="kl")
 
 
 def test_beta_schedule_holds_start_for_the_delay_then_ramps():
-    schedule = BetaSchedule.ramp(start=0.0, end=0.5, length=50, delay=250)
+    schedule = Schedule.ramp(start=0.0, end=0.5, length=50, delay=250)
     values = [schedule.value(i) for i in (0, 249, 250, 275, 300, 1000)]
     assert values == pytest.approx([0.0, 0.0, 0.0, 0.25, 0.5, 0.5])
-    cfg = method_config("sili", beta_schedule=schedule)
-    assert cfg.beta_at(100) == 0.0 and cfg.beta_at(400) == 0.5
-    assert BetaSchedule.ramp(1.0, 0.5, 10).value(5) == pytest.approx(0.75)  # ramps at once
+    agent = _agent(beta_schedule=schedule)
+    seen = {}
+    for j in (100, 400):
+        agent.update(j, rl=False)
+        seen[j] = agent.beta
+    assert seen == {100: 0.0, 400: 0.5}
+    assert Schedule.ramp(1.0, 0.5, 10).value(5) == pytest.approx(0.75)  # ramps at once
     with pytest.raises(ConfigError, match="interaction must be >= 0"):
-        method_config("sili", beta_schedule=BetaSchedule.ramp(0.0, 0.5, 10, delay=-1))
+        method_config("sili", beta_schedule=Schedule.ramp(0.0, 0.5, 10, delay=-1))
 
 
 def test_beta_schedule_rises_then_falls_through_its_points():
-    schedule = BetaSchedule([(250, 0.0), (300, 0.5), (1500, 0.5), (1600, 0.1)])
+    schedule = Schedule([(250, 0.0), (300, 0.5), (1500, 0.5), (1600, 0.1)])
     values = [schedule.value(i) for i in (0, 275, 300, 1000, 1550, 1600, 5000)]
     assert values == pytest.approx([0.0, 0.25, 0.5, 0.5, 0.3, 0.1, 0.1])
     with pytest.raises(ConfigError, match="must increase, got 250 after 300"):
-        method_config("sili", beta_schedule=BetaSchedule([(300, 0.5), (250, 0.0)]))
-    with pytest.raises(ConfigError, match=r"beta schedule: b must be in \[0, 1\], got 1.5 at"):
-        method_config("sili", beta_schedule=BetaSchedule([(9, 1.5)]))
+        method_config("sili", beta_schedule=Schedule([(300, 0.5), (250, 0.0)]))
+    with pytest.raises(ConfigError, match=r"sili.beta: value must be in \[0, 1\], got 1.5 at"):
+        method_config("sili", beta_schedule=Schedule([(9, 1.5)]))
 
 
 def test_saved_schedules_load_both_forms():
     """Runs saved with the single-ramp form still resume with the same b at every interaction."""
     ramp = {"start": 0.0, "end": 0.5, "length": 50, "delay": 250}
     points = {"points": [[250, 0.0], [300, 0.5], [1500, 0.5], [1600, 0.1]]}
-    old = AgentConfig.from_dict({"beta_schedule": ramp})
-    new = AgentConfig.from_dict({"beta_schedule": points})
-    assert [old.beta_at(i) for i in (249, 275, 2000)] == pytest.approx([0.0, 0.25, 0.5])
-    assert new.beta_at(1550) == pytest.approx(0.3)
-    assert AgentConfig.from_dict(new.to_dict()).beta_schedule == new.beta_schedule
+    old = AgentConfig.from_dict(migrate_run({"agent": {"beta_schedule": ramp}})["agent"])
+    new = AgentConfig.from_dict(migrate_run({"agent": {"beta_schedule": points}})["agent"])
+    assert [old.sili.beta.value(i) for i in (249, 275, 2000)] == pytest.approx([0.0, 0.25, 0.5])
+    assert new.sili.beta.value(1550) == pytest.approx(0.3)
+    assert AgentConfig.from_dict(new.to_dict()).sili.beta == new.sili.beta
 
 
 def test_last_step_encoder_reads_the_last_transition_itself():
@@ -634,23 +647,25 @@ def test_last_step_encoder_reads_the_last_transition_itself():
     swapped = traj[:, [0, 1, 2, 3, 5, 4]]  # the same set, another last transition
     pooled = LatentModel(3, 2, 4, 32, "continuous")
     torch.testing.assert_close(pooled.encode_logits(traj), pooled.encode_logits(swapped))
-    last = LatentModel(3, 2, 4, 32, "continuous", last_step=True)
+    last = LatentModel(3, 2, 4, 32, "continuous", readouts=[last_transition])
     assert not torch.allclose(last.encode_logits(traj), last.encode_logits(swapped))
     agent = _agent(latent_last_step=True)
-    assert agent.model.last_step and agent.model.head.in_features == 3 * 32
-    with pytest.raises(ConfigError, match="latent_last_step must be true or false, got 1"):
+    assert agent.model.readouts == [last_transition]
+    assert agent.model.head.in_features == 3 * 32
+    assert _agent().model.head.in_features == 2 * 32  # off: no add-on, pooled features only
+    with pytest.raises(ConfigError, match=r"addons.last_step must be true or false, got 1"):
         method_config("sili", latent_last_step=1)
 
 
 def test_refreshes_use_few_batch_sizes_and_the_same_latents(monkeypatch):
     """Every distinct batch shape costs memory for the rest of a run (oneDNN kernels,
     allocator fragments), so refreshes pad their chunks to a few sizes."""
-    import sili_robots.agent.agent as agent_module
+    import sili_robots.agent.latent_cache as cache_module
 
-    monkeypatch.setattr(agent_module, "REFRESH_CHUNK", 8)
+    monkeypatch.setattr(cache_module, "REFRESH_CHUNK", 8)
     agent = _agent(latent="continuous")
-    encode, sizes = agent._encode, []
-    agent._encode = lambda idx: sizes.append(len(idx)) or encode(idx)
+    encode, sizes = agent.latents.encode, []
+    agent.latents.encode = lambda idx: sizes.append(len(idx)) or encode(idx)
     for n in range(1, 22):
         _fill(agent, 1)
         agent.refresh_latents()
@@ -658,6 +673,6 @@ def test_refreshes_use_few_batch_sizes_and_the_same_latents(monkeypatch):
     assert set(sizes) == {1, 2, 4, 8}
     one_by_one = np.concatenate([encode(np.array([j])) for j in range(21)])
     np.testing.assert_allclose(agent.Z[1:], one_by_one, atol=1e-6)
-    np.testing.assert_array_equal(agent_module.pad_rows(np.arange(5)), [0, 1, 2, 3, 4, 4, 4, 4])
-    assert [agent_module.padded_size(m) for m in (3, 64, 65, 130, 512)] == [4, 64, 128, 192, 512]
-    assert agent_module.largest_power_of_two(700) == 512
+    np.testing.assert_array_equal(cache_module.pad_rows(np.arange(5)), [0, 1, 2, 3, 4, 4, 4, 4])
+    assert [cache_module.padded_size(m) for m in (3, 64, 65, 130, 512)] == [4, 64, 128, 192, 512]
+    assert largest_power_of_two(700) == 512

@@ -4,15 +4,16 @@ the decoder heads, the per-step latents the policy and the critic see, and runs 
 import numpy as np
 import pytest
 import torch
+from agent_helpers import make_agent, run_config
 
-from sili_robots.agent import SILIAgent, method_config
-from sili_robots.agent.latent_filter import (
+from sili_robots.addons.filter_math import (
     LOGLIK_FLOOR,
     filtered_categories,
     log_prior,
     medoid_candidates,
     target_norm,
 )
+from sili_robots.addons.latent_filter import LatentFilter
 from sili_robots.errors import ConfigError
 
 H = 5
@@ -22,16 +23,24 @@ EPS = 0.2
 
 
 def _agent(latent="discrete", latent_dim=4, **kw):
-    cfg = method_config(
+    return make_agent(
         "sili",
         latent,
+        obs_dim=3,
+        act_dim=2,
+        horizon=H,
+        strategy_dim=2,
+        seed=0,
         latent_dim=latent_dim,
         hidden=32,
         batch_interactions=4,
         batch_steps=H,
         **{"latent_filter": EPS, **kw},
     )
-    return SILIAgent(cfg, obs_dim=3, act_dim=2, horizon=H, strategy_dim=2, seed=0)
+
+
+def _filter(agent) -> LatentFilter:
+    return agent.addon(LatentFilter)
 
 
 def _constant_heads(agent):
@@ -79,13 +88,14 @@ def test_policy_acts_on_the_corrected_latent_within_the_interaction():
         _store(agent, reward)
     agent.Z = np.eye(4, dtype=np.float32)[[0, 0, 1, 0, 0]]  # z^4 (the next one) predicts 0
     agent.refresh_latents = lambda: None  # keep the hand-set Z; the filter is what is tested
-    agent._refresh_filter()
-    np.testing.assert_array_equal(agent.filter_in_use, [0, 1])
+    f = _filter(agent)
+    f._refresh()
+    np.testing.assert_array_equal(f.in_use, [0, 1])
     # the heads fit exactly: the noise scale is its floor, so one step decides
-    np.testing.assert_array_equal(agent.ZF[1], [0, 1, 1, 1, 1, 1])  # predicted 0, showed 1
-    np.testing.assert_array_equal(agent.ZF[2], [1, 0, 0, 0, 0, 0])  # predicted 1, showed 0
-    np.testing.assert_array_equal(agent.ZF[3], [0, 1, 1, 1, 1, 1])
-    agent._reset_live()
+    np.testing.assert_array_equal(f.ZF[1], [0, 1, 1, 1, 1, 1])  # predicted 0, showed 1
+    np.testing.assert_array_equal(f.ZF[2], [1, 0, 0, 0, 0, 0])  # predicted 1, showed 0
+    np.testing.assert_array_equal(f.ZF[3], [0, 1, 1, 1, 1, 1])
+    f.begin_interaction()
     obs = np.ones(3, np.float32)
     z_slot = slice(3, 7)
     np.testing.assert_array_equal(agent.policy_input(obs)[z_slot], [1, 0, 0, 0])
@@ -93,14 +103,15 @@ def test_policy_acts_on_the_corrected_latent_within_the_interaction():
     np.testing.assert_array_equal(agent.policy_input(obs)[z_slot], [0, 1, 0, 0])
     # the stored interaction's z^j (not the live one) when asked for by index
     np.testing.assert_array_equal(agent.policy_input(obs, j=4)[z_slot], [1, 0, 0, 0])
-    assert agent._live_ll[0] == pytest.approx(-LOGLIK_FLOOR)  # one step: floored evidence
+    assert f._ll[0] == pytest.approx(-LOGLIK_FLOOR)  # one step: floored evidence
 
 
 def test_filter_does_not_act_before_the_first_refresh():
     agent = _agent()
     _store(agent, 5.0)
-    assert agent.filter_scale is None
-    np.testing.assert_array_equal(agent.ZF, np.full((1, H + 1), -1))
+    f = _filter(agent)
+    assert f.scale is None
+    np.testing.assert_array_equal(f.ZF, np.full((1, H + 1), -1))
     agent.observe_step(np.ones(3, np.float32), np.zeros(2, np.float32), 5.0, np.ones(3))
     np.testing.assert_array_equal(agent.policy_input(np.ones(3, np.float32))[3:7], agent.Z[1])
 
@@ -111,15 +122,16 @@ def test_rl_batches_use_the_per_step_latents_and_the_encoders_at_the_boundary():
     for _ in range(4):
         _store(agent, 0.0, rng.normal(size=(H + 1, 3)).astype(np.float32))
     agent.Z = np.eye(4, dtype=np.float32)[[0, 1, 2, 3, 0]]
-    agent.ZF = rng.integers(0, 4, (4, H + 1)).astype(np.int16)
-    agent.ZF[0] = -1  # filter not running: the encoder's z^0 stands
+    f = _filter(agent)
+    f.ZF = rng.integers(0, 4, (4, H + 1)).astype(np.int16)
+    f.ZF[0] = -1  # filter not running: the encoder's z^0 stands
     x, _, _, x2 = agent.sample_batches(40, beta=0.5)
     x, x2 = x.reshape(-1, x.shape[-1]).numpy(), x2.reshape(-1, x2.shape[-1]).numpy()
     b, eye = agent.buffer, np.eye(4)
     seen_boundary = seen_inside = 0
     for row, row2 in zip(x, x2, strict=True):
         j, t = (int(i[0]) for i in np.where((b.obs[: b.n, :-1] == row[:3]).all(-1)))
-        acted = agent.Z[j] if j == 0 else eye[agent.ZF[j, t]]
+        acted = agent.Z[j] if j == 0 else eye[f.ZF[j, t]]
         np.testing.assert_array_equal(row[3:7], acted)
         np.testing.assert_array_equal(row[7:11], agent.Z[j - 1] if j else np.zeros(4))
         if t == H - 1:
@@ -128,7 +140,7 @@ def test_rl_batches_use_the_per_step_latents_and_the_encoders_at_the_boundary():
             np.testing.assert_array_equal(row2[7:11], agent.Z[j])  # and its z^j as previous
         else:
             seen_inside += 1
-            nxt = agent.Z[j] if j == 0 else eye[agent.ZF[j, t + 1]]
+            nxt = agent.Z[j] if j == 0 else eye[f.ZF[j, t + 1]]
             np.testing.assert_array_equal(row2[3:7], nxt)
     assert seen_boundary and seen_inside
 
@@ -139,31 +151,33 @@ def test_filter_state_survives_a_checkpoint():
     for reward in (0.0, 5.0, 0.0):
         _store(agent, reward)
     agent.Z = np.eye(4, dtype=np.float32)[[0, 0, 1, 0]]
-    agent._refresh_filter()
+    f = _filter(agent)
+    f._refresh()
     other = _agent()
     other.load_state_dict(agent.state_dict())
-    np.testing.assert_array_equal(other.ZF, agent.ZF)
-    np.testing.assert_array_equal(other.filter_in_use, agent.filter_in_use)
-    torch.testing.assert_close(other.filter_scale, agent.filter_scale)
+    g = _filter(other)
+    np.testing.assert_array_equal(g.ZF, f.ZF)
+    np.testing.assert_array_equal(g.in_use, f.in_use)
+    torch.testing.assert_close(g.scale, f.scale)
 
 
 @pytest.mark.parametrize(
     "settings, message",
     [
-        ({"latent_filter": 1.0}, r"latent_filter must be in \[0, 1\), got 1.0"),
-        ({"latent_filter": 0.1, "latent": "partial"}, "needs learned latents"),
-        ({"latent_filter": 0.1, "latent_filter_start": -1}, "latent_filter_start must be >= 0"),
-        ({"latent_filter": 0.1, "latent_filter_noise": -0.5}, "latent_filter_noise must be >= 0"),
+        ({"latent_filter": 1.0}, r"addons\.filter\.eps must be in \[0, 0\.999999\], got 1\.0"),
+        ({"latent_filter": 0.1, "latent": "partial"}, "add-on latent_filter needs learned latents"),
+        ({"latent_filter": 0.1, "latent_filter_start": -1}, "addons.filter.start must be >= 0"),
+        ({"latent_filter": 0.1, "latent_filter_noise": -0.5}, "addons.filter.noise must be >= 0"),
     ],
 )
 def test_bad_filter_settings_are_named(settings, message):
     settings = dict(settings)
     latent = settings.pop("latent", "discrete")
     with pytest.raises(ConfigError, match=message):
-        method_config("sili", latent, **settings)
-    with pytest.raises(ConfigError, match="needs learned latents"):
-        method_config("sac", latent_filter=0.1)
-    assert method_config("sili", "continuous", latent_filter=0.1).latent_filter == 0.1
+        run_config("sili", latent, **settings)
+    with pytest.raises(ConfigError, match="add-on latent_filter needs learned latents"):
+        run_config("sac", latent_filter=0.1)
+    assert run_config("sili", "continuous", latent_filter=0.1).addons.filter.eps == 0.1
 
 
 # ---------------------------------------------------------------- continuous latents
@@ -221,23 +235,24 @@ def _stored_continuous_agent(**kw):
 
 def test_continuous_filter_switches_to_the_latent_that_explains_the_steps():
     agent = _stored_continuous_agent()
-    agent._refresh_filter()
-    np.testing.assert_array_equal(agent.filter_candidates, [[-0.5, 0], [0.5, 0]])
+    f = _filter(agent)
+    f._refresh()
+    np.testing.assert_array_equal(f.candidates, [[-0.5, 0], [0.5, 0]])
     # residual scale of the reward, under the best candidate of each interaction: it explains
     # every one but the first (reward 0, off by 5 under either candidate)
-    scale = float(agent.filter_scale[-1])
+    scale = float(f.scale[-1])
     assert scale == pytest.approx(5 * np.sqrt(1 / 4), rel=1e-5)
     per_step = min(0.5 * (10 / scale) ** 2, LOGLIK_FLOOR)  # evidence against z^j per step
     prior_odds = np.log((1 - EPS) / (EPS / 2))
     switch = int(np.ceil(prior_odds / per_step + 1e-9))  # steps until the evidence wins
     assert 0 < switch < H
-    np.testing.assert_array_equal(agent.ZF[0], [-1] * (H + 1))  # right all along
-    np.testing.assert_array_equal(agent.ZF[1], [-1] * switch + [1] * (H + 1 - switch))
-    np.testing.assert_array_equal(agent.ZF[2], [-1] * switch + [0] * (H + 1 - switch))
+    np.testing.assert_array_equal(f.ZF[0], [-1] * (H + 1))  # right all along
+    np.testing.assert_array_equal(f.ZF[1], [-1] * switch + [1] * (H + 1 - switch))
+    np.testing.assert_array_equal(f.ZF[2], [-1] * switch + [0] * (H + 1 - switch))
     # a candidate that predicts the same as z^j (0.5) never takes over from it
-    np.testing.assert_array_equal(agent.ZF[3], [-1] * (H + 1))
+    np.testing.assert_array_equal(f.ZF[3], [-1] * (H + 1))
 
-    agent._reset_live()
+    f.begin_interaction()
     obs, act = np.ones(3, np.float32), np.zeros(2, np.float32)
     z_slot = slice(3, 5)
     np.testing.assert_array_equal(agent.policy_input(obs)[z_slot], [0.5, 0])  # the encoder's
@@ -258,25 +273,26 @@ def test_continuous_filter_switches_to_the_latent_that_explains_the_steps():
         {},
         refresh=False,
     )
-    assert stats.filter_step == switch  # the step it first acted on another latent
-    np.testing.assert_array_equal(agent.ZF[4], [-1] * switch + [0] * (H + 1 - switch))
+    assert stats.extra["filter_step"] == switch  # the step it first acted on another latent
+    np.testing.assert_array_equal(f.ZF[4], [-1] * switch + [0] * (H + 1 - switch))
 
 
 def test_continuous_rl_batches_put_the_candidate_acted_on_in_the_z_slot():
     agent = _stored_continuous_agent()
-    agent._refresh_filter()
+    f = _filter(agent)
+    f._refresh()
     rng = np.random.default_rng(0)
     agent.buffer.obs[: agent.buffer.n] = rng.normal(size=agent.buffer.obs[:4].shape)
-    agent.ZF = rng.integers(-1, 2, (4, H + 1)).astype(np.int16)
+    f.ZF = rng.integers(-1, 2, (4, H + 1)).astype(np.int16)
     x, _, _, x2 = agent.sample_batches(40, beta=0.0)
     x, x2 = x.reshape(-1, x.shape[-1]).numpy(), x2.reshape(-1, x2.shape[-1]).numpy()
     b = agent.buffer
     seen = {-1: 0, 0: 0, 1: 0}
     for row, row2 in zip(x, x2, strict=True):
         j, t = (int(i[0]) for i in np.where((b.obs[: b.n, :-1] == row[:3]).all(-1)))
-        c = int(agent.ZF[j, t])
+        c = int(f.ZF[j, t])
         seen[c] += 1
-        np.testing.assert_array_equal(row[3:5], agent.Z[j] if c < 0 else agent.filter_candidates[c])
+        np.testing.assert_array_equal(row[3:5], agent.Z[j] if c < 0 else f.candidates[c])
         if t == H - 1:
             np.testing.assert_array_equal(row2[3:5], agent.Z[j + 1])
     assert all(seen.values())
@@ -285,38 +301,41 @@ def test_continuous_rl_batches_put_the_candidate_acted_on_in_the_z_slot():
 @pytest.mark.parametrize("start, running", [(0, True), (100, False)])
 def test_a_checkpoint_without_the_filter_starts_it_as_a_run_would(start, running):
     plain = _stored_continuous_agent(latent_filter=0.0)
+    assert "latent_filter" not in plain.state_dict()["addons"]  # saved without the filter
     agent = _continuous_agent(latent_filter_start=start)
     agent.load_state_dict(plain.state_dict())
-    assert len(agent.ZF) == 4
+    f = _filter(agent)
+    assert len(f.ZF) == 4
     if running:
-        reference = _stored_continuous_agent()
-        reference._refresh_filter()
-        np.testing.assert_array_equal(agent.ZF, reference.ZF)
-        np.testing.assert_array_equal(agent.filter_candidates, reference.filter_candidates)
-        assert agent._live_logp is not None
+        reference = _filter(_stored_continuous_agent())
+        reference._refresh()
+        np.testing.assert_array_equal(f.ZF, reference.ZF)
+        np.testing.assert_array_equal(f.candidates, reference.candidates)
+        assert f._logp is not None
     else:
-        assert agent.filter_scale is None and (agent.ZF == -1).all()
+        assert f.scale is None and (f.ZF == -1).all()
         agent.refresh_latents()  # still before the start: the filter stays off
-        assert agent.filter_scale is None
+        assert f.scale is None
         x, _, _, _ = agent.sample_batches(2, beta=0.0)  # RL batches on the encoder's latents
         z_rows = {tuple(r) for r in agent.Z[:4]}
         assert {tuple(r) for r in x.reshape(-1, x.shape[-1])[:, 3:5].numpy()} <= z_rows
     restored = _continuous_agent(latent_filter_start=start)
     restored.load_state_dict(agent.state_dict())
-    np.testing.assert_array_equal(restored.ZF, agent.ZF)
-    np.testing.assert_array_equal(restored.filter_candidates, agent.filter_candidates)
+    np.testing.assert_array_equal(_filter(restored).ZF, f.ZF)
+    np.testing.assert_array_equal(_filter(restored).candidates, f.candidates)
 
 
 def test_a_broader_noise_scale_needs_more_steps_of_evidence():
     """``latent_filter_noise``: the scale is that fraction of the targets' std, so the same wrong
     interaction takes longer to overturn z^j, and an error as large as a strategy's still does."""
     agent = _stored_continuous_agent(latent_filter_noise=1.5)
-    agent._refresh_filter()
+    f = _filter(agent)
+    f._refresh()
     b = agent.buffer
     _, std = target_norm(torch.from_numpy(b.obs[: b.n]), torch.from_numpy(b.rew[: b.n]))
-    torch.testing.assert_close(agent.filter_scale, 1.5 * std)
-    per_step = min(0.5 * (10 / float(agent.filter_scale[-1])) ** 2, LOGLIK_FLOOR)
+    torch.testing.assert_close(f.scale, 1.5 * std)
+    per_step = min(0.5 * (10 / float(f.scale[-1])) ** 2, LOGLIK_FLOOR)
     switch = int(np.ceil(np.log((1 - EPS) / (EPS / 2)) / per_step + 1e-9))
     assert switch == 2  # one step with the residual scale (the test above), two here
-    np.testing.assert_array_equal(agent.ZF[1], [-1] * switch + [1] * (H + 1 - switch))
-    np.testing.assert_array_equal(agent.ZF[3], [-1] * (H + 1))
+    np.testing.assert_array_equal(f.ZF[1], [-1] * switch + [1] * (H + 1 - switch))
+    np.testing.assert_array_equal(f.ZF[3], [-1] * (H + 1))

@@ -63,8 +63,9 @@ class SILIAgent:
         self.hooks = {h: overriding(self.addons, h) for h in HOOKS}
         self.zdim = strategy_dim if cfg.latent == "true" else cfg.model.dim
         self.n_latents = cfg.policy_latents
+        self.in_dim = obs_dim + self.n_latents * self.zdim  # the policy's and critics' input
         self.sac = SAC(
-            obs_dim + self.n_latents * self.zdim,
+            self.in_dim,
             act_dim,
             cfg.hidden,
             value_at(cfg.sac.lr, 0),
@@ -112,6 +113,10 @@ class SILIAgent:
     def Z(self) -> np.ndarray:
         """Z[j] = z^j for every stored interaction and the next one (Z[0]: no history)."""
         return self.latents.Z
+
+    @Z.setter
+    def Z(self, value: np.ndarray) -> None:  # noqa: N802
+        self.latents.Z = value
 
     def addon(self, kind: type[AgentAddon]) -> AgentAddon:
         """The wired add-on of type ``kind`` (KeyError when it is not wired)."""

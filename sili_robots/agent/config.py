@@ -165,7 +165,7 @@ def convert(name: str, tp: Any, value: Any) -> Any:
             return None
         if isinstance(value, Schedule) and Schedule in args:
             return value
-        if isinstance(value, dict) and Schedule in args and "points" in value:
+        if isinstance(value, dict) and Schedule in args:
             return Schedule.from_dict(value)
         for kind in (float, int, bool, str):
             if kind in args:

@@ -1,0 +1,155 @@
+"""The Python API, in stable-baselines3's shape: ``SILI(env).learn(n)``, ``predict``,
+``save`` and ``SILI.load``.
+
+A model is a run directory (config, metrics, checkpoint) plus the agent and environment it
+describes, so a model trained here loads in ``sili eval`` and a run of ``sili train`` loads
+here. ``predict`` acts on the agent's latent, which it carries across interactions when the
+interactions are played on ``model.env`` (as ``sili eval`` does): resetting ``model.env`` hands
+the agent the interaction just played, from which it infers z^{j+1}.
+
+    from sili_robots import SILI
+    model = SILI("sili/Circle3-v1", method="sili", seed=0)
+    model.learn(interactions=300, progress_bar=True)
+    obs, info = model.env.reset()
+    action = model.predict(obs, deterministic=True)
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from sili_robots.agent import SILIAgent
+from sili_robots.build import build_agent, make_run_config, make_run_env, observed_as, task_name_of
+from sili_robots.errors import ConfigError
+from sili_robots.evaluation import AgentFeedback, evaluate
+from sili_robots.runs import CHECKPOINT, CONFIG, METRICS, SUMMARY, RunConfig, load_checkpoint
+from sili_robots.runs import read_config as read_run_config
+from sili_robots.tasks import RepeatedInteractionEnv
+from sili_robots.training import extend, resume, train
+
+
+class SILI:
+    """SILI or one of its baselines (``method``) on one task.
+
+    ``env``: a task id or CLI name (``"sili/Circle3-v1"``, ``"circle-3"``), a
+    ``package.module:ClassName`` of a task class, or a ``RepeatedInteractionEnv`` instance
+    (a user's own task included). ``settings`` are agent settings by dotted path
+    (``{"sac.lr": 1e-3, "addons.filter.eps": 0.01}``); ``run_dir`` keeps the run (default: a
+    new temporary directory)."""
+
+    def __init__(
+        self,
+        env: str | gym.Env,
+        method: str = "sili",
+        seed: int = 0,
+        *,
+        latent: str | None = None,
+        profile: str = "package",
+        settings: dict[str, Any] | None = None,
+        env_kwargs: dict[str, Any] | None = None,
+        run_dir: str | Path | None = None,
+        checkpoint_every: int = 50,
+    ) -> None:
+        self._task_env: gym.Env | None = None
+        if isinstance(env, gym.Env):
+            if not isinstance(env.unwrapped, RepeatedInteractionEnv):
+                raise ConfigError(
+                    f"env {type(env.unwrapped).__name__} does not follow the repeated-interaction "
+                    "contract; give a RepeatedInteractionEnv (see README, 'Your own task')"
+                )
+            self._task_env, task = env, task_name_of(env)
+        else:
+            task = env
+        cfg = make_run_config(
+            task,
+            method,
+            seed,
+            0,
+            latent=latent,
+            profile=profile,
+            settings=settings,
+            env_kwargs=env_kwargs,
+            checkpoint_every=checkpoint_every,
+        )
+        self.run_dir = Path(run_dir) if run_dir else Path(tempfile.mkdtemp(prefix="sili-run-"))
+        self.cfg = cfg
+        self._setup(None)
+
+    # ------------------------------------------------------------------ building
+    def _setup(self, state: dict[str, Any] | None) -> None:
+        """The environment as the method observes it, and the agent (from ``state``)."""
+        if self._task_env is not None:
+            base = observed_as(self._task_env, self.cfg)
+        else:
+            base = make_run_env(self.cfg)
+        self.agent: SILIAgent = build_agent(self.cfg, base)
+        game = None
+        if state is not None:
+            self.agent.load_state_dict(state["agent"])
+            game = state["game"]
+        self.env: gym.Env = AgentFeedback(base, self.agent, game)
+
+    @classmethod
+    def load(cls, path: str | Path, env: gym.Env | None = None) -> SILI:
+        """A model saved by ``save`` or a run directory of ``sili train``; ``env``: the task
+        instance for a run of a user's task class that cannot be imported by name."""
+        path = Path(path)
+        cfg = read_run_config(path)
+        state = load_checkpoint(path)
+        if state is None:
+            raise ConfigError(f"{path} has no checkpoint yet ({CHECKPOINT}); train it first")
+        model = cls.__new__(cls)
+        model.cfg, model.run_dir, model._task_env = cfg, path, env
+        model._setup(state)
+        return model
+
+    # ------------------------------------------------------------------ sb3 API
+    def learn(self, interactions: int, progress_bar: bool = False) -> SILI:
+        """Train for ``interactions`` more interactions (checkpointed in ``run_dir``)."""
+        if not isinstance(interactions, int) or interactions < 1:
+            raise ConfigError(f"interactions must be an integer >= 1, got {interactions!r}")
+        if self._task_env is None:
+            self.env.close()  # training builds its own (libsumo holds one simulation)
+        done = self.cfg.interactions
+        self.cfg.interactions = done + interactions
+        env = None if self._task_env is None else observed_as(self._task_env, self.cfg)
+        if done == 0:
+            train(self.cfg, self.run_dir, progress=progress_bar, env=env)
+        else:
+            extend(self.run_dir, self.cfg.interactions)
+            if env is None:
+                resume(self.run_dir, progress=progress_bar)
+            else:
+                train(self.cfg, self.run_dir, resume=True, progress=progress_bar, env=env)
+        self._setup(load_checkpoint(self.run_dir))
+        return self
+
+    def predict(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        """The action for ``obs`` of the interaction being played on ``model.env``."""
+        return self.agent.act(np.asarray(obs, np.float32), deterministic=deterministic)
+
+    def save(self, path: str | Path) -> Path:
+        """Copy the run (config, metrics, checkpoint, summary) to ``path``."""
+        path = Path(path)
+        if self.cfg.interactions == 0 or not (self.run_dir / CHECKPOINT).is_file():
+            raise ConfigError("nothing to save yet: call learn() first")
+        if path.resolve() != self.run_dir.resolve():
+            path.mkdir(parents=True, exist_ok=True)
+            for name in (CONFIG, METRICS, CHECKPOINT, SUMMARY):
+                if (self.run_dir / name).is_file():
+                    shutil.copy2(self.run_dir / name, path / name)
+        return path
+
+    def evaluate(self, interactions: int = 100) -> dict[str, float]:
+        """Greedy play continuing the saved game: mean task reward and stability."""
+        return evaluate(self.run_dir, interactions)
+
+    @property
+    def config(self) -> RunConfig:
+        return self.cfg

@@ -1,0 +1,1 @@
+"""Small examples of the package's extension points (a user's own task)."""

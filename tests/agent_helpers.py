@@ -1,0 +1,33 @@
+"""Building agents for tests from flat or dotted settings, as ``sili train --set`` takes them."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from sili_robots.addons import build_addons
+from sili_robots.agent import SILIAgent
+from sili_robots.build import make_run_config
+from sili_robots.runs import RunConfig
+
+
+def run_config(method: str = "sili", latent: str | None = None, **settings: Any) -> RunConfig:
+    """A run config of ``method`` with ``settings`` (earlier flat names or dotted paths with
+    ``__`` for the dots, e.g. ``sac__lr=1e-3``)."""
+    settings = {k.replace("__", "."): v for k, v in settings.items()}
+    return make_run_config("circle-3", method, latent=latent, settings=settings)
+
+
+def make_agent(
+    method: str = "sili",
+    latent: str | None = None,
+    obs_dim: int = 3,
+    act_dim: int = 2,
+    horizon: int = 10,
+    strategy_dim: int = 2,
+    seed: int = 0,
+    **settings: Any,
+) -> SILIAgent:
+    """An agent with the add-ons its settings switch on, as a run would build it."""
+    cfg = run_config(method, latent, **settings)
+    addons = build_addons(cfg.addons, cfg.agent)
+    return SILIAgent(cfg.agent, obs_dim, act_dim, horizon, strategy_dim, seed=seed, addons=addons)
