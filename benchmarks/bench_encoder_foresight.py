@@ -25,10 +25,12 @@ import numpy as np
 import pandas as pd
 import torch
 
-from sili_robots.agent import SILIAgent, method_config
+from sili_robots.addons import build_addons
+from sili_robots.agent import SILIAgent
+from sili_robots.build import make_run_config
 from sili_robots.diagnostics import foresight_by_exit
+from sili_robots.rollout import play_interaction
 from sili_robots.tasks.registry import make_task
-from sili_robots.training import play_interaction
 
 WANDER = 300  # interactions of wandering before the scripted ego holds the opponent
 SETTLED = 400  # counts start here (the runs' breakdowns use 400 on as well)
@@ -65,17 +67,19 @@ def run(last_step: bool, seed: int, interactions: int, updates: int) -> dict[str
     env = make_task("circle-3")
     task = env.unwrapped
     rng = np.random.default_rng(100 + seed)  # the same replay for both encoders of a seed
-    cfg = method_config("sili", latent_last_step=last_step)
-    agent = SILIAgent(cfg, 3, 2, task.horizon, task.strategy_dim, seed=seed)
+    cfg = make_run_config("circle-3", "sili", settings={"addons.last_step": last_step})
+    addons = build_addons(cfg.addons, cfg.agent)
+    agent = SILIAgent(cfg.agent, 3, 2, task.horizon, task.strategy_dim, seed=seed, addons=addons)
     obs, info = env.reset(seed=seed)
     radius = []
     for j in range(interactions + 1000):
-        data, obs, info, _ = play_interaction(env, obs, info, scripted_policy(task, rng, j))
+        played = play_interaction(env, obs, info, scripted_policy(task, rng, j))
+        obs, info = played.next_obs, played.next_info
         agent.observe_interaction(
-            data["obs"], data["act"], data["rew"], obs, data["strategy_id"], data["strategy"],
+            played.obs, played.act, played.rew, obs, played.strategy_id, played.strategy,
             info, refresh=False,
         )  # fmt: skip
-        radius.append(float(np.linalg.norm(data["obs"][-1, :2])))
+        radius.append(float(np.linalg.norm(played.obs[-1, :2])))
         if j < interactions and (j + 1) % 100 == 0:
             agent.update_latent_model(100 * updates)
             agent.refresh_latents()

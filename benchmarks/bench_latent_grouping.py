@@ -17,16 +17,15 @@ the previous defaults (bonus 0.03, no grouping) as the reference:
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import time
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from sili_robots.build import build_agent, make_run_env
 from sili_robots.diagnostics import change_agreement, purity
 from sili_robots.runs import load_checkpoint, read_config
-from sili_robots.training import build_agent, make_run_env
 
 REFERENCE_BONUS = 0.03  # the previous default, trained and labelled without grouping
 
@@ -34,9 +33,8 @@ REFERENCE_BONUS = 0.03  # the previous default, trained and labelled without gro
 def labels(run_dir: Path, bonus: float, threshold: float, steps: int, seed: int) -> np.ndarray:
     """Predicted category of z^{j+1} for every stored interaction j, from a fresh model."""
     cfg = read_config(run_dir)
-    cfg.agent = dataclasses.replace(
-        cfg.agent, latent_usage_bonus=bonus, latent_merge_threshold=threshold
-    )
+    cfg.set("model.usage_bonus", bonus)
+    cfg.set("model.merge_threshold", threshold)
     cfg.seed = seed
     agent = build_agent(cfg, make_run_env(cfg))
     agent.buffer.load_state_dict(load_checkpoint(run_dir)["agent"]["buffer"])

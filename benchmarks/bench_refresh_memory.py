@@ -39,15 +39,19 @@ def measure(config: str, padded: bool, interactions: int) -> dict:
     """One variant in this process: RSS after every 250 interactions, time, final latents."""
     import torch
 
-    import sili_robots.agent.agent as agent_module
-    from sili_robots.agent import SILIAgent, method_config
+    import sili_robots.addons.latent_filter as filter_module
+    import sili_robots.agent.latent_cache as cache_module
+    from sili_robots.addons import LatentFilter, build_addons
+    from sili_robots.agent import SILIAgent
+    from sili_robots.build import make_run_config
 
     torch.set_num_threads(1)
     if not padded:
-        agent_module.pad_rows = lambda idx: idx  # the reference: chunks as they come ...
-        agent_module.largest_power_of_two = lambda n: n  # ... and the filter's scale on all n
-    cfg = method_config("sili", **CONFIGS[config])
-    agent = SILIAgent(cfg, obs_dim=OBS, act_dim=ACT, horizon=H, strategy_dim=2, seed=0)
+        cache_module.pad_rows = lambda idx: idx  # the reference: chunks as they come ...
+        filter_module.largest_power_of_two = lambda n: n  # ... and the filter's scale on all n
+    cfg = make_run_config("circle-3", "sili", settings=dict(CONFIGS[config]))
+    addons = build_addons(cfg.addons, cfg.agent)
+    agent = SILIAgent(cfg.agent, OBS, ACT, H, strategy_dim=2, seed=0, addons=addons)
     rng = np.random.default_rng(0)
     rss, start = {}, time.perf_counter()
     for j in range(interactions):
@@ -66,7 +70,7 @@ def measure(config: str, padded: bool, interactions: int) -> dict:
         "rss": rss,
         "seconds": time.perf_counter() - start,
         "Z": agent.Z.tolist(),
-        "ZF": agent.ZF.tolist() if agent.filtering else [],
+        "ZF": [f.ZF.tolist() for f in agent.addons if isinstance(f, LatentFilter)][:1],
     }
 
 

@@ -93,20 +93,12 @@ def time_sb3(in_dim: int, act_dim: int, batch: int, updates: int) -> float:
 
 
 def time_train(interactions: int, precision: str, matmul: str) -> float:
-    from sili_robots.agent import method_config
-    from sili_robots.runs import RunConfig
+    from sili_robots.build import make_run_config
     from sili_robots.training import train
 
     out = Path(tempfile.mkdtemp())
-    cfg = RunConfig(
-        "circle-3",
-        "sili",
-        0,
-        interactions,
-        method_config(
-            "sili", "discrete", random_interactions=5, precision=precision, matmul=matmul
-        ),
-    )
+    settings = {"sac.random_interactions": 5, "sac.precision": precision, "matmul": matmul}
+    cfg = make_run_config("circle-3", "sili", 0, interactions, settings=settings)
     t = time.perf_counter()
     train(cfg, out, progress=False)
     dt = time.perf_counter() - t

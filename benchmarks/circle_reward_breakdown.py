@@ -61,11 +61,11 @@ import torch
 
 from sili_robots.agent import SILIAgent
 from sili_robots.agent.latent import transitions
+from sili_robots.build import build_agent, make_run_env
 from sili_robots.diagnostics import change_masks, foresight_by_exit
 from sili_robots.errors import ConfigError
 from sili_robots.runs import load_checkpoint, read_config
 from sili_robots.tasks.circle import ARENA, STEP, CircleEnv
-from sili_robots.training import build_agent, make_run_env
 
 PHASE_STEPS = 10
 RADIAL_ACTIONS = np.linspace(-1.0, 1.0, 9)
@@ -261,7 +261,7 @@ def ending_cost(
     scale = (EXIT_RADII - 1) / (radius[-1] - 1)  # of each step's distance outside radius 1
     paths = exit_path / radius * (1 + (radius - 1) * scale[:, None, None])
     traj = rewritten_last_interaction(agent, task, location, paths.astype(np.float32), PHASE_STEPS)
-    z = agent._grouped(agent.model.encode(traj).numpy())
+    z = agent.latents.grouped(agent.model.encode(traj).numpy())
     previous = [agent.Z[n - 1]] if agent.n_latents == 2 else []
     moved_on = (location + 1) % len(task.angles)  # where ending inside sends the opponent
     where = [location] + [moved_on if task.ends_inside(p[-1]) else location for p in paths]

@@ -19,14 +19,14 @@ Why: the margin a policy keeps outside the circle is priced by what a slip costs
 from __future__ import annotations
 
 import argparse
-import dataclasses
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from sili_robots.addons.filter_math import first_departure
+from sili_robots.addons.latent_filter import LatentFilter
 from sili_robots.agent import SILIAgent
-from sili_robots.agent.latent_filter import first_departure
 from sili_robots.evaluation import load_trained
 from sili_robots.tasks.circle import CircleEnv
 
@@ -39,22 +39,23 @@ def play(
     ``location``, and the step at which the filter (if running) first left that latent."""
     obs, _ = task.reset(options={"restart": True})
     task.location = location
-    agent._reset_live()
+    agent.begin_interaction()
     total = 0.0
     for _ in range(task.horizon):
         action = agent.act(obs, deterministic=deterministic)
         next_obs, reward, _, _, _ = task.step(action)
         agent.observe_step(obs, action, reward, next_obs)
         obs, total = next_obs, total + reward
-    return total, first_departure(agent._live_cats) if agent.filtering else -1
+    filters = [a for a in agent.addons if isinstance(a, LatentFilter)]
+    return total, first_departure(filters[0].acted) if filters else -1
 
 
 def with_filter(agent: SILIAgent, eps: float, noise: float) -> SILIAgent:
     """The agent with the filter running from now on (eps, noise), on its current model."""
-    agent.cfg = dataclasses.replace(
-        agent.cfg, latent_filter=eps, latent_filter_noise=noise, latent_filter_start=0
-    )
-    agent._start_filter_late()
+    agent.detach_addon(LatentFilter)
+    latent_filter = LatentFilter(eps, start=0, noise=noise)
+    agent.attach_addon(latent_filter)
+    latent_filter.load_state_dict({})  # no saved state: starts as a run with it would now
     return agent
 
 
@@ -70,7 +71,7 @@ def slip_costs(
         if label == "filter":
             with_filter(agent, eps, noise)
         else:
-            agent.cfg = dataclasses.replace(agent.cfg, latent_filter=0.0)
+            agent.detach_addon(LatentFilter)
         held = int(game["fields"]["location"])
         where = {"held": held, "moved on": (held + 1) % len(task.angles)}
         out[label] = {

@@ -87,6 +87,11 @@ class LatentFilter(AgentAddon):
         best = int((self._logp + self._ll).argmax())
         return best - 1 if self.continuous else best  # option 0: the encoder's z^j
 
+    @property
+    def acted(self) -> list[int]:
+        """The option acted on before each step of the interaction so far (-1: the encoder's)."""
+        return list(self._cats)
+
     def acting_latent(self) -> np.ndarray | None:
         c = self._cats[-1]
         if c < 0:

@@ -107,7 +107,7 @@ class SILIAgent:
         self._update_credit = 0.0
         for addon in self.addons:
             addon.attach(self)
-        self._begin_interaction()
+        self.begin_interaction()
 
     @property
     def Z(self) -> np.ndarray:
@@ -115,8 +115,20 @@ class SILIAgent:
         return self.latents.Z
 
     @Z.setter
-    def Z(self, value: np.ndarray) -> None:  # noqa: N802
+    def Z(self, value: np.ndarray) -> None:
         self.latents.Z = value
+
+    def attach_addon(self, addon: AgentAddon) -> None:
+        """Wire in an add-on after construction (e.g. a filter on a trained agent); its
+        ``encoder_readouts`` cannot change a model that is already built."""
+        self.addons.append(addon)
+        self.hooks = {h: overriding(self.addons, h) for h in HOOKS}
+        addon.attach(self)
+
+    def detach_addon(self, kind: type[AgentAddon]) -> None:
+        """Unwire the add-ons of type ``kind``."""
+        self.addons = [a for a in self.addons if not isinstance(a, kind)]
+        self.hooks = {h: overriding(self.addons, h) for h in HOOKS}
 
     def addon(self, kind: type[AgentAddon]) -> AgentAddon:
         """The wired add-on of type ``kind`` (KeyError when it is not wired)."""
@@ -166,7 +178,8 @@ class SILIAgent:
         if self.cfg.latent == "true" and self.buffer.n == 0:
             self.Z[0] = info["strategy"]
 
-    def _begin_interaction(self) -> None:
+    def begin_interaction(self) -> None:
+        """A new interaction starts (the add-ons that follow one reset their state)."""
         for addon in self.hooks["begin_interaction"]:
             addon.begin_interaction()
 
@@ -200,7 +213,7 @@ class SILIAgent:
             extra.update(addon.interaction_stored(j))
         if refresh and self.model is not None and (j + 1) % self.cfg.model.refresh_every == 0:
             self.refresh_latents()
-        self._begin_interaction()
+        self.begin_interaction()
         return self._stats(j, next_first, extra)
 
     def refresh_latents(self) -> None:
@@ -360,4 +373,4 @@ class SILIAgent:
         saved = state.get("addons", {})
         for addon in self.addons:
             addon.load_state_dict(saved.get(addon.name, {}))
-        self._begin_interaction()
+        self.begin_interaction()

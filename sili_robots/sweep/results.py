@@ -15,6 +15,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from sili_robots.agent.schedule import Schedule
+from sili_robots.migrations import migrate_run
 from sili_robots.runs import CONFIG, METRIC_COLUMNS, METRICS, SUMMARY
 from sili_robots.sweep.state import ERROR_FILE, RESULTS, RUNS_DIR, RUNS_TABLE
 
@@ -39,8 +41,11 @@ def run_dirs(sweep_dir: Path) -> list[Path]:
 
 
 def _identity(run_dir: Path) -> tuple[dict, dict]:
-    cfg = json.loads((run_dir / CONFIG).read_text())["run"]
+    cfg = migrate_run(json.loads((run_dir / CONFIG).read_text())["run"])
     agent = cfg["agent"]
+    beta = agent.get("sili", {}).get("beta", 0.5)
+    if isinstance(beta, dict):  # a schedule: the b it ends at
+        beta = Schedule.from_dict(beta).points[-1][1]
     ident = {
         "run": run_dir.name,
         "task": cfg["task"],
@@ -48,7 +53,7 @@ def _identity(run_dir: Path) -> tuple[dict, dict]:
         "latent": agent["latent"],
         "seed": int(cfg["seed"]),
         "controller": cfg.get("env_kwargs", {}).get("controller", ""),
-        "config_beta": float(agent["beta"]),
+        "config_beta": float(beta),
     }
     return ident, cfg
 

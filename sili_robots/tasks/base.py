@@ -250,5 +250,4 @@ def _same(a: StrategyId | None, b: StrategyId | None) -> bool:
 def resume_game(env: gym.Env, state: dict[str, Any]) -> tuple[np.ndarray, dict[str, Any]]:
     """Restore a saved game through any wrappers (each sees a reset, as they require, and
     shapes the restored observation as it shapes any other)."""
-    env.reset()
     return env.reset(options={"restore": state})
