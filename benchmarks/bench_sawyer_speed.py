@@ -27,8 +27,9 @@ import mujoco
 import numpy as np
 
 from sili_robots.controllers import CONTROLLER_NAMES
+from sili_robots.controllers.robosuite_logging import quiet_robosuite_import
 from sili_robots.tasks import make_task
-from sili_robots.tasks.sawyer_scene import N_SUBSTEPS, SawyerScene, quiet_robosuite_import
+from sili_robots.tasks.sawyer_scene import N_SUBSTEPS, SawyerScene
 
 Block = Callable[[int], None]
 

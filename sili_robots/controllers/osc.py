@@ -20,7 +20,7 @@ import mujoco
 import numpy as np
 
 from sili_robots.controllers.base import ArmSpec, EndEffectorController
-from sili_robots.tasks.sawyer_scene import quiet_robosuite_import
+from sili_robots.controllers.robosuite_logging import quiet_robosuite_import
 
 OSC_KP = 150.0
 OSC_DAMPING_RATIO = 1.0

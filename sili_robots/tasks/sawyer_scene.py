@@ -37,7 +37,6 @@ is z = 0.95 m.
 
 from __future__ import annotations
 
-import logging
 import xml.etree.ElementTree as ET
 from functools import cache
 
@@ -45,6 +44,7 @@ import mujoco
 import numpy as np
 
 from sili_robots.controllers.base import ArmSpec
+from sili_robots.controllers.robosuite_logging import quiet_robosuite_import
 from sili_robots.errors import check_choice
 
 ACTUATIONS = ("position", "velocity", "torque")
@@ -83,30 +83,6 @@ SERVO_KV = np.array([330.0, 190.0, 110.0, 90.0, 55.0, 45.0, 38.0])
 ARM_JOINTS = tuple(f"robot0_right_j{i}" for i in range(7))
 EE_SITE = "gripper0_right_grip_site"
 BASE_SITE = "robot0_right_center"
-
-_QUIET = (
-    "No private macro file found",
-    "It is recommended to use a private macro file",
-    "To setup, run:",
-    "Could not import robosuite_models",
-    "Could not load the mink-based whole-body IK",
-)
-
-
-class _DropKnownImportWarnings(logging.Filter):
-    """robosuite warns about optional extras on import; they do not concern this scene."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        msg = record.getMessage()
-        return not any(msg.startswith(q) for q in _QUIET)
-
-
-def quiet_robosuite_import() -> None:
-    """Install the filter on robosuite's logger (before robosuite is first imported)."""
-    logger = logging.getLogger("robosuite_logs")
-    if not any(isinstance(f, _DropKnownImportWarnings) for f in logger.filters):
-        logger.addFilter(_DropKnownImportWarnings())
-
 
 def _scene_xml(actuation: str, visual: bool = False) -> str:
     """robosuite's models merged into one MJCF string, actuated as ``actuation`` asks."""

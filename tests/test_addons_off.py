@@ -1,0 +1,40 @@
+"""With every add-on off the agent runs none of their code; with one on, its hooks run."""
+
+from __future__ import annotations
+
+import cProfile
+import pstats
+
+from fast_settings import FAST_AGENT
+
+from sili_robots.build import make_run_config
+from sili_robots.training import train
+
+
+def _calls(tmp_path, **settings) -> dict[str, int]:
+    """Calls per function of the add-ons package during a short Circle run."""
+    cfg = make_run_config("circle-3", "sili", 0, 6, settings={**FAST_AGENT, **settings})
+    profile = cProfile.Profile()
+    profile.runcall(train, cfg, tmp_path / "run", progress=False)
+    stats = pstats.Stats(profile).stats
+    return {
+        f"{name}:{line}": calls
+        for (path, line, name), (calls, *_) in stats.items()
+        if "/sili_robots/addons/" in path
+    }
+
+
+#: wiring, once per agent: reads the settings and finds nothing switched on
+WIRING = ("build_addons", "active", "validate")
+
+
+def test_no_addon_code_runs_with_every_addon_off(tmp_path):
+    calls = _calls(tmp_path / "off")
+    assert {key.split(":")[0] for key in calls} <= set(WIRING)
+    assert max(calls.values()) <= 2  # not per step, not per interaction
+
+
+def test_a_switched_on_addon_runs_its_hooks_per_step(tmp_path):
+    calls = _calls(tmp_path / "on", latent_filter=0.1)
+    steps = [n for key, n in calls.items() if key.startswith("observe_step:")]
+    assert steps == [6 * 50]  # each step of the 6 interactions of H = 50
