@@ -24,8 +24,8 @@ def _calls(tmp_path, **settings) -> dict[str, int]:
     }
 
 
-#: wiring, once per agent: reads the settings and finds nothing switched on
-WIRING = ("build_addons", "active", "validate")
+#: wiring and saving the settings, once per run: nothing switched on
+WIRING = ("build_addons", "active", "validate", "to_dict")
 
 
 def test_no_addon_code_runs_with_every_addon_off(tmp_path):
