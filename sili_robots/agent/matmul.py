@@ -15,9 +15,21 @@ setting saved with each run (a resumed run keeps the kernels it was trained with
 
 ``matmul="aten"`` is PyTorch's default path. Under autocast (``precision="bfloat16"``) layers
 always take it: autocast already sends bfloat16 products to oneDNN.
+
+Which library is faster depends on the CPU (oneDNN 2x on one AMD EPYC, slower than MKL on
+another), so the default is chosen by measurement: ``default_matmul`` times a SAC-sized layer's
+forward and backward on both, once per machine, torch version and thread count, and caches the
+choice (``kernels.json`` in the package's cache directory). A run records the choice in its
+config, so it resumes on the kernels it was trained with.
 """
 
 from __future__ import annotations
+
+import json
+import os
+import platform
+import time
+from pathlib import Path
 
 import torch
 import torch.nn.functional as F
@@ -35,9 +47,75 @@ def onednn_available() -> bool:
     return torch.backends.mkldnn.is_available() and hasattr(ops, "_linear_pointwise")
 
 
+def cache_dir() -> Path:
+    """``$SILI_ROBOTS_CACHE``, else ``$XDG_CACHE_HOME/sili-robots`` (``~/.cache/sili-robots``)."""
+    if os.environ.get("SILI_ROBOTS_CACHE"):
+        return Path(os.environ["SILI_ROBOTS_CACHE"])
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "sili-robots"
+
+
+def machine_key() -> str:
+    """What a kernel timing depends on: CPU model and flags, torch version (one thread, as
+    training runs)."""
+    model, flags = platform.processor(), ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name":
+                model = value.strip()
+            elif key.strip() == "flags":
+                flags = " ".join(sorted(f for f in value.split() if f.startswith(("avx", "amx"))))
+            if model and flags:
+                break
+    except OSError:
+        pass
+    return f"{model} | {flags} | torch {torch.__version__} | 1 thread"
+
+
+def time_matmuls(width: int = 256, batch: int = 256, rounds: int = 4) -> dict[str, float]:
+    """Seconds per forward and backward of a [batch, width] x [width, width] layer, the best
+    of ``rounds`` interleaved rounds per library (interleaved, so a busy neighbour slows both)."""
+    x = torch.randn(batch, width, requires_grad=True)
+    layers = {m: Linear(width, width, m) for m in MATMULS}
+    best = dict.fromkeys(MATMULS, float("inf"))
+    for _ in range(rounds):
+        for m, layer in layers.items():
+            start = time.perf_counter()
+            for _ in range(20):
+                layer(x).sum().backward()
+            best[m] = min(best[m], (time.perf_counter() - start) / 20)
+    return best
+
+
 def default_matmul() -> str:
-    """``onednn`` where this PyTorch has it, else ``aten``."""
-    return "onednn" if onednn_available() else "aten"
+    """The faster float32 library on this machine (``aten`` where oneDNN's op is missing),
+    measured once and cached per ``machine_key``."""
+    if not onednn_available():
+        return "aten"
+    path, key = cache_dir() / "kernels.json", machine_key()
+    try:
+        cached = json.loads(path.read_text())
+    except (OSError, ValueError):
+        cached = {}
+    if cached.get(key, {}).get("matmul") in MATMULS:
+        return cached[key]["matmul"]
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # as training runs
+    try:
+        times = time_matmuls()
+    finally:
+        torch.set_num_threads(threads)
+    choice = "onednn" if times["onednn"] < times["aten"] else "aten"
+    cached[key] = {"matmul": choice, "seconds": times}
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(cached, indent=2))
+        os.replace(tmp, path)
+    except OSError:
+        pass  # an unwritable cache only means measuring again next time
+    return choice
 
 
 def _mm(a: torch.Tensor, b_t: torch.Tensor, bias: torch.Tensor | None = None) -> torch.Tensor:
