@@ -11,6 +11,7 @@ from sili_robots.agent.matmul import MIN_WIDTH, default_matmul, linear, onednn_a
 from sili_robots.agent.networks import EnsembleLinear
 from sili_robots.agent.sac import SAC
 from sili_robots.errors import ConfigError
+from sili_robots.migrations import migrate_run
 
 pytestmark = pytest.mark.skipif(not onednn_available(), reason="PyTorch without oneDNN")
 
@@ -120,9 +121,9 @@ def test_matmul_setting_defaults_to_onednn_and_old_runs_keep_aten():
     agent = SILIAgent(cfg, obs_dim=3, act_dim=2, horizon=5, strategy_dim=2)
     assert agent.sac.actor.trunk[0].matmul == "onednn"
     assert agent.model.phi[0].matmul == "onednn"
-    saved = cfg.to_dict()
-    del saved["matmul"]  # a config.json written before the setting existed
-    assert AgentConfig.from_dict(saved).matmul == "aten"
-    assert method_config("sili", matmul="aten").matmul == "aten"
+    # a config.json written before the setting existed (settings flat, no matmul)
+    saved = {"method": "sili", "latent": "discrete", "latent_dim": 10, "hidden": 256}
+    assert AgentConfig.from_dict(migrate_run({"agent": saved})["agent"]).matmul == "aten"
+    assert method_config("sili", overrides={"matmul": "aten"}).matmul == "aten"
     with pytest.raises(ConfigError, match="unknown matmul 'mkl'; allowed: onednn, aten"):
-        method_config("sili", matmul="mkl")
+        method_config("sili", overrides={"matmul": "mkl"})

@@ -91,7 +91,8 @@ def test_results_table_has_a_row_per_run_per_interaction(tiny_sweep):
             json.loads((out / "runs" / name / "config.json").read_text())["run"]
         )
         assert (rows["task"] == cfg.task).all() and (rows["method"] == cfg.method).all()
-        assert (rows["seed"] == cfg.seed).all() and (rows["config_beta"] == cfg.agent.beta).all()
+        assert (rows["seed"] == cfg.seed).all()
+        assert (rows["config_beta"] == cfg.agent.sili.beta).all()
     np.testing.assert_array_equal(table["true_stability"], 1 - table["strategy_changed"])
     assert table["finished"].all()
     runs = pd.read_csv(out / "runs.csv").set_index("run")
@@ -277,7 +278,7 @@ def test_schedules_given_to_the_sweep_drive_its_runs(tmp_path):
     assert sili["beta"].tolist() == [0.0, 0.25, 0.5, 0.5]
     for name in ("circle-3__sili-bschedule__s0", "circle-3__oracle__s0"):
         agent = json.loads((out / "runs" / name / "config.json").read_text())["run"]["agent"]
-        assert agent["target_entropy_schedule"] == {"points": [[0, -2.0], [3, -5.0]]}
+        assert agent["sac"]["target_entropy"] == {"points": [[0, -2.0], [3, -5.0]]}
     # the sweep records its schedules, so a re-run finds every run done
     again = _sili("sweep", "--resume", out, "--no-progress")
     assert again.returncode == 0, again.stderr

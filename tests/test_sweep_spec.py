@@ -5,7 +5,9 @@ import json
 import pytest
 
 from sili_robots.agent.matmul import default_matmul
+from sili_robots.agent.schedule import Schedule, value_at
 from sili_robots.errors import ConfigError
+from sili_robots.migrations import LEGACY_SETTINGS
 from sili_robots.sweep import SweepSpec, expand, parse_betas, parse_seeds, plan
 from sili_robots.sweep.state import check_existing, run_path
 
@@ -13,6 +15,23 @@ from sili_robots.sweep.state import check_existing, run_path
 def _spec(**kw):
     base = {"tasks": ["circle-3"], "methods": ["sili"], "seeds": [0], "interactions": 5}
     return SweepSpec(**{**base, **kw})
+
+
+def _flat_layout(run: dict) -> dict:
+    """A run config as runs were saved before the agent's settings were nested by section."""
+    names = {
+        path: name
+        for name, path in LEGACY_SETTINGS.items()
+        if not name.endswith("_schedule") and not path.startswith("addons.")
+    }
+    agent = run["agent"]
+    flat = {key: agent[key] for key in ("method", "latent", "hidden", "matmul")}
+    for section in ("sac", "model", "sili"):
+        for key, value in agent[section].items():
+            if f"{section}.{key}" in names:
+                flat[names[f"{section}.{key}"]] = value
+    old = {key: value for key, value in run.items() if key != "addons"}
+    return {**old, "agent": flat}
 
 
 def test_parse_seeds_ranges_lists_and_errors():
@@ -47,9 +66,9 @@ def test_expansion_is_the_cross_product_with_b_only_where_b_is_free():
     assert len(runs) == 2 * (4 + 2 + 2)
     by_name = {r.name: r.config for r in runs}
     cfg = by_name["circle-8__sili-b0.2__s1"]
-    assert (cfg.task, cfg.method, cfg.seed, cfg.agent.beta) == ("circle-8", "sili", 1, 0.2)
+    assert (cfg.task, cfg.method, cfg.seed, cfg.agent.sili.beta) == ("circle-8", "sili", 1, 0.2)
     assert cfg.agent.hidden == 32 and cfg.interactions == 5
-    assert by_name["circle-3__lili__s0"].agent.beta == 0.0  # LILI's b stays 0
+    assert by_name["circle-3__lili__s0"].agent.sili.beta == 0.0  # LILI's b stays 0
     assert by_name["circle-3__sac__s1"].agent.method == "sac"
     # the default b is part of SILI's name, so the b=0.5 run of a b sweep is the same run
     assert [r.name for r in expand(_spec())] == ["circle-3__sili-b0.5__s0"]
@@ -68,12 +87,12 @@ def test_schedules_reach_every_run_and_b_schedules_only_where_b_is_free():
     names = {"circle-3__sili-bschedule__s0", "circle-3__lili__s0", "circle-3__oracle__s0"}
     assert set(by_name) == names
     sili = by_name["circle-3__sili-bschedule__s0"]
-    assert [sili.beta_at(i) for i in (0, 275, 1000)] == [0.0, 0.25, 0.5]
-    assert by_name["circle-3__lili__s0"].beta_schedule is None
+    assert [value_at(sili.sili.beta, i) for i in (0, 275, 1000)] == [0.0, 0.25, 0.5]
+    assert not isinstance(by_name["circle-3__lili__s0"].sili.beta, Schedule)
     for agent in by_name.values():
-        assert agent.target_entropy_at(2050, 2) == -3.0
-        assert agent.gamma_at(2000) == 0.998
-        assert agent.lr_at(2300) == pytest.approx(1.65e-4)
+        assert value_at(agent.sac.target_entropy, 2050) == -3.0
+        assert value_at(agent.sac.gamma, 2000) == 0.998
+        assert value_at(agent.sac.lr, 2300) == pytest.approx(1.65e-4)
     # the spec goes through sweep.json as JSON and plans the same runs again
     again = SweepSpec.from_dict(json.loads(json.dumps(spec.to_dict())))
     assert [r.config.to_dict() for r in expand(again)] == [r.config.to_dict() for r in expand(spec)]
@@ -112,8 +131,15 @@ def test_latent_kind_other_than_the_default_is_named():
         ({"controllers": ["osc"]}, "--controller applies to tasks sawyer-reach"),
         ({"agent_overrides": {"beta": 0.3}}, "use the sweep's --beta"),
         (
-            {"agent_overrides": {"target_entropy_schedule": {"points": [[0, -2]]}}},
-            "use the sweep's --target-entropy-schedule",
+            {"agent_overrides": {"beta_schedule": {"points": [[0, 0.5]]}}},
+            "use the sweep's --beta or --beta-schedule",
+        ),
+        (
+            {
+                "target_entropy_schedule": [(0, -2.0)],
+                "agent_overrides": {"target_entropy_schedule": {"points": [[0, -2]]}},
+            },
+            "one of --set target_entropy_schedule and --target-entropy-schedule",
         ),
         ({"betas": [0.2], "beta_schedule": [(0, 0.5)]}, "one of --beta and --beta-schedule"),
         (
@@ -126,8 +152,8 @@ def test_latent_kind_other_than_the_default_is_named():
         ),
         ({"methods": ["lili"], "beta_schedule": [(0, 0.5)]}, "--beta-schedule applies to"),
         ({"beta_schedule": [(300, 0.5), (250, 0.0)]}, "interactions must increase"),
-        ({"agent_overrides": {"hiddden": 3}}, "unknown agent setting 'hiddden'"),
-        ({"agent_overrides": {"gamma": 2}}, r"gamma must be in \(0, 1\]"),
+        ({"agent_overrides": {"hiddden": 3}}, "unknown setting 'hiddden'; allowed: method"),
+        ({"agent_overrides": {"gamma": 2}}, r"sac\.gamma must be in \[1e-09, 1\], got 2"),
         ({"latent": "fuzzy"}, "unknown latent kind 'fuzzy'"),
         ({"tasks": []}, "no tasks given"),
         ({"env_kwargs": {"controller": "osc"}}, "give controllers with --controller"),
@@ -150,7 +176,8 @@ def test_an_existing_run_with_other_settings_is_refused(tmp_path):
     (path / "config.json").write_text(json.dumps({"run": run.config.to_dict()}))
     check_existing(tmp_path, run)  # the same run: fine
     older = run.config.to_dict()
-    del older["agent"]["smirl_std_floor"]  # written before that setting existed: its default
+    # written before that setting existed: its default
+    del older["agent"]["sili"]["smirl_std_floor"]
     (path / "config.json").write_text(json.dumps({"run": older}))
     check_existing(tmp_path, run)
 
@@ -167,7 +194,7 @@ def test_a_sweep_records_its_kernel_library_and_older_records_resume_on_aten(tmp
     # its runs, whose config.json has no matmul either, are the same runs: resumable
     path = run_path(tmp_path, run.name)
     path.mkdir(parents=True)
-    on_disk = run.config.to_dict()
+    on_disk = _flat_layout(run.config.to_dict())
     del on_disk["agent"]["matmul"]
     (path / "config.json").write_text(json.dumps({"run": on_disk}))
     check_existing(tmp_path, run)

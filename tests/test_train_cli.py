@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 from fast_settings import FAST_ARGS
 
+from sili_robots.addons import LatentFilter
 from sili_robots.evaluation import load_trained
 
 FAST = [*FAST_ARGS, "--no-progress"]
@@ -50,7 +51,8 @@ def test_train_writes_a_complete_run_and_eval_reads_it(tmp_path):
     assert json.loads(res.stdout)["interactions"] == 12
     cfg = json.loads((out / "config.json").read_text())
     assert cfg["run"]["method"] == "sili" and cfg["run"]["seed"] == 1
-    assert cfg["run"]["agent"]["beta"] == 0.5 and cfg["run"]["agent"]["latent"] == "discrete"
+    agent = cfg["run"]["agent"]
+    assert agent["sili"]["beta"] == 0.5 and agent["latent"] == "discrete"
     assert "torch" in cfg["versions"]
     df = pd.read_csv(out / "metrics.csv")
     assert list(df["interaction"]) == list(range(12))
@@ -95,9 +97,9 @@ def test_entropy_discount_and_lr_schedules_are_saved_with_the_run(tmp_path):
     )  # fmt: skip
     assert res.returncode == 0, res.stderr
     agent = json.loads((out / "config.json").read_text())["run"]["agent"]
-    assert agent["target_entropy_schedule"] == {"points": [[0, -2.0], [2, -4.0]]}
-    assert agent["gamma_schedule"] == {"points": [[1, 0.99], [2, 0.998]]}
-    assert agent["lr_schedule"] == {"points": [[1, 3e-4], [2, 3e-5]]}
+    assert agent["sac"]["target_entropy"] == {"points": [[0, -2.0], [2, -4.0]]}
+    assert agent["sac"]["gamma"] == {"points": [[1, 0.99], [2, 0.998]]}
+    assert agent["sac"]["lr"] == {"points": [[1, 3e-4], [2, 3e-5]]}
 
 
 @pytest.mark.parametrize("latent", ["continuous", "partial", "true"])
@@ -125,7 +127,7 @@ def test_every_latent_kind_trains(tmp_path, latent):
         (["--task", "circle-3", "--method", "ppo"], "invalid choice: 'ppo'"),
         (["--task", "circle-3", "--beta", "1.5"], "outside the allowed range [0, 1]"),
         (["--task", "circle-3", "--interactions", "0"], "need an integer >= 1"),
-        (["--task", "circle-3", "--set", "gamma=2"], "gamma must be in (0, 1]"),
+        (["--task", "circle-3", "--set", "gamma=2"], "sac.gamma must be in [1e-09, 1], got 2"),
         (["--task", "circle-3", "--method", "lili", "--beta", "0.3"], "does not apply to method"),
         (["--task", "circle-3", "--beta-anneal", "2", "0", "10"], "outside the allowed range"),
         (["--task", "circle-3", "--beta-anneal", "0", "0.5"], "START END LENGTH [DELAY]"),
@@ -166,7 +168,7 @@ def test_every_latent_kind_trains(tmp_path, latent):
                 "--set",
                 "target_entropy=-3",
             ],
-            "give one of target_entropy and a target entropy schedule",
+            "give one of --set target_entropy and --target-entropy-schedule, not both",
         ),
         (
             ["--task", "circle-3", "--method", "lili", "--beta-schedule", "0:0.5"],
@@ -175,6 +177,14 @@ def test_every_latent_kind_trains(tmp_path, latent):
         (
             ["--task", "circle-3", "--beta-anneal", "0", "0.5", "9", "--beta-schedule", "0:0"],
             "not both",
+        ),
+        (
+            ["--task", "circle-3", "--beta", "0.3", "--beta-schedule", "0:0"],
+            "give one of --beta and --beta-schedule, not both",
+        ),
+        (
+            ["--task", "circle-3", "--set", "beta=0.3", "--beta-anneal", "0", "0.5", "9"],
+            "give one of --set beta and --beta-anneal, not both",
         ),
         (["--resume", "/nonexistent"], "is not a run directory"),
     ],
@@ -278,13 +288,14 @@ def test_a_continuous_filter_started_late_leaves_the_run_unchanged_before_it(tmp
 
     _, env, agent, _ = load_trained(filtered)
     env.close()
-    assert agent.filter_scale is not None and len(agent.filter_candidates) >= 2
-    assert len(agent.ZF) == 24
+    lf = agent.addon(LatentFilter)
+    assert lf.scale is not None and len(lf.candidates) >= 2
+    assert len(lf.ZF) == 24
     # candidates are latents the encoder produced; every step acted on z^j or one of them
-    assert all((agent.Z[1:] == c).all(-1).any() for c in agent.filter_candidates)
-    n_candidates = len(agent.filter_candidates)
-    assert agent.ZF.min() >= -1 and agent.ZF.max() < n_candidates
-    np.testing.assert_array_equal(agent.ZF[:, 0], -1)  # no evidence yet: the encoder's z^j
+    assert all((agent.Z[1:] == c).all(-1).any() for c in lf.candidates)
+    n_candidates = len(lf.candidates)
+    assert lf.ZF.min() >= -1 and lf.ZF.max() < n_candidates
+    np.testing.assert_array_equal(lf.ZF[:, 0], -1)  # no evidence yet: the encoder's z^j
     res = _sili("eval", filtered, "--interactions", 2)  # greedy, the filter running step by step
     assert res.returncode == 0 and "mean_task_reward" in res.stdout, res.stderr
 
@@ -304,11 +315,12 @@ def test_a_filtered_run_records_what_it_acted_on_and_resumes_exactly(tmp_path):
 
     _, env, agent, _ = load_trained(longer)
     env.close()
-    assert agent.filter_scale is not None and len(agent.ZF) == 24
+    lf = agent.addon(LatentFilter)
+    assert lf.scale is not None and len(lf.ZF) == 24
     # interactions 20-23 came after the last refresh: their rows are what the policy acted on,
     # step by step, and the same model replaying them gives the same categories
-    np.testing.assert_array_equal(agent.ZF[20:], agent._filter_rows(np.arange(20, 24)))
-    np.testing.assert_array_equal(agent.ZF[20:, 0], agent.Z[20:24].argmax(-1))  # the prior
-    assert (agent.ZF >= 0).all()  # every row recomputed once the filter runs
+    np.testing.assert_array_equal(lf.ZF[20:], lf._rows(np.arange(20, 24)))
+    np.testing.assert_array_equal(lf.ZF[20:, 0], agent.Z[20:24].argmax(-1))  # the prior
+    assert (lf.ZF >= 0).all()  # every row recomputed once the filter runs
     res = _sili("eval", longer, "--interactions", 2)  # greedy, the filter running step by step
     assert res.returncode == 0 and "mean_task_reward" in res.stdout, res.stderr

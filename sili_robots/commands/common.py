@@ -115,11 +115,19 @@ def schedule_args(args: argparse.Namespace) -> dict[str, Schedule]:
     return out
 
 
-def check_schedule_overrides(schedules: dict[str, Schedule], settings: dict[str, Any]) -> None:
-    """Refuse a schedule option given together with ``--set`` of the setting it schedules."""
+def check_schedule_overrides(
+    schedules: dict[str, Schedule],
+    settings: dict[str, Any],
+    options: dict[str, str] | None = None,
+) -> None:
+    """Refuse a schedule option given together with ``--set`` of the setting it schedules.
+
+    ``options`` names the option that gave each schedule (setting path -> option) where it is
+    not the one ``SCHEDULE_ARGS`` lists for that setting (e.g. ``--beta-anneal``)."""
     given = {setting_path(name): name for name in settings}
     for option, (path, *_) in SCHEDULE_ARGS.items():
         if path in schedules and path in given:
+            option = (options or {}).get(path, option)
             raise ConfigError(f"give one of --set {given[path]} and {option}, not both")
 
 

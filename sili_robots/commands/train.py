@@ -89,14 +89,19 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
                 f"{option} does not apply to method {args.method!r} (its b is fixed); "
                 f"use --method {' or '.join(BETA_METHODS)}"
             )
-    if args.beta is not None:
-        settings["sili.beta"] = args.beta
     if args.beta_anneal and args.beta_schedule:
         raise ConfigError("give one of --beta-anneal and --beta-schedule, not both")
     schedules = schedule_args(args)
+    options = {}
     if args.beta_anneal:
         schedules["sili.beta"] = beta_anneal(args.beta_anneal)
-    check_schedule_overrides(schedules, settings)
+        options["sili.beta"] = "--beta-anneal"
+    if args.beta is not None and "sili.beta" in schedules:
+        given = options.get("sili.beta", "--beta-schedule")
+        raise ConfigError(f"give one of --beta and {given}, not both")
+    check_schedule_overrides(schedules, settings, options)
+    if args.beta is not None:
+        settings["sili.beta"] = args.beta
     settings.update(schedules)
     env_kwargs = parse_env_kwargs(args.env_kwarg, "--env-kwarg")
     if args.controller is not None:
