@@ -59,3 +59,10 @@ def test_an_output_directory_that_cannot_be_created_exits_2_naming_it(capsys):
     assert main([*args, *FAST_ARGS, "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert f"cannot create the run directory {out}" in err and "Traceback" not in err
+
+
+def test_method_and_profile_are_chosen_not_overridden():
+    with pytest.raises(ConfigError, match="profile is not a setting to override"):
+        method_config("sili", overrides={"profile": "paper"})
+    with pytest.raises(ConfigError, match="method is not a setting to override"):
+        method_config("lili", overrides={"method": "sili"})

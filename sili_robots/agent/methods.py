@@ -89,6 +89,12 @@ def method_config(
         for path, value in PAPER_PROFILE.items():
             set_path(cfg, path, value)
     given = dict(overrides or {})
+    for name in ("method", "profile"):
+        if name in given:
+            raise ConfigError(
+                f"{name} is not a setting to override ({name} {given[name]!r}); choose the "
+                f"{name} itself (allowed: {', '.join(PRESETS if name == 'method' else PROFILES)})"
+            )
     if latent is not None:
         given["latent"] = latent
     fixed = PRESETS[method].fixed
