@@ -84,8 +84,9 @@ def load_trained(run_dir: Path) -> tuple[RunConfig, gym.Env, SILIAgent, dict[str
 def policy_from_run(
     run_dir: Path,
 ) -> tuple[str, dict[str, Any], Callable[[gym.Env], tuple[gym.Env, Callable]]]:
-    """(task name, env kwargs, make_policy) where ``make_policy(env)`` returns the env to step
-    (a wrapper feeding the agent) and a deterministic ``policy(env, obs) -> action``."""
+    """(task version, env kwargs, make_policy) where ``make_policy(env)`` returns the env to step
+    (a wrapper feeding the agent) and a deterministic ``policy(env, obs) -> action``; the task
+    version is the gymnasium id the run trained on."""
     from sili_robots.training import run_env_kwargs
 
     cfg = read_config(run_dir)
@@ -97,7 +98,7 @@ def policy_from_run(
         wrapped = AgentFeedback(env, agent, game)
         return wrapped, lambda _env, obs: agent.act(obs, deterministic=True)
 
-    return cfg.task, kwargs, make_policy
+    return cfg.task_id or cfg.task, kwargs, make_policy
 
 
 def evaluate(run_dir: Path, interactions: int) -> dict[str, float]:

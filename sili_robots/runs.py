@@ -7,6 +7,7 @@ every ``checkpoint_every`` interactions) and, once finished, ``summary.json``.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import os
@@ -50,6 +51,17 @@ class RunConfig:
     agent: AgentConfig
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     checkpoint_every: int = 50
+    #: the gymnasium id (task version) the run builds; resolved from ``task`` when the run is
+    #: configured and recorded, so the run keeps its version when the name moves on
+    task_id: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.task_id is None:
+            from sili_robots.tasks import task_spec
+
+            # an unknown task fails, with the choices, where the task is built
+            with contextlib.suppress(ConfigError):
+                self.task_id = task_spec(self.task).gym_id
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -58,9 +70,25 @@ class RunConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> RunConfig:
+        """Read a recorded config; one recorded before task versions ran the task's first."""
         d = dict(d)
         d["agent"] = AgentConfig.from_dict(d["agent"])
+        if d.get("task_id") is None:
+            d["task_id"] = recorded_task_id(d)
         return cls(**d)
+
+
+def recorded_task_id(run: dict[str, Any]) -> str | None:
+    """The task version a recorded run config (``config.json``'s ``run``) built: its ``task_id``,
+    or, for a config written before versions were recorded, its task's first version."""
+    from sili_robots.tasks.registry import first_version
+
+    if run.get("task_id"):
+        return str(run["task_id"])
+    try:
+        return first_version(run["task"]).gym_id
+    except ConfigError:
+        return None
 
 
 def versions() -> dict[str, str]:

@@ -41,7 +41,7 @@ def run_env_kwargs(cfg: RunConfig) -> dict[str, Any]:
 
 
 def make_run_env(cfg: RunConfig) -> gym.Env:
-    return make_task(cfg.task, **run_env_kwargs(cfg))
+    return make_task(cfg.task_id or cfg.task, **run_env_kwargs(cfg))
 
 
 def build_agent(cfg: RunConfig, env: gym.Env) -> SILIAgent:
