@@ -25,10 +25,12 @@ def run_interactions(
     interactions: int,
     seed: int | None = 0,
     on_step: Callable[[np.ndarray, dict], None] | None = None,
+    options: dict | None = None,
 ) -> list[InteractionSummary]:
-    """Play ``interactions`` whole interactions, restarting the game with ``seed``."""
+    """Play ``interactions`` whole interactions, restarting the game with ``seed`` (and the
+    first reset's ``options``, e.g. ``{"strategy": z}``)."""
     out: list[InteractionSummary] = []
-    obs, info = env.reset(seed=seed)
+    obs, info = env.reset(seed=seed, options=options)
     env.action_space.seed(seed)
     for j in range(interactions):
         if j > 0:

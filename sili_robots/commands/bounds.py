@@ -15,7 +15,13 @@ from sili_robots.errors import ConfigError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    from sili_robots.bounds import BOUNDS_FILE, DEFAULT_INTERACTIONS, DEFAULT_SEED
+    from sili_robots.bounds import (
+        BOUNDS_FILE,
+        DEFAULT_GAMES,
+        DEFAULT_INTERACTIONS,
+        DEFAULT_SEED,
+        TASK_INTERACTIONS,
+    )
 
     p = sub.add_parser(
         "bounds",
@@ -24,18 +30,27 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "greedy with z, stabilizing = holds z, and where they exist blind = holds z without "
         "seeing it, tracking = predicts z without stabilizing) and prints each one's mean task "
         "reward per interaction and true stability (fraction of interactions 2..N whose true "
-        "strategy stayed).",
+        "strategy stayed), over every interaction but each game's first.",
     )
     p.add_argument("task", nargs="?", help="task name or gymnasium id, e.g. circle-3")
     p.add_argument(
         "--all", action="store_true", help="every registered task version (current and earlier)"
     )
+    slow = ", ".join(f"{t}: {n}" for t, n in TASK_INTERACTIONS.items())
     p.add_argument(
         "--interactions",
-        default=str(DEFAULT_INTERACTIONS),
-        help=f"interactions per policy, >= 2 (default {DEFAULT_INTERACTIONS})",
+        help=f"interactions per policy, shared by the games (default {DEFAULT_INTERACTIONS}; "
+        f"{slow})",
     )
-    p.add_argument("--seed", default=str(DEFAULT_SEED), help=f"seed (default {DEFAULT_SEED})")
+    p.add_argument(
+        "--games",
+        help="repeated games per policy, seeds SEED, SEED+1, ..., starting from each strategy "
+        f"in turn (default: the smallest multiple of the number of strategies >= {DEFAULT_GAMES},"
+        " fewer if the interactions are few)",
+    )
+    p.add_argument(
+        "--seed", default=str(DEFAULT_SEED), help=f"first game's seed (default {DEFAULT_SEED})"
+    )
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument(
         "--write",
@@ -50,15 +65,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.bounds import (
-        check_interactions,
+        check_counts,
         compute_bounds,
+        default_interactions,
         format_table,
         write_bounds_file,
     )
     from sili_robots.tasks import task_spec
     from sili_robots.tasks.registry import all_versions
 
-    n = check_interactions(args.interactions)
     try:
         seed = int(args.seed)
     except ValueError:
@@ -66,9 +81,11 @@ def run(args: argparse.Namespace) -> int:
     if args.all == (args.task is not None):
         raise ConfigError("give either a TASK (e.g. circle-3) or --all, not both or neither")
     specs = all_versions() if args.all else [task_spec(args.task)]
+    for spec in specs:  # the counts checked before anything runs
+        check_counts(args.interactions or default_interactions(spec.name), args.games)
     results = []
     for spec in specs:
-        result = compute_bounds(spec.gym_id, n, seed)
+        result = compute_bounds(spec.gym_id, args.interactions, seed, args.games)
         results.append(result)
         if args.json:
             print(json.dumps({k: result[k] for k in ("task", "task_id", "bounds")}))

@@ -127,6 +127,15 @@ class CircleEnv(RepeatedInteractionEnv):
         else:
             self.location = int(self.np_random.integers(len(self.angles)))
 
+    def strategy_choices(self) -> list[int] | None:
+        return None if self.variant == "continuous" else list(range(len(self.angles)))
+
+    def _set_strategy(self, strategy: int | float) -> None:
+        if self.variant == "continuous":
+            self.angle = float(strategy) % (2 * math.pi)
+        else:
+            self.location = int(strategy)
+
     def ends_inside(self, position: np.ndarray) -> bool:
         """The strategy rule's test: closer to the centre than ``RADIUS + outside_margin``."""
         return float(np.linalg.norm(position)) < RADIUS + self.outside_margin

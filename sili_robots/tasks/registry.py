@@ -97,7 +97,7 @@ def make_task(name: str, **kwargs: Any) -> gym.Env:
     spec = task_spec(name)
     with warnings.catch_warnings():
         if spec.name in EARLIER_VERSIONS:  # asked for by its version: no "out of date" warning
-            warnings.filterwarnings("ignore", "The environment .* is out of date", Warning)
+            warnings.filterwarnings("ignore", ".*The environment .* is out of date", Warning)
         return gym.make(spec.gym_id, **kwargs)
 
 

@@ -102,6 +102,12 @@ class SawyerReachEnv(RepeatedInteractionEnv):
     def strategy_encoding(self) -> np.ndarray:
         return self.goal_position.astype(np.float32)
 
+    def strategy_choices(self) -> list[int]:
+        return list(range(len(GOALS)))
+
+    def _set_strategy(self, strategy: int) -> None:
+        self.goal = int(strategy)
+
     def _initial_strategy(self) -> None:
         self.goal = int(self.np_random.integers(len(GOALS)))
 

@@ -116,6 +116,12 @@ class SpeakerListenerEnv(RepeatedInteractionEnv):
             others = [m for m in range(len(MAPPINGS)) if m != self.mapping]
             self.mapping = int(self.np_random.choice(others))
 
+    def strategy_choices(self) -> list[int]:
+        return list(range(len(MAPPINGS)))
+
+    def _set_strategy(self, strategy: int) -> None:
+        self.mapping = int(strategy)
+
     def _initial_strategy(self) -> None:
         self.mapping = int(self.np_random.integers(len(MAPPINGS)))
         self.visited_before = False
