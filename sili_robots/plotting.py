@@ -115,7 +115,8 @@ def _task_ids(rows: pd.DataFrame, task: str) -> list[str]:
 
 def draw_bounds(ax: Axes, metric: str, task_ids: Sequence[str]) -> None:
     """The stored bounds of ``task_ids`` as labelled horizontal lines across ``ax`` (a panel of
-    ``BOUND_METRICS``); kinds that share a value are named together at the right edge."""
+    ``BOUND_METRICS``), all kept in view; bounds close together share one label at the right
+    edge, each kind with its value."""
     from matplotlib.collections import LineCollection
     from matplotlib.transforms import blended_transform_factory
 
@@ -125,7 +126,7 @@ def draw_bounds(ax: Axes, metric: str, task_ids: Sequence[str]) -> None:
     if key is None:
         return
     trans = blended_transform_factory(ax.transAxes, ax.transData)
-    at: dict[float, list[str]] = {}
+    drawn: list[tuple[float, str]] = []
     for task_id in task_ids:
         suffix = f" ({task_id.rsplit('-', 1)[-1]})" if len(task_ids) > 1 else ""
         for kind, values in stored_bounds(task_id).items():
@@ -143,19 +144,44 @@ def draw_bounds(ax: Axes, metric: str, task_ids: Sequence[str]) -> None:
             lines.set_gid("bound")
             ax.add_collection(lines, autolim=False)
             ax.update_datalim([(ax.dataLim.x0 if ax.dataLim.width else 0.0, y)], updatex=False)
-            at.setdefault(round(y, 2), []).append(f"{kind}{suffix}")
-    for y, kinds in at.items():
-        ax.annotate(
-            ", ".join(kinds),
-            xy=(0.995, y),
-            xycoords=trans,
-            ha="right",
-            va="bottom",
-            fontsize=6.5,
-            color="0.3",
-            gid="bound_label",
-        )
+            drawn.append((y, f"{kind}{suffix}"))
+    if not drawn:
+        return
     ax.autoscale_view()
+    lo, hi = ax.get_ylim()
+    for cluster in _clusters(sorted(drawn), 0.07 * (hi - lo)):
+        ys = [y for y, _ in cluster]
+        at = float(np.mean(ys))
+        by_value: dict[str, list[str]] = {}
+        for y, kind in cluster:
+            by_value.setdefault(f"{y:.2f}", []).append(kind)
+        text = "; ".join(f"{', '.join(kinds)} {v}" for v, kinds in by_value.items())
+        upper = (at - lo) > 0.5 * (hi - lo)
+        ax.annotate(
+            text,
+            xy=(0.995, at),
+            xycoords=trans,
+            xytext=(0, -3 if upper else 3),
+            textcoords="offset points",
+            ha="right",
+            va="top" if upper else "bottom",
+            fontsize=6.5,
+            color="0.25",
+            bbox={"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.75},
+            gid="bound_label",
+            zorder=3,
+        )
+
+
+def _clusters(points: list[tuple[float, str]], gap: float) -> list[list[tuple[float, str]]]:
+    """Sorted ``(y, name)`` points grouped where consecutive ys are within ``gap``."""
+    out: list[list[tuple[float, str]]] = []
+    for point in points:
+        if out and point[0] - out[-1][-1][0] <= gap:
+            out[-1].append(point)
+        else:
+            out.append([point])
+    return out
 
 
 def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFrame:
