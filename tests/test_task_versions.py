@@ -63,8 +63,8 @@ def test_v0_ids_build_the_original_dynamics():
     assert sawyer.start.tolist() == [0.0, 0.0, 1.0] and sawyer.plane_z == PLANE_Z
 
 
-@pytest.mark.parametrize("gym_id", LIGHT_V1)
-def test_check_env_passes_on_v1(gym_id):
+@pytest.mark.parametrize("gym_id", [*LIGHT_V1, *(i.replace("-v1", "-v0") for i in LIGHT_V1)])
+def test_check_env_passes_on_every_version(gym_id):
     for kwargs in ({}, {"oracle": True}, {"strategy_flag": True}):
         env = make_task(gym_id, **kwargs)
         check_env(env.unwrapped, skip_render_check=True)
