@@ -136,8 +136,9 @@ def edge_examples(
     final = agent.buffer.obs[:n, -1, :2]
     near = final @ location_direction(task, location) > radius * np.cos(np.pi / 6)
     there = near & (metrics["strategy_id"].to_numpy()[:n] == location)
-    inside = there & (radius >= 1 - EDGE_BAND) & (radius < 1)
-    outside = there & (radius >= 1) & (radius < 1 + EDGE_BAND)
+    edge = 1 + task.outside_margin  # where outside begins (radius 1 on the -v0 tasks)
+    inside = there & (radius >= edge - EDGE_BAND) & (radius < edge)
+    outside = there & (radius >= edge) & (radius < edge + EDGE_BAND)
     return int(inside.sum()), int(outside.sum())
 
 

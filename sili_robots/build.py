@@ -77,7 +77,8 @@ def observed_as(env: gym.Env, cfg: RunConfig) -> gym.Env:
 
 
 def make_run_env(cfg: RunConfig) -> gym.Env:
-    return observed_as(make_env(cfg.task, **cfg.env_kwargs), cfg)
+    """The run's task version (``task_id``, else its name) as its method observes it."""
+    return observed_as(make_env(cfg.task_id or cfg.task, **cfg.env_kwargs), cfg)
 
 
 def build_agent(cfg: RunConfig, env: gym.Env) -> SILIAgent:

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 from sili_robots.errors import ConfigError
 
 #: sub-commands, in the order ``sili --help`` lists them
-COMMANDS = ("rollout", "train", "eval", "preview", "sweep", "plot")
+COMMANDS = ("rollout", "bounds", "train", "eval", "preview", "sweep", "plot")
 
 
 def _available_commands() -> list:

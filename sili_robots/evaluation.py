@@ -84,9 +84,9 @@ def load_trained(run_dir: Path) -> tuple[RunConfig, gym.Env, SILIAgent, dict[str
 def policy_from_run(
     run_dir: Path,
 ) -> tuple[str, dict[str, Any], Callable[[gym.Env], tuple[gym.Env, Callable]]]:
-    """(task name, env kwargs, make_policy) where ``make_policy(env)`` returns the env to step
+    """(task version, env kwargs, make_policy) where ``make_policy(env)`` returns the env to step
     (the task as the method observes it, feeding the agent) and a deterministic
-    ``policy(env, obs) -> action``."""
+    ``policy(env, obs) -> action``; the task version is the gymnasium id the run trained on."""
     cfg = read_config(run_dir)
 
     def make_policy(env: gym.Env) -> tuple[gym.Env, Callable]:
@@ -95,7 +95,7 @@ def policy_from_run(
         wrapped = AgentFeedback(observed_as(env, cfg), agent, game)
         return wrapped, lambda _env, obs: agent.act(obs, deterministic=True)
 
-    return cfg.task, dict(cfg.env_kwargs), make_policy
+    return cfg.task_id or cfg.task, dict(cfg.env_kwargs), make_policy
 
 
 def evaluate(run_dir: Path, interactions: int) -> dict[str, float]:

@@ -10,8 +10,14 @@
 - ``overview.png/pdf``: every task's task reward and true stability, one row per task (the
   layout of the paper's results figure).
 
+Every task-reward and true-stability panel also shows the task's reference bounds (``sili
+bounds``: the scripted random, still, oracle, stabilizing, ... policies) as labelled horizontal
+lines, read from the packaged bounds file for the task version the runs built (the results'
+``task_id``; runs recorded before task versions built the first version, and get its bounds).
+
 Figures are built on ``matplotlib.figure.Figure`` (no pyplot state, no display needed); each
-curve is a ``Line2D`` labelled with its variant, so what is drawn can be read back and checked.
+curve is a ``Line2D`` labelled with its variant, and each bound a ``LineCollection`` labelled
+``bound: KIND`` (gid ``bound``), so what is drawn can be read back and checked.
 """
 
 from __future__ import annotations
@@ -70,6 +76,112 @@ CURVE_METRICS = (
 )
 FINAL_METRICS = (("task_reward", "final task reward"), ("true_stability", "final true stability"))
 VARIANT_KEYS = ("method", "config_beta", "controller", "latent")
+#: the panels that show reference bounds, and the bound each one reads
+BOUND_METRICS = {"task_reward": "task_reward", "true_stability": "stability"}
+#: (colour, dash pattern) of each bound kind's line
+BOUND_STYLES = {
+    "random": ("0.55", (0, (1, 2))),
+    "still": ("tab:olive", (0, (1, 2))),
+    "oracle": ("0.15", (0, (6, 2, 1, 2))),
+    "stabilizing": ("tab:cyan", (0, (6, 2, 1, 2))),
+    "blind": ("tab:pink", (0, (3, 2))),
+    "tracking": ("tab:brown", (0, (3, 2))),
+}
+
+
+def task_title(task: str) -> str:
+    """The paper's name of a task; an earlier version gets its version appended."""
+    if task in TASK_TITLES:
+        return TASK_TITLES[task]
+    from sili_robots.tasks.registry import EARLIER_VERSIONS
+
+    spec = EARLIER_VERSIONS.get(task)
+    if spec is not None and spec.family in TASK_TITLES:
+        return f"{TASK_TITLES[spec.family]} (v{spec.version})"
+    return task
+
+
+def _task_ids(rows: pd.DataFrame, task: str) -> list[str]:
+    """The task versions the rows' runs built (the current one when the table has no column)."""
+    if "task_id" in rows and rows["task_id"].notna().any():
+        return sorted(str(t) for t in rows["task_id"].dropna().unique())
+    from sili_robots.tasks import task_spec
+
+    try:
+        return [task_spec(task).gym_id]
+    except ConfigError:
+        return []
+
+
+def draw_bounds(ax: Axes, metric: str, task_ids: Sequence[str]) -> None:
+    """The stored bounds of ``task_ids`` as labelled horizontal lines across ``ax`` (a panel of
+    ``BOUND_METRICS``), all kept in view; bounds close together share one label at the right
+    edge, each kind with its value."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.transforms import blended_transform_factory
+
+    from sili_robots.bounds import stored_bounds
+
+    key = BOUND_METRICS.get(metric)
+    if key is None:
+        return
+    trans = blended_transform_factory(ax.transAxes, ax.transData)
+    drawn: list[tuple[float, str]] = []
+    for task_id in task_ids:
+        suffix = f" ({task_id.rsplit('-', 1)[-1]})" if len(task_ids) > 1 else ""
+        for kind, values in stored_bounds(task_id).items():
+            y = float(values[key])
+            color, dashes = BOUND_STYLES.get(kind, ("0.5", (0, (2, 2))))
+            lines = LineCollection(
+                [[(0.0, y), (1.0, y)]],
+                colors=[color],
+                linestyles=[dashes],
+                linewidths=1.1,
+                transform=trans,
+                label=f"bound: {kind}{suffix}",
+                zorder=1.5,
+            )
+            lines.set_gid("bound")
+            ax.add_collection(lines, autolim=False)
+            ax.update_datalim([(ax.dataLim.x0 if ax.dataLim.width else 0.0, y)], updatex=False)
+            drawn.append((y, f"{kind}{suffix}"))
+    if not drawn:
+        return
+    ax.autoscale_view()
+    lo, hi = ax.get_ylim()
+    for cluster in _clusters(sorted(drawn), 0.07 * (hi - lo)):
+        ys = [y for y, _ in cluster]
+        at = float(np.mean(ys))
+        by_value: dict[str, list[str]] = {}
+        for y, kind in cluster:
+            by_value.setdefault(f"{y:.2f}", []).append(kind)
+        text = "; ".join(f"{', '.join(kinds)} {v}" for v, kinds in by_value.items())
+        upper = (at - lo) > 0.5 * (hi - lo)
+        ax.annotate(
+            text,
+            xy=(0.995, at),
+            xycoords=trans,
+            xytext=(0, -3 if upper else 3),
+            textcoords="offset points",
+            ha="right",
+            va="top" if upper else "bottom",
+            fontsize=6.5,
+            color="0.25",
+            bbox={"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.75},
+            gid="bound_label",
+            zorder=3,
+        )
+
+
+def _clusters(points: list[tuple[float, str]], gap: float) -> list[list[tuple[float, str]]]:
+    """Sorted ``(y, name)`` points grouped where consecutive ys are within ``gap``."""
+    out: list[list[tuple[float, str]]] = []
+    for point in points:
+        if out and point[0] - out[-1][-1][0] <= gap:
+            out[-1].append(point)
+        else:
+            out.append([point])
+    return out
 
 
 def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFrame:
@@ -173,7 +285,9 @@ def _draw_curves(
             mean, std = stats["mean"].to_numpy(), stats["std"].to_numpy()
             ax.plot(x, mean, style, color=colors[variant], label=label, lw=1.6)
             ax.fill_between(x, mean - std, mean + std, color=colors[variant], alpha=0.18, lw=0)
+    task_ids = _task_ids(task_rows, str(task_rows["task"].iloc[0]))
     for ax, (metric, ylabel) in zip(axes, metrics, strict=True):
+        draw_bounds(ax, metric, task_ids)
         ax.set_ylabel(ylabel)
         ax.set_gid(metric)
         ax.grid(alpha=0.3)
@@ -199,9 +313,11 @@ def learning_curves(df: pd.DataFrame, task: str, smooth: int | None = None) -> F
     _draw_curves(axes, rows, CURVE_METRICS, window)
     for ax in axes:
         ax.set_xlabel("interaction")
+    ids = ", ".join(_task_ids(rows, task))
     fig.suptitle(
-        f"{TASK_TITLES.get(task, task)}: mean ± std over {_seed_note(rows)}, "
+        f"{task_title(task)}: mean ± std over {_seed_note(rows)}, "
         f"smoothed over {window} interaction{'s' if window > 1 else ''}"
+        + (f"; bounds: scripted policies on {ids}" if ids else "")
     )
     fig.legend(*axes[0].get_legend_handles_labels(), loc="outside right upper")
     return fig
@@ -249,7 +365,7 @@ def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "si
     seed_text = f"{seeds.min()}" if seeds.min() == seeds.max() else f"{seeds.min()}-{seeds.max()}"
     last = min(window, int(rows.groupby("run").size().min()))
     fig.suptitle(
-        f"{TASK_TITLES.get(task, task)}: effect of b on {METHOD_NAMES.get(method, method)} "
+        f"{task_title(task)}: effect of b on {METHOD_NAMES.get(method, method)} "
         f"(mean of the last {last} interactions; mean ± std over {seed_text} seeds)"
     )
     if len(groups) > 1:
@@ -271,7 +387,7 @@ def overview(df: pd.DataFrame, smooth: int | None = None) -> Figure:
         rows = df[df["task"] == task]
         window = smooth or default_smoothing(int(rows["interaction"].max()) + 1)
         _draw_curves(row, rows, metrics, window)
-        row[0].set_title(TASK_TITLES.get(task, task), loc="left", fontsize=10)
+        row[0].set_title(task_title(task), loc="left", fontsize=10)
         for h, lab in zip(*row[0].get_legend_handles_labels(), strict=True):
             handles.setdefault(lab, h)
     fig.legend(list(handles.values()), list(handles), loc="outside right upper")

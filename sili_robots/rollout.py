@@ -84,11 +84,13 @@ def run_interactions(
     interactions: int,
     seed: int | None = 0,
     on_step: Callable[[np.ndarray, dict], None] | None = None,
+    options: dict | None = None,
 ) -> list[InteractionSummary]:
-    """Play ``interactions`` whole interactions, restarting the game with ``seed``;
-    ``on_step(obs, info)`` sees each step's outcome."""
+    """Play ``interactions`` whole interactions, restarting the game with ``seed`` (and the
+    first reset's ``options``, e.g. ``{"strategy": z}``); ``on_step(obs, info)`` sees each
+    step's outcome."""
     out: list[InteractionSummary] = []
-    obs, info = env.reset(seed=seed)
+    obs, info = env.reset(seed=seed, options=options)
     env.action_space.seed(seed)
     step = None if on_step is None else (lambda _o, _a, _r, o2, i: on_step(o2, i))
     for j in range(interactions):

@@ -7,6 +7,7 @@ every ``checkpoint_every`` interactions) and, once finished, ``summary.json``.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import os
@@ -53,6 +54,17 @@ class RunConfig:
     addons: AddonsConfig = field(default_factory=AddonsConfig)
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     checkpoint_every: int = 50
+    #: the gymnasium id (task version) the run builds; resolved from ``task`` when the run is
+    #: configured and recorded, so the run keeps its version when the name moves on
+    task_id: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.task_id is None:
+            from sili_robots.tasks import task_spec
+
+            # an unknown task fails, with the choices, where the task is built
+            with contextlib.suppress(ConfigError):
+                self.task_id = task_spec(self.task).gym_id
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -62,9 +74,13 @@ class RunConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> RunConfig:
+        """Read a recorded config (any earlier layout); one recorded before task versions ran
+        the task's first."""
         d = dict(migrate_run(d))
         d["agent"] = AgentConfig.from_dict(d["agent"])
         d["addons"] = AddonsConfig.from_dict(d.get("addons", {}))
+        if d.get("task_id") is None:
+            d["task_id"] = recorded_task_id(d)
         return cls(**d)
 
     def set(self, name: str, value: Any) -> None:
@@ -74,6 +90,19 @@ class RunConfig:
             set_path(self.addons, path.removeprefix("addons."), value, prefix="addons.")
         else:
             set_path(self.agent, path, value)
+
+
+def recorded_task_id(run: dict[str, Any]) -> str | None:
+    """The task version a recorded run config (``config.json``'s ``run``) built: its ``task_id``,
+    or, for a config written before versions were recorded, its task's first version."""
+    from sili_robots.tasks.registry import first_version
+
+    if run.get("task_id"):
+        return str(run["task_id"])
+    try:
+        return first_version(run["task"]).gym_id
+    except ConfigError:
+        return None
 
 
 def versions() -> dict[str, str]:

@@ -54,7 +54,7 @@ def test_continuous_inside_moves_by_bounded_angle_outside_holds():
 
 
 def test_unequal_only_the_far_location_can_be_held():
-    env = make_task("circle-unequal").unwrapped
+    env = make_task("sili/CircleUnequal-v0").unwrapped
     env.reset(seed=0)
     start = env.start
     dists = [
@@ -75,7 +75,9 @@ def test_unequal_only_the_far_location_can_be_held():
     assert env.location == 1
 
 
-@pytest.mark.parametrize("name", ["circle-3", "circle-8", "circle-continuous", "circle-unequal"])
+@pytest.mark.parametrize(
+    "name", ["circle-3", "circle-8", "circle-continuous", "sili/CircleUnequal-v0"]
+)
 def test_stabilizing_policy_holds_the_opponent(name):
     env = make_task(name)
     # 300 interactions: Unequal must first pass its (at most two) unstable locations.
@@ -98,7 +100,7 @@ def test_oracle_policy_is_near_optimal(name):
 
 
 def test_every_location_reachable_and_detour_feasible():
-    env = make_task("circle-8").unwrapped
+    env = make_task("sili/Circle8-v0").unwrapped
     env.reset(seed=0)
     policy = scripted_policy(env, "stabilizing")
     for _ in range(8):

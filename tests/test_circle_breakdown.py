@@ -32,7 +32,7 @@ def breakdown() -> ModuleType:
 @pytest.fixture(scope="module")
 def run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("breakdown") / "run"
-    args = ["train", "--task", "circle-3", "--method", "sili", "--latent", "continuous"]
+    args = ["train", "--task", "sili/Circle3-v0", "--method", "sili", "--latent", "continuous"]
     args += ["--interactions", "8", "--seed", "0", "--out", str(out), "--no-progress"]
     assert main([*args, "--set", "latent_last_step=true", *FAST_ARGS]) == 0
     return out

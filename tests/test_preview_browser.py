@@ -204,7 +204,7 @@ def test_browser_processes_end_with_close():
 def test_sawyer_is_drawn_from_the_models_own_geoms_and_joint_positions():
     from sili_robots.preview import mujoco_geoms
 
-    prev = _record("sawyer-reach", 1)
+    prev = _record("sili/SawyerReach-v0", 1)  # starts 0.17 m above the goals
     model = prev.recording.static["model"]
     cmds = _commands(prev.html())
     meshes = [c for c in cmds if c["type"] == "set_object" and "/robot/" in c["path"]]

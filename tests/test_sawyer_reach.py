@@ -10,7 +10,7 @@ from sili_robots.cli import main as cli_main
 from sili_robots.errors import ConfigError
 from sili_robots.policies import scripted_policy
 from sili_robots.rollout import run_interactions
-from sili_robots.tasks import TASKS, make_task
+from sili_robots.tasks import make_task, task_spec
 from sili_robots.tasks.sawyer_reach import MAX_SPEED, SawyerReachEnv
 from sili_robots.tasks.sawyer_scene import GOALS, PLANE_Z, START_EE, TABLE_TOP_Z
 
@@ -35,7 +35,7 @@ def _end_interaction_at(env: SawyerReachEnv, qpos: np.ndarray) -> None:
 
 
 def test_registered_with_gymnasium_and_spaces():
-    spec = TASKS["sawyer-reach"]
+    spec = task_spec("sili/SawyerReach-v0")
     assert spec.gym_id == "sili/SawyerReach-v0"
     env = gym.make("sili/SawyerReach-v0")
     assert env.action_space == gym.spaces.Box(-1.0, 1.0, (3,), np.float32)
@@ -64,7 +64,7 @@ def test_unknown_controller_is_a_config_error_listing_choices():
 def test_observation_is_position_velocity_time_and_never_the_goal():
     firsts = {}
     for seed in range(12):
-        obs, info = make_task("sawyer-reach").unwrapped.reset(seed=seed)
+        obs, info = make_task("sili/SawyerReach-v0").unwrapped.reset(seed=seed)
         firsts.setdefault(info["strategy_id"], obs)
     assert len(firsts) == 3  # every goal drawn at least once...
     for obs in firsts.values():  # ...and the first observation is the same for all of them
@@ -74,7 +74,7 @@ def test_observation_is_position_velocity_time_and_never_the_goal():
     np.testing.assert_allclose(obs[3:6], 0.0, atol=1e-6)
     assert obs[6] == 0.0
 
-    env = make_task("sawyer-reach", oracle=True).unwrapped
+    env = make_task("sili/SawyerReach-v0", oracle=True).unwrapped
     obs, info = env.reset(seed=1)
     np.testing.assert_allclose(obs[-3:], GOALS[info["strategy_id"]], atol=1e-6)
     obs, reward, *_ = env.step(np.array([0.0, 0.0, -1.0]))
@@ -109,7 +109,7 @@ def test_seed_reproduces_the_repeated_game():
 
 
 def test_strategy_rule_above_plane_keeps_below_moves_uniformly(below_plane_qpos):
-    env = make_task("sawyer-reach").unwrapped
+    env = make_task("sili/SawyerReach-v0").unwrapped
     env.reset(seed=0)
     moves = {0: [], 1: [], 2: []}
     for _ in range(300):

@@ -9,7 +9,7 @@ from sili_robots.tasks.speaker_listener import MAPPINGS, SPEAKER
 
 
 def test_change_probability_is_one_half_while_unvisited():
-    env = make_task("speaker-listener").unwrapped
+    env = make_task("sili/SpeakerListener-v0").unwrapped
     env.reset(seed=0)
     changes, steps = 0, 0
     for _ in range(400):
@@ -26,7 +26,7 @@ def test_change_probability_is_one_half_while_unvisited():
 
 
 def test_visit_locks_mapping_for_rest_and_next_interaction():
-    env = make_task("speaker-listener", strategy_flag=True).unwrapped
+    env = make_task("sili/SpeakerListener-v0", strategy_flag=True).unwrapped
     env.reset(seed=1)
     env.position = SPEAKER.copy()
     obs, *_ = env.step(np.zeros(2))

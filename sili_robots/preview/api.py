@@ -146,9 +146,11 @@ def make_env_and_policy(
     if not run_dir.is_dir():
         raise ConfigError(f"checkpoint {str(checkpoint)!r} is not a run directory")
     run_task, kwargs, make_policy = policy_from_run(run_dir)
-    if task_spec(run_task).name != name:
+    trained_on = task_spec(run_task).name
+    if trained_on != name:
         raise ConfigError(
-            f"checkpoint {str(checkpoint)!r} was trained on {run_task!r}, not {name!r}"
+            f"checkpoint {str(checkpoint)!r} was trained on {trained_on!r}, not {name!r} "
+            f"(task version {run_task})"
         )
     env = make_task(name, **kwargs)
     try:

@@ -1,7 +1,8 @@
 """The sweep's tables, built from its run directories (the single source of truth).
 
 - ``results.csv``: tidy, one row per run per interaction: the run's identity (``run``, ``task``,
-  ``method``, ``latent``, ``seed``, ``controller``, ``config_beta``) + every ``metrics.csv``
+  ``task_id`` (the task version, a gymnasium id), ``method``, ``latent``, ``seed``,
+  ``controller``, ``config_beta``) + every ``metrics.csv``
   column + ``true_stability`` (1 - strategy_changed) + ``finished``.
 - ``runs.csv``: one row per run: status (done / failed / incomplete / not started), interactions
   logged, final task reward and true stability, wall time, error.
@@ -17,10 +18,10 @@ import pandas as pd
 
 from sili_robots.agent.schedule import Schedule
 from sili_robots.migrations import migrate_run
-from sili_robots.runs import CONFIG, METRIC_COLUMNS, METRICS, SUMMARY
+from sili_robots.runs import CONFIG, METRIC_COLUMNS, METRICS, SUMMARY, recorded_task_id
 from sili_robots.sweep.state import ERROR_FILE, RESULTS, RUNS_DIR, RUNS_TABLE
 
-ID_COLUMNS = ("run", "task", "method", "latent", "seed", "controller", "config_beta")
+ID_COLUMNS = ("run", "task", "task_id", "method", "latent", "seed", "controller", "config_beta")
 RESULT_COLUMNS = (*ID_COLUMNS, *METRIC_COLUMNS, "true_stability", "finished")
 RUN_COLUMNS = (
     *ID_COLUMNS,
@@ -49,6 +50,7 @@ def _identity(run_dir: Path) -> tuple[dict, dict]:
     ident = {
         "run": run_dir.name,
         "task": cfg["task"],
+        "task_id": recorded_task_id(cfg),
         "method": cfg["method"],
         "latent": agent["latent"],
         "seed": int(cfg["seed"]),

@@ -7,8 +7,10 @@ the same name in every sweep and a re-invoked sweep finds its earlier runs.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import inspect
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from functools import cache
 from typing import Any
@@ -19,7 +21,8 @@ from sili_robots.build import make_run_config
 from sili_robots.errors import ConfigError, check_choice
 from sili_robots.migrations import setting_path
 from sili_robots.runs import RunConfig
-from sili_robots.tasks import TASKS, task_spec
+from sili_robots.tasks import TASKS, TaskSpec, task_spec
+from sili_robots.tasks.registry import first_version
 
 
 @dataclass
@@ -43,20 +46,37 @@ class SweepSpec:
     agent_overrides: dict[str, Any] = field(default_factory=dict)
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     checkpoint_every: int = 50
+    #: task name -> the gymnasium id (task version) its runs build; filled when planned
+    task_ids: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         # the kernel library is resolved once, when the sweep is planned, and recorded with it
         # (as a run's config.json records it), so ``--resume`` keeps it on any machine
         self.agent_overrides = {"matmul": default_matmul(), **self.agent_overrides}
+        # likewise each task's version, so ``--resume`` keeps it when a name moves on
+        self.task_ids = {**_task_ids(self.tasks, task_spec), **self.task_ids}
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> SweepSpec:
-        """Read a recorded invocation; one recorded before ``matmul`` existed ran on aten."""
+        """Read a recorded invocation; one recorded before ``matmul`` existed ran on aten, one
+        recorded before task versions ran each task's first version."""
         overrides = {"matmul": "aten", **data.get("agent_overrides", {})}
-        return cls(**{**data, "agent_overrides": overrides})
+        task_ids = data.get("task_ids")
+        if task_ids is None:
+            task_ids = _task_ids(data.get("tasks", []), first_version)
+        return cls(**{**data, "agent_overrides": overrides, "task_ids": task_ids})
+
+
+def _task_ids(tasks: list[str], version: Callable[[str], TaskSpec]) -> dict[str, str]:
+    """``{task: version(task).gym_id}`` for the known tasks (unknown ones fail in ``validate``)."""
+    out = {}
+    for task in tasks:
+        with contextlib.suppress(ConfigError):
+            out[task] = version(task).gym_id
+    return out
 
 
 @dataclass(frozen=True)
@@ -254,6 +274,7 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                         )
                         cfg = replace(
                             base,
+                            task_id=spec.task_ids.get(task, tspec.gym_id),
                             seed=seed,
                             interactions=spec.interactions,
                             checkpoint_every=spec.checkpoint_every,

@@ -3,7 +3,10 @@
 One gymnasium episode is one *interaction* of ``horizon`` steps. The opponent's hidden strategy
 z^j is fixed within interaction j (unless a task documents otherwise) and moves by the task's
 strategy dynamics T^z(z^{j+1} | z^j, tau^j) when ``reset()`` begins the next interaction. The
-repeated game itself restarts only on ``reset(seed=...)`` or ``reset(options={"restart": True})``.
+repeated game itself restarts only on ``reset(seed=...)`` or ``reset(options={"restart": True})``;
+``reset(options={"strategy": z})`` restarts it with z^1 = z instead of a drawn one (one of
+``strategy_choices()``, or any angle on the continuous circle), e.g. to average over the first
+strategy exactly.
 
 ``info`` always carries the true strategy (``strategy``, ``strategy_id``), the interaction index
 (``interaction``) and whether the true strategy changed since the previous step
@@ -110,23 +113,53 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     def _within_interaction_update(self) -> None:
         """Hook for strategies that may change between timesteps (e.g. Speaker-Listener)."""
 
+    def strategy_choices(self) -> list[StrategyId] | None:
+        """Every strategy a game can start from, when there are finitely many (else ``None``)."""
+        return None
+
+    def _set_strategy(self, strategy: StrategyId) -> None:
+        """Make ``strategy`` (already checked) the current one; tasks that allow a chosen first
+        strategy override this."""
+        raise ConfigError(f"{type(self).__name__} cannot start from a chosen strategy")
+
+    def _start_from(self, strategy: Any) -> None:
+        choices = self.strategy_choices()
+        if isinstance(strategy, bool) or not isinstance(strategy, (int, float, np.number)):
+            ok = False
+        elif choices is None:
+            ok = bool(np.isfinite(strategy))
+        else:
+            ok = any(_same(strategy, c) for c in choices)
+        if not ok:
+            allowed = "any finite number" if choices is None else ", ".join(map(str, choices))
+            raise ConfigError(f"unknown strategy {strategy!r}; allowed: {allowed}")
+        self._set_strategy(strategy)
+
     # ----------------------------------------------------------------- gymnasium API
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         options = dict(options or {})
-        unknown = set(options) - {"restart", "restore"}
+        unknown = set(options) - {"restart", "restore", "strategy"}
         if unknown:
             raise ConfigError(
-                f"unknown reset options {sorted(unknown)}; allowed: ['restart', 'restore']"
+                f"unknown reset options {sorted(unknown)}; "
+                "allowed: ['restart', 'restore', 'strategy']"
             )
         if options.get("restore") is not None:
             return self.restore_game_state(options["restore"])
-        restart = seed is not None or bool(options.get("restart", False)) or not self._started
+        restart = (
+            seed is not None
+            or bool(options.get("restart", False))
+            or "strategy" in options
+            or not self._started
+        )
         if restart:
             self.interaction = 0
-            self._initial_strategy()
+            self._initial_strategy()  # drawn even when chosen: the generator moves on the same
+            if "strategy" in options:
+                self._start_from(options["strategy"])
             self._last_strategy_id = None
             self._started = True
         else:

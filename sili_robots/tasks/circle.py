@@ -6,13 +6,27 @@ ego starts at the centre (Unequal: at (0, -0.5)), action is a velocity in [-1, 1
 (10 steps), so reaching it and then stepping just outside the circle (a stabilizing "detour" of a
 few hundredths) fits comfortably within H but costs a little reward.
 
-Strategy dynamics T^z: if the ego ends the interaction strictly inside the circle the opponent
-jumps counter-clockwise to the next location; ending on or outside keeps it.
+Strategy dynamics T^z: if the ego ends the interaction inside the circle the opponent jumps
+counter-clockwise to the next location; ending outside keeps it. "Outside" means at least
+``outside_margin`` beyond the circle (distance from the centre >= 1 + margin).
 - ``3`` / ``8``: equally spaced locations, first at angle pi/2.
 - ``continuous``: any angle; inside moves it on by an angle drawn uniformly in [pi/3, pi].
 - ``unequal``: locations at 90, 210 and 330 degrees; the ego starts nearer the lower two, where
   the opponent always moves on (cannot be held); only the farther top location is held by
-  ending outside.
+  ending outside. ``near_moves`` says where a near location is left for: ``counter-clockwise``
+  (the next location) or ``random`` (either other location, drawn uniformly).
+
+Versions (``sili_robots.tasks.registry``):
+- v0: ``outside_margin=0`` (outside means distance >= 1) and ``near_moves="counter-clockwise"``.
+  The opponent sits on the circle, so a greedy chaser that ends on it counts as outside and holds
+  it: chasing is free stabilization, and on Unequal the near locations follow a fixed cycle an
+  ego can predict and track (about -5.7 per interaction against -10.5 for holding the far one).
+- v1: ``outside_margin=0.1`` (one full step): the paper has the ego stabilize by a deliberate act
+  ("the ego agent ends each interaction outside the circle"), so ending on the opponent, or
+  jittering around it, is inside. On Unequal, ``near_moves="random"``: the paper calls the near
+  strategies *unstable* and has the baselines "greedily try to track" them; moving on at random
+  makes them unpredictable to an ego that does not see z, so holding the far location is the
+  best such an ego can do (the far location keeps the paper's counter-clockwise rule).
 """
 
 from __future__ import annotations
@@ -23,13 +37,16 @@ from typing import Any, ClassVar
 import numpy as np
 from gymnasium import spaces
 
-from sili_robots.errors import check_choice
+from sili_robots.errors import ConfigError, check_choice
 from sili_robots.tasks.base import RepeatedInteractionEnv
 
 VARIANTS = ("3", "8", "continuous", "unequal")
+NEAR_MOVES = ("counter-clockwise", "random")
 RADIUS = 1.0
 STEP = 0.1
 ARENA = 2.0
+#: Continuous: an angle the opponent moves on by is drawn uniformly from this range
+JUMP = (math.pi / 3, math.pi)
 
 
 class CircleEnv(RepeatedInteractionEnv):
@@ -46,9 +63,21 @@ class CircleEnv(RepeatedInteractionEnv):
         horizon: int = 50,
         oracle: bool = False,
         strategy_flag: bool = False,
+        outside_margin: float = 0.0,
+        near_moves: str = "counter-clockwise",
     ) -> None:
         check_choice("Circle variant", variant, VARIANTS)
+        check_choice("near_moves", near_moves, NEAR_MOVES)
+        if isinstance(outside_margin, bool) or not (
+            isinstance(outside_margin, (int, float)) and 0.0 <= outside_margin < ARENA - RADIUS
+        ):
+            raise ConfigError(
+                f"outside_margin must be a number in [0, {ARENA - RADIUS:g}) (outside must be "
+                f"reachable in the arena), got {outside_margin!r}"
+            )
         self.variant = variant
+        self.outside_margin = float(outside_margin)
+        self.near_moves = near_moves
         if variant == "unequal":
             self.angles = np.deg2rad([90.0, 210.0, 330.0])
             self.stable_locations = {0}
@@ -98,19 +127,40 @@ class CircleEnv(RepeatedInteractionEnv):
         else:
             self.location = int(self.np_random.integers(len(self.angles)))
 
+    def strategy_choices(self) -> list[int] | None:
+        return None if self.variant == "continuous" else list(range(len(self.angles)))
+
+    def _set_strategy(self, strategy: int | float) -> None:
+        if self.variant == "continuous":
+            self.angle = float(strategy) % (2 * math.pi)
+        else:
+            self.location = int(strategy)
+
     def ends_inside(self, position: np.ndarray) -> bool:
-        """The strategy rule's test: strictly inside the circle."""
-        return float(np.linalg.norm(position)) < RADIUS
+        """The strategy rule's test: closer to the centre than ``RADIUS + outside_margin``."""
+        return float(np.linalg.norm(position)) < RADIUS + self.outside_margin
+
+    def next_locations(self, location: int, inside: bool) -> list[int]:
+        """Where the opponent at ``location`` may be next interaction, each equally likely,
+        when the ego ends ``inside`` (or not); discrete variants only."""
+        if location in self.stable_locations:
+            return [(location + 1) % len(self.angles)] if inside else [location]
+        if self.near_moves == "random":
+            return [k for k in range(len(self.angles)) if k != location]
+        return [(location + 1) % len(self.angles)]
 
     def _advance_strategy(self, trajectory: list[dict[str, Any]]) -> None:
         inside = self.ends_inside(self.position)
         if self.variant == "continuous":
             if inside:
-                jump = self.np_random.uniform(math.pi / 3, math.pi)
+                jump = self.np_random.uniform(*JUMP)
                 self.angle = float((self.angle + jump) % (2 * math.pi))
             return
-        if inside or self.location not in self.stable_locations:
-            self.location = (self.location + 1) % len(self.angles)
+        choices = self.next_locations(self.location, inside)
+        if len(choices) == 1:  # no draw: the v0 games use the generator exactly as before
+            self.location = choices[0]
+        else:
+            self.location = int(choices[self.np_random.integers(len(choices))])
 
     # -- dynamics
     def _begin_interaction(self) -> None:

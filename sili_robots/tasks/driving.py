@@ -136,6 +136,12 @@ class DrivingEnv(RepeatedInteractionEnv):
     def strategy_encoding(self) -> np.ndarray:
         return np.array([self.target_lane == RIGHT, self.target_lane == LEFT], np.float32)
 
+    def strategy_choices(self) -> list[int]:
+        return list(TARGET_LANES)
+
+    def _set_strategy(self, strategy: int) -> None:
+        self.target_lane = int(strategy)
+
     def _initial_strategy(self) -> None:
         self.target_lane = int(self.np_random.choice(TARGET_LANES))
 

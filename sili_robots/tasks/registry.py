@@ -2,11 +2,19 @@
 
 Like robosuite's registry of environments, every task is listed once here; ``make_task`` is the
 one way the rest of the package builds a task, so bad names fail here with the list of choices.
+
+Versions follow gymnasium's convention: a change to a task's dynamics gets a new version id and
+the earlier ids stay registered, unchanged, so results recorded on them can be reproduced. The
+CLI names (``circle-3``, ...) build the current version (``TASKS``); an earlier version is built
+by its gymnasium id (``sili/Circle3-v0``) or by its CLI name with the version appended
+(``circle-3-v0``), both listed in ``EARLIER_VERSIONS``. ``docs/tasks.md`` says what each version
+changed and why.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import warnings
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import gymnasium as gym
@@ -16,82 +24,143 @@ from sili_robots.errors import ConfigError
 
 @dataclass(frozen=True)
 class TaskSpec:
-    """One registered task."""
+    """One registered task version."""
 
-    name: str  # CLI name, e.g. "circle-3"
-    gym_id: str  # gymnasium id, e.g. "sili/Circle3-v0"
+    name: str  # CLI name, e.g. "circle-3" (the current version) or "circle-3-v0" (an earlier one)
+    gym_id: str  # gymnasium id, e.g. "sili/Circle3-v1"
     entry_point: str  # "module:Class"
     kwargs: dict[str, Any] = field(default_factory=dict)
     #: the latent kind the paper uses on this task (the default for ``--method sili``)
     default_latent: str = "discrete"
     #: True when the task may need a dedicated process (e.g. libsumo: one simulation each)
     one_per_process: bool = False
+    #: the CLI name of the task family (the same for every version); set by ``register_task``
+    family: str = ""
+
+    @property
+    def version(self) -> int:
+        return int(self.gym_id.rsplit("-v", 1)[1])
 
 
+#: the current version of every task, by CLI name
 TASKS: dict[str, TaskSpec] = {}
+#: earlier versions, by their own CLI name (``circle-3-v0``)
+EARLIER_VERSIONS: dict[str, TaskSpec] = {}
 
 
-def register_task(spec: TaskSpec) -> None:
-    """Add a task to the registry and to gymnasium."""
-    TASKS[spec.name] = spec
+def register_task(spec: TaskSpec, current: bool = True) -> TaskSpec:
+    """Add a task version to the registry and to gymnasium.
+
+    ``current=False`` registers an earlier version: it keeps ``spec.name`` as its family and is
+    listed as ``NAME-vK``.
+    """
+    family = spec.family or spec.name
+    if current:
+        spec = replace(spec, family=family)
+        TASKS[spec.name] = spec
+    else:
+        spec = replace(spec, name=f"{family}-v{spec.version}", family=family)
+        EARLIER_VERSIONS[spec.name] = spec
     if spec.gym_id not in gym.registry:
         gym.register(id=spec.gym_id, entry_point=spec.entry_point, kwargs=dict(spec.kwargs))
+    return spec
+
+
+def all_versions() -> list[TaskSpec]:
+    """Every registered version: the current tasks, then the earlier versions."""
+    return [*TASKS.values(), *EARLIER_VERSIONS.values()]
 
 
 def task_spec(name: str) -> TaskSpec:
-    """Look a task up by CLI name or gymnasium id."""
-    for spec in TASKS.values():
+    """Look a task up by CLI name (``circle-3``, ``circle-3-v0``) or gymnasium id."""
+    for spec in all_versions():
         if name in (spec.name, spec.gym_id):
             return spec
-    raise ConfigError(f"unknown task {name!r}; allowed: {', '.join(TASKS)}")
+    raise ConfigError(
+        f"unknown task {name!r}; allowed: {', '.join(TASKS)} "
+        f"(earlier versions: {', '.join(EARLIER_VERSIONS)})"
+    )
+
+
+def first_version(name: str) -> TaskSpec:
+    """The oldest registered version of the task ``name`` belongs to.
+
+    Run configs and sweep records written before task versions were recorded name only the task;
+    they ran its first version, which this returns.
+    """
+    family = task_spec(name).family
+    return min((s for s in all_versions() if s.family == family), key=lambda s: s.version)
 
 
 def make_task(name: str, **kwargs: Any) -> gym.Env:
     """Build a task by CLI name or gymnasium id; ``kwargs`` go to the task's constructor."""
     spec = task_spec(name)
-    return gym.make(spec.gym_id, **kwargs)
+    with warnings.catch_warnings():
+        if spec.name in EARLIER_VERSIONS:  # asked for by its version: no "out of date" warning
+            warnings.filterwarnings("ignore", ".*The environment .* is out of date", Warning)
+        return gym.make(spec.gym_id, **kwargs)
 
 
-register_task(
-    TaskSpec("circle-3", "sili/Circle3-v0", "sili_robots.tasks.circle:CircleEnv", {"variant": "3"})
-)
-register_task(
-    TaskSpec("circle-8", "sili/Circle8-v0", "sili_robots.tasks.circle:CircleEnv", {"variant": "8"})
-)
-register_task(
-    TaskSpec(
-        "circle-continuous",
-        "sili/CircleContinuous-v0",
-        "sili_robots.tasks.circle:CircleEnv",
-        {"variant": "continuous"},
-        default_latent="continuous",
+def _register(
+    name: str,
+    entry_point: str,
+    versions: dict[int, dict[str, Any]],
+    camel: str,
+    **options: Any,
+) -> None:
+    """Register every version of one task; the highest is the current one."""
+    newest = max(versions)
+    for version, kwargs in sorted(versions.items()):
+        spec = TaskSpec(name, f"sili/{camel}-v{version}", entry_point, kwargs, **options)
+        register_task(spec, current=version == newest)
+
+
+_CIRCLE = "sili_robots.tasks.circle:CircleEnv"
+#: Circle v1: ending on the opponent is inside; outside starts one step (0.1) beyond the circle
+_CIRCLE_V1 = {"outside_margin": 0.1}
+for _variant, _camel in (("3", "Circle3"), ("8", "Circle8"), ("continuous", "CircleContinuous")):
+    _register(
+        f"circle-{_variant}",
+        _CIRCLE,
+        {0: {"variant": _variant}, 1: {"variant": _variant, **_CIRCLE_V1}},
+        _camel,
+        default_latent="continuous" if _variant == "continuous" else "discrete",
     )
+_register(
+    "circle-unequal",
+    _CIRCLE,
+    {
+        0: {"variant": "unequal"},
+        # v1 also: a near location is left for either other location at random
+        1: {"variant": "unequal", **_CIRCLE_V1, "near_moves": "random"},
+    },
+    "CircleUnequal",
 )
-register_task(
-    TaskSpec(
-        "circle-unequal",
-        "sili/CircleUnequal-v0",
-        "sili_robots.tasks.circle:CircleEnv",
-        {"variant": "unequal"},
-    )
+_register(
+    "speaker-listener",
+    "sili_robots.tasks.speaker_listener:SpeakerListenerEnv",
+    {
+        0: {},
+        # v1: the appendix's per-interaction change rule and a speaker the detour can afford
+        1: {"change_rule": "interaction", "speaker": (0.0, -0.8)},
+    },
+    "SpeakerListener",
+    default_latent="partial",
 )
-register_task(
-    TaskSpec(
-        "speaker-listener",
-        "sili/SpeakerListener-v0",
-        "sili_robots.tasks.speaker_listener:SpeakerListenerEnv",
-        default_latent="partial",
-    )
+_register(
+    "driving",
+    "sili_robots.tasks.driving:DrivingEnv",
+    {0: {}},
+    "Driving",
+    one_per_process=True,
 )
-register_task(
-    TaskSpec(
-        "driving",
-        "sili/Driving-v0",
-        "sili_robots.tasks.driving:DrivingEnv",
-        default_latent="discrete",
-        one_per_process=True,
-    )
-)
-register_task(
-    TaskSpec("sawyer-reach", "sili/SawyerReach-v0", "sili_robots.tasks.sawyer_reach:SawyerReachEnv")
+_register(
+    "sawyer-reach",
+    "sili_robots.tasks.sawyer_reach:SawyerReachEnv",
+    {
+        0: {},
+        # v1: the arm starts below the plane, so holding the goal takes a rise at the end
+        1: {"start_z": 0.9},
+    },
+    "SawyerReach",
 )

@@ -13,8 +13,16 @@ business. The opponent's strategy z is which of three goals on the table it has 
 - H = 50 steps; task reward each step: minus the distance from end effector to the chosen goal.
 - Strategy dynamics T^z: if the end effector ends the interaction above the height plane
   z = ``PLANE_Z`` (0.95 m, 15 cm above the table) the opponent keeps its goal; otherwise it moves
-  to one of the other two goals, drawn uniformly with the env's seeded generator. The start
-  (0, 0, 1.0) lies above the plane, at 0.26 m from every goal.
+  to one of the other two goals, drawn uniformly with the env's seeded generator.
+- Start: the gripper at rest at (0, 0, ``start_z``) above the table centre.
+
+Versions (``sili_robots.tasks.registry``):
+- v0: ``start_z=1.0``, above the plane: standing still holds the goal in every interaction and a
+  uniformly random policy in about two thirds of them, so true stability says little.
+- v1: ``start_z=0.9``, 5 cm below the plane (7 cm above the goals, 0.21 m from each): the paper's
+  server "needing to move its arm away from the dish by the end of the interaction" must now
+  rise deliberately; standing still never holds the goal and a random policy rarely does
+  (docs/tasks.md has the measured bounds).
 """
 
 from __future__ import annotations
@@ -25,10 +33,13 @@ import numpy as np
 from gymnasium import spaces
 
 from sili_robots.controllers import DEFAULT_CONTROLLER, controller_class
+from sili_robots.errors import ConfigError
 from sili_robots.tasks.base import RepeatedInteractionEnv
-from sili_robots.tasks.sawyer_scene import GOALS, PLANE_Z, SawyerScene
+from sili_robots.tasks.sawyer_scene import GOALS, PLANE_Z, START_EE, TABLE_TOP_Z, SawyerScene
 
 MAX_SPEED = 0.4  # m/s per axis at |action| = 1
+#: allowed start heights (m): above the goals, within the arm's comfortable reach
+START_Z_RANGE = (TABLE_TOP_Z + 0.06, 1.1)
 #: the stabilizing reference leaves the goal this many steps before the end of an interaction
 RISE_STEPS = 15
 #: ... and ends this far above the plane
@@ -53,10 +64,20 @@ class SawyerReachEnv(RepeatedInteractionEnv):
         horizon: int = 50,
         oracle: bool = False,
         strategy_flag: bool = False,
+        start_z: float = float(START_EE[2]),
     ) -> None:
         cls = controller_class(controller)  # ConfigError naming the choices, before any build
+        if isinstance(start_z, bool) or not (
+            isinstance(start_z, (int, float)) and START_Z_RANGE[0] <= start_z <= START_Z_RANGE[1]
+        ):
+            raise ConfigError(
+                f"start_z must be a height in [{START_Z_RANGE[0]:g}, {START_Z_RANGE[1]:g}] m, "
+                f"got {start_z!r}"
+            )
         self.controller_name = controller
-        self.scene = SawyerScene(cls.actuation)
+        self.start = np.array([START_EE[0], START_EE[1], float(start_z)])
+        self.plane_z = PLANE_Z
+        self.scene = SawyerScene(cls.actuation, tuple(self.start))
         self.controller = cls(self.scene.model, self.scene.data, self.scene.arm)
         self.goal = 0
         super().__init__(horizon=horizon, oracle=oracle, strategy_flag=strategy_flag)
@@ -81,12 +102,18 @@ class SawyerReachEnv(RepeatedInteractionEnv):
     def strategy_encoding(self) -> np.ndarray:
         return self.goal_position.astype(np.float32)
 
+    def strategy_choices(self) -> list[int]:
+        return list(range(len(GOALS)))
+
+    def _set_strategy(self, strategy: int) -> None:
+        self.goal = int(strategy)
+
     def _initial_strategy(self) -> None:
         self.goal = int(self.np_random.integers(len(GOALS)))
 
     def ends_above_plane(self) -> bool:
         """The strategy rule's test, on where the end effector is now."""
-        return float(self.scene.ee_pos[2]) > PLANE_Z
+        return float(self.scene.ee_pos[2]) > self.plane_z
 
     def _advance_strategy(self, trajectory: list[dict[str, Any]]) -> None:
         if not self.ends_above_plane():
@@ -124,9 +151,10 @@ def action_toward(env: SawyerReachEnv, point: np.ndarray) -> np.ndarray:
     return np.clip((point - env.controller.target) / step, -1.0, 1.0).astype(np.float32)
 
 
-def stabilizing_point(env: SawyerReachEnv) -> np.ndarray:
-    """The goal, then (for the last ``RISE_STEPS`` steps) the point just above the plane over it."""
-    point = env.goal_position.copy()
+def stabilizing_point(env: SawyerReachEnv, goal: int | None = None) -> np.ndarray:
+    """The goal (default: the true one), then (for the last ``RISE_STEPS`` steps) the point just
+    above the plane over it."""
+    point = (env.goal_position if goal is None else GOALS[goal]).copy()
     if env.t >= env.horizon - RISE_STEPS:
-        point[2] = PLANE_Z + RISE_MARGIN
+        point[2] = env.plane_z + RISE_MARGIN
     return point

@@ -30,9 +30,9 @@ Geometry (documented choice; the paper gives none): table top at z = 0.8 m, 0.8 
 centred at the origin; the robot's base sits at x = -0.56 m as in robosuite's table tasks. The
 three goals lie 3 cm above the table on a circle of radius 0.2 m around the table centre, at 0,
 120 and 240 degrees. Every interaction starts at rest with the gripper pointing down at
-(0, 0, 1.0), 0.26 m from each goal (the same joint configuration every time, found once by
-inverse kinematics from robosuite's Sawyer ``init_qpos``). The height plane of the strategy rule
-is z = 0.95 m.
+(0, 0, 1.0), 0.26 m from each goal, or at another start the task asks for (the same joint
+configuration every time, found once per start by inverse kinematics from robosuite's Sawyer
+``init_qpos``). The height plane of the strategy rule is z = 0.95 m.
 """
 
 from __future__ import annotations
@@ -206,10 +206,15 @@ def scene_model(actuation: str, visual: bool = False) -> mujoco.MjModel:
     return mujoco.MjModel.from_xml_string(_scene_xml(actuation, visual))
 
 
+def home_qpos(actuation: str, start: tuple[float, float, float] | None = None) -> np.ndarray:
+    """The start configuration: gripper down at ``start`` (default ``START_EE``), found by mink
+    from robosuite's ``init_qpos`` (deterministic; the same for every actuation up to solver
+    round-off)."""
+    return _home_qpos(actuation, tuple(float(x) for x in (START_EE if start is None else start)))
+
+
 @cache
-def home_qpos(actuation: str) -> np.ndarray:
-    """The start configuration: gripper down at ``START_EE``, found by mink from robosuite's
-    ``init_qpos`` (deterministic; the same for every actuation up to solver round-off)."""
+def _home_qpos(actuation: str, start: tuple[float, float, float]) -> np.ndarray:
     from mink import SE3, SO3, Configuration, ConfigurationLimit, FrameTask, PostureTask, solve_ik
     from robosuite.models.robots import Sawyer
 
@@ -219,7 +224,9 @@ def home_qpos(actuation: str) -> np.ndarray:
     q[adr] = Sawyer().init_qpos
     config = Configuration(model, q)
     frame = FrameTask(EE_SITE, "site", position_cost=1.0, orientation_cost=1.0)
-    frame.set_target(SE3.from_rotation_and_translation(SO3.from_matrix(EE_ROTATION), START_EE))
+    frame.set_target(
+        SE3.from_rotation_and_translation(SO3.from_matrix(EE_ROTATION), np.array(start))
+    )
     posture = PostureTask(model, cost=1e-3)
     posture.set_target(q)
     limits = [ConfigurationLimit(model)]
@@ -240,7 +247,7 @@ def _has_actuator(model: mujoco.MjModel, name: str) -> bool:
 class SawyerScene:
     """One simulation of the scene: its own ``MjData`` on the shared compiled model."""
 
-    def __init__(self, actuation: str) -> None:
+    def __init__(self, actuation: str, start: tuple[float, float, float] | None = None) -> None:
         self.actuation = actuation
         self.model = scene_model(actuation)
         self.data = mujoco.MjData(self.model)
@@ -267,7 +274,7 @@ class SawyerScene:
             base_site=BASE_SITE,
             velocity_limits=VELOCITY_LIMITS.copy(),
             torque_limits=torque,
-            home_qpos=home_qpos(actuation),
+            home_qpos=home_qpos(actuation, start),
             ee_rotation=EE_ROTATION.copy(),
             n_substeps=N_SUBSTEPS,
             control_dt=N_SUBSTEPS * TIMESTEP,

@@ -1,18 +1,36 @@
 """Detour Speaker-Listener: the ego (listener) must learn what a changeable speaker means.
 
 Layout (documented choice): listener starts at the origin; three goal landmarks at radius 1 and
-angles 90, 210 and 330 degrees; the stationary speaker at (0, -1.5), so visiting it is a detour
-of about 1.5 on the way to any goal; visiting means coming within 0.3 of it. Action: velocity in
-[-1, 1]^2 scaled by 0.1 per step; positions clipped to [-2, 2]^2; H = 50.
+angles 90, 210 and 330 degrees; a stationary speaker at ``speaker``; visiting it means coming
+within ``visit_radius`` (0.3) of it. Action: velocity in [-1, 1]^2 scaled by 0.1 per step;
+positions clipped to [-2, 2]^2; H = 50.
 
 Each interaction draws a new true goal uniformly. The speaker's strategy is its *mapping* of goals
 to messages (one of the 3! = 6 permutations); it utters ``mapping[goal]`` every step and the ego
-observes the message as a one-hot. The speaker's mapping is *locked* while the ego has visited
-it in the current interaction or in the previous one. While unlocked, before every step and at
-the interaction boundary the mapping changes (to a different permutation, uniformly) with
-probability 0.5. So visiting every interaction keeps the mapping fixed for good; this breaks
-the "fixed within an interaction" assumption, which is why the paper uses partial observations
-here (``strategy_flag=True``).
+observes the message as a one-hot. A change of mapping is to a different permutation, uniformly,
+with probability ``CHANGE_PROBABILITY`` = 0.5, under one of two rules (``change_rule``):
+
+- ``"interaction"``: at the end of an interaction in which the ego has not gone near the speaker
+  the mapping changes (with probability 0.5); a visit keeps it for the next interaction. At most
+  one change per interaction, seen at its first step.
+- ``"step"``: the mapping is *locked* while the ego has visited the speaker in the current
+  interaction or in the previous one; while unlocked, before every step and at the interaction
+  boundary it changes with probability 0.5 (about 27 changes in an unvisited interaction).
+
+Either way the flag "changed since the last step" (``strategy_flag=True``) is the partial
+observation the paper uses on this task.
+
+Versions (``sili_robots.tasks.registry``):
+- v0: ``change_rule="step"``, speaker at (0, -1.5). The message changes so often that, unvisited,
+  it is noise, and the detour (about 1.5 each way) costs so much that the best detour-then-decode
+  play scores about -23 per interaction against -3.8 for decoding with the mapping known.
+- v1: ``change_rule="interaction"``, following the appendix: "If the ego agent has not gone near
+  the speaker within the current interaction, the opponent's communication strategy changes
+  with probability 0.5" (and the main text: going near the speaker keeps the strategy for the
+  next interaction). The speaker at (0, -0.8), so the detour is a real trade, as in the paper's
+  figure: it costs a few units per interaction, while decoding a drifting speaker with the
+  mapping the last interaction revealed goes to a wrong goal 40% of the time (docs/tasks.md has
+  the measured bounds).
 """
 
 from __future__ import annotations
@@ -23,12 +41,14 @@ from typing import Any, ClassVar
 import numpy as np
 from gymnasium import spaces
 
+from sili_robots.errors import ConfigError, check_choice
 from sili_robots.tasks.base import RepeatedInteractionEnv
 
 GOALS = np.array([[0.0, 1.0], [-np.sqrt(3) / 2, -0.5], [np.sqrt(3) / 2, -0.5]])
-SPEAKER = np.array([0.0, -1.5])
+SPEAKER = np.array([0.0, -1.5])  # the default (v0) speaker position
 VISIT_RADIUS = 0.3
 CHANGE_PROBABILITY = 0.5
+CHANGE_RULES = ("step", "interaction")
 STEP = 0.1
 ARENA = 2.0
 MAPPINGS = tuple(itertools.permutations(range(3)))  # mapping[goal] -> message
@@ -40,7 +60,24 @@ class SpeakerListenerEnv(RepeatedInteractionEnv):
     strategy_dim: ClassVar[int] = len(MAPPINGS)  # one-hot of the mapping, what Oracle observes
     game_state_fields: ClassVar[tuple[str, ...]] = ("mapping", "visited_before")
 
-    def __init__(self, horizon: int = 50, oracle: bool = False, strategy_flag: bool = False):
+    def __init__(
+        self,
+        horizon: int = 50,
+        oracle: bool = False,
+        strategy_flag: bool = False,
+        change_rule: str = "step",
+        speaker: tuple[float, float] | list[float] = tuple(SPEAKER),
+    ) -> None:
+        check_choice("change_rule", change_rule, CHANGE_RULES)
+        where = np.asarray(speaker, dtype=float)
+        if where.shape != (2,) or not np.all(np.abs(where) <= ARENA):
+            raise ConfigError(
+                f"speaker must be an (x, y) position in the arena [-{ARENA:g}, {ARENA:g}]^2, "
+                f"got {speaker!r}"
+            )
+        self.change_rule = change_rule
+        self.speaker = where
+        self.goals = GOALS
         self.position = np.zeros(2)
         self.goal = 0
         self.mapping = 0
@@ -59,6 +96,9 @@ class SpeakerListenerEnv(RepeatedInteractionEnv):
     # -- strategy
     @property
     def locked(self) -> bool:
+        """Whether the mapping cannot change before the next step (or the next interaction)."""
+        if self.change_rule == "interaction":
+            return self.visited_now
         return self.visited_now or self.visited_before
 
     @property
@@ -76,6 +116,12 @@ class SpeakerListenerEnv(RepeatedInteractionEnv):
             others = [m for m in range(len(MAPPINGS)) if m != self.mapping]
             self.mapping = int(self.np_random.choice(others))
 
+    def strategy_choices(self) -> list[int]:
+        return list(range(len(MAPPINGS)))
+
+    def _set_strategy(self, strategy: int) -> None:
+        self.mapping = int(strategy)
+
     def _initial_strategy(self) -> None:
         self.mapping = int(self.np_random.integers(len(MAPPINGS)))
         self.visited_before = False
@@ -86,7 +132,7 @@ class SpeakerListenerEnv(RepeatedInteractionEnv):
             self._maybe_change_mapping()
 
     def _within_interaction_update(self) -> None:
-        if not self.locked and self.t < self.horizon:
+        if self.change_rule == "step" and not self.locked and self.t < self.horizon:
             self._maybe_change_mapping()
 
     # -- dynamics
@@ -97,7 +143,7 @@ class SpeakerListenerEnv(RepeatedInteractionEnv):
 
     def _apply_action(self, action: np.ndarray) -> float:
         self.position = np.clip(self.position + STEP * action, -ARENA, ARENA)
-        if np.linalg.norm(self.position - SPEAKER) <= VISIT_RADIUS:
+        if np.linalg.norm(self.position - self.speaker) <= VISIT_RADIUS:
             self.visited_now = True
         return -float(np.linalg.norm(self.position - GOALS[self.goal]))
 

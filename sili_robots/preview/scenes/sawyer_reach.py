@@ -72,7 +72,7 @@ class SawyerReachScene(TaskScene):
         return {
             "model": visual_model(task),
             "goals": np.asarray(ss.GOALS, float),
-            "plane_z": float(ss.PLANE_Z),
+            "plane_z": float(task.plane_z),
             "table_top": float(ss.TABLE_TOP_Z),
             "table_half": float(ss.TABLE_SIZE[0]) / 2,
         }

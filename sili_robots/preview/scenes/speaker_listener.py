@@ -62,7 +62,7 @@ class SpeakerListenerScene(TaskScene):
 
         return {
             "goals": np.asarray(sl.GOALS, float),
-            "speaker": np.asarray(sl.SPEAKER, float),
+            "speaker": np.asarray(task.speaker, float),
             "visit_radius": float(sl.VISIT_RADIUS),
             "mappings": [tuple(m) for m in sl.MAPPINGS],
             "arena": float(sl.ARENA),

@@ -1,0 +1,96 @@
+"""``sili bounds TASK``: what the scripted reference policies score on a task (reward, stability).
+
+Unlike ``sili rollout`` it plays every scripted kind the task has and prints them side by side:
+the reference lines a learned curve is read against. ``--all --write`` stores every registered
+task version's bounds in the packaged file ``sili plot`` draws from.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from sili_robots.errors import ConfigError
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from sili_robots.bounds import (
+        BOUNDS_FILE,
+        DEFAULT_GAMES,
+        DEFAULT_INTERACTIONS,
+        DEFAULT_SEED,
+        TASK_INTERACTIONS,
+    )
+
+    p = sub.add_parser(
+        "bounds",
+        help="reference bounds of a task: reward and true stability of its scripted policies",
+        description="Plays the task's scripted policies (random, still = zero action, oracle = "
+        "greedy with z, stabilizing = holds z, and where they exist blind = holds z without "
+        "seeing it, tracking = predicts z without stabilizing) and prints each one's mean task "
+        "reward per interaction and true stability (fraction of interactions 2..N whose true "
+        "strategy stayed), over every interaction but each game's first.",
+    )
+    p.add_argument("task", nargs="?", help="task name or gymnasium id, e.g. circle-3")
+    p.add_argument(
+        "--all", action="store_true", help="every registered task version (current and earlier)"
+    )
+    slow = ", ".join(f"{t}: {n}" for t, n in TASK_INTERACTIONS.items())
+    p.add_argument(
+        "--interactions",
+        help=f"interactions per policy, shared by the games (default {DEFAULT_INTERACTIONS}; "
+        f"{slow})",
+    )
+    p.add_argument(
+        "--games",
+        help="repeated games per policy, seeds SEED, SEED+1, ..., starting from each strategy "
+        f"in turn (default: the smallest multiple of the number of strategies >= {DEFAULT_GAMES},"
+        " fewer if the interactions are few)",
+    )
+    p.add_argument(
+        "--seed", default=str(DEFAULT_SEED), help=f"first game's seed (default {DEFAULT_SEED})"
+    )
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.add_argument(
+        "--write",
+        nargs="?",
+        const=str(BOUNDS_FILE),
+        metavar="FILE",
+        help="also store the bounds (keyed by gymnasium id) in FILE, default the packaged "
+        "bounds file `sili plot` reads",
+    )
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from sili_robots.bounds import (
+        check_counts,
+        compute_bounds,
+        default_interactions,
+        format_table,
+        write_bounds_file,
+    )
+    from sili_robots.tasks import task_spec
+    from sili_robots.tasks.registry import all_versions
+
+    try:
+        seed = int(args.seed)
+    except ValueError:
+        raise ConfigError(f"--seed must be an integer, got {args.seed!r}") from None
+    if args.all == (args.task is not None):
+        raise ConfigError("give either a TASK (e.g. circle-3) or --all, not both or neither")
+    specs = all_versions() if args.all else [task_spec(args.task)]
+    for spec in specs:  # the counts checked before anything runs
+        check_counts(args.interactions or default_interactions(spec.name), args.games)
+    results = []
+    for spec in specs:
+        result = compute_bounds(spec.gym_id, args.interactions, seed, args.games)
+        results.append(result)
+        if args.json:
+            print(json.dumps({k: result[k] for k in ("task", "task_id", "bounds")}))
+        else:
+            print(format_table(result), flush=True)
+    if args.write:
+        print(f"wrote {write_bounds_file(results, Path(args.write))}")
+    return 0

@@ -1,0 +1,187 @@
+"""``sili bounds``: the scripted policies' reward and true stability per task, the packaged
+bounds file ``sili plot`` draws from, and the bound lines in the figures."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+from matplotlib.collections import LineCollection
+
+from sili_robots.bounds import BOUNDS_FILE, compute_bounds, read_bounds_file, stored_bounds
+from sili_robots.cli import main
+from sili_robots.plotting import learning_curves, overview
+from sili_robots.tasks import TASKS
+from sili_robots.tasks.registry import all_versions
+
+REQUIRED = ("random", "still", "oracle", "stabilizing")
+
+
+def test_json_output_has_the_four_bounds_and_matches_the_policies(capsys):
+    assert main(["bounds", "circle-3", "--interactions", "6", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["task"] == "circle-3" and out["task_id"] == "sili/Circle3-v1"
+    bounds = out["bounds"]
+    assert set(REQUIRED) <= set(bounds) and set(bounds) <= {*REQUIRED, "blind", "tracking"}
+    for b in bounds.values():
+        assert set(b) == {"task_reward", "stability"} and 0.0 <= b["stability"] <= 1.0
+    assert bounds["still"] == {"task_reward": -50.0, "stability": 0.0}  # 1 away for 50 steps
+    assert bounds["stabilizing"]["stability"] == 1.0 and bounds["oracle"]["stability"] == 0.0
+    assert bounds["oracle"]["task_reward"] > -5 > -45 > bounds["random"]["task_reward"]
+
+
+def test_table_output_names_every_policy(capsys):
+    assert main(["bounds", "sili/CircleUnequal-v0", "--interactions", "4", "--seed", "3"]) == 0
+    out = capsys.readouterr().out
+    assert "circle-unequal-v0 (sili/CircleUnequal-v0): 4 interactions in 2 games from seed 3" in out
+    for kind in (*REQUIRED, "blind", "tracking"):
+        assert f"\n  {kind} " in out
+
+
+@pytest.mark.parametrize("task", [t for t in TASKS if t != "driving"])
+def test_bounds_work_for_every_task(task):
+    result = compute_bounds(task, interactions=4, games=2)
+    assert set(REQUIRED) <= set(result["bounds"])
+    assert result["interactions"] == 4 and result["games"] == 2
+
+
+def test_bounds_work_for_driving_in_its_own_process():
+    """libsumo runs one simulation per process: Driving's bounds get a process of their own."""
+    args = ["bounds", "driving", "--interactions", "4", "--json"]
+    out = subprocess.run(
+        [sys.executable, "-m", "sili_robots.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert out.returncode == 0, out.stderr
+    bounds = json.loads(out.stdout)["bounds"]
+    assert set(bounds) == set(REQUIRED)
+    assert bounds["oracle"]["task_reward"] == 0.0  # the oracle never collides
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["nope"], "unknown task 'nope'; allowed: circle-3"),
+        (["circle-3", "--interactions", "0"], "--interactions must be an integer >= 2"),
+        (["circle-3", "--interactions", "-3"], "got '-3'"),
+        (["circle-3", "--games", "0"], "--games must be an integer >= 1, got '0'"),
+        (["circle-3", "--interactions", "4", "--games", "3"], "must be >= 6 for 3 games"),
+        ([], "give either a TASK (e.g. circle-3) or --all"),
+    ],
+)
+def test_bad_input_exits_2_with_one_line(args, message, capsys):
+    assert main(["bounds", *args]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("sili bounds: error: ") and message in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_packaged_bounds_cover_every_version_and_agree_with_a_fresh_run():
+    data = read_bounds_file()
+    assert data["command"] == "sili bounds --all --write"
+    assert set(data["tasks"]) == {s.gym_id for s in all_versions()}
+    for entry in data["tasks"].values():
+        assert set(REQUIRED) <= set(entry["bounds"])
+    stored = data["tasks"]["sili/Circle3-v1"]
+    fresh = compute_bounds("circle-3", stored["interactions"], stored["seed"], stored["games"])
+    assert fresh == stored
+
+
+def test_the_packaged_bounds_show_what_each_v1_makes_possible():
+    def b(task_id, kind):
+        return stored_bounds(task_id)[kind]
+
+    assert b("sili/Circle3-v1", "oracle")["stability"] <= 0.5  # v0: 1.0
+    assert b("sili/Circle3-v0", "oracle")["stability"] == 1.0
+    assert b("sili/Circle3-v1", "stabilizing")["stability"] == 1.0
+    for kind in ("still", "random"):
+        assert b("sili/SawyerReach-v1", kind)["stability"] <= 0.5
+    assert b("sili/SawyerReach-v1", "stabilizing")["stability"] == 1.0
+    unequal = "sili/CircleUnequal-v1"
+    assert b(unequal, "blind")["task_reward"] > b(unequal, "tracking")["task_reward"]
+    assert b("sili/SpeakerListener-v1", "stabilizing")["stability"] == 1.0
+    assert stored_bounds("sili/Nope-v3") == {}
+
+
+def test_write_adds_to_a_bounds_file(tmp_path, capsys):
+    path = tmp_path / "bounds.json"
+    assert main(["bounds", "circle-3", "--interactions", "4", "--write", str(path)]) == 0
+    assert main(["bounds", "sili/Circle3-v0", "--interactions", "4", "--write", str(path)]) == 0
+    data = json.loads(path.read_text())
+    assert set(data["tasks"]) == {"sili/Circle3-v0", "sili/Circle3-v1"}
+    assert f"wrote {path}" in capsys.readouterr().out
+    assert BOUNDS_FILE.is_file()
+
+
+# -- the bound lines in the figures -----------------------------------------------------------
+def _results(task, task_id, n=20, method="sac"):
+    rng = np.random.default_rng(0)
+    rows = []
+    for seed in (0, 1):
+        for i in range(n):
+            rows.append(
+                {
+                    "run": f"{task}__{method}__s{seed}",
+                    "task": task,
+                    "task_id": task_id,
+                    "method": method,
+                    "latent": "discrete",
+                    "seed": seed,
+                    "controller": "",
+                    "config_beta": 0.0,
+                    "interaction": i,
+                    "task_reward": -20 + i + rng.normal(),
+                    "stability_reward": 0.0,
+                    "true_stability": float(rng.random() < 0.5),
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+def _bound_lines(ax):
+    out = {}
+    for c in ax.collections:
+        if isinstance(c, LineCollection) and c.get_gid() == "bound":
+            (segment,) = c.get_segments()
+            assert segment[0][1] == segment[1][1]  # horizontal
+            out[c.get_label()] = segment[0][1]
+    return out
+
+
+@pytest.mark.parametrize(
+    "task, task_id", [("circle-3", "sili/Circle3-v1"), ("circle-3", "sili/Circle3-v0")]
+)
+def test_learning_curves_draw_the_bounds_of_the_runs_task_version(task, task_id):
+    stored = stored_bounds(task_id)
+    fig = learning_curves(_results(task, task_id), task, smooth=2)
+    axes = {ax.get_gid(): ax for ax in fig.axes}
+    for metric, key in (("task_reward", "task_reward"), ("true_stability", "stability")):
+        drawn = _bound_lines(axes[metric])
+        assert drawn == {f"bound: {k}": v[key] for k, v in stored.items()}
+        lo, hi = axes[metric].get_ylim()
+        assert all(lo <= y <= hi for y in drawn.values())  # every bound is in view
+        labels = " ".join(t.get_text() for t in axes[metric].texts if t.get_gid() == "bound_label")
+        for kind, values in stored.items():  # every bound named, with its value
+            assert kind in labels and f"{values[key]:.2f}" in labels
+    assert _bound_lines(axes["stability_reward"]) == {}
+    assert task_id in fig.get_suptitle()
+    legend = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "SAC" in legend and "bound: oracle" in legend
+
+
+def test_results_of_two_versions_get_both_bounds_labelled_and_overview_draws_them():
+    old, new = "sili/Circle3-v0", "sili/Circle3-v1"
+    df = pd.concat(
+        [_results("circle-3", old), _results("circle-3", new, method="lili")], ignore_index=True
+    )
+    fig = learning_curves(df, "circle-3", smooth=2)
+    drawn = _bound_lines(fig.axes[0])
+    assert drawn["bound: oracle (v0)"] == stored_bounds(old)["oracle"]["task_reward"]
+    assert drawn["bound: oracle (v1)"] == stored_bounds(new)["oracle"]["task_reward"]
+    sawyer = "sili/SawyerReach-v1"
+    grid = overview(_results("sawyer-reach", sawyer)).axes
+    assert set(_bound_lines(grid[0])) == {f"bound: {k}" for k in stored_bounds(sawyer)}
