@@ -232,7 +232,7 @@ def test_reset_can_start_the_game_from_a_chosen_strategy():
     assert cont.angle == pytest.approx(math.pi / 2)
     with pytest.raises(ConfigError, match=r"unknown strategy 8; allowed: 0, 1, 2, 3"):
         env.reset(options={"strategy": 8})
-    with pytest.raises(ConfigError, match=r"allowed: \['restart', 'strategy'\]"):
+    with pytest.raises(ConfigError, match=r"allowed: \['restart', 'restore', 'strategy'\]"):
         env.reset(options={"strateg": 1})
     sl = make_task("speaker-listener").unwrapped
     _, info = sl.reset(seed=0, options={"strategy": 5})
