@@ -190,7 +190,7 @@ def edge_profile(agent: SILIAgent, task: CircleEnv, location: int) -> tuple[np.n
     """min Q on the last step from the held opponent's position, for radial actions."""
     out = location_direction(task, location)  # radial unit vector
     obs = np.array([*out, (task.horizon - 1) / task.horizon], np.float32)
-    if task.oracle:
+    if agent.cfg.method == "oracle":  # Oracle observes the opponent's position
         obs = np.concatenate([obs, out])
     x = torch.from_numpy(agent.policy_input(obs, agent.buffer.n)).unsqueeze(0)
     actions = torch.from_numpy(np.outer(RADIAL_ACTIONS, out).astype(np.float32))

@@ -15,11 +15,12 @@ import numpy as np
 from gymnasium import spaces
 
 
-class _AppendFromInfo(gym.Wrapper):
+class _AppendFromInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Appends ``_extra(info)`` to every observation, within ``low``/``high``."""
 
     def __init__(self, env: gym.Env, low: np.ndarray, high: np.ndarray) -> None:
-        super().__init__(env)
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.Wrapper.__init__(self, env)
         base = env.observation_space
         self.observation_space = spaces.Box(
             np.concatenate([base.low, low]).astype(np.float32),

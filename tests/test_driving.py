@@ -19,6 +19,7 @@ from sili_robots.tasks.driving import (
     DrivingEnv,
     lane_of,
 )
+from sili_robots.wrappers import OracleObservation, StrategyFlag
 
 Policy = Callable[[DrivingEnv, int], float]
 
@@ -217,16 +218,16 @@ def test_observation_space_and_intent_stays_hidden(make_env):
         obs, _, term, trunc, _ = plain.step(np.array([0.3], np.float32))
         assert obs[-1] == pytest.approx(t / plain.horizon)
         assert (term, trunc) == (False, t == plain.horizon)
-    oracle = make_env(oracle=True)
+    oracle = OracleObservation(make_env())
     obs, info = oracle.reset(seed=0)
     assert obs.shape == (7,)
     np.testing.assert_array_equal(obs[-2:], info["strategy"])
     assert obs[-2:].tolist() == ([1.0, 0.0] if info["strategy_id"] == RIGHT else [0.0, 1.0])
 
 
-@pytest.mark.parametrize("kwargs", [{}, {"oracle": True}, {"strategy_flag": True}])
-def test_check_env_passes(make_env, kwargs):
-    check_env(make_env(**kwargs), skip_render_check=True)
+@pytest.mark.parametrize("wrap", [lambda e: e, OracleObservation, StrategyFlag])
+def test_check_env_passes(make_env, wrap):
+    check_env(wrap(make_env()), skip_render_check=True)
 
 
 def test_bad_arguments_are_named(env):

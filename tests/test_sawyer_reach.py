@@ -13,6 +13,7 @@ from sili_robots.rollout import run_interactions
 from sili_robots.tasks import make_task, task_spec
 from sili_robots.tasks.sawyer_reach import MAX_SPEED, SawyerReachEnv
 from sili_robots.tasks.sawyer_scene import GOALS, PLANE_Z, START_EE, TABLE_TOP_Z
+from sili_robots.wrappers import OracleObservation, StrategyFlag
 
 
 @pytest.fixture(scope="module")
@@ -45,10 +46,10 @@ def test_registered_with_gymnasium_and_spaces():
     env.close()
 
 
-@pytest.mark.parametrize("kwargs", [{}, {"oracle": True}, {"strategy_flag": True}])
-def test_check_env_passes(kwargs):
-    env = make_task("sawyer-reach", **kwargs)
-    check_env(env.unwrapped, skip_render_check=True)
+@pytest.mark.parametrize("wrap", [lambda e: e, OracleObservation, StrategyFlag])
+def test_check_env_passes(wrap):
+    env = wrap(make_task("sawyer-reach").unwrapped)
+    check_env(env, skip_render_check=True)
 
 
 def test_unknown_controller_is_a_config_error_listing_choices():
@@ -74,7 +75,7 @@ def test_observation_is_position_velocity_time_and_never_the_goal():
     np.testing.assert_allclose(obs[3:6], 0.0, atol=1e-6)
     assert obs[6] == 0.0
 
-    env = make_task("sili/SawyerReach-v0", oracle=True).unwrapped
+    env = OracleObservation(make_task("sili/SawyerReach-v0").unwrapped)
     obs, info = env.reset(seed=1)
     np.testing.assert_allclose(obs[-3:], GOALS[info["strategy_id"]], atol=1e-6)
     obs, reward, *_ = env.step(np.array([0.0, 0.0, -1.0]))

@@ -6,6 +6,7 @@ from sili_robots.policies import scripted_policy
 from sili_robots.rollout import run_interactions
 from sili_robots.tasks import make_task
 from sili_robots.tasks.speaker_listener import MAPPINGS, SPEAKER
+from sili_robots.wrappers import StrategyFlag
 
 
 def test_change_probability_is_one_half_while_unvisited():
@@ -26,14 +27,15 @@ def test_change_probability_is_one_half_while_unvisited():
 
 
 def test_visit_locks_mapping_for_rest_and_next_interaction():
-    env = make_task("sili/SpeakerListener-v0", strategy_flag=True).unwrapped
-    env.reset(seed=1)
+    flagged = StrategyFlag(make_task("sili/SpeakerListener-v0").unwrapped)
+    env = flagged.unwrapped
+    flagged.reset(seed=1)
     env.position = SPEAKER.copy()
-    obs, *_ = env.step(np.zeros(2))
+    obs, *_ = flagged.step(np.zeros(2))
     assert env.visited_now
     locked = env.mapping
     for _ in range(env.horizon - 1):
-        obs, *_ = env.step(np.array([0.0, 1.0]))
+        obs, *_ = flagged.step(np.array([0.0, 1.0]))
         assert env.mapping == locked and obs[-1] == 0.0
     _, info = env.reset()
     assert env.mapping == locked and not info["strategy_changed"]

@@ -7,6 +7,7 @@ from gymnasium.utils.env_checker import check_env
 
 from sili_robots.errors import ConfigError
 from sili_robots.tasks import TASKS, make_task
+from sili_robots.wrappers import OracleObservation, StrategyFlag
 
 LIGHT_TASKS = [
     n for n, s in TASKS.items() if not s.one_per_process and n.startswith(("circle", "speaker"))
@@ -31,9 +32,9 @@ def _rollout(env, seed, interactions=6):
 
 @pytest.mark.parametrize("name", LIGHT_TASKS)
 def test_check_env_passes(name):
-    for kwargs in ({}, {"oracle": True}, {"strategy_flag": True}):
-        env = make_task(name, **kwargs)
-        check_env(env.unwrapped, skip_render_check=True)
+    for wrap in (lambda e: e, OracleObservation, StrategyFlag):
+        env = wrap(make_task(name).unwrapped)
+        check_env(env, skip_render_check=True)
         env.close()
 
 
@@ -77,7 +78,7 @@ def test_episode_is_one_interaction_truncated_at_horizon(name):
 @pytest.mark.parametrize("name", LIGHT_TASKS)
 def test_oracle_exposes_strategy_and_plain_does_not(name):
     plain = make_task(name).unwrapped
-    oracle = make_task(name, oracle=True).unwrapped
+    oracle = OracleObservation(make_task(name).unwrapped)
     obs_p, _info_p = plain.reset(seed=1)
     obs_o, info_o = oracle.reset(seed=1)
     k = plain.strategy_dim
@@ -95,9 +96,9 @@ def test_oracle_exposes_strategy_and_plain_does_not(name):
 
 @pytest.mark.parametrize("name", LIGHT_TASKS)
 def test_strategy_flag_is_last_element(name):
-    env = make_task(name, strategy_flag=True).unwrapped
+    env = StrategyFlag(make_task(name).unwrapped)
     obs, info = env.reset(seed=0)
-    for _ in range(env.horizon):
+    for _ in range(env.unwrapped.horizon):
         obs, _, _, _, info = env.step(env.action_space.sample())
         assert obs[-1] == float(info["strategy_changed"])
 

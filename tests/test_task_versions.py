@@ -15,6 +15,7 @@ from sili_robots.tasks import TASKS, make_task, task_spec
 from sili_robots.tasks.circle import RADIUS
 from sili_robots.tasks.registry import EARLIER_VERSIONS, first_version
 from sili_robots.tasks.sawyer_scene import PLANE_Z
+from sili_robots.wrappers import OracleObservation, StrategyFlag
 
 V1 = {
     "circle-3": "sili/Circle3-v1",
@@ -65,9 +66,9 @@ def test_v0_ids_build_the_original_dynamics():
 
 @pytest.mark.parametrize("gym_id", [*LIGHT_V1, *(i.replace("-v1", "-v0") for i in LIGHT_V1)])
 def test_check_env_passes_on_every_version(gym_id):
-    for kwargs in ({}, {"oracle": True}, {"strategy_flag": True}):
-        env = make_task(gym_id, **kwargs)
-        check_env(env.unwrapped, skip_render_check=True)
+    for wrap in (lambda e: e, OracleObservation, StrategyFlag):
+        env = wrap(make_task(gym_id).unwrapped)
+        check_env(env, skip_render_check=True)
         env.close()
 
 
@@ -168,15 +169,16 @@ def test_speaker_listener_v1_changes_at_most_once_per_interaction_with_probabili
 
 
 def test_speaker_listener_v1_visit_keeps_the_mapping_for_the_next_interaction():
-    env = make_task("speaker-listener", strategy_flag=True).unwrapped
-    env.reset(seed=1)
+    flagged = StrategyFlag(make_task("speaker-listener").unwrapped)
+    env = flagged.unwrapped
+    flagged.reset(seed=1)
     for _ in range(30):
         kept = env.mapping
         env.position = env.speaker.copy()
-        env.step(np.zeros(2))
+        flagged.step(np.zeros(2))
         assert env.visited_now
         for _ in range(env.horizon - 1):
-            obs, *_ = env.step(np.array([0.0, 1.0]))
+            obs, *_ = flagged.step(np.array([0.0, 1.0]))
             assert obs[-1] == 0.0
         obs, info = env.reset()
         assert env.mapping == kept and not info["strategy_changed"] and obs[-1] == 0.0
@@ -259,11 +261,11 @@ def test_runs_record_their_task_version_and_older_records_ran_v0(tmp_path):
     import pandas as pd
 
     from sili_robots.agent import method_config
+    from sili_robots.build import make_run_env
     from sili_robots.runs import METRIC_COLUMNS, RunConfig, read_config, write_config
     from sili_robots.sweep import SweepSpec, expand
     from sili_robots.sweep.results import results_table
     from sili_robots.sweep.state import check_existing, run_path
-    from sili_robots.build import make_run_env
 
     cfg = RunConfig("circle-3", "sac", 0, 5, method_config("sac"))
     assert cfg.task_id == "sili/Circle3-v1"

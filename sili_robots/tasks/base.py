@@ -10,10 +10,10 @@ strategy exactly.
 
 ``info`` always carries the true strategy (``strategy``, ``strategy_id``), the interaction index
 (``interaction``) and whether the true strategy changed since the previous step
-(``strategy_changed``); none of it enters the observation unless the env was built with
-``oracle=True`` (appends ``strategy_encoding()``) or ``strategy_flag=True`` (appends the
-partial-observation flag "the opponent's strategy changed since the last step" as the *last*
-observation element).
+(``strategy_changed``); none of it enters the observation. What a method may see beyond it
+is added by wrappers (``sili_robots.wrappers``): ``OracleObservation`` appends
+``strategy_encoding()``, ``StrategyFlag`` the partial-observation flag "the opponent's strategy
+changed since the last step".
 """
 
 from __future__ import annotations
@@ -43,12 +43,10 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     #: they are what ``game_state()`` saves so a run can resume at an interaction boundary.
     game_state_fields: ClassVar[tuple[str, ...]] = ()
 
-    def __init__(self, horizon: int, oracle: bool = False, strategy_flag: bool = False) -> None:
+    def __init__(self, horizon: int) -> None:
         if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 1:
             raise ConfigError(f"horizon must be an integer >= 1, got {horizon!r}")
         self.horizon = int(horizon)
-        self.oracle = bool(oracle)
-        self.strategy_flag = bool(strategy_flag)
         self.interaction = -1  # index of the current interaction; -1 before the first reset
         self.t = 0
         self._trajectory: list[dict[str, Any]] = []
@@ -57,17 +55,8 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         self._changed_since_last_step = False
         self.action_space = self._make_action_space()
         base = self._base_observation_space()
-        lows = [base.low]
-        highs = [base.high]
-        if self.oracle:
-            lows.append(np.full(self.strategy_dim, self.strategy_low, np.float32))
-            highs.append(np.full(self.strategy_dim, self.strategy_high, np.float32))
-        if self.strategy_flag:
-            lows.append(np.zeros(1, np.float32))
-            highs.append(np.ones(1, np.float32))
-        self.observation_space = spaces.Box(
-            np.concatenate(lows).astype(np.float32), np.concatenate(highs).astype(np.float32)
-        )
+        low, high = base.low.astype(np.float32), base.high.astype(np.float32)
+        self.observation_space = spaces.Box(low, high)
 
     # ----------------------------------------------------------------- subclass hooks
     @abstractmethod
@@ -247,12 +236,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         return np.clip(arr, self.action_space.low, self.action_space.high)
 
     def _observation(self) -> np.ndarray:
-        parts = [np.asarray(self._base_observation(), np.float32)]
-        if self.oracle:
-            parts.append(np.asarray(self.strategy_encoding(), np.float32))
-        if self.strategy_flag:
-            parts.append(np.array([float(self._changed_since_last_step)], np.float32))
-        obs = np.concatenate(parts).astype(np.float32)
+        obs = np.asarray(self._base_observation(), np.float32)
         return np.clip(obs, self.observation_space.low, self.observation_space.high)
 
     def _info(self) -> dict[str, Any]:

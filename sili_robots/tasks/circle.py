@@ -61,8 +61,6 @@ class CircleEnv(RepeatedInteractionEnv):
         self,
         variant: str = "3",
         horizon: int = 50,
-        oracle: bool = False,
-        strategy_flag: bool = False,
         outside_margin: float = 0.0,
         near_moves: str = "counter-clockwise",
     ) -> None:
@@ -94,7 +92,7 @@ class CircleEnv(RepeatedInteractionEnv):
         self.position = self.start.copy()
         self.location = 0  # index into self.angles (discrete variants)
         self.angle = math.pi / 2  # continuous variant
-        super().__init__(horizon=horizon, oracle=oracle, strategy_flag=strategy_flag)
+        super().__init__(horizon=horizon)
 
     # -- spaces
     def _make_action_space(self) -> spaces.Box:

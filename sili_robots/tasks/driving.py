@@ -81,8 +81,6 @@ class DrivingEnv(RepeatedInteractionEnv):
     def __init__(
         self,
         horizon: int = 10,
-        oracle: bool = False,
-        strategy_flag: bool = False,
         backend: str = "libsumo",
     ) -> None:
         integer = isinstance(horizon, (int, np.integer)) and not isinstance(horizon, bool)
@@ -95,7 +93,7 @@ class DrivingEnv(RepeatedInteractionEnv):
         self.ego_x = self.ego_y = self.opp_x = self.opp_y = 0.0  # metres, see _read_positions
         self._reset_interaction_flags()
         check_choice("SUMO backend", backend, BACKENDS)
-        super().__init__(horizon=horizon, oracle=oracle, strategy_flag=strategy_flag)
+        super().__init__(horizon=horizon)
         self.backend = backend
         sc.sumo_binary("sumo")  # fail early if the wheel is broken; SUMO itself starts lazily
         self.session: SumoSession | None = None

@@ -5,7 +5,7 @@ MuJoCo simulates it, so joint limits, reach, torque limits and table contacts ar
 business. The opponent's strategy z is which of three goals on the table it has chosen.
 
 - Observation (float32): end-effector position (m, world frame), its linear velocity (m/s), then
-  the elapsed fraction t/H. Never the goal (``oracle=True`` appends the goal's position).
+  the elapsed fraction t/H. Never the goal (``OracleObservation`` appends the goal's position).
 - Action: end-effector velocity in [-1, 1]^3, scaled by ``MAX_SPEED`` = 0.4 m/s and held for one
   control step (20 Hz, 50 ms: at most 2 cm per axis per step). The controller chosen with
   ``controller=`` executes it: ``mink`` (default), ``osc`` or ``joint_velocity``
@@ -62,8 +62,6 @@ class SawyerReachEnv(RepeatedInteractionEnv):
         self,
         controller: str = DEFAULT_CONTROLLER,
         horizon: int = 50,
-        oracle: bool = False,
-        strategy_flag: bool = False,
         start_z: float = float(START_EE[2]),
     ) -> None:
         cls = controller_class(controller)  # ConfigError naming the choices, before any build
@@ -80,7 +78,7 @@ class SawyerReachEnv(RepeatedInteractionEnv):
         self.scene = SawyerScene(cls.actuation, tuple(self.start))
         self.controller = cls(self.scene.model, self.scene.data, self.scene.arm)
         self.goal = 0
-        super().__init__(horizon=horizon, oracle=oracle, strategy_flag=strategy_flag)
+        super().__init__(horizon=horizon)
 
     # -- spaces
     def _make_action_space(self) -> spaces.Box:

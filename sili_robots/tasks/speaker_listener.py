@@ -17,8 +17,8 @@ with probability ``CHANGE_PROBABILITY`` = 0.5, under one of two rules (``change_
   interaction or in the previous one; while unlocked, before every step and at the interaction
   boundary it changes with probability 0.5 (about 27 changes in an unvisited interaction).
 
-Either way the flag "changed since the last step" (``strategy_flag=True``) is the partial
-observation the paper uses on this task.
+Either way the flag "changed since the last step" (``sili_robots.wrappers.StrategyFlag``) is
+the partial observation the paper uses on this task.
 
 Versions (``sili_robots.tasks.registry``):
 - v0: ``change_rule="step"``, speaker at (0, -1.5). The message changes so often that, unvisited,
@@ -63,8 +63,6 @@ class SpeakerListenerEnv(RepeatedInteractionEnv):
     def __init__(
         self,
         horizon: int = 50,
-        oracle: bool = False,
-        strategy_flag: bool = False,
         change_rule: str = "step",
         speaker: tuple[float, float] | list[float] = tuple(SPEAKER),
     ) -> None:
@@ -83,7 +81,7 @@ class SpeakerListenerEnv(RepeatedInteractionEnv):
         self.mapping = 0
         self.visited_now = False
         self.visited_before = False
-        super().__init__(horizon=horizon, oracle=oracle, strategy_flag=strategy_flag)
+        super().__init__(horizon=horizon)
 
     def _make_action_space(self) -> spaces.Box:
         return spaces.Box(-1.0, 1.0, (2,), np.float32)
