@@ -93,17 +93,28 @@ def time_sb3(in_dim: int, act_dim: int, batch: int, updates: int) -> float:
 
 
 def time_train(interactions: int, precision: str, matmul: str) -> float:
+    """Seconds per learning interaction of ``sili train`` (SILI, Circle 3, the default agent),
+    from the run's own wall times after its random phase (5 interactions here)."""
+    import pandas as pd
+
     from sili_robots.build import make_run_config
     from sili_robots.training import train
 
     out = Path(tempfile.mkdtemp())
     settings = {"sac.random_interactions": 5, "sac.precision": precision, "matmul": matmul}
     cfg = make_run_config("circle-3", "sili", 0, interactions, settings=settings)
-    t = time.perf_counter()
     train(cfg, out, progress=False)
-    dt = time.perf_counter() - t
+    wall = pd.read_csv(out / "metrics.csv")["wall_time"].to_numpy()
     shutil.rmtree(out)
-    return interactions / dt
+    return float((wall[-1] - wall[5]) / (len(wall) - 6))
+
+
+def machine() -> str:
+    """CPU model and its vector extensions, as every timing here is reported with."""
+    from sili_robots.agent.matmul import machine_key
+
+    model, flags, *_ = machine_key().split(" | ")
+    return f"{model}; {flags or 'flags unknown'}"
 
 
 def time_matmul(m: int, k: int, n: int, matmul: str, repeats: int = 2000) -> float:
@@ -147,6 +158,7 @@ def main() -> None:
             rates[label].append(rate)
     med = {k: float(np.median(v)) for k, v in rates.items()}
     sb3 = med["sb3"]
+    print(f"machine: {machine()}")
     print(f"torch threads: {args.threads}; batch {batch}; input {in_dim}; 2 x 256 networks")
     print(f"stable-baselines3 SAC:              {sb3:8.1f} updates/s ({1e3 / sb3:.2f} ms/update)")
     for label in VARIANTS:
@@ -156,11 +168,12 @@ def main() -> None:
             f"({1e3 / ours:.2f} ms/update), {ours / sb3:.2f}x stable-baselines3"
         )
     print(f"(medians of {args.rounds} alternating rounds)")
+    sb3_50 = 50 / sb3  # stable-baselines3's time for one interaction's 50 SAC updates
     for label, (precision, matmul) in VARIANTS.items():
-        ips = time_train(args.interactions, precision, matmul)
+        seconds = time_train(args.interactions, precision, matmul)
         print(
-            f"sili train end to end (circle-3, sili, 1 update/step, {label}): "
-            f"{ips:.2f} interactions/s"
+            f"sili train, SILI on circle-3, {label:16s}: {seconds:.3f} s per learning "
+            f"interaction, {seconds / sb3_50:.2f}x stable-baselines3's 50 updates ({sb3_50:.3f} s)"
         )
 
 

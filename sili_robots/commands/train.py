@@ -143,6 +143,7 @@ def _task_names() -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.training import extend, resume, train, write_summary
+    from sili_robots.verdict import verdict
 
     if args.resume is not None:
         read_config(args.resume)  # a clear error when it is not a run
@@ -165,6 +166,7 @@ def run(args: argparse.Namespace) -> int:
         run_dir = train(cfg, args.out, progress=not args.no_progress)
     summary = write_summary(run_dir)
     print(json.dumps({"run_dir": str(run_dir), **summary}, indent=2))
+    print(verdict(run_dir))
     return 0
 
 

@@ -1,0 +1,39 @@
+"""One line a newcomer understands: did the run hold the opponent, and what did it earn, next
+to what standing still and the scripted references earn on the same task version."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from sili_robots.bounds import stored_bounds
+from sili_robots.runs import METRICS, read_config
+
+HOLDS = 0.9  # the stability a run needs to count as holding the opponent
+
+
+def verdict(run_dir: Path, window: int = 50) -> str:
+    """E.g. "SILI held the opponent in 96% of its last 50 interactions (standing still: 0%)
+    and earned -8.1 per interaction (standing still: -50.0, the scripted stabilizing policy
+    that sees z: -4.0)"."""
+    cfg = read_config(run_dir)
+    tail = pd.read_csv(Path(run_dir) / METRICS).tail(window)
+    stability = 1.0 - float(tail["strategy_changed"].mean())
+    reward = float(tail["task_reward"].mean())
+    bounds = stored_bounds(cfg.task_id) if cfg.task_id else {}
+    still, stab = bounds.get("still"), bounds.get("stabilizing")
+    held = "held" if stability >= HOLDS else "did not hold"
+    line = (
+        f"{cfg.method.upper()} {held} the opponent in {stability:.0%} of its last {len(tail)} "
+        f"interactions"
+    )
+    if still:
+        line += f" (standing still: {still['stability']:.0%})"
+    line += f" and earned {reward:.1f} per interaction"
+    refs = []
+    if still:
+        refs.append(f"standing still: {still['task_reward']:.1f}")
+    if stab:
+        refs.append(f"the scripted stabilizing policy that sees z: {stab['task_reward']:.1f}")
+    return line + (f" ({', '.join(refs)})" if refs else "")

@@ -1,0 +1,26 @@
+"""The one-line result of a run: held or not, and its reward against the task's references."""
+
+from __future__ import annotations
+
+import pandas as pd
+from fast_settings import FAST_ARGS
+
+from sili_robots.cli import main
+from sili_robots.verdict import verdict
+
+
+def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys):
+    run = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--interactions", "4", "--out", str(run)]
+    assert main([*args, *FAST_ARGS, "--no-progress"]) == 0
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last.startswith("SILI did not hold the opponent in ")  # 4 interactions: no hold
+    assert "(standing still: 0%)" in last and "standing still: -50.0" in last
+    assert "the scripted stabilizing policy that sees z: -4.0" in last
+    metrics = pd.read_csv(run / "metrics.csv")
+    metrics["strategy_changed"] = 0
+    metrics["task_reward"] = -7.25
+    metrics.to_csv(run / "metrics.csv", index=False)
+    line = verdict(run)
+    assert line.startswith("SILI held the opponent in 100% of its last 4 interactions")
+    assert "earned -7.2 per interaction" in line
