@@ -1,0 +1,74 @@
+"""Runs written before the settings were nested (flat config.json, the latent cache and the
+add-ons' state at the top of the checkpoint, no task version) resume exactly where they
+stopped, on the task version they were trained on."""
+
+from __future__ import annotations
+
+import json
+
+import pandas as pd
+import torch
+from fast_settings import FAST_ARGS
+
+from sili_robots.cli import main
+from sili_robots.migrations import LEGACY_SETTINGS
+
+SETTINGS = ["--set", "latent_filter=0.2", "--set", "stability_distance=posterior"]
+
+
+def _old_config(run: dict) -> dict:
+    """config.json's run in the flat layout of earlier versions."""
+    names = {path: name for name, path in LEGACY_SETTINGS.items() if not name.endswith("_schedule")}
+    agent = run["agent"]
+    flat = {key: agent[key] for key in ("method", "latent", "hidden", "matmul")}
+    for section in ("sac", "model", "sili"):
+        for key, value in agent[section].items():
+            if f"{section}.{key}" in names:
+                flat[names[f"{section}.{key}"]] = value
+
+    def leaves(tree: dict, prefix: str) -> None:
+        for key, value in tree.items():
+            if isinstance(value, dict):
+                leaves(value, f"{prefix}{key}.")
+            elif f"{prefix}{key}" in names:
+                flat[names[f"{prefix}{key}"]] = value
+
+    leaves(run["addons"], "addons.")
+    old = {k: v for k, v in run.items() if k not in ("addons", "task_id")}
+    return {**old, "task": "circle-3", "agent": flat}
+
+
+def _old_checkpoint(state: dict) -> dict:
+    agent = dict(state["agent"])
+    latents, addons = agent.pop("latents"), agent.pop("addons")
+    agent.update(
+        Z=latents["Z"],
+        category_map=latents["category_map"],
+        posteriors=addons["posteriors"]["P"],
+        filter=addons["latent_filter"],
+    )
+    return {**state, "agent": agent}
+
+
+def _metrics(run) -> pd.DataFrame:
+    return pd.read_csv(run / "metrics.csv").drop(columns="wall_time")
+
+
+def test_a_run_saved_in_the_earlier_layout_resumes_exactly(tmp_path):
+    common = ["--method", "sili", "--seed", "3", "--checkpoint-every", "4", "--no-progress"]
+    whole, part = tmp_path / "whole", tmp_path / "part"
+    task = ["--task", "sili/Circle3-v0"]
+    assert main(["train", *task, *common, *FAST_ARGS, *SETTINGS, "--interactions", "12",
+                 "--out", str(whole)]) == 0  # fmt: skip
+    assert main(["train", *task, *common, *FAST_ARGS, *SETTINGS, "--interactions", "8",
+                 "--out", str(part)]) == 0  # fmt: skip
+    saved = json.loads((part / "config.json").read_text())
+    (part / "config.json").write_text(json.dumps({**saved, "run": _old_config(saved["run"])}))
+    state = torch.load(part / "checkpoint.pt", weights_only=False)
+    torch.save(_old_checkpoint(state), part / "checkpoint.pt")
+    assert "task_id" not in json.loads((part / "config.json").read_text())["run"]
+    assert main(["train", "--resume", str(part), "--interactions", "12", "--no-progress"]) == 0
+    pd.testing.assert_frame_equal(_metrics(part), _metrics(whole))
+    resumed = json.loads((part / "config.json").read_text())["run"]
+    assert resumed["task_id"] == "sili/Circle3-v0"  # the earlier layout ran the first version
+    assert resumed["addons"]["filter"]["eps"] == 0.2 and resumed["agent"]["sac"]["lr"] == 3e-4
