@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import pandas as pd
 from fast_settings import FAST_ARGS
 
@@ -13,7 +15,9 @@ def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys
     run = tmp_path / "run"
     args = ["train", "--task", "circle-3", "--interactions", "4", "--out", str(run)]
     assert main([*args, *FAST_ARGS, "--no-progress"]) == 0
-    last = capsys.readouterr().out.strip().splitlines()[-1]
+    printed = capsys.readouterr()
+    json.loads(printed.out)  # stdout stays one JSON document for tools
+    last = printed.err.strip().splitlines()[-1]
     assert last.startswith("SILI did not hold the opponent in ")  # 4 interactions: no hold
     assert "(standing still: 0%)" in last and "standing still: -50.0" in last
     assert "the scripted stabilizing policy that sees z: -4.0" in last

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+import sys
 from pathlib import Path
 
 from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, PROFILES, Schedule
@@ -166,7 +167,7 @@ def run(args: argparse.Namespace) -> int:
         run_dir = train(cfg, args.out, progress=not args.no_progress)
     summary = write_summary(run_dir)
     print(json.dumps({"run_dir": str(run_dir), **summary}, indent=2))
-    print(verdict(run_dir))
+    print(verdict(run_dir), file=sys.stderr)  # for people; stdout stays one JSON document
     return 0
 
 
