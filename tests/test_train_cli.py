@@ -1,5 +1,7 @@
 """``sili train`` / ``sili eval`` end to end: run directories, bad input, kill and resume."""
 
+import contextlib
+import io
 import json
 import os
 import signal
@@ -7,6 +9,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
@@ -14,19 +17,22 @@ import pytest
 from fast_settings import FAST_ARGS
 
 from sili_robots.addons import LatentFilter
+from sili_robots.cli import main
 from sili_robots.evaluation import load_trained
 
 FAST = [*FAST_ARGS, "--no-progress"]
 
 
-def _sili(*args, **kw):
-    return subprocess.run(
-        [sys.executable, "-m", "sili_robots.cli", *map(str, args)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        **kw,
-    )
+def _sili(*args):
+    """``sili ARGS`` in this process (a fresh process costs seconds of imports per call); an
+    exception the CLI does not turn into an exit code escapes and fails the test."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main([str(a) for a in args])
+        except SystemExit as exit_:  # argparse's own errors
+            code = exit_.code if isinstance(exit_.code, int) else 1
+    return SimpleNamespace(returncode=code, stdout=out.getvalue(), stderr=err.getvalue())
 
 
 def test_train_writes_a_complete_run_and_eval_reads_it(tmp_path):
