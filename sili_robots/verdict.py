@@ -14,9 +14,9 @@ HOLDS = 0.9  # the stability a run needs to count as holding the opponent
 
 
 def verdict(run_dir: Path, window: int = 50) -> str:
-    """E.g. "SILI held the opponent in 96% of its last 50 interactions (standing still: 0%)
-    and earned -8.1 per interaction (standing still: -50.0, the scripted stabilizing policy
-    that sees z: -4.0)"."""
+    """E.g. "SILI held the opponent (kept its strategy in 96% of its last 50 interactions;
+    standing still: 0%) and earned -8.1 per interaction (standing still: -50.0, the scripted
+    stabilizing policy that sees z: -4.0)"."""
     cfg = read_config(run_dir)
     tail = pd.read_csv(Path(run_dir) / METRICS).tail(window)
     stability = 1.0 - float(tail["strategy_changed"].mean())
@@ -24,12 +24,12 @@ def verdict(run_dir: Path, window: int = 50) -> str:
     bounds = stored_bounds(cfg.task_id) if cfg.task_id else {}
     still, stab = bounds.get("still"), bounds.get("stabilizing")
     held = "held" if stability >= HOLDS else "did not hold"
-    line = (
-        f"{cfg.method.upper()} {held} the opponent in {stability:.0%} of its last {len(tail)} "
-        f"interactions"
-    )
+    kept = f"kept its strategy in {stability:.0%} of its last {len(tail)} interactions"
+    if stability < HOLDS:
+        kept += f", {HOLDS:.0%} needed"
     if still:
-        line += f" (standing still: {still['stability']:.0%})"
+        kept += f"; standing still: {still['stability']:.0%}"
+    line = f"{cfg.method.upper()} {held} the opponent ({kept})"
     line += f" and earned {reward:.1f} per interaction"
     refs = []
     if still:

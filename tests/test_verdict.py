@@ -18,13 +18,13 @@ def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys
     printed = capsys.readouterr()
     json.loads(printed.out)  # stdout stays one JSON document for tools
     last = printed.err.strip().splitlines()[-1]
-    assert last.startswith("SILI did not hold the opponent in ")  # 4 interactions: no hold
-    assert "(standing still: 0%)" in last and "standing still: -50.0" in last
+    assert last.startswith("SILI did not hold the opponent (kept its strategy in ")  # 4: no hold
+    assert ", 90% needed; standing still: 0%)" in last and "standing still: -50.0" in last
     assert "the scripted stabilizing policy that sees z: -4.0" in last
     metrics = pd.read_csv(run / "metrics.csv")
     metrics["strategy_changed"] = 0
     metrics["task_reward"] = -7.25
     metrics.to_csv(run / "metrics.csv", index=False)
     line = verdict(run)
-    assert line.startswith("SILI held the opponent in 100% of its last 4 interactions")
+    assert line.startswith("SILI held the opponent (kept its strategy in 100% of its last 4 ")
     assert "earned -7.2 per interaction" in line
