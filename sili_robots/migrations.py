@@ -72,14 +72,9 @@ def migrate_run(run: dict[str, Any]) -> dict[str, Any]:
     flat.setdefault("matmul", "aten")  # likewise: trained on PyTorch's default kernels
     nested: dict[str, Any] = {}
     for name, value in flat.items():
-        if name.endswith("_schedule") and value is None:
-            continue
-        if name.endswith("_schedule") or name not in LEGACY_SETTINGS:
+        unset_schedule = name.endswith("_schedule") and value is None
+        if not unset_schedule and flat.get(f"{name}_schedule") is None:  # a schedule wins
             _nest(nested, setting_path(name), value)
-    for name, value in flat.items():  # plain values, unless a schedule replaced them
-        path = LEGACY_SETTINGS.get(name)
-        if path and not name.endswith("_schedule") and flat.get(f"{name}_schedule") is None:
-            _nest(nested, path, value)
     if nested.get("method") in NO_LATENT:
         nested["latent"] = "none"
     addons = nested.pop("addons", {})

@@ -61,14 +61,16 @@ def train(
     bar = TrainingProgress(
         cfg.interactions, start, enabled=progress, label=f"{cfg.task} {cfg.method} seed {cfg.seed}"
     )
-    watching = agent.watches_steps  # only add-ons that need each step as it is played
+    # only add-ons that need each step as it is played make the loop report steps
+    watch = None
+    if agent.watches_steps:
+        watch = lambda s, a, r, s2, _info: agent.observe_step(s, a, r, s2)  # noqa: E731
     try:
         for j in range(start, cfg.interactions):
             if j < cfg.agent.sac.random_interactions:
                 policy = lambda _o: agent.random_action()  # noqa: E731
             else:
                 policy = agent.act
-            watch = (lambda s, a, r, s2, _i: agent.observe_step(s, a, r, s2)) if watching else None
             played = play_interaction(env, obs, info, policy, watch)
             obs, info = played.next_obs, played.next_info
             stats = agent.observe_interaction(

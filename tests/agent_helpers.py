@@ -7,6 +7,7 @@ from typing import Any
 from sili_robots.addons import build_addons
 from sili_robots.agent import SILIAgent
 from sili_robots.build import make_run_config
+from sili_robots.migrations import LEGACY_SETTINGS
 from sili_robots.runs import RunConfig
 
 
@@ -31,3 +32,21 @@ def make_agent(
     cfg = run_config(method, latent, **settings)
     addons = build_addons(cfg.addons, cfg.agent)
     return SILIAgent(cfg.agent, obs_dim, act_dim, horizon, strategy_dim, seed=seed, addons=addons)
+
+
+def flat_layout(run: dict[str, Any]) -> dict[str, Any]:
+    """A run config (config.json's "run") as runs were saved before the settings were nested:
+    every agent and add-on setting under its earlier flat name, no "addons" section."""
+    names = {path: name for name, path in LEGACY_SETTINGS.items() if not name.endswith("_schedule")}
+    flat = {key: run["agent"][key] for key in ("method", "latent", "hidden", "matmul")}
+
+    def leaves(tree: dict[str, Any], prefix: str) -> None:
+        for key, value in tree.items():
+            if isinstance(value, dict):
+                leaves(value, f"{prefix}{key}.")
+            elif f"{prefix}{key}" in names:
+                flat[names[f"{prefix}{key}"]] = value
+
+    leaves({k: run["agent"][k] for k in ("sac", "model", "sili")}, "")
+    leaves(run["addons"], "addons.")
+    return {**{k: v for k, v in run.items() if k != "addons"}, "agent": flat}

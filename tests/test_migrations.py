@@ -8,34 +8,19 @@ import json
 
 import pandas as pd
 import torch
+from agent_helpers import flat_layout
 from fast_settings import FAST_ARGS
 
 from sili_robots.cli import main
-from sili_robots.migrations import LEGACY_SETTINGS
 
 SETTINGS = ["--set", "latent_filter=0.2", "--set", "stability_distance=posterior"]
 
 
 def _old_config(run: dict) -> dict:
-    """config.json's run in the flat layout of earlier versions."""
-    names = {path: name for name, path in LEGACY_SETTINGS.items() if not name.endswith("_schedule")}
-    agent = run["agent"]
-    flat = {key: agent[key] for key in ("method", "latent", "hidden", "matmul")}
-    for section in ("sac", "model", "sili"):
-        for key, value in agent[section].items():
-            if f"{section}.{key}" in names:
-                flat[names[f"{section}.{key}"]] = value
-
-    def leaves(tree: dict, prefix: str) -> None:
-        for key, value in tree.items():
-            if isinstance(value, dict):
-                leaves(value, f"{prefix}{key}.")
-            elif f"{prefix}{key}" in names:
-                flat[names[f"{prefix}{key}"]] = value
-
-    leaves(run["addons"], "addons.")
-    old = {k: v for k, v in run.items() if k not in ("addons", "task_id")}
-    return {**old, "task": "circle-3", "agent": flat}
+    """config.json's run in the flat layout of earlier versions, from before task versions."""
+    old = flat_layout(run)
+    del old["task_id"]
+    return {**old, "task": "circle-3"}
 
 
 def _old_checkpoint(state: dict) -> dict:

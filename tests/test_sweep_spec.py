@@ -3,11 +3,11 @@
 import json
 
 import pytest
+from agent_helpers import flat_layout
 
 from sili_robots.agent.matmul import default_matmul
 from sili_robots.agent.schedule import Schedule, value_at
 from sili_robots.errors import ConfigError
-from sili_robots.migrations import LEGACY_SETTINGS
 from sili_robots.sweep import SweepSpec, expand, parse_betas, parse_seeds, plan
 from sili_robots.sweep.state import check_existing, run_path
 
@@ -15,23 +15,6 @@ from sili_robots.sweep.state import check_existing, run_path
 def _spec(**kw):
     base = {"tasks": ["circle-3"], "methods": ["sili"], "seeds": [0], "interactions": 5}
     return SweepSpec(**{**base, **kw})
-
-
-def _flat_layout(run: dict) -> dict:
-    """A run config as runs were saved before the agent's settings were nested by section."""
-    names = {
-        path: name
-        for name, path in LEGACY_SETTINGS.items()
-        if not name.endswith("_schedule") and not path.startswith("addons.")
-    }
-    agent = run["agent"]
-    flat = {key: agent[key] for key in ("method", "latent", "hidden", "matmul")}
-    for section in ("sac", "model", "sili"):
-        for key, value in agent[section].items():
-            if f"{section}.{key}" in names:
-                flat[names[f"{section}.{key}"]] = value
-    old = {key: value for key, value in run.items() if key != "addons"}
-    return {**old, "agent": flat}
 
 
 def test_parse_seeds_ranges_lists_and_errors():
@@ -194,7 +177,7 @@ def test_a_sweep_records_its_kernel_library_and_older_records_resume_on_aten(tmp
     # its runs, whose config.json has no matmul either, are the same runs: resumable
     path = run_path(tmp_path, run.name)
     path.mkdir(parents=True)
-    on_disk = _flat_layout(run.config.to_dict())
+    on_disk = flat_layout(run.config.to_dict())
     del on_disk["agent"]["matmul"]
     (path / "config.json").write_text(json.dumps({"run": on_disk}))
     check_existing(tmp_path, run)

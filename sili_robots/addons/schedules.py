@@ -12,7 +12,8 @@ from collections.abc import Callable
 
 from sili_robots.agent.addon import AgentAddon
 from sili_robots.agent.agent import SILIAgent
-from sili_robots.agent.config import get_path, resolved, scheduled_paths
+from sili_robots.agent.config import get_path, scheduled_paths
+from sili_robots.agent.schedule import value_at
 
 
 def _set_model_lr(agent: SILIAgent, value: float) -> None:
@@ -42,6 +43,5 @@ class Schedules(AgentAddon):
         self.paths = scheduled_paths(agent.cfg)
 
     def before_update(self, interaction: int) -> None:
-        live = resolved(self.agent.cfg, interaction)
         for path in self.paths:
-            APPLY[path](self.agent, get_path(live, path))
+            APPLY[path](self.agent, value_at(get_path(self.agent.cfg, path), interaction))

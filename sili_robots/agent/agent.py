@@ -235,10 +235,10 @@ class SILIAgent:
             flags = np.concatenate([self.buffer.obs[j, 1:, -1], next_first[-1:]])
             return InteractionStats(-float(flags.sum()), -1, bool(flags.any()), extra)
         d = float(self.change_after(np.array([j]))[0])
+        discrete = self.cfg.latent == "discrete"
         changed = d > 0
-        if self.hooks["stability_distance"]:  # a probability: the categories tell the change
-            changed = j > 0 and bool(self.Z[j].argmax() != self.Z[j + 1].argmax())
-        discrete = self.model is not None and self.cfg.latent == "discrete"
+        if discrete:  # the category changed (d may be a probability, from an add-on)
+            changed = bool(j > 0 and self.Z[j].argmax() != self.Z[j + 1].argmax())
         category = int(self.Z[j + 1].argmax()) if discrete else -1
         return InteractionStats(-d, category, changed, extra)
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, fields
 from typing import Any, Literal
 
 from sili_robots.agent.matmul import default_matmul, onednn_available
-from sili_robots.agent.schedule import Schedule, Scheduled, span, value_at
+from sili_robots.agent.schedule import Schedule, Scheduled, span
 from sili_robots.errors import ConfigError
 
 Method = Literal["sili", "lili", "stable", "sac", "oracle", "smirl"]
@@ -282,18 +282,6 @@ def from_plain(cls: type, data: dict[str, Any], name: str) -> Any:
         raise ConfigError(f"unknown {name} settings {sorted(unknown)}; allowed: {sorted(known)}")
     hints = _hints(cls)
     return cls(**{k: convert(f"{name}.{k}", hints[k], v) for k, v in data.items()})
-
-
-def resolved(cfg: Any, interaction: int) -> Any:
-    """A copy of a config with every schedule replaced by its value at ``interaction``."""
-    changes = {}
-    for f in fields(cfg):
-        value = getattr(cfg, f.name)
-        if _is_section(value):
-            changes[f.name] = resolved(value, interaction)
-        elif isinstance(value, Schedule):
-            changes[f.name] = value_at(value, interaction)
-    return dataclasses.replace(cfg, **changes)
 
 
 def scheduled_paths(cfg: Any, prefix: str = "") -> list[str]:

@@ -20,7 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from sili_robots.agent.config import AgentConfig, get_path, set_path
+from sili_robots.agent.config import AgentConfig, set_path
 from sili_robots.errors import ConfigError
 
 #: the methods whose b is a setting (the others fix it)
@@ -115,14 +115,3 @@ def method_config(
         set_path(cfg, path, value)
     return cfg.validate()
 
-
-def fixed_value(method: str, path: str) -> Any:
-    """What ``method`` fixes ``path`` to (KeyError when it does not)."""
-    return PRESETS[method].fixed[path][0]
-
-
-def check_fixed(cfg: AgentConfig) -> None:
-    """A config (e.g. read back from disk) still honours its method's preset."""
-    for path, (want, why) in PRESETS[cfg.method].fixed.items():
-        if get_path(cfg, path) != want:
-            raise ConfigError(f"method {cfg.method!r} fixes {path} = {want!r} ({why})")
