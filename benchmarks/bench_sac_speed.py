@@ -92,9 +92,10 @@ def time_sb3(in_dim: int, act_dim: int, batch: int, updates: int) -> float:
     return updates / (time.perf_counter() - t)
 
 
-def time_train(interactions: int, precision: str, matmul: str) -> float:
-    """Seconds per learning interaction of ``sili train`` (SILI, Circle 3, the default agent),
-    from the run's own wall times after its random phase (5 interactions here)."""
+def time_train(interactions: int, precision: str, matmul: str, **extra: object) -> float:
+    """Seconds per learning interaction of ``sili train`` (SILI, Circle 3, the default agent
+    unless ``extra`` settings say otherwise), from the run's own wall times after its random
+    phase (5 interactions here)."""
     import pandas as pd
 
     from sili_robots.build import make_run_config
@@ -102,6 +103,7 @@ def time_train(interactions: int, precision: str, matmul: str) -> float:
 
     out = Path(tempfile.mkdtemp())
     settings = {"sac.random_interactions": 5, "sac.precision": precision, "matmul": matmul}
+    settings.update(extra)
     cfg = make_run_config("circle-3", "sili", 0, interactions, settings=settings)
     train(cfg, out, progress=False)
     wall = pd.read_csv(out / "metrics.csv")["wall_time"].to_numpy()
@@ -138,12 +140,23 @@ def matmul_only() -> None:
 
 
 def main() -> None:
+    from sili_robots.agent.matmul import default_matmul
+    from sili_robots.commands.common import parse_settings
+
     p = argparse.ArgumentParser()
     p.add_argument("--updates", type=int, default=300)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--interactions", type=int, default=30)
     p.add_argument("--rounds", type=int, default=3, help="alternating rounds; medians reported")
     p.add_argument("--matmul-only", action="store_true", help="time the products alone")
+    p.add_argument(
+        "--arm",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE[;KEY=VALUE]",
+        help="also time sili train with these agent settings (float32 products on the default "
+        "library), e.g. model.updates_per_interaction=5; repeatable",
+    )
     args = p.parse_args()
     torch.set_num_threads(args.threads)
     if args.matmul_only:
@@ -169,8 +182,12 @@ def main() -> None:
         )
     print(f"(medians of {args.rounds} alternating rounds)")
     sb3_50 = 50 / sb3  # stable-baselines3's time for one interaction's 50 SAC updates
-    for label, (precision, matmul) in VARIANTS.items():
-        seconds = time_train(args.interactions, precision, matmul)
+    runs = [(label, precision, matmul, {}) for label, (precision, matmul) in VARIANTS.items()]
+    runs = [r for r in runs if r[1] == "float32"]  # bfloat16 is ~10x slower: not worth a run
+    for arm in args.arm:
+        runs.append((arm, "float32", default_matmul(), parse_settings(arm.split(";"))))
+    for label, precision, matmul, extra in runs:
+        seconds = time_train(args.interactions, precision, matmul, **extra)
         print(
             f"sili train, SILI on circle-3, {label:16s}: {seconds:.3f} s per learning "
             f"interaction, {seconds / sb3_50:.2f}x stable-baselines3's 50 updates ({sb3_50:.3f} s)"

@@ -14,7 +14,19 @@ from collections.abc import Sequence
 from sili_robots.errors import ConfigError
 
 #: sub-commands, in the order ``sili --help`` lists them
-COMMANDS = ("rollout", "bounds", "train", "eval", "preview", "sweep", "plot")
+COMMANDS = (
+    "rollout",
+    "bounds",
+    "train",
+    "eval",
+    "preview",
+    "sweep",
+    "grid",
+    "collect",
+    "runs",
+    "claims",
+    "plot",
+)
 
 
 def _available_commands() -> list:

@@ -75,7 +75,7 @@ CURVE_METRICS = (
     ("stability_reward", "stability reward\n(agent's, per interaction)"),
 )
 FINAL_METRICS = (("task_reward", "final task reward"), ("true_stability", "final true stability"))
-VARIANT_KEYS = ("method", "config_beta", "controller", "latent")
+VARIANT_KEYS = ("method", "profile", "config_beta", "controller", "latent")
 #: the panels that show reference bounds, and the bound each one reads
 BOUND_METRICS = {"task_reward": "task_reward", "true_stability": "stability"}
 #: (colour, dash pattern) of each bound kind's line
@@ -185,16 +185,20 @@ def _clusters(points: list[tuple[float, str]], gap: float) -> list[list[tuple[fl
 
 
 def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFrame:
-    """The sweep's tidy table, rebuilt from its run directories (and written to results.csv)."""
-    from sili_robots.sweep.results import write_tables
+    """The tidy table of a sweep (rebuilt from its run directories and written to results.csv)
+    or of a results collection (``sili collect``: read only, nothing written)."""
+    from sili_robots.sweep.results import results_table, run_dirs, write_tables
     from sili_robots.sweep.state import SWEEP_FILE
 
-    if not (Path(sweep_dir) / SWEEP_FILE).is_file():
+    if (Path(sweep_dir) / SWEEP_FILE).is_file():
+        df, _ = write_tables(sweep_dir)
+    elif run_dirs(sweep_dir):
+        df = results_table(sweep_dir)
+    else:
         raise ConfigError(
-            f"{sweep_dir} is not a sweep directory (no {SWEEP_FILE}); give a directory written "
-            "by `sili sweep --out`"
+            f"{sweep_dir} holds no runs (no {SWEEP_FILE} and no runs/*/config.json); give a "
+            "directory written by `sili sweep --out` or `sili collect`"
         )
-    df, _ = write_tables(sweep_dir)
     if not include_unfinished:
         df = df[df["finished"].astype(bool)]
     if df.empty:
@@ -209,7 +213,9 @@ def variant_labels(df: pd.DataFrame) -> pd.Series:
     """A label per row naming its method, plus b / controller / latent where the rows of the
     same method differ in them (e.g. ``SILI b=0.2``, ``SAC [osc]``)."""
     labels = pd.Series([METHOD_NAMES.get(m, m) for m in df["method"]], index=df.index)
-    for _, rows in df.groupby("method"):
+    profile = df["profile"] if "profile" in df else pd.Series("package", index=df.index)
+    labels += profile.map(lambda p: "" if p == "package" else f" ({p})")
+    for _, rows in df.groupby(["method", profile]):
         idx = rows.index
         if rows["config_beta"].nunique() > 1:
             labels[idx] += rows["config_beta"].map(lambda b: f" b={b:g}")

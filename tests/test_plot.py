@@ -148,6 +148,6 @@ def test_unfinished_runs_are_left_out_unless_asked(sweep_dir, tmp_path):
 
 def test_plot_of_a_non_sweep_exits_2(tmp_path, capsys):
     assert main(["plot", str(tmp_path)]) == 2
-    assert "is not a sweep directory" in capsys.readouterr().err
+    assert "holds no runs" in capsys.readouterr().err
     assert main(["plot", str(tmp_path), "--formats", "gif"]) == 2
     assert "unknown figure format" in capsys.readouterr().err

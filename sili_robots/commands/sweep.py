@@ -7,7 +7,7 @@ import json
 import os
 from pathlib import Path
 
-from sili_robots.agent import LATENT_KINDS
+from sili_robots.agent import LATENT_KINDS, PROFILES
 from sili_robots.commands.common import (
     add_override_args,
     add_schedule_args,
@@ -51,6 +51,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="controllers to sweep on the tasks that take one (e.g. sawyer-reach: mink,osc)",
     )
     p.add_argument("--latent", choices=LATENT_KINDS, help="latent kind (default: each task's)")
+    p.add_argument(
+        "--profile",
+        choices=PROFILES,
+        default="package",
+        help="settings every run starts from: the package's defaults or the paper's appendix "
+        "(run names get -paper)",
+    )
     p.add_argument("--interactions", type=positive_int, default=1000)
     p.add_argument("--checkpoint-every", type=positive_int, default=50)
     add_override_args(p, scope=" for every run")
@@ -101,6 +108,7 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
         },
         controllers=parse_list(args.controller) if args.controller is not None else None,
         latent=args.latent,
+        profile=args.profile,
         agent_overrides=parse_settings(args.agent_set),
         env_kwargs=parse_env_kwargs(args.env_kwarg, "--env-kwarg"),
         checkpoint_every=args.checkpoint_every,

@@ -1,7 +1,7 @@
 """The sweep's tables, built from its run directories (the single source of truth).
 
 - ``results.csv``: tidy, one row per run per interaction: the run's identity (``run``, ``task``,
-  ``task_id`` (the task version, a gymnasium id), ``method``, ``latent``, ``seed``,
+  ``task_id`` (the task version, a gymnasium id), ``method``, ``profile``, ``latent``, ``seed``,
   ``controller``, ``config_beta``) + every ``metrics.csv``
   column + ``true_stability`` (1 - strategy_changed) + ``finished``.
 - ``runs.csv``: one row per run: status (done / failed / incomplete / not started), interactions
@@ -21,7 +21,17 @@ from sili_robots.migrations import migrate_run
 from sili_robots.runs import CONFIG, METRIC_COLUMNS, METRICS, SUMMARY, recorded_task_id
 from sili_robots.sweep.state import ERROR_FILE, RESULTS, RUNS_DIR, RUNS_TABLE
 
-ID_COLUMNS = ("run", "task", "task_id", "method", "latent", "seed", "controller", "config_beta")
+ID_COLUMNS = (
+    "run",
+    "task",
+    "task_id",
+    "method",
+    "profile",
+    "latent",
+    "seed",
+    "controller",
+    "config_beta",
+)
 RESULT_COLUMNS = (*ID_COLUMNS, *METRIC_COLUMNS, "true_stability", "finished")
 RUN_COLUMNS = (
     *ID_COLUMNS,
@@ -52,6 +62,7 @@ def _identity(run_dir: Path) -> tuple[dict, dict]:
         "task": cfg["task"],
         "task_id": recorded_task_id(cfg),
         "method": cfg["method"],
+        "profile": agent.get("profile", "package"),
         "latent": agent["latent"],
         "seed": int(cfg["seed"]),
         "controller": cfg.get("env_kwargs", {}).get("controller", ""),
@@ -60,13 +71,22 @@ def _identity(run_dir: Path) -> tuple[dict, dict]:
     return ident, cfg
 
 
+def metrics_file(run_dir: Path) -> Path | None:
+    """A run's ``metrics.csv``, or the gzipped copy a results collection keeps (None: neither)."""
+    for path in (run_dir / METRICS, run_dir / f"{METRICS}.gz"):
+        if path.is_file():
+            return path
+    return None
+
+
 def results_table(sweep_dir: Path) -> pd.DataFrame:
     """All runs' per-interaction rows in one tidy frame (columns ``RESULT_COLUMNS``)."""
     frames = []
     for run_dir in run_dirs(sweep_dir):
-        if not (run_dir / METRICS).is_file():
+        path = metrics_file(run_dir)
+        if path is None:
             continue
-        df = pd.read_csv(run_dir / METRICS)
+        df = pd.read_csv(path)
         if df.empty:
             continue
         ident, _ = _identity(run_dir)
@@ -86,9 +106,9 @@ def runs_table(sweep_dir: Path) -> pd.DataFrame:
     for run_dir in run_dirs(sweep_dir):
         ident, cfg = _identity(run_dir)
         summary_path, error_path = run_dir / SUMMARY, run_dir / ERROR_FILE
-        logged = 0
-        if (run_dir / METRICS).is_file():
-            logged = len(pd.read_csv(run_dir / METRICS, usecols=["interaction"]))
+        logged, path = 0, metrics_file(run_dir)
+        if path is not None:
+            logged = len(pd.read_csv(path, usecols=["interaction"]))
         row = {**ident, "interactions": int(cfg["interactions"]), "interactions_logged": logged}
         if summary_path.is_file():
             summary = json.loads(summary_path.read_text())

@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass, field, replace
 from functools import cache
 from typing import Any
 
-from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, Schedule
+from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, PROFILES, Schedule
 from sili_robots.agent.matmul import default_matmul
 from sili_robots.build import make_run_config
 from sili_robots.errors import ConfigError, check_choice
@@ -43,6 +43,8 @@ class SweepSpec:
     lr_schedule: list[tuple[int, float]] | None = None
     controllers: list[str] | None = None  # None: each task's default
     latent: str | None = None  # None: each task's default latent kind
+    #: the settings every run starts from: ``package`` or ``paper`` (agent/methods.py)
+    profile: str = "package"
     agent_overrides: dict[str, Any] = field(default_factory=dict)
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     checkpoint_every: int = 50
@@ -148,11 +150,13 @@ def run_name(
     beta: float | str | None = None,
     controller: str | None = None,
     latent: str | None = None,
+    profile: str = "package",
 ) -> str:
-    """``task[-controller]__method[-latent][-bB]__sSEED``, e.g. ``circle-3__sili-b0.5__s0``
-    (``-bschedule`` when b follows a schedule)."""
+    """``task[-controller]__method[-profile][-latent][-bB]__sSEED``, e.g.
+    ``circle-3__sili-b0.5__s0`` (``-bschedule`` when b follows a schedule; ``-paper`` in the
+    paper profile)."""
     head = task if controller is None else f"{task}-{controller}"
-    mid = method
+    mid = method if profile == "package" else f"{method}-{profile}"
     if latent is not None:
         mid += f"-{latent}"
     if beta is not None:
@@ -196,6 +200,7 @@ def validate(spec: SweepSpec) -> None:
         task_spec(task)
     for method in spec.methods:
         check_choice("method", method, METHODS)
+    check_choice("profile", spec.profile, PROFILES)
     if spec.latent is not None:
         check_choice("latent kind", spec.latent, LATENT_KINDS)
     if spec.interactions < 1:
@@ -258,6 +263,7 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                         tspec.name,
                         method,
                         latent=spec.latent if method in learned else None,
+                        profile=spec.profile,
                         settings=settings,
                         env_kwargs=env_kwargs,
                     )
@@ -271,6 +277,7 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                             beta=label if method in BETA_METHODS else None,
                             controller=controller,
                             latent=None if latent == tspec.default_latent else latent,
+                            profile=spec.profile,
                         )
                         cfg = replace(
                             base,

@@ -1,0 +1,274 @@
+"""The paper's claims, decided from a results collection of the paper grid (``sili claims``).
+
+Every number is a run's mean over its last ``WINDOW`` interactions, then the mean over seeds.
+Task rewards are compared as a *score*: 0 = standing still, 1 = the task's scripted oracle (its
+reference bounds, ``sili bounds``), so one margin means the same on every task. A claim is
+decided only from runs at the grid's full budget for their block (``paper_grid.py``); with any
+of its runs missing it is "not measured yet" and says how many it has.
+
+Rules (the margins are the table's, fixed before the grid ran):
+
+- *SILI comparable to Oracle*: SILI's score at least Oracle's - 0.1 holds; at least - 0.25 holds
+  in part.
+- *SILI above LILI, SAC and SMiRL*: SILI's score beats a baseline's by more than 0.05, each
+  compared over the same interactions (SMiRL runs half the budget: SILI's window at the same
+  point). All three: holds; one or two: in part.
+- *Stable stabilizes but ignores the task*: Stable's true stability >= 0.9 and its score below
+  SILI's by more than 0.1: holds; one of the two: in part.
+- *Driving: only SILI avoids all collisions*: collision rate (the share of interactions with a
+  collision, -task reward) at most 1% in every SILI seed and above 1% for every other method:
+  holds; SILI has the lowest rate: in part.
+- *Speaker-Listener: SILI stabilizes by about interaction 250 and beats the baselines*: every
+  seed's first 50-interaction window of true stability >= 0.9 starts by 350, and SILI is above
+  LILI, SAC and SMiRL: holds; one of the two: in part.
+- *b sweet spot 0.4-0.8* (Circle 3, 5 seeds per b, 1,000 interactions): the b with the best
+  score lies in [0.4, 0.8] and beats b = 0 and b = 1 by more than 0.05: holds; the best b in
+  the range alone: in part.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from sili_robots.bounds import stored_bounds
+from sili_robots.paper_grid import SWEEP_BETAS, TASKS, Block, block
+
+WINDOW = 100
+COMPARABLE, COMPARABLE_PART = 0.1, 0.25
+ABOVE = 0.05
+STABLE = 0.9
+STABLE_BY = 350
+NO_COLLISIONS = 0.01
+SWEET_SPOT = (0.4, 0.8)
+
+HOLDS, PART, NO = "holds", "holds in part", "does not hold"
+
+
+@dataclass(frozen=True)
+class Claim:
+    claim: str
+    task: str
+    measured: str
+    verdict: str
+
+
+def run_finals(df: pd.DataFrame, upto: dict[str, int] | None = None) -> pd.DataFrame:
+    """One row per run: identity, interactions logged, and its final-window task reward, true
+    stability and score (``upto``: run -> the interaction count its window ends at)."""
+    rows = []
+    for run, g in df.groupby("run", sort=False):
+        g = g.sort_values("interaction")
+        n = len(g) if upto is None else min(len(g), upto.get(run, len(g)))
+        tail = g.iloc[max(n - WINDOW, 0) : n]
+        first = g.iloc[0]
+        reward = float(tail["task_reward"].mean())
+        rows.append(
+            {
+                "run": run,
+                "task": first["task"],
+                "method": first["method"],
+                "profile": first.get("profile", "package"),
+                "config_beta": float(first["config_beta"]),
+                "seed": int(first["seed"]),
+                "logged": len(g),
+                "task_reward": reward,
+                "stability": float(tail["true_stability"].mean()),
+                "score": score(reward, str(first["task_id"])),
+                "first_stable": first_stable(g["true_stability"].to_numpy()),
+            }
+        )
+    return pd.DataFrame(rows)
+
+
+def score(task_reward: float, task_id: str) -> float:
+    """0 = standing still, 1 = the scripted oracle (the task version's stored bounds)."""
+    b = stored_bounds(task_id)
+    if "still" not in b or "oracle" not in b:
+        return float("nan")
+    still, best = b["still"]["task_reward"], b["oracle"]["task_reward"]
+    return (task_reward - still) / (best - still)
+
+
+def first_stable(stability: np.ndarray, window: int = 50) -> int | None:
+    """First interaction whose ``window``-interaction trailing window has stability >= 0.9."""
+    if len(stability) < window:
+        return None
+    means = np.convolve(stability, np.ones(window) / window, mode="valid")
+    hits = np.flatnonzero(means >= STABLE)
+    return int(hits[0]) if len(hits) else None
+
+
+def _block_runs(finals: pd.DataFrame, b: Block, task: str, method: str) -> pd.DataFrame:
+    rows = finals[
+        (finals.task == task)
+        & (finals.method == method)
+        & (finals.profile == b.profile)
+        & (finals.logged == b.budget(task))
+    ]
+    return rows.sort_values("seed")
+
+
+def _mean(rows: pd.DataFrame, col: str) -> float:
+    return float(rows[col].mean())
+
+
+def _missing(have: dict[str, pd.DataFrame], want: dict[str, int]) -> str | None:
+    parts = [f"{m} {len(have[m])}/{n}" for m, n in want.items() if len(have[m]) < n]
+    return None if not parts else "not measured yet (runs: " + ", ".join(parts) + ")"
+
+
+def decide(finals: pd.DataFrame, df: pd.DataFrame) -> list[Claim]:
+    """Every claim of the paper, in the table's order."""
+    grid, half = block("sili-oracle"), block("stable-smirl")
+    base = block("lili-sac")
+    claims: list[Claim] = []
+    for task in TASKS:
+        sili = _block_runs(finals, grid, task, "sili")
+        oracle = _block_runs(finals, grid, task, "oracle")
+        lili, sac = (_block_runs(finals, base, task, m) for m in ("lili", "sac"))
+        stable, smirl = (_block_runs(finals, half, task, m) for m in ("stable", "smirl"))
+        n = len(grid.seeds)
+        claims.append(_comparable(task, sili, oracle, n))
+        claims.append(_above(task, sili, {"LILI": lili, "SAC": sac, "SMiRL": smirl}, df, n))
+        claims.append(_stable(task, sili, stable, df, n))
+    claims.append(_driving(finals, grid, base, half))
+    claims.append(_speaker_listener(finals, df, grid, base, half))
+    claims.append(_sweet_spot(finals))
+    return claims
+
+
+def _comparable(task: str, sili: pd.DataFrame, oracle: pd.DataFrame, n: int) -> Claim:
+    name = "SILI's task reward comparable to Oracle's"
+    missing = _missing({"SILI": sili, "Oracle": oracle}, {"SILI": n, "Oracle": n})
+    if missing:
+        return Claim(name, task, "", missing)
+    s, o = _mean(sili, "score"), _mean(oracle, "score")
+    measured = (
+        f"score SILI {s:.2f} (reward {_mean(sili, 'task_reward'):.2f}, stability "
+        f"{_mean(sili, 'stability'):.2f}), Oracle {o:.2f} ({_mean(oracle, 'task_reward'):.2f})"
+    )
+    verdict = HOLDS if s >= o - COMPARABLE else PART if s >= o - COMPARABLE_PART else NO
+    return Claim(name, task, measured, verdict)
+
+
+def _same_window(sili: pd.DataFrame, other: pd.DataFrame, df: pd.DataFrame) -> float:
+    """SILI's mean score over the window where ``other``'s runs end (they may be shorter)."""
+    end = int(other["logged"].min())
+    rows = df[df.run.isin(sili.run)]
+    return _mean(run_finals(rows, {r: end for r in sili.run}), "score")
+
+
+def _above(
+    task: str,
+    sili: pd.DataFrame,
+    baselines: dict[str, pd.DataFrame],
+    df: pd.DataFrame,
+    n: int,
+) -> Claim:
+    name = "SILI above LILI, SAC and SMiRL"
+    missing = _missing({"SILI": sili, **baselines}, {k: n for k in ("SILI", *baselines)})
+    if missing:
+        return Claim(name, task, "", missing)
+    above, parts = 0, []
+    for label, rows in baselines.items():
+        s, b = _same_window(sili, rows, df), _mean(rows, "score")
+        above += s - b > ABOVE
+        parts.append(f"{label} {b:.2f} (SILI {s:.2f})")
+    verdict = HOLDS if above == len(baselines) else PART if above else NO
+    return Claim(name, task, "score " + ", ".join(parts), verdict)
+
+
+def _stable(task: str, sili: pd.DataFrame, stable: pd.DataFrame, df: pd.DataFrame, n: int) -> Claim:
+    name = "Stable stabilizes but ignores the task"
+    missing = _missing({"Stable": stable, "SILI": sili}, {"Stable": n, "SILI": n})
+    if missing:
+        return Claim(name, task, "", missing)
+    st, sc, s = _mean(stable, "stability"), _mean(stable, "score"), _same_window(sili, stable, df)
+    ok = (st >= STABLE) + (sc < s - COMPARABLE)
+    measured = f"Stable: stability {st:.2f}, score {sc:.2f} (SILI {s:.2f})"
+    return Claim(name, task, measured, HOLDS if ok == 2 else PART if ok else NO)
+
+
+def _driving(finals: pd.DataFrame, grid: Block, base: Block, half: Block) -> Claim:
+    name, task = "only SILI avoids all collisions", "driving"
+    runs = {
+        "SILI": _block_runs(finals, grid, task, "sili"),
+        "Oracle": _block_runs(finals, grid, task, "oracle"),
+        "LILI": _block_runs(finals, base, task, "lili"),
+        "SAC": _block_runs(finals, base, task, "sac"),
+        "Stable": _block_runs(finals, half, task, "stable"),
+        "SMiRL": _block_runs(finals, half, task, "smirl"),
+    }
+    missing = _missing(runs, {k: len(grid.seeds) for k in runs})
+    if missing:
+        return Claim(name, task, "", missing)
+    rates = {k: 0.0 - _mean(v, "task_reward") for k, v in runs.items()}
+    sili_worst = float((-runs["SILI"]["task_reward"]).max())
+    others = [r for k, r in rates.items() if k != "SILI"]
+    measured = "collision rate " + ", ".join(f"{k} {r:.0%}" for k, r in rates.items())
+    if sili_worst <= NO_COLLISIONS and min(others) > NO_COLLISIONS:
+        verdict = HOLDS
+    else:
+        verdict = PART if rates["SILI"] < min(others) else NO
+    return Claim(name, task, measured, verdict)
+
+
+def _speaker_listener(
+    finals: pd.DataFrame, df: pd.DataFrame, grid: Block, base: Block, half: Block
+) -> Claim:
+    name = "SILI stabilizes by about interaction 250 and beats the baselines"
+    task = "speaker-listener"
+    sili = _block_runs(finals, grid, task, "sili")
+    baselines = {
+        "LILI": _block_runs(finals, base, task, "lili"),
+        "SAC": _block_runs(finals, base, task, "sac"),
+        "SMiRL": _block_runs(finals, half, task, "smirl"),
+    }
+    above = _above(task, sili, baselines, df, len(grid.seeds))
+    if above.verdict.startswith("not measured"):
+        return Claim(name, task, "", above.verdict)
+    firsts = list(sili["first_stable"])
+    early = all(f is not None and f <= STABLE_BY for f in firsts)
+    ok = early + (above.verdict == HOLDS)
+    firsts_text = ", ".join("never" if f is None else str(f) for f in firsts)
+    measured = f"first stable 50-window at {firsts_text}; {above.measured}"
+    return Claim(name, task, measured, HOLDS if ok == 2 else PART if ok else NO)
+
+
+def _sweet_spot(finals: pd.DataFrame) -> Claim:
+    name, task = "b sweet spot between 0.4 and 0.8", "circle-3"
+    b = block("b-sweep")
+    rows = _block_runs(finals, b, task, "sili")
+    per_b = {beta: rows[np.isclose(rows.config_beta, beta)] for beta in SWEEP_BETAS}
+    missing = _missing(
+        {f"b={k:g}": v for k, v in per_b.items()}, {f"b={k:g}": len(b.seeds) for k in per_b}
+    )
+    if missing:
+        return Claim(name, task, "", missing)
+    scores = {beta: _mean(r, "score") for beta, r in per_b.items()}
+    best = max(scores, key=scores.__getitem__)
+    in_range = SWEET_SPOT[0] <= best <= SWEET_SPOT[1]
+    ends = min(SWEEP_BETAS), max(SWEEP_BETAS)
+    separated = all(scores[best] - scores[e] > ABOVE for e in ends)
+    measured = "score " + ", ".join(
+        f"b={k:g} {v:.2f} (stability {_mean(per_b[k], 'stability'):.2f})" for k, v in scores.items()
+    )
+    verdict = HOLDS if in_range and separated else PART if in_range else NO
+    return Claim(name, task, measured, verdict)
+
+
+def claims_table(df: pd.DataFrame) -> list[Claim]:
+    """The claims from a results table (``plotting.load_results`` of a collection)."""
+    return decide(run_finals(df), df)
+
+
+def markdown(claims: list[Claim]) -> str:
+    lines = ["| claim | task | measured (last 100 interactions, mean of seeds) | verdict |"]
+    lines.append("|---|---|---|---|")
+    for c in claims:
+        verdict = f"**{c.verdict}**" if c.verdict in (HOLDS, NO, PART) else c.verdict
+        lines.append(f"| {c.claim} | {c.task} | {c.measured} | {verdict} |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,51 @@
+"""``sili claims DIR``: the paper's claims decided from a results collection of the grid."""
+
+from __future__ import annotations
+
+import argparse
+import re
+from pathlib import Path
+
+from sili_robots.errors import ConfigError
+
+#: the README block ``--write`` replaces
+START, END = "<!-- claims:start -->", "<!-- claims:end -->"
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "claims",
+        help="the paper's claims, decided from the grid's results (a markdown table)",
+        description="Decides each claim of the paper (rules in sili_robots/claims.py) from the "
+        "finished runs in DIR (`sili grid` / `sili collect`) and prints a markdown table.",
+    )
+    p.add_argument("directory", type=Path, metavar="DIR")
+    p.add_argument(
+        "--write",
+        type=Path,
+        metavar="FILE",
+        help=f"also replace the table between {START} and {END} in FILE (e.g. README.md)",
+    )
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from sili_robots.claims import claims_table, markdown
+    from sili_robots.plotting import load_results
+
+    table = markdown(claims_table(load_results(args.directory)))
+    print(table, end="")
+    if args.write is not None:
+        write_block(args.write, table)
+    return 0
+
+
+def write_block(path: Path, table: str) -> None:
+    """Replace the text between the claims markers of ``path`` with ``table``."""
+    if not path.is_file():
+        raise ConfigError(f"--write {path}: no such file")
+    text = path.read_text()
+    pattern = re.compile(re.escape(START) + ".*?" + re.escape(END), re.S)
+    if not pattern.search(text):
+        raise ConfigError(f"--write {path}: it has no {START} ... {END} block to replace")
+    path.write_text(pattern.sub(lambda _: f"{START}\n{table}{END}", text, count=1))

@@ -1,0 +1,37 @@
+"""``sili collect SOURCE... --into DIR``: keep the finished runs of sweeps in a small collection."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "collect",
+        help="copy the finished runs of sweeps into a small results collection (no checkpoints)",
+        description="Copies every finished run of each SOURCE (a sweep or another collection) "
+        "into DIR/runs/NAME/ as config.json, summary.json and metrics.csv.gz: what `sili plot`, "
+        "`sili runs` and `sili claims` read, small enough to commit. Unfinished runs are "
+        "skipped; a run already collected is left as is.",
+    )
+    p.add_argument("sources", type=Path, nargs="+", metavar="SOURCE")
+    p.add_argument("--into", type=Path, required=True, metavar="DIR", help="collection directory")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from sili_robots.sweep.collect import collect
+
+    report = collect(args.sources, args.into)
+    print(
+        json.dumps(
+            {
+                "added": report.added,
+                "unchanged": len(report.unchanged),
+                "unfinished": report.unfinished,
+            }
+        )
+    )
+    return 0

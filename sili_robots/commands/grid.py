@@ -1,0 +1,73 @@
+"""``sili grid``: run the paper's experiment grid block by block, resumably, collecting results."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from pathlib import Path
+
+from sili_robots.commands.common import positive_int
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    from sili_robots.paper_grid import BLOCKS, TASKS
+
+    p = sub.add_parser(
+        "grid",
+        help="the paper's experiment grid: run it (resumably) and collect its finished runs",
+        description="Runs the grid's blocks in order (each block on each task is one sweep "
+        "invocation into SWEEP_DIR, so an interrupted grid resumes where it stopped) and after "
+        "each invocation copies the finished runs into the collection (`sili collect`). "
+        f"Blocks: {', '.join(b.name for b in BLOCKS)}.",
+    )
+    p.add_argument("--blocks", help="comma-separated blocks to run (default: all, in order)")
+    p.add_argument("--tasks", help=f"comma-separated tasks (default: all of {', '.join(TASKS)})")
+    p.add_argument(
+        "--sweep-dir",
+        type=Path,
+        default=Path("sweeps/paper-grid"),
+        help="working sweep directory with checkpoints (default: sweeps/paper-grid)",
+    )
+    p.add_argument(
+        "--into",
+        type=Path,
+        default=Path("results/paper-grid"),
+        help="results collection (default: results/paper-grid)",
+    )
+    p.add_argument("--workers", type=positive_int, help="parallel runs (default: the CPU count)")
+    p.add_argument("--dry-run", action="store_true", help="list the invocations and runs only")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from sili_robots.errors import ConfigError
+    from sili_robots.paper_grid import BLOCKS, TASKS, block
+    from sili_robots.sweep import LocalBackend, plan, run_sweep
+    from sili_robots.sweep.collect import collect
+    from sili_robots.sweep.spec import parse_list
+    from sili_robots.sweep.state import run_path, run_state
+
+    blocks = [block(b) for b in parse_list(args.blocks)] if args.blocks else list(BLOCKS)
+    tasks = tuple(parse_list(args.tasks)) if args.tasks else TASKS
+    bad = [t for t in tasks if t not in TASKS]
+    if bad:
+        raise ConfigError(f"unknown grid task {bad[0]!r}; allowed: {', '.join(TASKS)}")
+    failed: list[str] = []
+    for b in blocks:
+        for spec in b.specs(tasks):
+            label = f"{b.name} on {spec.tasks[0]} ({spec.interactions} interactions)"
+            if args.dry_run:
+                runs = plan([spec])
+                states = [run_state(run_path(args.sweep_dir, r.name)) for r in runs]
+                print(f"{label}: {len(runs)} runs, {states.count('done')} done")
+                continue
+            print(f"grid: {label}", flush=True)
+            backend = LocalBackend(args.workers or os.cpu_count() or 1)
+            report = run_sweep(spec, args.sweep_dir, backend, progress=False)
+            failed += list(report.failed)
+            added = collect([args.sweep_dir], args.into).added
+            print(json.dumps({"block": b.name, "task": spec.tasks[0], "collected": added}))
+    if failed:
+        print(json.dumps({"failed": failed}))
+    return 1 if failed else 0

@@ -1,0 +1,34 @@
+"""``sili runs DIR``: what a sweep or results collection holds, run counts and interactions."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from sili_robots.errors import ConfigError
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "runs",
+        help="count the runs of a sweep or collection: per task and method, and in total",
+        description="One line per task and method variant: runs done (and unfinished), "
+        "seeds, interactions per run, mean final task reward and true stability, CPU time; "
+        "then the totals.",
+    )
+    p.add_argument("directory", type=Path, metavar="DIR")
+    p.add_argument("--csv", action="store_true", help="the per-variant table as CSV")
+    p.set_defaults(run=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from sili_robots.sweep.inventory import inventory, totals_line
+    from sili_robots.sweep.results import run_dirs
+
+    if not run_dirs(args.directory):
+        raise ConfigError(f"{args.directory} holds no runs (no runs/*/config.json)")
+    table = inventory(args.directory)
+    print(table.to_csv(index=False) if args.csv else table.to_string(index=False))
+    if not args.csv:
+        print(totals_line(table))
+    return 0

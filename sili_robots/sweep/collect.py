@@ -1,0 +1,84 @@
+"""Results collections: the finished runs of one or more sweeps, small enough to keep in git.
+
+A collection has a sweep's layout (``DIR/runs/NAME/``) with, per finished run, only what the
+tables and figures need: ``config.json``, ``summary.json`` and ``metrics.csv.gz``; no
+checkpoints, TensorBoard files or uncompressed tables. ``sili plot``, ``sili runs`` and ``sili
+claims`` read a collection as they read a sweep, so every figure and table is rebuilt from it
+without retraining.
+
+The gzip stream is written with no timestamp and the metrics with 7 significant digits (the
+float32 the agent computes), so collecting the same run twice gives the same bytes.
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from sili_robots.errors import ConfigError
+from sili_robots.runs import CONFIG, METRICS, SUMMARY
+from sili_robots.sweep.results import metrics_file, run_dirs
+from sili_robots.sweep.state import RUNS_DIR
+
+COMPRESSED_METRICS = f"{METRICS}.gz"
+
+
+@dataclass
+class CollectReport:
+    """Run names by what ``collect`` did with them."""
+
+    added: list[str] = field(default_factory=list)
+    unchanged: list[str] = field(default_factory=list)
+    unfinished: list[str] = field(default_factory=list)
+
+
+def compressed_metrics(source: Path) -> bytes:
+    """The run's metrics as reproducible gzipped CSV bytes."""
+    df = pd.read_csv(source)
+    text = df.to_csv(index=False, float_format="%.7g")
+    return gzip.compress(text.encode(), compresslevel=9, mtime=0)
+
+
+def collect(sources: list[Path], dest: Path) -> CollectReport:
+    """Copy every finished run of the ``sources`` (sweeps or collections) into ``dest``.
+
+    A run already in ``dest`` with a different config is an error (two sweeps gave one name to
+    different runs), so a collection never mixes two versions of a run."""
+    report = CollectReport()
+    for source in sources:
+        if not run_dirs(source):
+            raise ConfigError(f"{source} holds no runs (no runs/*/config.json)")
+        for run_dir in run_dirs(source):
+            name = run_dir.name
+            metrics = metrics_file(run_dir)
+            if not (run_dir / SUMMARY).is_file() or metrics is None:
+                report.unfinished.append(name)
+                continue
+            target = Path(dest) / RUNS_DIR / name
+            new_config = json.loads((run_dir / CONFIG).read_text())
+            if (target / CONFIG).is_file():
+                old_config = json.loads((target / CONFIG).read_text())
+                if old_config != new_config:
+                    raise ConfigError(
+                        f"{target} holds a different run named {name} (its config.json differs "
+                        f"from {run_dir}'s); remove one of them first"
+                    )
+                if (target / SUMMARY).read_bytes() == (run_dir / SUMMARY).read_bytes():
+                    report.unchanged.append(name)
+                    continue
+            target.mkdir(parents=True, exist_ok=True)
+            for name_ in (CONFIG, SUMMARY):
+                shutil.copyfile(run_dir / name_, target / name_)
+            data = (
+                metrics.read_bytes()
+                if metrics.name == COMPRESSED_METRICS
+                else compressed_metrics(metrics)
+            )
+            (target / COMPRESSED_METRICS).write_bytes(data)
+            report.added.append(name)
+    return report

@@ -1,0 +1,262 @@
+"""The paper grid's machinery: a sweep's profile axis, results collections (``sili collect``),
+``sili runs``, ``sili grid`` and ``sili claims``, on real (tiny) training runs."""
+
+import gzip
+import json
+import shutil
+
+import numpy as np
+import pandas as pd
+import pytest
+from fast_settings import FAST_AGENT as FAST
+
+from sili_robots.claims import HOLDS, NO, PART, claims_table, markdown, run_finals, score
+from sili_robots.cli import main
+from sili_robots.commands.claims import END, START
+from sili_robots.paper_grid import BLOCKS, TASK_BUDGETS, block
+from sili_robots.plotting import load_results
+from sili_robots.sweep import LocalBackend, SweepSpec, expand, run_sweep
+from sili_robots.sweep.results import results_table
+
+
+@pytest.fixture(scope="module")
+def sweep_and_collection(tmp_path_factory):
+    """SILI in both profiles and SAC on Circle (3 Goals), 6 interactions; SAC left unfinished."""
+    root = tmp_path_factory.mktemp("grid")
+    sweep = root / "sweep"
+    common = {"tasks": ["circle-3"], "seeds": [0], "interactions": 6, "agent_overrides": FAST}
+    specs = [
+        SweepSpec(methods=["sili", "sac"], **common),
+        SweepSpec(methods=["sili"], profile="paper", **common),
+    ]
+    report = run_sweep(specs, sweep, LocalBackend(workers=2), progress=False)
+    assert report.ok, report.failed
+    (sweep / "runs" / "circle-3__sac__s0" / "summary.json").unlink()  # as if still training
+    collection = root / "collection"
+    assert main(["collect", str(sweep), "--into", str(collection)]) == 0
+    return sweep, collection
+
+
+def test_sweep_profile_names_and_records_the_paper_runs():
+    (run,) = expand(
+        SweepSpec(tasks=["circle-3"], methods=["sili"], seeds=[0], interactions=5, profile="paper")
+    )
+    assert run.name == "circle-3__sili-paper-b0.5__s0"
+    assert run.config.agent.profile == "paper"
+    assert run.config.agent.model.estimator == "gumbel"
+    args = ["sweep", "--tasks", "circle-3", "--methods", "sili", "--out", "x", "--dry-run"]
+    with pytest.raises(SystemExit) as exc:  # argparse's choices: exit 2 with the allowed values
+        main([*args, "--profile", "papr"])
+    assert exc.value.code == 2
+
+
+def test_collection_keeps_finished_runs_small_and_identical(sweep_and_collection):
+    sweep, collection = sweep_and_collection
+    names = sorted(p.name for p in (collection / "runs").iterdir())
+    assert names == ["circle-3__sili-b0.5__s0", "circle-3__sili-paper-b0.5__s0"]
+    for name in names:
+        files = sorted(p.name for p in (collection / "runs" / name).iterdir())
+        assert files == ["config.json", "metrics.csv.gz", "summary.json"]
+    a = results_table(sweep)
+    b = results_table(collection)
+    a = a[a.run.isin(names)].reset_index(drop=True)
+    assert list(b.run.unique()) == names and (b.profile.unique() == ["package", "paper"]).all()
+    pd.testing.assert_frame_equal(
+        a.drop(columns="finished"), b.drop(columns="finished"), rtol=1e-6, check_dtype=False
+    )
+    # collecting again changes no byte; the gzip stream carries no timestamp
+    before = (collection / "runs" / names[0] / "metrics.csv.gz").read_bytes()
+    assert main(["collect", str(sweep), "--into", str(collection)]) == 0
+    assert (collection / "runs" / names[0] / "metrics.csv.gz").read_bytes() == before
+    assert gzip.decompress(before).startswith(b"interaction,")
+
+
+def test_collect_refuses_a_different_run_of_the_same_name(sweep_and_collection, tmp_path, capsys):
+    sweep, collection = sweep_and_collection
+    other = tmp_path / "other"
+    shutil.copytree(collection, other)
+    cfg_path = other / "runs" / "circle-3__sili-b0.5__s0" / "config.json"
+    cfg = json.loads(cfg_path.read_text())
+    cfg["run"]["seed"] = 7
+    cfg_path.write_text(json.dumps(cfg))
+    assert main(["collect", str(sweep), "--into", str(other)]) == 2
+    assert "holds a different run named circle-3__sili-b0.5__s0" in capsys.readouterr().err
+    assert main(["collect", str(tmp_path / "nothing"), "--into", str(other)]) == 2
+
+
+def test_runs_counts_runs_and_interactions(sweep_and_collection, capsys):
+    sweep, collection = sweep_and_collection
+    assert main(["runs", str(sweep)]) == 0
+    out = capsys.readouterr().out
+    assert out.strip().splitlines()[-1].startswith("2 runs done, 1 unfinished; 18 interactions")
+    assert main(["runs", str(collection), "--csv"]) == 0
+    table = pd.read_csv(__import__("io").StringIO(capsys.readouterr().out))
+    assert sorted(table.profile) == ["package", "paper"] and table.done.tolist() == [1, 1]
+
+
+def test_plot_reads_a_collection_without_writing_into_it(sweep_and_collection, tmp_path):
+    _, collection = sweep_and_collection
+    df = load_results(collection)
+    assert set(df.run) == {"circle-3__sili-b0.5__s0", "circle-3__sili-paper-b0.5__s0"}
+    assert main(["plot", str(collection), "--out", str(tmp_path / "fig"), "--formats", "png"]) == 0
+    assert (tmp_path / "fig" / "circle-3.png").is_file()
+    assert not (collection / "results.csv").exists()
+
+
+def test_grid_blocks_and_budgets(capsys):
+    assert (
+        main(
+            [
+                "grid",
+                "--dry-run",
+                "--blocks",
+                "sili-oracle",
+                "--tasks",
+                "driving",
+                "--sweep-dir",
+                "/nonexistent",
+            ]
+        )
+        == 0
+    )
+    assert (
+        capsys.readouterr().out.strip()
+        == "sili-oracle on driving (2500 interactions): 6 runs, 0 done"
+    )
+    (spec,) = block("stable-smirl").specs(("circle-8",))
+    assert spec.interactions == TASK_BUDGETS["circle-8"] // 2 and spec.methods == [
+        "stable",
+        "smirl",
+    ]
+    assert BLOCKS[0].name == "sili-oracle"
+    assert main(["grid", "--dry-run", "--tasks", "circle-9"]) == 2
+    assert main(["grid", "--dry-run", "--blocks", "everything"]) == 2
+
+
+# ---------------------------------------------------------------- the claims' decision rules
+def _rows(task, task_id, method, seed, rewards, stability, profile="package", beta=0.5):
+    n = len(rewards)
+    return pd.DataFrame(
+        {
+            "run": f"{task}__{method}-{profile}-{beta}__s{seed}",
+            "task": task,
+            "task_id": task_id,
+            "method": method,
+            "profile": profile,
+            "config_beta": beta,
+            "seed": seed,
+            "interaction": np.arange(n),
+            "task_reward": rewards,
+            "true_stability": stability,
+        }
+    )
+
+
+def _const(n, value):
+    return np.full(n, float(value))
+
+
+def test_score_is_zero_at_standing_still_and_one_at_the_oracle():
+    assert score(-50.0, "sili/Circle3-v1") == pytest.approx(0.0)
+    assert score(-3.8568, "sili/Circle3-v1") == pytest.approx(1.0)
+    assert score(-0.25, "sili/Driving-v0") == pytest.approx(0.75)
+
+
+@pytest.mark.parametrize(("sili_reward", "verdict"), [(-6.0, HOLDS), (-12.0, PART), (-30.0, NO)])
+def test_comparable_to_oracle(sili_reward, verdict):
+    n = 2000
+    parts = [
+        _rows("circle-3", "sili/Circle3-v1", "sili", s, _const(n, sili_reward), _const(n, 1))
+        for s in range(3)
+    ] + [
+        _rows("circle-3", "sili/Circle3-v1", "oracle", s, _const(n, -4.5), _const(n, 0))
+        for s in range(3)
+    ]
+    claims = claims_table(pd.concat(parts, ignore_index=True))
+    first = claims[0]
+    assert first.task == "circle-3" and first.claim.startswith("SILI's task reward")
+    assert first.verdict == verdict
+    # everything else has no runs: said so, never decided
+    assert all(c.verdict.startswith("not measured yet") for c in claims[1:])
+    assert "| circle-3 |" in markdown(claims)
+
+
+def test_a_run_short_of_its_budget_does_not_count():
+    parts = [
+        _rows("circle-3", "sili/Circle3-v1", m, s, _const(1999, -5), _const(1999, 1))
+        for m in ("sili", "oracle")
+        for s in range(3)
+    ]
+    first = claims_table(pd.concat(parts, ignore_index=True))[0]
+    assert first.verdict == "not measured yet (runs: SILI 0/3, Oracle 0/3)"
+
+
+def test_above_baselines_compares_smirl_over_its_own_interactions():
+    n, half = 2000, 1000
+    # SILI is at -40 until 1000 and -5 after; SMiRL stops at 1000 with -30: at the same point
+    # SILI (-40) is below it, although SILI's final window (-5) is far above
+    sili_curve = np.r_[_const(half, -40), _const(half, -5)]
+    parts = [
+        _rows("circle-8", "sili/Circle8-v1", "sili", s, sili_curve, _const(n, 1)) for s in range(3)
+    ]
+    for method, value, length in (("lili", -20, n), ("sac", -50, n), ("smirl", -30, half)):
+        parts += [
+            _rows(
+                "circle-8", "sili/Circle8-v1", method, s, _const(length, value), _const(length, 0)
+            )
+            for s in range(3)
+        ]
+    claims = claims_table(pd.concat(parts, ignore_index=True))
+    (above,) = [c for c in claims if c.task == "circle-8" and c.claim.startswith("SILI above")]
+    assert above.verdict == PART  # above LILI and SAC, not SMiRL
+    assert "SMiRL 0.43" in above.measured
+
+
+def test_driving_only_sili_avoids_collisions():
+    parts = []
+    budgets = {
+        "sili": 2500,
+        "oracle": 2500,
+        "lili": 2500,
+        "sac": 2500,
+        "stable": 1250,
+        "smirl": 1250,
+    }
+    for method, n in budgets.items():
+        rate = 0.0 if method == "sili" else 0.3
+        rewards = -(np.arange(n) % 10 < rate * 10).astype(float)
+        parts += [
+            _rows("driving", "sili/Driving-v0", method, s, rewards, _const(n, 1)) for s in range(3)
+        ]
+    claims = claims_table(pd.concat(parts, ignore_index=True))
+    (driving,) = [c for c in claims if c.claim == "only SILI avoids all collisions"]
+    assert (
+        driving.verdict == HOLDS and "SILI 0%" in driving.measured and "SAC 30%" in driving.measured
+    )
+
+
+def test_first_finished_run_finals():
+    df = _rows(
+        "circle-3",
+        "sili/Circle3-v1",
+        "sili",
+        0,
+        np.r_[_const(100, -50), _const(100, -4)],
+        np.r_[_const(60, 0), _const(140, 1)],
+    )
+    (row,) = run_finals(df).itertuples()
+    assert row.task_reward == pytest.approx(-4.0) and row.stability == 1.0
+    assert row.first_stable == 55  # the first 50-window with >= 0.9 (45 of 50 stable) starts at 55
+
+
+def test_claims_write_replaces_the_readme_block(sweep_and_collection, tmp_path, capsys):
+    _, collection = sweep_and_collection
+    readme = tmp_path / "README.md"
+    readme.write_text(f"# x\n{START}\nold\n{END}\ntail\n")
+    assert main(["claims", str(collection), "--write", str(readme)]) == 0
+    table = capsys.readouterr().out
+    text = readme.read_text()
+    assert text.startswith(f"# x\n{START}\n| claim |") and text.endswith(f"{END}\ntail\n")
+    assert table in text and "old" not in text
+    readme.write_text("no block")
+    assert main(["claims", str(collection), "--write", str(readme)]) == 2
