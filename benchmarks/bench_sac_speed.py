@@ -92,7 +92,9 @@ def time_sb3(in_dim: int, act_dim: int, batch: int, updates: int) -> float:
     return updates / (time.perf_counter() - t)
 
 
-def time_train(interactions: int, precision: str, matmul: str, **extra: object) -> float:
+def time_train(
+    interactions: int, precision: str, matmul: str, threads: int = 1, **extra: object
+) -> float:
     """Seconds per learning interaction of ``sili train`` (SILI, Circle 3, the default agent
     unless ``extra`` settings say otherwise), from the run's own wall times after its random
     phase (5 interactions here)."""
@@ -104,7 +106,7 @@ def time_train(interactions: int, precision: str, matmul: str, **extra: object) 
     out = Path(tempfile.mkdtemp())
     settings = {"sac.random_interactions": 5, "sac.precision": precision, "matmul": matmul}
     settings.update(extra)
-    cfg = make_run_config("circle-3", "sili", 0, interactions, settings=settings)
+    cfg = make_run_config("circle-3", "sili", 0, interactions, settings=settings, threads=threads)
     train(cfg, out, progress=False)
     wall = pd.read_csv(out / "metrics.csv")["wall_time"].to_numpy()
     shutil.rmtree(out)
@@ -187,7 +189,7 @@ def main() -> None:
     for arm in args.arm:
         runs.append((arm, "float32", default_matmul(), parse_settings(arm.split(";"))))
     for label, precision, matmul, extra in runs:
-        seconds = time_train(args.interactions, precision, matmul, **extra)
+        seconds = time_train(args.interactions, precision, matmul, args.threads, **extra)
         print(
             f"sili train, SILI on circle-3, {label:16s}: {seconds:.3f} s per learning "
             f"interaction, {seconds / sb3_50:.2f}x stable-baselines3's 50 updates ({sb3_50:.3f} s)"

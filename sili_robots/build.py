@@ -105,6 +105,7 @@ def make_run_config(
     settings: dict[str, Any] | None = None,
     env_kwargs: dict[str, Any] | None = None,
     checkpoint_every: int = 50,
+    threads: int = 1,
 ) -> RunConfig:
     """A run's full config: the method's preset in ``profile``, then ``settings`` (dotted paths
     or earlier flat names; ``addons.*`` for the add-ons), checked as a whole."""
@@ -122,6 +123,7 @@ def make_run_config(
         agent=agent,
         env_kwargs=dict(env_kwargs or {}),
         checkpoint_every=checkpoint_every,
+        threads=threads,
     )
     for path, value in addon_settings.items():
         cfg.set(path, value)

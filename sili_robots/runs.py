@@ -54,6 +54,9 @@ class RunConfig:
     addons: AddonsConfig = field(default_factory=AddonsConfig)
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     checkpoint_every: int = 50
+    #: torch threads of the run's arithmetic; a second thread sums in another order, so it is
+    #: part of what makes a run reproducible (sweep workers keep 1 each)
+    threads: int = 1
     #: the gymnasium id (task version) the run builds; resolved from ``task`` when the run is
     #: configured and recorded, so the run keeps its version when the name moves on
     task_id: str | None = None

@@ -40,7 +40,7 @@ def train(
     ``env``: the task instance to train on, as the method observes it (default: built from
     ``cfg``; a given one is left open)."""
     run_dir = Path(run_dir)
-    torch.set_num_threads(1)
+    torch.set_num_threads(cfg.threads)
     own_env = env is None
     env = make_run_env(cfg) if env is None else env
     agent = build_agent(cfg, env)

@@ -330,3 +330,30 @@ def test_a_filtered_run_records_what_it_acted_on_and_resumes_exactly(tmp_path):
     assert (lf.ZF >= 0).all()  # every row recomputed once the filter runs
     res = _sili("eval", longer, "--interactions", 2)  # greedy, the filter running step by step
     assert res.returncode == 0 and "mean_task_reward" in res.stdout, res.stderr
+
+
+def test_threads_are_recorded_and_used(tmp_path):
+    import torch
+
+    out = tmp_path / "run"
+    try:
+        res = _sili(
+            "train",
+            "--task",
+            "circle-3",
+            "--method",
+            "sac",
+            "--interactions",
+            4,
+            "--threads",
+            2,
+            "--out",
+            out,
+            *FAST,
+        )
+        assert res.returncode == 0, res.stderr
+        assert torch.get_num_threads() == 2  # the run's arithmetic ran on two threads
+        assert json.loads((out / "config.json").read_text())["run"]["threads"] == 2
+        assert _sili("train", "--task", "circle-3", "--threads", 0, "--out", out).returncode == 2
+    finally:
+        torch.set_num_threads(1)

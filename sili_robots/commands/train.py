@@ -69,6 +69,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--controller", help="controller for robot tasks (e.g. sawyer-reach: mink)")
     add_override_args(p, scope="")
     p.add_argument("--checkpoint-every", type=positive_int, default=50)
+    p.add_argument(
+        "--threads",
+        type=positive_int,
+        default=1,
+        help="torch threads for this run (default 1; recorded, as it changes the summation order)",
+    )
     p.add_argument("--overwrite", action="store_true", help="replace an existing run directory")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(run=run)
@@ -117,6 +123,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         settings=settings,
         env_kwargs=env_kwargs,
         checkpoint_every=args.checkpoint_every,
+        threads=args.threads,
     )
 
 
