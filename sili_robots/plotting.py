@@ -209,13 +209,18 @@ def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFr
     return df
 
 
+def with_profile(df: pd.DataFrame) -> pd.DataFrame:
+    """Tables written before profiles were recorded ran the package's settings."""
+    return df if "profile" in df else df.assign(profile="package")
+
+
 def variant_labels(df: pd.DataFrame) -> pd.Series:
     """A label per row naming its method, plus b / controller / latent where the rows of the
     same method differ in them (e.g. ``SILI b=0.2``, ``SAC [osc]``)."""
+    df = with_profile(df)
     labels = pd.Series([METHOD_NAMES.get(m, m) for m in df["method"]], index=df.index)
-    profile = df["profile"] if "profile" in df else pd.Series("package", index=df.index)
-    labels += profile.map(lambda p: "" if p == "package" else f" ({p})")
-    for _, rows in df.groupby(["method", profile]):
+    labels += df["profile"].map(lambda p: "" if p == "package" else f" ({p})")
+    for _, rows in df.groupby(["method", "profile"]):
         idx = rows.index
         if rows["config_beta"].nunique() > 1:
             labels[idx] += rows["config_beta"].map(lambda b: f" b={b:g}")
@@ -308,6 +313,7 @@ def _seed_note(rows: pd.DataFrame) -> str:
 
 def learning_curves(df: pd.DataFrame, task: str, smooth: int | None = None) -> Figure:
     """Task reward, true stability and stability reward per interaction for every method."""
+    df = with_profile(df)
     rows = df[df["task"] == task]
     if rows.empty:
         raise ConfigError(
@@ -331,6 +337,7 @@ def learning_curves(df: pd.DataFrame, task: str, smooth: int | None = None) -> F
 
 def final_values(df: pd.DataFrame, window: int = 100) -> pd.DataFrame:
     """Per run: the mean of each metric over its last ``window`` interactions."""
+    df = with_profile(df)
     tail = df.sort_values("interaction").groupby("run").tail(window)
     cols = [m for m, _ in FINAL_METRICS]
     ident = tail.groupby("run")[["task", *VARIANT_KEYS, "seed"]].first()
@@ -339,6 +346,7 @@ def final_values(df: pd.DataFrame, window: int = 100) -> pd.DataFrame:
 
 def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "sili") -> Figure:
     """Final task reward and final true stability against b (mean and std across seeds)."""
+    df = with_profile(df)
     rows = df[(df["task"] == task) & (df["method"] == method)]
     if rows["config_beta"].nunique() < 2:
         raise ConfigError(
@@ -382,6 +390,7 @@ def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "si
 def overview(df: pd.DataFrame, smooth: int | None = None) -> Figure:
     """One row per task: task reward and true stability per interaction, like the paper's
     results figure."""
+    df = with_profile(df)
     tasks = [t for t in TASK_TITLES if t in set(df["task"])] + sorted(
         set(df["task"]) - set(TASK_TITLES)
     )

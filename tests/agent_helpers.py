@@ -36,16 +36,22 @@ def make_agent(
 
 def flat_layout(run: dict[str, Any]) -> dict[str, Any]:
     """A run config (config.json's "run") as runs were saved before the settings were nested:
-    every agent and add-on setting under its earlier flat name, no "addons" section."""
+    every agent and add-on setting under its earlier flat name, a schedule under its
+    ``*_schedule`` name, no "addons" section."""
     names = {path: name for name, path in LEGACY_SETTINGS.items() if not name.endswith("_schedule")}
+    schedules = {path: name for name, path in LEGACY_SETTINGS.items() if name.endswith("_schedule")}
     flat = {key: run["agent"][key] for key in ("method", "latent", "hidden", "matmul")}
 
     def leaves(tree: dict[str, Any], prefix: str) -> None:
         for key, value in tree.items():
-            if isinstance(value, dict):
-                leaves(value, f"{prefix}{key}.")
-            elif f"{prefix}{key}" in names:
-                flat[names[f"{prefix}{key}"]] = value
+            path = f"{prefix}{key}"
+            if isinstance(value, dict) and "points" in value and path in schedules:
+                flat[schedules[path]] = value
+                flat[names[path]] = value["points"][-1][1]
+            elif isinstance(value, dict):
+                leaves(value, f"{path}.")
+            elif path in names:
+                flat[names[path]] = value
 
     leaves({k: run["agent"][k] for k in ("sac", "model", "sili")}, "")
     leaves(run["addons"], "addons.")

@@ -29,9 +29,15 @@ WIRING = ("build_addons", "active", "validate", "to_dict")
 
 
 def test_no_addon_code_runs_with_every_addon_off(tmp_path):
-    calls = _calls(tmp_path / "off")
+    calls = _calls(tmp_path / "off", **{"sili.beta": 0.5})  # constant b: no schedule either
     assert {key.split(":")[0] for key in calls} <= set(WIRING)
     assert max(calls.values()) <= 2  # not per step, not per interaction
+
+
+def test_silis_default_b_schedule_is_the_only_addon_it_runs(tmp_path):
+    calls = _calls(tmp_path / "default")
+    ran = {key.split(":")[0] for key in calls} - set(WIRING)
+    assert ran == {"attach", "before_update", "<lambda>"}  # schedules.py: b applied per update
 
 
 def test_a_switched_on_addon_runs_its_hooks_per_step(tmp_path):

@@ -53,7 +53,7 @@ def test_sweep_profile_names_and_records_the_paper_runs():
 def test_collection_keeps_finished_runs_small_and_identical(sweep_and_collection):
     sweep, collection = sweep_and_collection
     names = sorted(p.name for p in (collection / "runs").iterdir())
-    assert names == ["circle-3__sili-b0.5__s0", "circle-3__sili-paper-b0.5__s0"]
+    assert names == ["circle-3__sili-bschedule__s0", "circle-3__sili-paper-b0.5__s0"]
     for name in names:
         files = sorted(p.name for p in (collection / "runs" / name).iterdir())
         assert files == ["config.json", "metrics.csv.gz", "summary.json"]
@@ -75,12 +75,12 @@ def test_collect_refuses_a_different_run_of_the_same_name(sweep_and_collection, 
     sweep, collection = sweep_and_collection
     other = tmp_path / "other"
     shutil.copytree(collection, other)
-    cfg_path = other / "runs" / "circle-3__sili-b0.5__s0" / "config.json"
+    cfg_path = other / "runs" / "circle-3__sili-bschedule__s0" / "config.json"
     cfg = json.loads(cfg_path.read_text())
     cfg["run"]["seed"] = 7
     cfg_path.write_text(json.dumps(cfg))
     assert main(["collect", str(sweep), "--into", str(other)]) == 2
-    assert "holds a different run named circle-3__sili-b0.5__s0" in capsys.readouterr().err
+    assert "holds a different run named circle-3__sili-bschedule__s0" in capsys.readouterr().err
     assert main(["collect", str(tmp_path / "nothing"), "--into", str(other)]) == 2
 
 
@@ -97,7 +97,7 @@ def test_runs_counts_runs_and_interactions(sweep_and_collection, capsys):
 def test_plot_reads_a_collection_without_writing_into_it(sweep_and_collection, tmp_path):
     _, collection = sweep_and_collection
     df = load_results(collection)
-    assert set(df.run) == {"circle-3__sili-b0.5__s0", "circle-3__sili-paper-b0.5__s0"}
+    assert set(df.run) == {"circle-3__sili-bschedule__s0", "circle-3__sili-paper-b0.5__s0"}
     assert main(["plot", str(collection), "--out", str(tmp_path / "fig"), "--formats", "png"]) == 0
     assert (tmp_path / "fig" / "circle-3.png").is_file()
     assert not (collection / "results.csv").exists()

@@ -58,7 +58,7 @@ def tiny_sweep(tmp_path_factory):
 
 def test_local_sweep_runs_every_run_in_its_own_process(tiny_sweep):
     out, report = tiny_sweep
-    names = ["circle-3__sili-b0.5__s0", "circle-3__sili-b0.5__s1", "circle-3__sac__s0"]
+    names = ["circle-3__sili-bschedule__s0", "circle-3__sili-bschedule__s1", "circle-3__sac__s0"]
     assert report.ok and set(names) < set(report.outcomes)
     assert all(o.status == "done" for o in report.outcomes.values())
     pids = {o.pid for o in report.outcomes.values()}
@@ -71,10 +71,10 @@ def test_local_sweep_runs_every_run_in_its_own_process(tiny_sweep):
 
 def test_a_sweep_run_is_the_run_sili_train_would_make(tiny_sweep, tmp_path):
     out, _ = tiny_sweep
-    cfg = {r.name: r.config for r in expand(_spec())}["circle-3__sili-b0.5__s1"]
+    cfg = {r.name: r.config for r in expand(_spec())}["circle-3__sili-bschedule__s1"]
     train(cfg, tmp_path / "ref", progress=False)
     ref = pd.read_csv(tmp_path / "ref" / "metrics.csv")
-    got = pd.read_csv(out / "runs" / "circle-3__sili-b0.5__s1" / "metrics.csv")
+    got = pd.read_csv(out / "runs" / "circle-3__sili-bschedule__s1" / "metrics.csv")
     pd.testing.assert_frame_equal(_without_wall_time(ref), _without_wall_time(got))
 
 
@@ -92,7 +92,8 @@ def test_results_table_has_a_row_per_run_per_interaction(tiny_sweep):
         )
         assert (rows["task"] == cfg.task).all() and (rows["method"] == cfg.method).all()
         assert (rows["seed"] == cfg.seed).all()
-        assert (rows["config_beta"] == cfg.agent.sili.beta).all()
+        b = cfg.agent.sili.beta  # a schedule's b is the value it ends at
+        assert (rows["config_beta"] == (b.points[-1][1] if hasattr(b, "points") else b)).all()
     np.testing.assert_array_equal(table["true_stability"], 1 - table["strategy_changed"])
     assert table["finished"].all()
     runs = pd.read_csv(out / "runs.csv").set_index("run")
@@ -119,7 +120,7 @@ def test_tensorboard_scalars_mirror_the_metrics(tiny_sweep):
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
     out, _ = tiny_sweep
-    run_dir = out / "runs" / "circle-3__sili-b0.5__s0"
+    run_dir = out / "runs" / "circle-3__sili-bschedule__s0"
     acc = EventAccumulator(str(run_dir / "tb"))
     acc.Reload()
     metrics = pd.read_csv(run_dir / "metrics.csv")
@@ -195,7 +196,7 @@ def test_killed_worker_is_reported_and_the_sweep_resumes_its_run(tmp_path):
         stderr=subprocess.PIPE,
         text=True,
     )
-    victim = out / "runs" / "circle-3__sili-b0.5__s0"
+    victim = out / "runs" / "circle-3__sili-bschedule__s0"
     try:
         assert _wait_for(lambda: _rows(victim / "metrics.csv") >= 12), "run never got going"
         pid = json.loads((victim / "worker.json").read_text())["pid"]
@@ -206,8 +207,10 @@ def test_killed_worker_is_reported_and_the_sweep_resumes_its_run(tmp_path):
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 1, stderr
-    assert json.loads(stdout)["failed"] == {"circle-3__sili-b0.5__s0": "worker killed by SIGKILL"}
-    assert len(pd.read_csv(out / "runs" / "circle-3__sili-b0.5__s1" / "metrics.csv")) == 40
+    assert json.loads(stdout)["failed"] == {
+        "circle-3__sili-bschedule__s0": "worker killed by SIGKILL"
+    }
+    assert len(pd.read_csv(out / "runs" / "circle-3__sili-bschedule__s1" / "metrics.csv")) == 40
     checkpointed = torch.load(victim / "checkpoint.pt", weights_only=False)["interaction"]
     assert 10 <= checkpointed < 40 and not (victim / "summary.json").exists()
     before = pd.read_csv(victim / "metrics.csv")
@@ -216,7 +219,7 @@ def test_killed_worker_is_reported_and_the_sweep_resumes_its_run(tmp_path):
     assert res.returncode == 0, res.stderr
     report = json.loads(res.stdout)
     assert (report["already_done"], report["done"], report["failed"]) == (1, 1, {})
-    assert "done circle-3__sili-b0.5__s0 (resumed)" in res.stderr
+    assert "done circle-3__sili-bschedule__s0 (resumed)" in res.stderr
     after = pd.read_csv(victim / "metrics.csv")
     # resumed, not restarted: the rows up to the checkpoint are the very rows written before
     pd.testing.assert_frame_equal(after.head(checkpointed), before.head(checkpointed))

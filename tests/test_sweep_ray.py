@@ -61,10 +61,10 @@ def test_ray_sweep_runs_each_run_in_a_fresh_worker_and_isolates_a_failure(ray_cl
     table = pd.read_csv(tmp_path / "results.csv")
     assert len(table) == 4 * 6 and set(table["run"]) == {o.name for o in done}
     # the same run as the local training loop makes
-    cfg = {r.name: r.config for r in expand(_spec())}["circle-3__sili-b0.5__s1"]
+    cfg = {r.name: r.config for r in expand(_spec())}["circle-3__sili-bschedule__s1"]
     train(cfg, tmp_path / "ref", progress=False)
     ref = pd.read_csv(tmp_path / "ref" / "metrics.csv")
-    got = pd.read_csv(tmp_path / "runs" / "circle-3__sili-b0.5__s1" / "metrics.csv")
+    got = pd.read_csv(tmp_path / "runs" / "circle-3__sili-bschedule__s1" / "metrics.csv")
     pd.testing.assert_frame_equal(_strip(ref), _strip(got))
     runs = pd.read_csv(tmp_path / "runs.csv").set_index("run")
     assert runs.loc["sawyer-reach-bogus__sac__s0", "status"] == "failed"
@@ -108,7 +108,7 @@ def test_cli_joins_a_running_ray_cluster_by_address(ray_cluster, tmp_path):
 
 def test_ray_retries_a_killed_worker_from_its_checkpoint(ray_cluster, tmp_path):
     spec = _spec(methods=["sili"], seeds=[0], interactions=40, checkpoint_every=5)
-    run_dir = tmp_path / "runs" / "circle-3__sili-b0.5__s0"
+    run_dir = tmp_path / "runs" / "circle-3__sili-bschedule__s0"
     killed: list[int] = []
     sweep_over = threading.Event()
 

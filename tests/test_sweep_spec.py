@@ -54,7 +54,7 @@ def test_expansion_is_the_cross_product_with_b_only_where_b_is_free():
     assert by_name["circle-3__lili__s0"].agent.sili.beta == 0.0  # LILI's b stays 0
     assert by_name["circle-3__sac__s1"].agent.method == "sac"
     # the default b is part of SILI's name, so the b=0.5 run of a b sweep is the same run
-    assert [r.name for r in expand(_spec())] == ["circle-3__sili-b0.5__s0"]
+    assert [r.name for r in expand(_spec())] == ["circle-3__sili-bschedule__s0"]
     assert "circle-3__sili-b0.5__s0" in {r.name for r in expand(_spec(betas=[0.5, 1.0]))}
 
 
@@ -99,10 +99,12 @@ def test_controllers_multiply_only_tasks_that_take_one():
 
 def test_latent_kind_other_than_the_default_is_named():
     runs = expand(_spec(latent="continuous"))
-    assert runs[0].name == "circle-3__sili-continuous-b0.5__s0"
+    assert runs[0].name == "circle-3__sili-continuous-bschedule__s0"
     assert runs[0].config.agent.latent == "continuous"
     # speaker-listener's default latent is partial: not named
-    assert expand(_spec(tasks=["speaker-listener"]))[0].name == "speaker-listener__sili-b0.5__s0"
+    assert (
+        expand(_spec(tasks=["speaker-listener"]))[0].name == "speaker-listener__sili-bschedule__s0"
+    )
 
 
 @pytest.mark.parametrize(
@@ -166,7 +168,7 @@ def test_an_existing_run_with_other_settings_is_refused(tmp_path):
 
 
 def test_a_sweep_records_its_kernel_library_and_older_records_resume_on_aten(tmp_path):
-    spec = _spec()
+    spec = _spec(betas=[0.5])  # a constant b: the flat layout held no schedule
     assert spec.agent_overrides["matmul"] == default_matmul()
     assert SweepSpec.from_dict(spec.to_dict()) == spec
     recorded = spec.to_dict()
@@ -181,7 +183,7 @@ def test_a_sweep_records_its_kernel_library_and_older_records_resume_on_aten(tmp
     del on_disk["agent"]["matmul"]
     (path / "config.json").write_text(json.dumps({"run": on_disk}))
     check_existing(tmp_path, run)
-    (new,) = expand(_spec())
+    (new,) = expand(_spec(betas=[0.5]))
     if new.config.agent.matmul != "aten":  # planned anew, they would be another sweep
         with pytest.raises(ConfigError, match=r"agent\.matmul: 'aten' on disk, 'onednn' now"):
             check_existing(tmp_path, new)
@@ -189,6 +191,14 @@ def test_a_sweep_records_its_kernel_library_and_older_records_resume_on_aten(tmp
 
 def test_plan_unions_specs_and_rejects_a_name_planned_twice_differently():
     runs = plan([_spec(), _spec(methods=["sili", "sac"])])
-    assert [r.name for r in runs] == ["circle-3__sili-b0.5__s0", "circle-3__sac__s0"]
+    assert [r.name for r in runs] == ["circle-3__sili-bschedule__s0", "circle-3__sac__s0"]
     with pytest.raises(ConfigError, match="planned twice"):
         plan([_spec(), _spec(interactions=6)])
+
+
+def test_a_sweep_recorded_before_the_b_schedule_keeps_b_05_on_resume():
+    recorded = _spec().to_dict()
+    assert recorded["sili_beta"] == {"points": [[250, 0.0], [300, 0.5]]}
+    del recorded["sili_beta"]  # as sweeps recorded it before SILI's default b was a schedule
+    (run,) = expand(SweepSpec.from_dict(recorded))
+    assert run.name == "circle-3__sili-b0.5__s0" and run.config.agent.sili.beta == 0.5

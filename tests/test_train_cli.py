@@ -58,7 +58,8 @@ def test_train_writes_a_complete_run_and_eval_reads_it(tmp_path):
     cfg = json.loads((out / "config.json").read_text())
     assert cfg["run"]["method"] == "sili" and cfg["run"]["seed"] == 1
     agent = cfg["run"]["agent"]
-    assert agent["sili"]["beta"] == 0.5 and agent["latent"] == "discrete"
+    assert agent["sili"]["beta"] == {"points": [[250, 0.0], [300, 0.5]]}  # SILI's default b
+    assert agent["latent"] == "discrete"
     assert "torch" in cfg["versions"]
     df = pd.read_csv(out / "metrics.csv")
     assert list(df["interaction"]) == list(range(12))

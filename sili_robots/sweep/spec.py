@@ -17,6 +17,7 @@ from typing import Any
 
 from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, PROFILES, Schedule
 from sili_robots.agent.matmul import default_matmul
+from sili_robots.agent.methods import PRESETS
 from sili_robots.build import make_run_config
 from sili_robots.errors import ConfigError, check_choice
 from sili_robots.migrations import setting_path
@@ -50,6 +51,9 @@ class SweepSpec:
     checkpoint_every: int = 50
     #: task name -> the gymnasium id (task version) its runs build; filled when planned
     task_ids: dict[str, str] = field(default_factory=dict)
+    #: SILI's default b when the sweep was planned (a number, or a schedule's dict), so
+    #: ``--resume`` keeps it when the default moves on
+    sili_beta: float | dict[str, Any] | None = None
 
     def __post_init__(self) -> None:
         # the kernel library is resolved once, when the sweep is planned, and recorded with it
@@ -57,6 +61,9 @@ class SweepSpec:
         self.agent_overrides = {"matmul": default_matmul(), **self.agent_overrides}
         # likewise each task's version, so ``--resume`` keeps it when a name moves on
         self.task_ids = {**_task_ids(self.tasks, task_spec), **self.task_ids}
+        if self.sili_beta is None:
+            b = PRESETS["sili"].defaults["sili.beta"]
+            self.sili_beta = b.to_dict() if isinstance(b, Schedule) else float(b)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -64,12 +71,19 @@ class SweepSpec:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> SweepSpec:
         """Read a recorded invocation; one recorded before ``matmul`` existed ran on aten, one
-        recorded before task versions ran each task's first version."""
+        recorded before task versions ran each task's first version, one recorded before SILI's
+        default b was a schedule ran at b = 0.5."""
         overrides = {"matmul": "aten", **data.get("agent_overrides", {})}
         task_ids = data.get("task_ids")
         if task_ids is None:
             task_ids = _task_ids(data.get("tasks", []), first_version)
-        return cls(**{**data, "agent_overrides": overrides, "task_ids": task_ids})
+        data = {"sili_beta": 0.5, **data, "agent_overrides": overrides, "task_ids": task_ids}
+        return cls(**data)
+
+    def default_beta(self) -> float | Schedule:
+        """SILI's b for the runs that give none: the default recorded with the sweep."""
+        b = self.sili_beta
+        return Schedule.from_dict(b) if isinstance(b, dict) else float(b)
 
 
 def _task_ids(tasks: list[str], version: Callable[[str], TaskSpec]) -> dict[str, str]:
@@ -258,6 +272,8 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                     settings = dict(spec.agent_overrides)
                     if beta is not None:
                         settings["sili.beta"] = beta
+                    elif method == "sili" and spec.profile == "package":
+                        settings["sili.beta"] = spec.default_beta()
                     settings.update(schedule_overrides(spec, method))
                     base = make_run_config(
                         tspec.name,
