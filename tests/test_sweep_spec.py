@@ -202,3 +202,18 @@ def test_a_sweep_recorded_before_the_b_schedule_keeps_b_05_on_resume():
     del recorded["sili_beta"]  # as sweeps recorded it before SILI's default b was a schedule
     (run,) = expand(SweepSpec.from_dict(recorded))
     assert run.name == "circle-3__sili-b0.5__s0" and run.config.agent.sili.beta == 0.5
+
+
+def test_a_sweep_records_the_changed_defaults_and_older_records_keep_the_earlier_value():
+    spec = _spec(agent_overrides={})
+    assert spec.agent_overrides["model.updates_per_interaction"] == 5
+    (run,) = expand(spec)
+    assert run.config.agent.model.updates_per_interaction == 5
+    recorded = spec.to_dict()
+    del recorded["agent_overrides"]["model.updates_per_interaction"]  # recorded before the change
+    (old,) = expand(SweepSpec.from_dict(recorded))
+    assert old.config.agent.model.updates_per_interaction == 20
+    # a value given by its earlier flat name is the user's, never replaced
+    given = _spec(agent_overrides={"latent_updates_per_interaction": 7})
+    assert "model.updates_per_interaction" not in given.agent_overrides
+    assert expand(given)[0].config.agent.model.updates_per_interaction == 7

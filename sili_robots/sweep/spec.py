@@ -57,8 +57,14 @@ class SweepSpec:
 
     def __post_init__(self) -> None:
         # the kernel library is resolved once, when the sweep is planned, and recorded with it
-        # (as a run's config.json records it), so ``--resume`` keeps it on any machine
-        self.agent_overrides = {"matmul": default_matmul(), **self.agent_overrides}
+        # (as a run's config.json records it), so ``--resume`` keeps it on any machine; so are
+        # the defaults that have changed since sweeps were first recorded
+        given = {setting_path(k) for k in self.agent_overrides}
+        recorded = {"matmul": default_matmul(), **_current(CHANGED_DEFAULTS)}
+        self.agent_overrides = {
+            **{k: v for k, v in recorded.items() if k not in given},
+            **self.agent_overrides,
+        }
         # likewise each task's version, so ``--resume`` keeps it when a name moves on
         self.task_ids = {**_task_ids(self.tasks, task_spec), **self.task_ids}
         if self.sili_beta is None:
@@ -72,8 +78,14 @@ class SweepSpec:
     def from_dict(cls, data: dict[str, Any]) -> SweepSpec:
         """Read a recorded invocation; one recorded before ``matmul`` existed ran on aten, one
         recorded before task versions ran each task's first version, one recorded before SILI's
-        default b was a schedule ran at b = 0.5."""
-        overrides = {"matmul": "aten", **data.get("agent_overrides", {})}
+        default b was a schedule ran at b = 0.5, and one recorded before a default in
+        ``CHANGED_DEFAULTS`` changed ran at the earlier value."""
+        given = {setting_path(k) for k in data.get("agent_overrides", {})}
+        older = {"matmul": "aten", **CHANGED_DEFAULTS}
+        overrides = {
+            **{k: v for k, v in older.items() if k not in given},
+            **data.get("agent_overrides", {}),
+        }
         task_ids = data.get("task_ids")
         if task_ids is None:
             task_ids = _task_ids(data.get("tasks", []), first_version)
@@ -84,6 +96,18 @@ class SweepSpec:
         """SILI's b for the runs that give none: the default recorded with the sweep."""
         b = self.sili_beta
         return Schedule.from_dict(b) if isinstance(b, dict) else float(b)
+
+
+#: agent defaults that changed after sweeps were first recorded -> the value before the change
+#: (a recorded sweep without the setting planned its runs with that value)
+CHANGED_DEFAULTS: dict[str, Any] = {"model.updates_per_interaction": 20}
+
+
+def _current(paths: dict[str, Any]) -> dict[str, Any]:
+    """Today's default of each setting path."""
+    from sili_robots.agent.config import AgentConfig, get_path
+
+    return {path: get_path(AgentConfig(), path) for path in paths}
 
 
 def _task_ids(tasks: list[str], version: Callable[[str], TaskSpec]) -> dict[str, str]:
