@@ -16,8 +16,9 @@ Rules (the margins are the table's, fixed before the grid ran):
 - *Stable stabilizes but ignores the task*: Stable's true stability >= 0.9 and its score below
   SILI's by more than 0.1: holds; one of the two: in part.
 - *Driving: only SILI avoids all collisions*: collision rate (the share of interactions with a
-  collision, -task reward) at most 1% in every SILI seed and above 1% for every other method:
-  holds; SILI has the lowest rate: in part.
+  collision, -task reward), each method against SILI over the same interactions (Stable and
+  SMiRL end at half the budget): at most 1% in every SILI seed and above 1% for every other
+  method: holds; SILI's rate below every other method's: in part.
 - *Speaker-Listener: SILI stabilizes by about interaction 250 and beats the baselines*: every
   seed's first 50-interaction window of true stability >= 0.9 starts by 350, and SILI is above
   LILI, SAC and SMiRL: holds; one of the two: in part.
@@ -102,12 +103,13 @@ def first_stable(stability: np.ndarray, window: int = 50) -> int | None:
 
 
 def _block_runs(finals: pd.DataFrame, b: Block, task: str, method: str) -> pd.DataFrame:
-    rows = finals[
-        (finals.task == task)
-        & (finals.method == method)
-        & (finals.profile == b.profile)
-        & (finals.logged == b.budget(task))
-    ]
+    """The block's runs of ``method`` on ``task`` that are in and at full budget: selected by the
+    names the grid gives them, so no other run of the same method (another seed, latent kind,
+    b or budget) is counted."""
+    from sili_robots.sweep.runner import plan
+
+    names = {r.name for r in plan(b.specs((task,))) if r.config.method == method}
+    rows = finals[finals.run.isin(names) & (finals.logged == b.budget(task))]
     return rows.sort_values("seed")
 
 
@@ -116,7 +118,7 @@ def _mean(rows: pd.DataFrame, col: str) -> float:
 
 
 def _missing(have: dict[str, pd.DataFrame], want: dict[str, int]) -> str | None:
-    parts = [f"{m} {len(have[m])}/{n}" for m, n in want.items() if len(have[m]) < n]
+    parts = [f"{m} {len(have[m])}/{n}" for m, n in want.items() if len(have[m]) != n]
     return None if not parts else "not measured yet (runs: " + ", ".join(parts) + ")"
 
 
@@ -134,7 +136,7 @@ def decide(finals: pd.DataFrame, df: pd.DataFrame) -> list[Claim]:
         claims.append(_comparable(task, sili, oracle, n))
         claims.append(_above(task, sili, {"LILI": lili, "SAC": sac, "SMiRL": smirl}, df, n))
         claims.append(_stable(task, sili, stable, df, n))
-    claims.append(_driving(finals, grid, base, half))
+    claims.append(_driving(finals, df, grid, base, half))
     claims.append(_speaker_listener(finals, df, grid, base, half))
     claims.append(_sweet_spot(finals))
     return claims
@@ -192,7 +194,9 @@ def _stable(task: str, sili: pd.DataFrame, stable: pd.DataFrame, df: pd.DataFram
     return Claim(name, task, measured, HOLDS if ok == 2 else PART if ok else NO)
 
 
-def _driving(finals: pd.DataFrame, grid: Block, base: Block, half: Block) -> Claim:
+def _driving(
+    finals: pd.DataFrame, df: pd.DataFrame, grid: Block, base: Block, half: Block
+) -> Claim:
     name, task = "only SILI avoids all collisions", "driving"
     runs = {
         "SILI": _block_runs(finals, grid, task, "sili"),
@@ -205,14 +209,22 @@ def _driving(finals: pd.DataFrame, grid: Block, base: Block, half: Block) -> Cla
     missing = _missing(runs, {k: len(grid.seeds) for k in runs})
     if missing:
         return Claim(name, task, "", missing)
-    rates = {k: 0.0 - _mean(v, "task_reward") for k, v in runs.items()}
-    sili_worst = float((-runs["SILI"]["task_reward"]).max())
-    others = [r for k, r in rates.items() if k != "SILI"]
-    measured = "collision rate " + ", ".join(f"{k} {r:.0%}" for k, r in rates.items())
-    if sili_worst <= NO_COLLISIONS and min(others) > NO_COLLISIONS:
+    sili = runs.pop("SILI")
+    rates, sili_rates, sili_worst = {}, {}, {}
+    for label, rows in runs.items():  # each method against SILI over the same interactions
+        end = int(rows["logged"].min())
+        at_end = run_finals(df[df.run.isin(sili.run)], {r: end for r in sili.run})
+        rates[label] = 0.0 - _mean(rows, "task_reward")
+        sili_rates[label] = 0.0 - _mean(at_end, "task_reward")
+        sili_worst[label] = float((0.0 - at_end["task_reward"]).max())
+    final = 0.0 - _mean(sili, "task_reward")
+    measured = f"collision rate SILI {final:.0%}; " + ", ".join(
+        f"{k} {r:.0%} (SILI {sili_rates[k]:.0%})" for k, r in rates.items()
+    )
+    if all(sili_worst[k] <= NO_COLLISIONS < rates[k] for k in rates):
         verdict = HOLDS
     else:
-        verdict = PART if rates["SILI"] < min(others) else NO
+        verdict = PART if all(sili_rates[k] < rates[k] for k in rates) else NO
     return Claim(name, task, measured, verdict)
 
 
@@ -230,7 +242,7 @@ def _speaker_listener(
     above = _above(task, sili, baselines, df, len(grid.seeds))
     if above.verdict.startswith("not measured"):
         return Claim(name, task, "", above.verdict)
-    firsts = list(sili["first_stable"])
+    firsts = [None if pd.isna(f) else int(f) for f in sili["first_stable"]]
     early = all(f is not None and f <= STABLE_BY for f in firsts)
     ok = early + (above.verdict == HOLDS)
     firsts_text = ", ".join("never" if f is None else str(f) for f in firsts)

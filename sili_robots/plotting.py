@@ -75,7 +75,7 @@ CURVE_METRICS = (
     ("stability_reward", "stability reward\n(agent's, per interaction)"),
 )
 FINAL_METRICS = (("task_reward", "final task reward"), ("true_stability", "final true stability"))
-VARIANT_KEYS = ("method", "profile", "config_beta", "controller", "latent")
+VARIANT_KEYS = ("method", "profile", "config_beta", "beta_scheduled", "controller", "latent")
 #: the panels that show reference bounds, and the bound each one reads
 BOUND_METRICS = {"task_reward": "task_reward", "true_stability": "stability"}
 #: (colour, dash pattern) of each bound kind's line
@@ -210,8 +210,13 @@ def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFr
 
 
 def with_profile(df: pd.DataFrame) -> pd.DataFrame:
-    """Tables written before profiles were recorded ran the package's settings."""
-    return df if "profile" in df else df.assign(profile="package")
+    """Tables written before profiles and b schedules were recorded: the package's settings, and
+    a constant b."""
+    if "profile" not in df:
+        df = df.assign(profile="package")
+    if "beta_scheduled" not in df:
+        df = df.assign(beta_scheduled=False)
+    return df
 
 
 def variant_labels(df: pd.DataFrame) -> pd.Series:
@@ -222,8 +227,11 @@ def variant_labels(df: pd.DataFrame) -> pd.Series:
     labels += df["profile"].map(lambda p: "" if p == "package" else f" ({p})")
     for _, rows in df.groupby(["method", "profile"]):
         idx = rows.index
-        if rows["config_beta"].nunique() > 1:
-            labels[idx] += rows["config_beta"].map(lambda b: f" b={b:g}")
+        if rows[["config_beta", "beta_scheduled"]].drop_duplicates().shape[0] > 1:
+            labels[idx] += [
+                f" b→{b:g}" if scheduled else f" b={b:g}"
+                for b, scheduled in zip(rows["config_beta"], rows["beta_scheduled"], strict=True)
+            ]
         if rows["controller"].fillna("").nunique() > 1:
             labels[idx] += rows["controller"].fillna("").map(lambda c: f" [{c or 'default'}]")
         if rows["latent"].nunique() > 1:
@@ -344,10 +352,25 @@ def final_values(df: pd.DataFrame, window: int = 100) -> pd.DataFrame:
     return ident.join(tail.groupby("run")[cols].mean()).reset_index()
 
 
+def b_sweep_rows(df: pd.DataFrame, task: str, method: str = "sili") -> pd.DataFrame:
+    """The runs of a b sweep: ``method`` on ``task`` at a constant b in the package profile, of
+    the run length most of them have (so a longer run at one b is not pooled with the sweep)."""
+    rows = df[
+        (df["task"] == task)
+        & (df["method"] == method)
+        & (df["profile"] == "package")
+        & ~df["beta_scheduled"].astype(bool)
+    ]
+    if rows.empty:
+        return rows
+    lengths = rows.groupby("run").size()
+    keep = lengths[lengths == lengths.mode().max()].index
+    return rows[rows["run"].isin(keep)]
+
+
 def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "sili") -> Figure:
     """Final task reward and final true stability against b (mean and std across seeds)."""
-    df = with_profile(df)
-    rows = df[(df["task"] == task) & (df["method"] == method)]
+    rows = b_sweep_rows(with_profile(df), task, method)
     if rows["config_beta"].nunique() < 2:
         raise ConfigError(
             f"task {task!r} has no b sweep of {method} (needs runs with two or more b values)"
@@ -436,8 +459,7 @@ def plot_sweep(
     )
     for task in tasks:
         written += save_figure(learning_curves(df, task, smooth), out_dir / task, formats)
-        sili = df[(df["task"] == task) & (df["method"] == "sili")]
-        if sili["config_beta"].nunique() > 1:
+        if b_sweep_rows(df, task)["config_beta"].nunique() > 1:
             written += save_figure(beta_sweep(df, task, window), out_dir / f"{task}_beta", formats)
     written += save_figure(overview(df, smooth), out_dir / "overview", formats)
     return written

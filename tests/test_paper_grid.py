@@ -15,7 +15,7 @@ from sili_robots.cli import main
 from sili_robots.commands.claims import END, START
 from sili_robots.paper_grid import BLOCKS, TASK_BUDGETS, block
 from sili_robots.plotting import load_results
-from sili_robots.sweep import LocalBackend, SweepSpec, expand, run_sweep
+from sili_robots.sweep import LocalBackend, SweepSpec, expand, run_name, run_sweep
 from sili_robots.sweep.results import results_table
 
 
@@ -134,11 +134,14 @@ def test_grid_blocks_and_budgets(capsys):
 
 
 # ---------------------------------------------------------------- the claims' decision rules
-def _rows(task, task_id, method, seed, rewards, stability, profile="package", beta=0.5):
+def _rows(task, task_id, method, seed, rewards, stability, profile="package", beta=0.5, name=None):
+    """A run's rows in the results table, named as the grid names it (unless ``name``)."""
     n = len(rewards)
+    if name is None:
+        name = run_name(task, method, seed, beta={"sili": "schedule", "smirl": 0.5}.get(method))
     return pd.DataFrame(
         {
-            "run": f"{task}__{method}-{profile}-{beta}__s{seed}",
+            "run": name,
             "task": task,
             "task_id": task_id,
             "method": method,
@@ -181,12 +184,16 @@ def test_comparable_to_oracle(sili_reward, verdict):
     assert "| circle-3 |" in markdown(claims)
 
 
-def test_a_run_short_of_its_budget_does_not_count():
+def test_a_run_short_of_its_budget_or_outside_the_grid_does_not_count():
     parts = [
         _rows("circle-3", "sili/Circle3-v1", m, s, _const(1999, -5), _const(1999, 1))
         for m in ("sili", "oracle")
         for s in range(3)
     ]
+    # full-budget runs that are not the grid's: another latent kind, another seed
+    parts.append(_rows("circle-3", "sili/Circle3-v1", "sili", 0, _const(2000, -5), _const(2000, 1),
+                       name="circle-3__sili-continuous-bschedule__s0"))  # fmt: skip
+    parts.append(_rows("circle-3", "sili/Circle3-v1", "sili", 5, _const(2000, -5), _const(2000, 1)))
     first = claims_table(pd.concat(parts, ignore_index=True))[0]
     assert first.verdict == "not measured yet (runs: SILI 0/3, Oracle 0/3)"
 
@@ -212,8 +219,10 @@ def test_above_baselines_compares_smirl_over_its_own_interactions():
     assert "SMiRL 0.43" in above.measured
 
 
-def test_driving_only_sili_avoids_collisions():
-    parts = []
+@pytest.mark.parametrize(("sili_early_rate", "verdict"), [(0.0, HOLDS), (0.5, NO)])
+def test_driving_only_sili_avoids_collisions(sili_early_rate, verdict):
+    """Others collide in 30% of interactions; SILI in none at the end, but in
+    ``sili_early_rate`` until 1,250, where Stable and SMiRL (half budget) are compared with it."""
     budgets = {
         "sili": 2500,
         "oracle": 2500,
@@ -222,17 +231,21 @@ def test_driving_only_sili_avoids_collisions():
         "stable": 1250,
         "smirl": 1250,
     }
+    parts = []
     for method, n in budgets.items():
-        rate = 0.0 if method == "sili" else 0.3
-        rewards = -(np.arange(n) % 10 < rate * 10).astype(float)
+        if method == "sili":
+            early = -(np.arange(1250) % 10 < sili_early_rate * 10).astype(float)
+            rewards = np.r_[early, np.zeros(1250)]
+        else:
+            rewards = -(np.arange(n) % 10 < 3).astype(float)
         parts += [
             _rows("driving", "sili/Driving-v0", method, s, rewards, _const(n, 1)) for s in range(3)
         ]
     claims = claims_table(pd.concat(parts, ignore_index=True))
     (driving,) = [c for c in claims if c.claim == "only SILI avoids all collisions"]
-    assert (
-        driving.verdict == HOLDS and "SILI 0%" in driving.measured and "SAC 30%" in driving.measured
-    )
+    assert driving.verdict == verdict
+    assert driving.measured.startswith("collision rate SILI 0%; Oracle 30% (SILI 0%)")
+    assert f"SMiRL 30% (SILI {sili_early_rate:.0%})" in driving.measured
 
 
 def test_first_finished_run_finals():
@@ -260,3 +273,42 @@ def test_claims_write_replaces_the_readme_block(sweep_and_collection, tmp_path, 
     assert table in text and "old" not in text
     readme.write_text("no block")
     assert main(["claims", str(collection), "--write", str(readme)]) == 2
+
+
+def test_the_b_sweep_pools_only_constant_b_runs_of_the_sweeps_length():
+    from sili_robots.plotting import b_sweep_rows, variant_labels
+
+    def run(beta, n, name, scheduled=False, profile="package"):
+        rows = _rows("circle-3", "sili/Circle3-v1", "sili", 0, _const(n, -5), _const(n, 1),
+                     profile=profile, beta=beta, name=name)  # fmt: skip
+        return rows.assign(beta_scheduled=scheduled, controller="", latent="discrete")
+
+    df = pd.concat(
+        [
+            run(0.0, 1000, "b0"),
+            run(0.5, 1000, "b0.5"),
+            run(1.0, 1000, "b1"),
+            run(0.5, 2000, "long"),  # the grid's SILI at another budget
+            run(0.5, 2000, "scheduled", scheduled=True),
+            run(0.5, 1000, "paper", profile="paper"),
+        ],
+        ignore_index=True,
+    )
+    assert sorted(b_sweep_rows(df, "circle-3")["run"].unique()) == ["b0", "b0.5", "b1"]
+    labels = dict(zip(df["run"], variant_labels(df), strict=True))
+    assert labels["scheduled"] == "SILI b→0.5" and labels["b0.5"] == "SILI b=0.5"
+    assert labels["paper"] == "SILI (paper)"
+
+
+def test_a_resumed_grid_plans_each_block_as_it_was_recorded(tmp_path):
+    from sili_robots.commands.grid import recorded
+    from sili_robots.sweep.state import record_invocation
+
+    (fresh,) = block("sili-oracle").specs(("circle-8",))
+    older = fresh.to_dict()
+    older["agent_overrides"]["model.updates_per_interaction"] = 20  # a default since changed
+    record_invocation(tmp_path, SweepSpec.from_dict(older))
+    again = recorded(tmp_path, fresh)
+    assert again.agent_overrides["model.updates_per_interaction"] == 20
+    (other,) = block("lili-sac").specs(("circle-8",))
+    assert recorded(tmp_path, other) is other  # not recorded yet: planned anew

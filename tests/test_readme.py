@@ -39,3 +39,14 @@ def test_the_task_examples_run():
 def test_the_readme_is_a_guide_not_a_notebook():
     lines = README.read_text().splitlines()
     assert len(lines) <= 350 and max(map(len, lines)) <= 200
+
+
+def test_the_claims_table_is_generated_from_the_committed_results():
+    from sili_robots.claims import claims_table, markdown
+    from sili_robots.commands.claims import END, START
+    from sili_robots.plotting import load_results
+
+    grid = README.parent / "results" / "paper-grid"
+    table = markdown(claims_table(load_results(grid)))
+    block = README.read_text().split(START, 1)[1].split(END, 1)[0]
+    assert block.strip() == table.strip(), "run: sili claims results/paper-grid --write README.md"

@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(f"unknown grid task {bad[0]!r}; allowed: {', '.join(TASKS)}")
     failed: list[str] = []
     for b in blocks:
-        for spec in b.specs(tasks):
+        for spec in [recorded(args.sweep_dir, s) for s in b.specs(tasks)]:
             label = f"{b.name} on {spec.tasks[0]} ({spec.interactions} interactions)"
             if args.dry_run:
                 runs = plan([spec])
@@ -71,3 +71,20 @@ def run(args: argparse.Namespace) -> int:
     if failed:
         print(json.dumps({"failed": failed}))
     return 1 if failed else 0
+
+
+def recorded(sweep_dir: Path, spec):
+    """The invocation as ``sweep_dir`` recorded it when this block already ran on this task, so
+    a resumed grid keeps the defaults, kernels and task versions its runs started with."""
+    from sili_robots.errors import ConfigError
+    from sili_robots.sweep.state import recorded_specs
+
+    try:
+        specs = recorded_specs(sweep_dir)
+    except ConfigError:  # nothing recorded yet
+        return spec
+
+    def key(s):
+        return (s.tasks, s.methods, s.seeds, s.interactions, s.betas, s.profile)
+
+    return next((r for r in specs if key(r) == key(spec)), spec)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import gzip
 import json
-import shutil
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -68,17 +68,25 @@ def collect(sources: list[Path], dest: Path) -> CollectReport:
                         f"{target} holds a different run named {name} (its config.json differs "
                         f"from {run_dir}'s); remove one of them first"
                     )
-                if (target / SUMMARY).read_bytes() == (run_dir / SUMMARY).read_bytes():
+                complete = (target / SUMMARY).is_file() and (target / COMPRESSED_METRICS).is_file()
+                if complete and (target / SUMMARY).read_bytes() == (run_dir / SUMMARY).read_bytes():
                     report.unchanged.append(name)
                     continue
             target.mkdir(parents=True, exist_ok=True)
-            for name_ in (CONFIG, SUMMARY):
-                shutil.copyfile(run_dir / name_, target / name_)
             data = (
                 metrics.read_bytes()
                 if metrics.name == COMPRESSED_METRICS
                 else compressed_metrics(metrics)
             )
-            (target / COMPRESSED_METRICS).write_bytes(data)
+            # the summary last, each file whole: an interrupted copy is redone next time
+            _write(target / COMPRESSED_METRICS, data)
+            _write(target / CONFIG, (run_dir / CONFIG).read_bytes())
+            _write(target / SUMMARY, (run_dir / SUMMARY).read_bytes())
             report.added.append(name)
     return report
+
+
+def _write(path: Path, data: bytes) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)

@@ -2,7 +2,7 @@
 
 - ``results.csv``: tidy, one row per run per interaction: the run's identity (``run``, ``task``,
   ``task_id`` (the task version, a gymnasium id), ``method``, ``profile``, ``latent``, ``seed``,
-  ``controller``, ``config_beta``) + every ``metrics.csv``
+  ``controller``, ``config_beta`` (a schedule's last b), ``beta_scheduled``) + every ``metrics.csv``
   column + ``true_stability`` (1 - strategy_changed) + ``finished``.
 - ``runs.csv``: one row per run: status (done / failed / incomplete / not started), interactions
   logged, final task reward and true stability, wall time, error.
@@ -31,6 +31,7 @@ ID_COLUMNS = (
     "seed",
     "controller",
     "config_beta",
+    "beta_scheduled",
 )
 RESULT_COLUMNS = (*ID_COLUMNS, *METRIC_COLUMNS, "true_stability", "finished")
 RUN_COLUMNS = (
@@ -55,7 +56,8 @@ def _identity(run_dir: Path) -> tuple[dict, dict]:
     cfg = migrate_run(json.loads((run_dir / CONFIG).read_text())["run"])
     agent = cfg["agent"]
     beta = agent.get("sili", {}).get("beta", 0.5)
-    if isinstance(beta, dict):  # a schedule: the b it ends at
+    scheduled = isinstance(beta, dict)
+    if scheduled:  # a schedule: the b it ends at
         beta = Schedule.from_dict(beta).points[-1][1]
     ident = {
         "run": run_dir.name,
@@ -67,6 +69,7 @@ def _identity(run_dir: Path) -> tuple[dict, dict]:
         "seed": int(cfg["seed"]),
         "controller": cfg.get("env_kwargs", {}).get("controller", ""),
         "config_beta": float(beta),
+        "beta_scheduled": scheduled,
     }
     return ident, cfg
 
