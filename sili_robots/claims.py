@@ -143,7 +143,7 @@ def decide(finals: pd.DataFrame, df: pd.DataFrame) -> list[Claim]:
 
 
 def _comparable(task: str, sili: pd.DataFrame, oracle: pd.DataFrame, n: int) -> Claim:
-    name = "SILI's task reward comparable to Oracle's"
+    name = "SILI comparable to Oracle"
     missing = _missing({"SILI": sili, "Oracle": oracle}, {"SILI": n, "Oracle": n})
     if missing:
         return Claim(name, task, "", missing)
@@ -184,7 +184,7 @@ def _above(
 
 
 def _stable(task: str, sili: pd.DataFrame, stable: pd.DataFrame, df: pd.DataFrame, n: int) -> Claim:
-    name = "Stable stabilizes but ignores the task"
+    name = "Stable: stable, poor task reward"
     missing = _missing({"Stable": stable, "SILI": sili}, {"Stable": n, "SILI": n})
     if missing:
         return Claim(name, task, "", missing)
@@ -231,7 +231,7 @@ def _driving(
 def _speaker_listener(
     finals: pd.DataFrame, df: pd.DataFrame, grid: Block, base: Block, half: Block
 ) -> Claim:
-    name = "SILI stabilizes by about interaction 250 and beats the baselines"
+    name = "SILI stable by ~250, beats baselines"
     task = "speaker-listener"
     sili = _block_runs(finals, grid, task, "sili")
     baselines = {
@@ -246,12 +246,12 @@ def _speaker_listener(
     early = all(f is not None and f <= STABLE_BY for f in firsts)
     ok = early + (above.verdict == HOLDS)
     firsts_text = ", ".join("never" if f is None else str(f) for f in firsts)
-    measured = f"first stable 50-window at {firsts_text}; {above.measured}"
+    measured = f"first stable at {firsts_text}; {above.measured}"
     return Claim(name, task, measured, HOLDS if ok == 2 else PART if ok else NO)
 
 
 def _sweet_spot(finals: pd.DataFrame) -> Claim:
-    name, task = "b sweet spot between 0.4 and 0.8", "circle-3"
+    name, task = "b sweet spot 0.4-0.8", "circle-3"
     b = block("b-sweep")
     rows = _block_runs(finals, b, task, "sili")
     per_b = {beta: rows[np.isclose(rows.config_beta, beta)] for beta in SWEEP_BETAS}

@@ -177,7 +177,7 @@ def test_comparable_to_oracle(sili_reward, verdict):
     ]
     claims = claims_table(pd.concat(parts, ignore_index=True))
     first = claims[0]
-    assert first.task == "circle-3" and first.claim.startswith("SILI's task reward")
+    assert first.task == "circle-3" and first.claim == "SILI comparable to Oracle"
     assert first.verdict == verdict
     # everything else has no runs: said so, never decided
     assert all(c.verdict.startswith("not measured yet") for c in claims[1:])
