@@ -9,7 +9,15 @@ import pandas as pd
 from sili_robots.sweep.results import runs_table
 
 #: one row per (task, variant)
-INVENTORY_KEYS = ("task", "method", "profile", "config_beta", "controller", "latent")
+INVENTORY_KEYS = (
+    "task",
+    "method",
+    "profile",
+    "config_beta",
+    "beta_scheduled",
+    "controller",
+    "latent",
+)
 
 
 def inventory(directory: Path) -> pd.DataFrame:
