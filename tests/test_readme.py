@@ -50,3 +50,23 @@ def test_the_claims_table_is_generated_from_the_committed_results():
     table = markdown(claims_table(load_results(grid)))
     block = README.read_text().split(START, 1)[1].split(END, 1)[0]
     assert block.strip() == table.strip(), "run: sili claims results/paper-grid --write README.md"
+
+
+def test_the_committed_results_are_not_ignored_by_git():
+    """A clean clone must hold the runs the claims table is generated from."""
+    import shutil
+    import subprocess
+
+    import pytest
+
+    root = README.parent
+    if shutil.which("git") is None or not (root / ".git").exists():
+        pytest.skip("not a git checkout")
+    paths = [
+        f"results/paper-grid/runs/circle-3__sili__s0/{name}"
+        for name in ("config.json", "summary.json", "metrics.csv.gz")
+    ]
+    ignored = subprocess.run(
+        ["git", "check-ignore", *paths], cwd=root, capture_output=True, text=True
+    )
+    assert ignored.returncode == 1, f"git ignores {ignored.stdout.split()}"

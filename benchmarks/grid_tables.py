@@ -1,0 +1,89 @@
+"""Per-task tables of the paper grid, as in RESULTS.md, from a results collection alone.
+
+    python benchmarks/grid_tables.py results/paper-grid [--tasks circle-8 driving]
+
+One row per (method, profile, b): each seed's task reward and true stability over its last
+100 interactions, the mean and score (0 = standing still, 1 = the scripted oracle), the first
+50-interaction window of true stability >= 0.9, the mean reward over the second half of the
+run, and the wall time per run (one thread per run, two runs at a time).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import pandas as pd
+
+from sili_robots.claims import run_finals
+from sili_robots.paper_grid import TASKS
+from sili_robots.plotting import load_results
+
+NAMES = {
+    "sili": "SILI",
+    "lili": "LILI",
+    "sac": "SAC",
+    "oracle": "Oracle",
+    "stable": "Stable",
+    "smirl": "SMiRL",
+}
+
+
+def _seeds(values: pd.Series, fmt: str) -> str:
+    return ", ".join(fmt.format(v) for v in values)
+
+
+def _wall_minutes(source: Path, runs: pd.Series) -> str:
+    minutes = []
+    for run in runs:
+        summary = source / "runs" / run / "summary.json"
+        if summary.is_file():
+            minutes.append(json.loads(summary.read_text())["wall_time_s"] / 60)
+    return f"{min(minutes):.0f}-{max(minutes):.0f} min" if minutes else "-"
+
+
+def task_table(df: pd.DataFrame, source: Path, task: str) -> str:
+    runs = df[df.task == task]
+    finals = run_finals(runs)
+    half = {
+        run: float(g.sort_values("interaction")["task_reward"].iloc[len(g) // 2 :].mean())
+        for run, g in runs.groupby("run")
+    }
+    finals["second_half"] = finals.run.map(half)
+    lines = [
+        f"**{task}** ({runs.task_id.iloc[0]}, {int(finals.logged.max()):,} interactions)",
+        "",
+        "| method | task reward (seeds) | mean | score | true stability (seeds) | first stable "
+        "| mean reward, second half (seeds) | wall time per run |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    keys = ["method", "profile", "config_beta", "logged"]
+    for (method, profile, beta, logged), g in finals.groupby(keys, sort=False):
+        g = g.sort_values("seed")
+        name = NAMES.get(method, method)
+        name = name if profile == "package" else f"{name} ({profile})"
+        if method in ("sili", "lili", "stable") and profile == "package" and logged <= 1000:
+            name += f" b={beta:g}"
+        first = ", ".join("never" if pd.isna(v) else str(int(v)) for v in g.first_stable)
+        lines.append(
+            f"| {name} | {_seeds(g.task_reward, '{:.2f}')} | {g.task_reward.mean():.2f} "
+            f"| {g.score.mean():.2f} | {_seeds(g.stability, '{:.2f}')} | {first} "
+            f"| {_seeds(g.second_half, '{:.1f}')} | {_wall_minutes(source, g.run)} |"
+        )
+    return "\n".join(lines)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("source", type=Path)
+    p.add_argument("--tasks", nargs="+", default=list(TASKS))
+    args = p.parse_args()
+    df = load_results(args.source)
+    for task in args.tasks:
+        if (df.task == task).any():
+            print(task_table(df, args.source, task), end="\n\n")
+
+
+if __name__ == "__main__":
+    main()
