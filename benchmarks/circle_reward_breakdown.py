@@ -1,7 +1,8 @@
 """Where a Circle run's task reward goes, and what its critic believes at the circle's edge.
 
 Reads finished Circle runs (their ``checkpoint.pt``, which holds the whole replay and the
-networks) and prints, over the last ``--window`` interactions:
+networks) and prints, over the last ``--window`` interactions (Circle (Continuous) has no fixed
+locations: only the first item, where its interactions ended and how its latent moved):
 
 * the distance to the opponent summed over three phases of an interaction: the approach (first
   10 steps: from the start the opponent is 1 away, 0.1 per step), the middle, and the exit
@@ -85,8 +86,8 @@ def load_run(run: Path) -> tuple[SILIAgent, CircleEnv, pd.DataFrame]:
     cfg = read_config(run)
     env = make_run_env(cfg)
     task = env.unwrapped
-    if not isinstance(task, CircleEnv) or task.variant not in ("3", "8"):
-        raise ConfigError(f"{run}: a Circle (3 or 8 goals) run is needed, got task {cfg.task!r}")
+    if not isinstance(task, CircleEnv):
+        raise ConfigError(f"{run}: a Circle run is needed, got task {cfg.task!r}")
     state = load_checkpoint(run)
     if state is None:
         raise ConfigError(f"{run}: no checkpoint.pt")
@@ -273,6 +274,23 @@ def ending_cost(
     return np.linalg.norm(z[1:] - z[0], axis=-1), np.array(rewards[1:]), rewards[0]
 
 
+def overview(
+    run: Path, agent: SILIAgent, metrics: pd.DataFrame, d: dict[str, float], window: int
+) -> None:
+    """The location-free part of the breakdown (Circle (Continuous) has no fixed locations)."""
+    ended = final_radii(agent)[-window:]
+    stability = 1 - metrics["strategy_changed"].tail(window).mean()
+    print(
+        f"{run.name}: distance summed: total {d['total']:.2f} = approach {d['approach']:.2f}"
+        f" + middle {d['middle']:.2f} + exit {d['exit']:.2f}; alpha {agent.sac.alpha:.4f}; "
+        f"true stability {stability:.2f}\n"
+        f"  the interactions played ended at radius {ended.mean():.3f} +- {ended.std():.3f} "
+        f"(min {ended.min():.3f})"
+    )
+    if agent.cfg.latent == "continuous":
+        continuous_latent_changes(metrics, window)
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("runs", nargs="+", type=Path)
@@ -284,6 +302,9 @@ def main() -> None:
     for run in args.runs:
         agent, task, metrics = load_run(run)
         d = phase_distances(agent, args.window)
+        if task.variant == "continuous":  # no locations: where it ended and how z moved
+            overview(run, agent, metrics, d, args.window)
+            continue
         location = int(metrics["strategy_id"].iloc[-1])
         held = metrics["strategy_id"].tail(args.window)
         q, own = edge_profile(agent, task, location)
