@@ -128,7 +128,7 @@ def test_grid_blocks_and_budgets(capsys):
         "stable",
         "smirl",
     ]
-    assert BLOCKS[0].name == "sili-oracle"
+    assert [b.name for b in BLOCKS[:2]] == ["sili-oracle", "paper-profile"]
     assert main(["grid", "--dry-run", "--tasks", "circle-9"]) == 2
     assert main(["grid", "--dry-run", "--blocks", "everything"]) == 2
 
