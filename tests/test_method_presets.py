@@ -18,7 +18,7 @@ from sili_robots.errors import ConfigError
     [
         ("lili", "beta=0.7", "sili.beta = 0.0"),
         ("stable", "beta=0.3", "sili.beta = 1.0"),
-        ("sac", "latent=\"discrete\"", "latent = 'none'"),
+        ("sac", 'latent="discrete"', "latent = 'none'"),
         ("oracle", "sili.beta=0.5", "sili.beta = 0.0"),
     ],
 )

@@ -125,4 +125,3 @@ def method_config(
     for path, (value, _) in fixed.items():
         set_path(cfg, path, value)
     return cfg.validate()
-

@@ -73,7 +73,12 @@ def parse_schedule(text: str, option: str, low: float = -math.inf, high: float =
 #: option -> (setting path, metavar, what it sets, example, low, high)
 SCHEDULE_ARGS: dict[str, tuple[str, str, str, str, float, float]] = {
     "--beta-schedule": (
-        "sili.beta", "I:B,I:B,...", "b (sili, smirl)", "250:0,300:0.5,1500:0.5,1600:0", 0.0, 1.0
+        "sili.beta",
+        "I:B,I:B,...",
+        "b (sili, smirl)",
+        "250:0,300:0.5,1500:0.5,1600:0",
+        0.0,
+        1.0,
     ),
     "--target-entropy-schedule": (
         "sac.target_entropy",
@@ -84,12 +89,20 @@ SCHEDULE_ARGS: dict[str, tuple[str, str, str, str, float, float]] = {
         math.inf,
     ),
     "--discount-schedule": (
-        "sac.gamma", "I:G,I:G,...", "SAC's discount gamma (default 0.99)", "1600:0.99,1700:0.998",
-        0.0, 1.0,
+        "sac.gamma",
+        "I:G,I:G,...",
+        "SAC's discount gamma (default 0.99)",
+        "1600:0.99,1700:0.998",
+        0.0,
+        1.0,
     ),
     "--lr-schedule": (
-        "sac.lr", "I:LR,I:LR,...", "SAC's learning rate (default 3e-4)", "2200:3e-4,2400:3e-5",
-        0.0, 1.0,
+        "sac.lr",
+        "I:LR,I:LR,...",
+        "SAC's learning rate (default 3e-4)",
+        "2200:3e-4,2400:3e-5",
+        0.0,
+        1.0,
     ),
 }
 

@@ -84,6 +84,7 @@ ARM_JOINTS = tuple(f"robot0_right_j{i}" for i in range(7))
 EE_SITE = "gripper0_right_grip_site"
 BASE_SITE = "robot0_right_center"
 
+
 def _scene_xml(actuation: str, visual: bool = False) -> str:
     """robosuite's models merged into one MJCF string, actuated as ``actuation`` asks."""
     quiet_robosuite_import()
