@@ -322,7 +322,7 @@ def _seed_note(rows: pd.DataFrame) -> str:
 def learning_curves(df: pd.DataFrame, task: str, smooth: int | None = None) -> Figure:
     """Task reward, true stability and stability reward per interaction for every method."""
     df = with_profile(df)
-    rows = df[df["task"] == task]
+    rows = curve_rows(df, task)
     if rows.empty:
         raise ConfigError(
             f"no results for task {task!r}; tasks in the table: {sorted(set(df.task))}"
@@ -366,6 +366,18 @@ def b_sweep_rows(df: pd.DataFrame, task: str, method: str = "sili") -> pd.DataFr
     lengths = rows.groupby("run").size()
     keep = lengths[lengths == lengths.mode().max()].index
     return rows[rows["run"].isin(keep)]
+
+
+def curve_rows(df: pd.DataFrame, task: str) -> pd.DataFrame:
+    """The rows a task's learning curves draw: all of them, except the runs of a b sweep of a
+    method that also has runs outside it (the paper grid's SILI next to its b sweep): those
+    have their own figure against b, and six more curves would hide the methods'."""
+    rows = df[df["task"] == task]
+    sweep = b_sweep_rows(rows, task)
+    if sweep["config_beta"].nunique() < 2:
+        return rows
+    others = rows[(rows["method"] == "sili") & ~rows["run"].isin(sweep["run"])]
+    return rows[~rows["run"].isin(sweep["run"])] if len(others) else rows
 
 
 def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "sili") -> Figure:
@@ -422,7 +434,7 @@ def overview(df: pd.DataFrame, smooth: int | None = None) -> Figure:
     grid = np.atleast_2d(fig.subplots(len(tasks), len(metrics), squeeze=False))
     handles: dict[str, object] = {}
     for row, task in zip(grid, tasks, strict=True):
-        rows = df[df["task"] == task]
+        rows = curve_rows(df, task)
         window = smooth or default_smoothing(int(rows["interaction"].max()) + 1)
         _draw_curves(row, rows, metrics, window)
         row[0].set_title(task_title(task), loc="left", fontsize=10)

@@ -276,7 +276,7 @@ def test_claims_write_replaces_the_readme_block(sweep_and_collection, tmp_path, 
 
 
 def test_the_b_sweep_pools_only_constant_b_runs_of_the_sweeps_length():
-    from sili_robots.plotting import b_sweep_rows, variant_labels
+    from sili_robots.plotting import b_sweep_rows, curve_rows, variant_labels
 
     def run(beta, n, name, scheduled=False, profile="package"):
         rows = _rows("circle-3", "sili/Circle3-v1", "sili", 0, _const(n, -5), _const(n, 1),
@@ -298,6 +298,10 @@ def test_the_b_sweep_pools_only_constant_b_runs_of_the_sweeps_length():
     labels = dict(zip(df["run"], variant_labels(df), strict=True))
     assert labels["scheduled"] == "SILI b→0.5" and labels["b0.5"] == "SILI b=0.5"
     assert labels["paper"] == "SILI (paper)"
+    # the task's learning curves leave the b sweep to its own figure, but draw a lone b sweep
+    assert sorted(curve_rows(df, "circle-3")["run"].unique()) == ["long", "paper", "scheduled"]
+    alone = df[df.run.isin(["b0", "b0.5", "b1"])]
+    assert sorted(curve_rows(alone, "circle-3")["run"].unique()) == ["b0", "b0.5", "b1"]
 
 
 def test_a_resumed_grid_plans_each_block_as_it_was_recorded(tmp_path):
