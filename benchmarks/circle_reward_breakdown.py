@@ -62,10 +62,9 @@ import torch
 
 from sili_robots.agent import SILIAgent
 from sili_robots.agent.latent import transitions
-from sili_robots.build import build_agent, make_run_env
 from sili_robots.diagnostics import change_masks, foresight_by_exit
 from sili_robots.errors import ConfigError
-from sili_robots.runs import load_checkpoint, read_config
+from sili_robots.evaluation import load_trained
 from sili_robots.tasks.circle import ARENA, STEP, CircleEnv
 
 PHASE_STEPS = 10
@@ -83,16 +82,10 @@ def location_direction(task: CircleEnv, location: int) -> np.ndarray:
 
 
 def load_run(run: Path) -> tuple[SILIAgent, CircleEnv, pd.DataFrame]:
-    cfg = read_config(run)
-    env = make_run_env(cfg)
+    cfg, env, agent, _ = load_trained(run)
     task = env.unwrapped
     if not isinstance(task, CircleEnv):
         raise ConfigError(f"{run}: a Circle run is needed, got task {cfg.task!r}")
-    state = load_checkpoint(run)
-    if state is None:
-        raise ConfigError(f"{run}: no checkpoint.pt")
-    agent = build_agent(cfg, env)
-    agent.load_state_dict(state["agent"])
     return agent, task, pd.read_csv(run / "metrics.csv")
 
 

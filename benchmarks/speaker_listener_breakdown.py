@@ -26,24 +26,17 @@ import pandas as pd
 import torch
 
 from sili_robots.bounds import stored_bounds
-from sili_robots.build import build_agent, make_run_env
 from sili_robots.errors import ConfigError
-from sili_robots.runs import load_checkpoint, read_config
+from sili_robots.evaluation import load_trained
 from sili_robots.tasks.speaker_listener import VISIT_RADIUS, SpeakerListenerEnv
 
 
 def visits(run: Path) -> tuple[np.ndarray, pd.DataFrame, SpeakerListenerEnv, object]:
     """Per stored interaction: whether the ego came within the visit radius of the speaker."""
-    cfg = read_config(run)
-    env = make_run_env(cfg)
+    cfg, env, agent, _ = load_trained(run)
     task = env.unwrapped
     if not isinstance(task, SpeakerListenerEnv):
         raise ConfigError(f"{run}: a Speaker-Listener run is needed, got task {cfg.task!r}")
-    state = load_checkpoint(run)
-    if state is None:
-        raise ConfigError(f"{run}: no checkpoint.pt")
-    agent = build_agent(cfg, env)
-    agent.load_state_dict(state["agent"])
     n = agent.buffer.n
     positions = agent.buffer.obs[:n, :, :2]  # (interactions, H, 2): the ego's position
     near = np.linalg.norm(positions - task.speaker, axis=-1) <= VISIT_RADIUS
