@@ -7,10 +7,11 @@ thread count. Also reports end-to-end interactions per second of ``sili train`` 
     python benchmarks/bench_sac_speed.py [--updates 300] [--threads 1] [--rounds 3]
     python benchmarks/bench_sac_speed.py --matmul-only   # the products alone, per library
 
-Our SAC is timed in float32 with its float32 products on oneDNN (``matmul="onednn"``, the
-default where PyTorch has it) and on PyTorch's default BLAS (``matmul="aten"``, the kernels
-stable-baselines3 uses), both the same arithmetic as stable-baselines3, and with
-``precision="bfloat16"`` (matrix products under CPU autocast).
+Our SAC is timed in float32 with its float32 products on oneDNN (``matmul="onednn"``) and on
+PyTorch's default BLAS (``matmul="aten"``, the kernels stable-baselines3 uses), both the same
+arithmetic as stable-baselines3, and with ``precision="bfloat16"`` (matrix products under CPU
+autocast). ``sili train`` is timed on the machine's default kernels (library and precision
+chosen by timing, ``sili_robots/agent/matmul.py``) and on each float32 library.
 """
 
 from __future__ import annotations
@@ -142,7 +143,7 @@ def matmul_only() -> None:
 
 
 def main() -> None:
-    from sili_robots.agent.matmul import default_matmul
+    from sili_robots.agent.matmul import default_matmul, default_precision
     from sili_robots.commands.common import parse_settings
 
     p = argparse.ArgumentParser()
@@ -156,8 +157,8 @@ def main() -> None:
         action="append",
         default=[],
         metavar="KEY=VALUE[;KEY=VALUE]",
-        help="also time sili train with these agent settings (float32 products on the default "
-        "library), e.g. model.updates_per_interaction=5; repeatable",
+        help="also time sili train with these agent settings (on the machine's default "
+        "kernels), e.g. model.updates_per_interaction=20; repeatable",
     )
     args = p.parse_args()
     torch.set_num_threads(args.threads)
@@ -184,14 +185,15 @@ def main() -> None:
         )
     print(f"(medians of {args.rounds} alternating rounds)")
     sb3_50 = 50 / sb3  # stable-baselines3's time for one interaction's 50 SAC updates
-    runs = [(label, precision, matmul, {}) for label, (precision, matmul) in VARIANTS.items()]
-    runs = [r for r in runs if r[1] == "float32"]  # bfloat16 is ~10x slower: not worth a run
-    for arm in args.arm:
-        runs.append((arm, "float32", default_matmul(), parse_settings(arm.split(";"))))
+    precision, matmul = default_precision(), default_matmul()
+    runs = [(f"default: {precision}, {matmul}", precision, matmul, {})]
+    runs += [(label, p, m, {}) for label, (p, m) in VARIANTS.items() if p == "float32"]
+    for arm in args.arm:  # the default kernels unless the arm sets them
+        runs.append((arm, precision, matmul, parse_settings(arm.split(";"))))
     for label, precision, matmul, extra in runs:
         seconds = time_train(args.interactions, precision, matmul, args.threads, **extra)
         print(
-            f"sili train, SILI on circle-3, {label:16s}: {seconds:.3f} s per learning "
+            f"sili train, SILI on circle-3, {label:24s}: {seconds:.3f} s per learning "
             f"interaction, {seconds / sb3_50:.2f}x stable-baselines3's 50 updates ({sb3_50:.3f} s)"
         )
 

@@ -31,6 +31,9 @@ TASKS = tuple(TASK_BUDGETS)
 SEEDS = (0, 1, 2)
 #: the b values of the b sweep (constant b, as the paper's sweep)
 SWEEP_BETAS = (0.0, 0.2, 0.4, 0.6, 0.8, 1.0)
+#: the grid's products stay float32 on every machine and block (its first runs were), so no
+#: comparison in it mixes precisions; the float32 library is still each machine's own
+KERNELS = {"sac.precision": "float32"}
 
 
 @dataclass(frozen=True)
@@ -61,6 +64,7 @@ class Block:
                 interactions=self.budget(task),
                 betas=list(self.betas) if self.betas is not None else None,
                 profile=self.profile,
+                agent_overrides=dict(KERNELS),
             )
             for task in self.tasks
             if tasks is None or task in tasks

@@ -39,3 +39,32 @@ def test_a_real_timing_measures_both_libraries(cache):
     assert set(times) == set(matmul.MATMULS) and all(0 < t < 1 for t in times.values())
     assert matmul.default_matmul() in matmul.MATMULS
     assert "1 thread" in matmul.machine_key() and "torch" in matmul.machine_key()
+
+
+def test_bfloat16_is_chosen_only_where_it_clearly_pays_and_the_choice_is_cached(cache, monkeypatch):
+    monkeypatch.setattr(matmul, "default_matmul", lambda: "aten")
+    timed = []
+
+    def times(speedup):
+        def fake(matmul_name):
+            timed.append(matmul_name)
+            return {"float32": 1e-2, "bfloat16": 1e-2 / speedup}
+
+        return fake
+
+    monkeypatch.setattr(matmul, "time_precisions", times(1.1))  # faster, but not by enough
+    assert matmul.default_precision() == "float32" and timed == ["aten"]
+    cache.unlink()
+    monkeypatch.setattr(matmul, "time_precisions", times(1.5))
+    assert matmul.default_precision() == "bfloat16"
+    assert matmul.default_precision() == "bfloat16" and len(timed) == 2  # measured once
+    entry = json.loads(cache.read_text())[matmul.machine_key()]
+    assert entry["precision"] == "bfloat16" and entry["precision_seconds"]["float32"] == 1e-2
+    assert AgentConfig().sac.precision == "bfloat16"  # what a new run records in config.json
+
+
+def test_a_real_timing_measures_a_sac_update_in_both_precisions(cache):
+    times = matmul.time_precisions("aten", updates=2, rounds=1)
+    assert set(times) == set(matmul.PRECISIONS) and all(0 < t < 1 for t in times.values())
+    assert matmul.default_precision() in matmul.PRECISIONS
+    assert json.loads(cache.read_text())[matmul.machine_key()]["precision"] in matmul.PRECISIONS

@@ -17,6 +17,7 @@ from sili_robots.paper_grid import BLOCKS, TASK_BUDGETS, block
 from sili_robots.plotting import load_results
 from sili_robots.sweep import LocalBackend, SweepSpec, expand, run_name, run_sweep
 from sili_robots.sweep.results import results_table
+from sili_robots.sweep.runner import plan
 
 
 @pytest.fixture(scope="module")
@@ -129,6 +130,10 @@ def test_grid_blocks_and_budgets(capsys):
         "smirl",
     ]
     assert [b.name for b in BLOCKS[:2]] == ["sili-oracle", "paper-profile"]
+    # float32 products in every block, whatever precision the machine would choose
+    for b in BLOCKS:
+        for planned in plan(b.specs()):
+            assert planned.config.agent.sac.precision == "float32", planned.name
     assert main(["grid", "--dry-run", "--tasks", "circle-9"]) == 2
     assert main(["grid", "--dry-run", "--blocks", "everything"]) == 2
 

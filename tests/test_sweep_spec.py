@@ -5,6 +5,7 @@ import json
 import pytest
 from agent_helpers import flat_layout
 
+from sili_robots.agent.config import AgentConfig
 from sili_robots.agent.matmul import default_matmul
 from sili_robots.agent.schedule import Schedule, value_at
 from sili_robots.errors import ConfigError
@@ -210,9 +211,13 @@ def test_a_sweep_records_the_changed_defaults_and_older_records_keep_the_earlier
     (run,) = expand(spec)
     assert run.config.agent.model.updates_per_interaction == 5
     recorded = spec.to_dict()
-    del recorded["agent_overrides"]["model.updates_per_interaction"]  # recorded before the change
+    for path in ("model.updates_per_interaction", "sac.precision"):  # recorded before the change
+        del recorded["agent_overrides"][path]
     (old,) = expand(SweepSpec.from_dict(recorded))
     assert old.config.agent.model.updates_per_interaction == 20
+    # bfloat16 became a per-machine choice: an older record keeps float32 on any machine
+    assert spec.agent_overrides["sac.precision"] == AgentConfig().sac.precision
+    assert old.config.agent.sac.precision == "float32"
     # a value given by its earlier flat name is the user's, never replaced
     given = _spec(agent_overrides={"latent_updates_per_interaction": 7})
     assert "model.updates_per_interaction" not in given.agent_overrides

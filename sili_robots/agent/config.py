@@ -17,7 +17,7 @@ import typing
 from dataclasses import dataclass, field, fields
 from typing import Any, Literal
 
-from sili_robots.agent.matmul import default_matmul, onednn_available
+from sili_robots.agent.matmul import default_matmul, default_precision, onednn_available
 from sili_robots.agent.schedule import Schedule, Scheduled, span
 from sili_robots.errors import ConfigError
 
@@ -53,8 +53,9 @@ class SACConfig:
     batch_steps: int = setting(16, 1)  # ... times this many timesteps from each
     updates_per_step: Scheduled = setting(1.0, 0.0)
     random_interactions: int = setting(20, 0)  # uniform random actions first (20 x 50 steps)
-    #: ``bfloat16``: forward passes under CPU autocast (weights, gradients stay float32)
-    precision: Precision = "float32"
+    #: ``bfloat16``: forward passes under CPU autocast (weights, gradients stay float32); by
+    #: default chosen per machine by a timing (agent/matmul.py), recorded with each run
+    precision: Precision = field(default_factory=default_precision)
 
 
 @dataclass

@@ -19,8 +19,11 @@ always take it: autocast already sends bfloat16 products to oneDNN.
 Which library is faster depends on the CPU (oneDNN 2x on one AMD EPYC, slower than MKL on
 another), so the default is chosen by measurement: ``default_matmul`` times a SAC-sized layer's
 forward and backward on both, once per machine, torch version and thread count, and caches the
-choice (``kernels.json`` in the package's cache directory). A run records the choice in its
-config, so it resumes on the kernels it was trained with.
+choice (``kernels.json`` in the package's cache directory). The precision of SAC's products
+is chosen the same way (``default_precision``): bfloat16 only where a whole SAC update runs at
+least ``BF16_SPEEDUP`` times as fast (CPUs with bfloat16 units; on AVX2 alone it is ~10x
+slower). A run records both choices in its config, so it resumes on the kernels it was trained
+with.
 """
 
 from __future__ import annotations
@@ -29,6 +32,8 @@ import json
 import os
 import platform
 import time
+from collections.abc import Callable
+from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 
 import torch
@@ -36,6 +41,10 @@ import torch.nn.functional as F
 from torch import nn
 
 MATMULS = ("onednn", "aten")
+PRECISIONS = ("float32", "bfloat16")
+#: bfloat16 changes the numerics, so it is chosen only where it clearly pays (a SAC update:
+#: 1.4x oneDNN float32 on Zen 5 with AVX512-BF16, 0.1x on AVX2 alone; benchmarks/RESULTS.md)
+BF16_SPEEDUP = 1.25
 #: layers narrower than this stay on ``aten``: for a [B, 256] x [256, 1] product the library
 #: call costs more than the arithmetic (measured: 5 us through aten, 19 us through oneDNN)
 MIN_WIDTH = 16
@@ -73,41 +82,71 @@ def machine_key() -> str:
     return f"{model} | {flags} | torch {torch.__version__} | 1 thread"
 
 
-def time_matmuls(width: int = 256, batch: int = 256, rounds: int = 4) -> dict[str, float]:
-    """Seconds per forward and backward of a [batch, width] x [width, width] layer, the best
-    of ``rounds`` interleaved rounds per library (interleaved, so a busy neighbour slows both)."""
-    x = torch.randn(batch, width, requires_grad=True)
-    layers = {m: Linear(width, width, m) for m in MATMULS}
-    best = dict.fromkeys(MATMULS, float("inf"))
+def _best_times(
+    runs: dict[str, tuple[nn.Module, AbstractContextManager]], x: torch.Tensor, rounds: int
+) -> dict[str, float]:
+    """Seconds per forward and backward of each ``(layer, context)``: the best of ``rounds``
+    interleaved rounds (interleaved, so a busy neighbour slows all of them)."""
+    best = dict.fromkeys(runs, float("inf"))
     for _ in range(rounds):
-        for m, layer in layers.items():
+        for name, (layer, context) in runs.items():
             start = time.perf_counter()
             for _ in range(20):
-                layer(x).sum().backward()
-            best[m] = min(best[m], (time.perf_counter() - start) / 20)
+                with context:
+                    y = layer(x)
+                y.float().sum().backward()
+            best[name] = min(best[name], (time.perf_counter() - start) / 20)
     return best
 
 
-def default_matmul() -> str:
-    """The faster float32 library on this machine (``aten`` where oneDNN's op is missing),
-    measured once and cached per ``machine_key``."""
-    if not onednn_available():
-        return "aten"
+def time_matmuls(width: int = 256, batch: int = 256, rounds: int = 4) -> dict[str, float]:
+    """Seconds per forward and backward of a [batch, width] x [width, width] layer per
+    float32 library."""
+    x = torch.randn(batch, width, requires_grad=True)
+    return _best_times({m: (Linear(width, width, m), nullcontext()) for m in MATMULS}, x, rounds)
+
+
+def time_precisions(
+    matmul: str, width: int = 256, updates: int = 10, rounds: int = 3
+) -> dict[str, float]:
+    """Seconds per SAC update (2 x 256 networks, batch 256, as the agent's) in float32 on
+    ``matmul`` and with its products in bfloat16: the best of ``rounds`` interleaved rounds.
+    A whole update, not one layer: autocast's casts and the float32 optimizer are part of it."""
+    from sili_robots.agent.sac import SAC
+
+    g = torch.Generator().manual_seed(0)
+    x, x2 = torch.randn(2, 256, 32, generator=g)
+    a, r = torch.rand(256, 2, generator=g) * 2 - 1, torch.randn(256, generator=g)
+    sacs = {p: SAC(32, 2, hidden=width, precision=p, matmul=matmul) for p in PRECISIONS}
+    best = dict.fromkeys(PRECISIONS, float("inf"))
+    for _ in range(rounds):
+        for p, sac in sacs.items():
+            start = time.perf_counter()
+            for _ in range(updates):
+                sac.update(x, a, r, x2)
+            best[p] = min(best[p], (time.perf_counter() - start) / updates)
+    return best
+
+
+def _cached_choice(name: str, measure: Callable[[], tuple[str, dict[str, float]]]) -> str:
+    """The choice ``name`` for this machine from ``kernels.json``, else ``measure()``d at one
+    thread (as training runs) and cached with its timings."""
     path, key = cache_dir() / "kernels.json", machine_key()
     try:
         cached = json.loads(path.read_text())
     except (OSError, ValueError):
         cached = {}
-    if cached.get(key, {}).get("matmul") in MATMULS:
-        return cached[key]["matmul"]
+    entry = cached.get(key, {})
+    if name in entry:
+        return entry[name]
     threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # as training runs
+    torch.set_num_threads(1)
     try:
-        times = time_matmuls()
+        choice, times = measure()
     finally:
         torch.set_num_threads(threads)
-    choice = "onednn" if times["onednn"] < times["aten"] else "aten"
-    cached[key] = {"matmul": choice, "seconds": times}
+    seconds = "seconds" if name == "matmul" else f"{name}_seconds"
+    cached[key] = {**entry, name: choice, seconds: times}
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(".tmp")
@@ -116,6 +155,35 @@ def default_matmul() -> str:
     except OSError:
         pass  # an unwritable cache only means measuring again next time
     return choice
+
+
+def default_matmul() -> str:
+    """The faster float32 library on this machine (``aten`` where oneDNN's op is missing),
+    measured once and cached per ``machine_key``."""
+    if not onednn_available():
+        return "aten"
+
+    def measure() -> tuple[str, dict[str, float]]:
+        times = time_matmuls()
+        return ("onednn" if times["onednn"] < times["aten"] else "aten"), times
+
+    choice = _cached_choice("matmul", measure)
+    return choice if choice in MATMULS else "aten"
+
+
+def default_precision() -> str:
+    """``bfloat16`` where a SAC update with its products in bfloat16 is at least
+    ``BF16_SPEEDUP`` times as fast as in float32 on this machine's float32 library (CPUs with
+    bfloat16 units), else ``float32``; measured once and cached per ``machine_key``."""
+    matmul = default_matmul()
+
+    def measure() -> tuple[str, dict[str, float]]:
+        times = time_precisions(matmul)
+        fast = times["bfloat16"] * BF16_SPEEDUP <= times["float32"]
+        return ("bfloat16" if fast else "float32"), times
+
+    choice = _cached_choice("precision", measure)
+    return choice if choice in PRECISIONS else "float32"
 
 
 def _mm(a: torch.Tensor, b_t: torch.Tensor, bias: torch.Tensor | None = None) -> torch.Tensor:

@@ -8,8 +8,10 @@ There are no terminal states here: the repeated game never ends, so targets alwa
 (also across interactions).
 
 ``precision="bfloat16"`` runs the forward passes of an update under CPU autocast: matrix
-products in bfloat16 (on CPUs with bfloat16 units, e.g. AMX, they run faster), while weights,
-gradients, optimizer state and losses stay float32. Off by default: it changes the numerics.
+products in bfloat16 (on CPUs with bfloat16 units, e.g. AVX512-BF16 or AMX, they run faster),
+while weights, gradients, optimizer state and losses stay float32. The default is chosen per
+machine by a timing (``agent/matmul.py``): bfloat16 only where it clearly pays; on Circle 3 it
+learned as well as float32 (3 seeds, benchmarks/RESULTS.md).
 """
 
 from __future__ import annotations

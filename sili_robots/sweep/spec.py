@@ -100,7 +100,10 @@ class SweepSpec:
 
 #: agent defaults that changed after sweeps were first recorded -> the value before the change
 #: (a recorded sweep without the setting planned its runs with that value)
-CHANGED_DEFAULTS: dict[str, Any] = {"model.updates_per_interaction": 20}
+CHANGED_DEFAULTS: dict[str, Any] = {
+    "model.updates_per_interaction": 20,
+    "sac.precision": "float32",  # now chosen per machine
+}
 
 
 def _current(paths: dict[str, Any]) -> dict[str, Any]:
