@@ -1,0 +1,81 @@
+"""Where a Driving run's collisions come from.
+
+Reads finished Driving runs (their ``checkpoint.pt``, which holds the whole replay) and prints,
+over the last ``--window`` interactions: the ego's lane at the red line (after decision step 2,
+which decides the opponent's next merge) and when the opponent cuts in (after step 5), against
+the lane the opponent merged into (the true strategy), with the collision rate of each; the
+decision step at which the collisions happened (the opponent cuts in at step 5; later ones are
+the hazard); the latent categories used and how often the category changed; the entropy
+temperature alpha.
+
+    python benchmarks/driving_breakdown.py RUN [RUN ...] [--window 200]
+
+Why: a run that holds the opponent and still collides in every interaction (the stable
+equilibrium of passing on the right) has to be told apart from one that fails to hold it.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import torch
+
+from sili_robots.errors import ConfigError
+from sili_robots.evaluation import load_trained
+from sili_robots.tasks.driving import DrivingEnv
+
+LANES = {0.0: "right", 1.0: "centre", 2.0: "left"}
+RED_LINE_STEP = 2  # the observation after decision step 2: where the ego crossed the red line
+CUT_IN_STEP = 5  # ... after step 5: where the ego was when the opponent cut in
+
+
+def _side(y: np.ndarray) -> np.ndarray:
+    """Lane of a lateral position in lane widths from the centre lane (left positive)."""
+    return np.where(y > 0.5, "left", np.where(y < -0.5, "right", "centre"))
+
+
+def breakdown(run: Path, window: int) -> None:
+    cfg, env, agent, _ = load_trained(run)
+    if not isinstance(env.unwrapped, DrivingEnv):
+        raise ConfigError(f"{run}: a Driving run is needed, got task {cfg.task!r}")
+    n = agent.buffer.n
+    obs, rew = agent.buffer.obs[n - window : n], agent.buffer.rew[n - window : n]
+    m = pd.read_csv(run / "metrics.csv").iloc[n - window : n]
+    hit = (rew < 0).any(axis=1)
+    table = pd.DataFrame(
+        {
+            "ego at red line": _side(obs[:, RED_LINE_STEP, 1]),
+            "ego at cut-in": _side(obs[:, CUT_IN_STEP, 1]),
+            "opponent merged": m["strategy_id"].map(LANES),
+            "hit": hit,
+        }
+    )
+    keys = ["ego at red line", "ego at cut-in", "opponent merged"]
+    pairs = table.groupby(keys)["hit"].agg(["size", "mean"])
+    pairs.columns = ["interactions", "collision rate"]
+    steps = pd.Series(rew[hit].argmin(axis=1)).value_counts().sort_index().to_dict()
+    cats = m["latent_category"].value_counts().to_dict()
+    print(
+        f"{run.name}: last {window}: collisions {hit.mean():.2f}, true stability "
+        f"{1 - m['strategy_changed'].mean():.2f}, alpha {m['alpha'].iloc[-1]:.4f}\n"
+        f"  collision decision steps {steps}; latent categories {cats}, changed in "
+        f"{m['latent_changed'].mean():.2f}"
+    )
+    print("  " + pairs.round(2).to_string().replace("\n", "\n  "))
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("runs", nargs="+", type=Path)
+    p.add_argument("--window", type=int, default=200)
+    args = p.parse_args()
+    torch.set_num_threads(1)
+    for run in args.runs:
+        breakdown(run, args.window)
+
+
+if __name__ == "__main__":
+    main()
