@@ -33,7 +33,6 @@ import os
 import platform
 import time
 from collections.abc import Callable
-from contextlib import AbstractContextManager, nullcontext
 from pathlib import Path
 
 import torch
@@ -82,33 +81,22 @@ def machine_key() -> str:
     return f"{model} | {flags} | torch {torch.__version__} | 1 thread"
 
 
-def _best_times(
-    runs: dict[str, tuple[nn.Module, AbstractContextManager]], x: torch.Tensor, rounds: int
-) -> dict[str, float]:
-    """Seconds per forward and backward of each ``(layer, context)``: the best of ``rounds``
-    interleaved rounds (interleaved, so a busy neighbour slows all of them)."""
-    best = dict.fromkeys(runs, float("inf"))
+def time_matmuls(width: int = 256, batch: int = 256, rounds: int = 4) -> dict[str, float]:
+    """Seconds per forward and backward of a [batch, width] x [width, width] layer, the best
+    of ``rounds`` interleaved rounds per library (interleaved, so a busy neighbour slows both)."""
+    x = torch.randn(batch, width, requires_grad=True)
+    layers = {m: Linear(width, width, m) for m in MATMULS}
+    best = dict.fromkeys(MATMULS, float("inf"))
     for _ in range(rounds):
-        for name, (layer, context) in runs.items():
+        for m, layer in layers.items():
             start = time.perf_counter()
             for _ in range(20):
-                with context:
-                    y = layer(x)
-                y.float().sum().backward()
-            best[name] = min(best[name], (time.perf_counter() - start) / 20)
+                layer(x).sum().backward()
+            best[m] = min(best[m], (time.perf_counter() - start) / 20)
     return best
 
 
-def time_matmuls(width: int = 256, batch: int = 256, rounds: int = 4) -> dict[str, float]:
-    """Seconds per forward and backward of a [batch, width] x [width, width] layer per
-    float32 library."""
-    x = torch.randn(batch, width, requires_grad=True)
-    return _best_times({m: (Linear(width, width, m), nullcontext()) for m in MATMULS}, x, rounds)
-
-
-def time_precisions(
-    matmul: str, width: int = 256, updates: int = 10, rounds: int = 3
-) -> dict[str, float]:
+def time_precisions(matmul: str, updates: int = 10, rounds: int = 3) -> dict[str, float]:
     """Seconds per SAC update (2 x 256 networks, batch 256, as the agent's) in float32 on
     ``matmul`` and with its products in bfloat16: the best of ``rounds`` interleaved rounds.
     A whole update, not one layer: autocast's casts and the float32 optimizer are part of it."""
@@ -117,7 +105,7 @@ def time_precisions(
     g = torch.Generator().manual_seed(0)
     x, x2 = torch.randn(2, 256, 32, generator=g)
     a, r = torch.rand(256, 2, generator=g) * 2 - 1, torch.randn(256, generator=g)
-    sacs = {p: SAC(32, 2, hidden=width, precision=p, matmul=matmul) for p in PRECISIONS}
+    sacs = {p: SAC(32, 2, hidden=256, precision=p, matmul=matmul) for p in PRECISIONS}
     best = dict.fromkeys(PRECISIONS, float("inf"))
     for _ in range(rounds):
         for p, sac in sacs.items():
@@ -140,7 +128,7 @@ def _cached_choice(name: str, measure: Callable[[], tuple[str, dict[str, float]]
     if name in entry:
         return entry[name]
     threads = torch.get_num_threads()
-    torch.set_num_threads(1)
+    torch.set_num_threads(1)  # as training runs
     try:
         choice, times = measure()
     finally:
