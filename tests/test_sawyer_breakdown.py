@@ -1,0 +1,48 @@
+"""The Sawyer-Reach breakdown on a short real run: the replay it reads reproduces the run's task
+rewards, and the opponent kept its goal exactly after the interactions that ended above the
+plane (the task's rule, seen from the replay)."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fast_settings import FAST_ARGS
+
+from sili_robots.cli import main
+from sili_robots.errors import ConfigError
+
+SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "sawyer_breakdown.py"
+
+
+def _load():
+    spec = importlib.util.spec_from_file_location("sawyer_breakdown", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_breakdown_reads_the_replay_of_a_real_run(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    args = ["train", "--task", "sawyer-reach", "--method", "sili", "--interactions", "12"]
+    args += ["--seed", "0", "--out", str(out), "--no-progress", *FAST_ARGS]
+    assert main(args) == 0
+    table, _ = _load().trajectories(out)  # raises if the replay's rewards disagree
+    assert len(table) == 12
+    # interaction j's strategy_changed says whether the goal changed after interaction j - 1
+    above = table["above plane"].to_numpy()[:-1]
+    kept = table["stable"].to_numpy()[1:].astype(bool)
+    assert np.array_equal(above, kept)
+    assert (table["travel"] > 0).all() and (table["goal signal"] >= 0).all()
+
+
+def test_breakdown_refuses_another_task(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "2"]
+    assert main([*args, "--seed", "0", "--out", str(out), "--no-progress", *FAST_ARGS]) == 0
+    with pytest.raises(ConfigError, match="Sawyer-Reach run is needed"):
+        _load().trajectories(out)
