@@ -68,3 +68,16 @@ def test_a_real_timing_measures_a_sac_update_in_both_precisions(cache):
     assert set(times) == set(matmul.PRECISIONS) and all(0 < t < 1 for t in times.values())
     assert matmul.default_precision() in matmul.PRECISIONS
     assert json.loads(cache.read_text())[matmul.machine_key()]["precision"] in matmul.PRECISIONS
+
+
+def test_a_capped_instruction_set_is_timed_apart_from_the_full_one(cache, monkeypatch):
+    for cap in matmul.ISA_CAPS:
+        monkeypatch.delenv(cap, raising=False)
+    full = matmul.machine_key()
+    monkeypatch.setenv("ONEDNN_MAX_CPU_ISA", "AVX2")
+    assert matmul.machine_key() != full and "ONEDNN_MAX_CPU_ISA=AVX2" in matmul.machine_key()
+    monkeypatch.setattr(matmul, "time_matmuls", lambda: {"onednn": 2e-3, "aten": 1e-3})
+    assert matmul.default_matmul() == "aten"
+    monkeypatch.delenv("ONEDNN_MAX_CPU_ISA")
+    monkeypatch.setattr(matmul, "time_matmuls", lambda: {"onednn": 1e-3, "aten": 2e-3})
+    assert matmul.default_matmul() == "onednn"  # not the capped run's cached choice

@@ -63,9 +63,19 @@ def cache_dir() -> Path:
     return Path(base) / "sili-robots"
 
 
+#: environment variables that cap the instruction set torch's kernels use (set to emulate an
+#: older processor), so a timing made under one is not reused without it
+ISA_CAPS = (
+    "ATEN_CPU_CAPABILITY",
+    "ONEDNN_MAX_CPU_ISA",
+    "DNNL_MAX_CPU_ISA",
+    "MKL_ENABLE_INSTRUCTIONS",
+)
+
+
 def machine_key() -> str:
-    """What a kernel timing depends on: CPU model and flags, torch version (one thread, as
-    training runs)."""
+    """What a kernel timing depends on: CPU model and flags, any instruction-set cap, torch
+    version (one thread, as training runs)."""
     model, flags = platform.processor(), ""
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -78,7 +88,8 @@ def machine_key() -> str:
                 break
     except OSError:
         pass
-    return f"{model} | {flags} | torch {torch.__version__} | 1 thread"
+    caps = "".join(f" | {v}={os.environ[v]}" for v in ISA_CAPS if os.environ.get(v))
+    return f"{model} | {flags}{caps} | torch {torch.__version__} | 1 thread"
 
 
 def time_matmuls(width: int = 256, batch: int = 256, rounds: int = 4) -> dict[str, float]:
