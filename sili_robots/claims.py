@@ -22,6 +22,10 @@ Rules (the margins are the table's, fixed before the grid ran):
 - *Speaker-Listener: SILI stabilizes by about interaction 250 and beats the baselines*: every
   seed's first 50-interaction window of true stability >= 0.9 starts by 350, and SILI is above
   LILI, SAC and SMiRL: holds; one of the two: in part.
+- *The package default over the paper profile* (not a claim of the paper: the grid's choice of
+  the default for ``--method sili``, on each task the paper profile runs on): the package
+  profile's score above the paper profile's by more than 0.05 holds (the default stays); within
+  0.05 holds in part; below does not hold (the paper profile is the better default there).
 - *b sweet spot 0.4-0.8* (Circle 3, 5 seeds per b, 1,000 interactions): the b with the best
   score lies in [0.4, 0.8] and beats b = 0 and b = 1 by more than 0.05: holds; the best b in
   the range alone: in part.
@@ -139,6 +143,10 @@ def decide(finals: pd.DataFrame, df: pd.DataFrame) -> list[Claim]:
     claims.append(_driving(finals, df, grid, base, half))
     claims.append(_speaker_listener(finals, df, grid, base, half))
     claims.append(_sweet_spot(finals))
+    paper = block("paper-profile")
+    for task in paper.tasks:
+        package = _block_runs(finals, grid, task, "sili")
+        claims.append(_default_profile(task, package, _block_runs(finals, paper, task, "sili")))
     return claims
 
 
@@ -269,6 +277,22 @@ def _sweet_spot(finals: pd.DataFrame) -> Claim:
         f"b={k:g} {v:.2f} (stability {_mean(per_b[k], 'stability'):.2f})" for k, v in scores.items()
     )
     verdict = HOLDS if in_range and separated else PART if in_range else NO
+    return Claim(name, task, measured, verdict)
+
+
+def _default_profile(task: str, package: pd.DataFrame, paper: pd.DataFrame) -> Claim:
+    name = "package default over paper profile"
+    n = len(block("paper-profile").seeds)
+    missing = _missing({"package": package, "paper": paper}, {"package": n, "paper": n})
+    if missing:
+        return Claim(name, task, "", missing)
+    s, p = _mean(package, "score"), _mean(paper, "score")
+    measured = (
+        f"score package {s:.2f} (reward {_mean(package, 'task_reward'):.2f}, stability "
+        f"{_mean(package, 'stability'):.2f}), paper {p:.2f} ({_mean(paper, 'task_reward'):.2f}, "
+        f"{_mean(paper, 'stability'):.2f})"
+    )
+    verdict = HOLDS if s - p > ABOVE else PART if s - p >= -ABOVE else NO
     return Claim(name, task, measured, verdict)
 
 

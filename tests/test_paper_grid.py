@@ -253,6 +253,28 @@ def test_driving_only_sili_avoids_collisions(sili_early_rate, verdict):
     assert f"SMiRL 30% (SILI {sili_early_rate:.0%})" in driving.measured
 
 
+@pytest.mark.parametrize(("paper_reward", "verdict"), [(-30.0, HOLDS), (-6.0, PART), (-2.0, NO)])
+def test_the_default_profile_is_decided_against_the_paper_profile(paper_reward, verdict):
+    from sili_robots.sweep.runner import plan
+
+    n = 2000
+    paper_names = [r.name for r in plan(block("paper-profile").specs(("circle-3",)))]
+    parts = [
+        _rows("circle-3", "sili/Circle3-v1", "sili", s, _const(n, -6.0), _const(n, 1))
+        for s in range(3)
+    ]
+    for s, name in enumerate(paper_names):
+        paper = _const(n, paper_reward)
+        parts.append(_rows("circle-3", "sili/Circle3-v1", "sili", s, paper, _const(n, 1),
+                           profile="paper", name=name))  # fmt: skip
+    claims = claims_table(pd.concat(parts, ignore_index=True))
+    rows = {c.task: c for c in claims if c.claim == "package default over paper profile"}
+    assert set(rows) == {"circle-3", "driving"}
+    assert rows["circle-3"].verdict == verdict
+    assert rows["circle-3"].measured.startswith("score package 0.95 (reward -6.00")
+    assert rows["driving"].verdict == "not measured yet (runs: package 0/3, paper 0/3)"
+
+
 def test_first_finished_run_finals():
     df = _rows(
         "circle-3",
