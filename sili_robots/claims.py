@@ -121,6 +121,10 @@ def _mean(rows: pd.DataFrame, col: str) -> float:
     return float(rows[col].mean())
 
 
+def _reward_and_stability(rows: pd.DataFrame) -> str:
+    return f"reward {_mean(rows, 'task_reward'):.2f}, stability {_mean(rows, 'stability'):.2f}"
+
+
 def _missing(have: dict[str, pd.DataFrame], want: dict[str, int]) -> str | None:
     parts = [f"{m} {len(have[m])}/{n}" for m, n in want.items() if len(have[m]) != n]
     return None if not parts else "not measured yet (runs: " + ", ".join(parts) + ")"
@@ -157,8 +161,8 @@ def _comparable(task: str, sili: pd.DataFrame, oracle: pd.DataFrame, n: int) -> 
         return Claim(name, task, "", missing)
     s, o = _mean(sili, "score"), _mean(oracle, "score")
     measured = (
-        f"score SILI {s:.2f} (reward {_mean(sili, 'task_reward'):.2f}, stability "
-        f"{_mean(sili, 'stability'):.2f}), Oracle {o:.2f} ({_mean(oracle, 'task_reward'):.2f})"
+        f"score SILI {s:.2f} ({_reward_and_stability(sili)}), "
+        f"Oracle {o:.2f} ({_mean(oracle, 'task_reward'):.2f})"
     )
     verdict = HOLDS if s >= o - COMPARABLE else PART if s >= o - COMPARABLE_PART else NO
     return Claim(name, task, measured, verdict)
@@ -288,9 +292,8 @@ def _default_profile(task: str, package: pd.DataFrame, paper: pd.DataFrame) -> C
         return Claim(name, task, "", missing)
     s, p = _mean(package, "score"), _mean(paper, "score")
     measured = (
-        f"score package {s:.2f} (reward {_mean(package, 'task_reward'):.2f}, stability "
-        f"{_mean(package, 'stability'):.2f}), paper {p:.2f} ({_mean(paper, 'task_reward'):.2f}, "
-        f"{_mean(paper, 'stability'):.2f})"
+        f"score package {s:.2f} ({_reward_and_stability(package)}), "
+        f"paper {p:.2f} ({_reward_and_stability(paper)})"
     )
     verdict = HOLDS if s - p > ABOVE else PART if s - p >= -ABOVE else NO
     return Claim(name, task, measured, verdict)
