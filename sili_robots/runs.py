@@ -109,12 +109,16 @@ def recorded_task_id(run: dict[str, Any]) -> str | None:
 
 
 def versions() -> dict[str, str]:
+    """The software and the processor a run used: seeded runs repeat exactly only on the same
+    kernels, which torch picks by CPU and instruction-set cap (``machine``)."""
     import gymnasium
     import numpy
 
     import sili_robots
+    from sili_robots.agent.matmul import machine_key
 
     return {
+        "machine": machine_key(),
         "sili_robots": sili_robots.__version__,
         "torch": torch.__version__,
         "numpy": numpy.__version__,

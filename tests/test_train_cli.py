@@ -61,6 +61,7 @@ def test_train_writes_a_complete_run_and_eval_reads_it(tmp_path):
     assert agent["sili"]["beta"] == {"points": [[250, 0.0], [300, 0.5]]}  # SILI's default b
     assert agent["latent"] == "discrete"
     assert "torch" in cfg["versions"]
+    assert cfg["versions"]["machine"].endswith("| 1 thread")  # the CPU the kernels ran on
     df = pd.read_csv(out / "metrics.csv")
     assert list(df["interaction"]) == list(range(12))
     for col in (
