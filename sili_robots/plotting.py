@@ -76,6 +76,9 @@ CURVE_METRICS = (
 )
 FINAL_METRICS = (("task_reward", "final task reward"), ("true_stability", "final true stability"))
 VARIANT_KEYS = ("method", "profile", "config_beta", "beta_scheduled", "controller", "latent")
+#: metrics that are fractions: their seed band is clipped to the range (a mean +- std of a
+#: fraction can leave it, which would draw a stability below 0 or above 1)
+METRIC_RANGES = {"true_stability": (0.0, 1.0)}
 #: the panels that show reference bounds, and the bound each one reads
 BOUND_METRICS = {"task_reward": "task_reward", "true_stability": "stability"}
 #: (colour, dash pattern) of each bound kind's line
@@ -303,7 +306,9 @@ def _draw_curves(
             x = stats.index.to_numpy(float)
             mean, std = stats["mean"].to_numpy(), stats["std"].to_numpy()
             ax.plot(x, mean, style, color=colors[variant], label=label, lw=1.6)
-            ax.fill_between(x, mean - std, mean + std, color=colors[variant], alpha=0.18, lw=0)
+            low, high = METRIC_RANGES.get(metric, (-np.inf, np.inf))
+            band = np.clip(mean - std, low, high), np.clip(mean + std, low, high)
+            ax.fill_between(x, *band, color=colors[variant], alpha=0.18, lw=0)
     task_ids = _task_ids(task_rows, str(task_rows["task"].iloc[0]))
     for ax, (metric, ylabel) in zip(axes, metrics, strict=True):
         draw_bounds(ax, metric, task_ids)

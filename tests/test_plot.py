@@ -81,12 +81,14 @@ def test_learning_curves_plot_the_table_mean_and_std_across_seeds(sweep_dir):
             xy = line.get_xydata()
             np.testing.assert_array_equal(xy[:, 0], np.arange(8))
             np.testing.assert_allclose(xy[:, 1], mean, rtol=1e-9, atol=1e-12)
-            # the band of this variant spans mean - std .. mean + std at every interaction
+            # the band of this variant spans mean - std .. mean + std at every interaction,
+            # clipped to [0, 1] for true stability, a fraction
+            low, high = (0.0, 1.0) if metric == "true_stability" else (-np.inf, np.inf)
             verts = np.concatenate([p.vertices for p in _band(ax, line).get_paths()])
             for x in range(8):
                 at_x = verts[np.isclose(verts[:, 0], x), 1]
-                assert at_x.min() == pytest.approx(mean[x] - std[x], abs=1e-9)
-                assert at_x.max() == pytest.approx(mean[x] + std[x], abs=1e-9)
+                assert at_x.min() == pytest.approx(max(mean[x] - std[x], low), abs=1e-9)
+                assert at_x.max() == pytest.approx(min(mean[x] + std[x], high), abs=1e-9)
 
 
 def test_beta_figure_plots_final_values_against_b(sweep_dir):
@@ -151,3 +153,34 @@ def test_plot_of_a_non_sweep_exits_2(tmp_path, capsys):
     assert "holds no runs" in capsys.readouterr().err
     assert main(["plot", str(tmp_path), "--formats", "gif"]) == 2
     assert "unknown figure format" in capsys.readouterr().err
+
+
+def test_the_stability_band_stays_within_0_and_1():
+    # three seeds at stability 1, 1, 0: mean 0.67 +- 0.47 would reach 1.14
+    n, parts = 6, []
+    for seed, stable in enumerate((1.0, 1.0, 0.0)):
+        parts.append(
+            pd.DataFrame(
+                {
+                    "run": f"circle-3__sac__s{seed}",
+                    "task": "circle-3",
+                    "task_id": "sili/Circle3-v1",
+                    "method": "sac",
+                    "profile": "package",
+                    "config_beta": 0.0,
+                    "beta_scheduled": False,
+                    "controller": "",
+                    "latent": "",
+                    "seed": seed,
+                    "interaction": np.arange(n),
+                    "task_reward": np.full(n, -50.0),
+                    "true_stability": np.full(n, stable),
+                    "stability_reward": np.zeros(n),
+                }
+            )
+        )
+    fig = learning_curves(pd.concat(parts, ignore_index=True), "circle-3", smooth=1)
+    ax = {a.get_gid(): a for a in fig.axes}["true_stability"]
+    verts = np.concatenate([p.vertices for p in _band(ax, _line(ax, "SAC")).get_paths()])
+    assert verts[:, 1].max() == pytest.approx(1.0)  # clipped
+    assert verts[:, 1].min() == pytest.approx(2 / 3 - np.sqrt(2) / 3, abs=1e-9)  # mean - std
