@@ -7,7 +7,9 @@ closest approach to the true goal and to any goal, how far it travelled from the
 goal it came closest to against the true one, the goal signal (how much the interaction's
 task reward would have differed between the three goals: all the previous interaction tells the
 latent model about the goal), the latent categories used and how often the
-category changed, and the entropy temperature alpha.
+category changed, and the entropy temperature alpha. Then, for the last block, the goals behind
+each raw encoder category (before categories are merged), which tells an encoder that does not
+separate the goals from a merge that joined categories that did.
 
     python benchmarks/sawyer_breakdown.py RUN [RUN ...] [--block 250]
 
@@ -50,6 +52,7 @@ def trajectories(run: Path) -> tuple[pd.DataFrame, SawyerReachEnv]:
     table = pd.DataFrame(
         {
             "interaction": np.arange(n),
+            "goal": goal,
             "above plane": ee[:, -1, 2] > task.plane_z,
             "stable": 1 - m["strategy_changed"].to_numpy(),
             "to true goal": closest[np.arange(n), goal],
@@ -65,6 +68,27 @@ def trajectories(run: Path) -> tuple[pd.DataFrame, SawyerReachEnv]:
         }
     )
     return table, task
+
+
+def goals_per_raw_category(run: Path, window: int) -> dict[int, list[int]]:
+    """Over the last ``window`` interactions: raw encoder category (before the package merges
+    categories whose decoder heads predict alike) -> how many of its interactions had each goal.
+    One category, or categories with the goals mixed alike, mean the encoder does not tell the
+    goals apart: the collapse is the encoder's, not the merge's."""
+    _, _, agent, _ = load_trained(run)
+    cache, n = agent.latents, agent.buffer.n
+    if cache.kind != "discrete":
+        return {}
+    merged, cache.category_map = cache.category_map, np.arange(cache.dim)
+    idx = np.arange(max(n - window, 0), n)
+    try:
+        raw = cache.encode(idx).argmax(-1)
+    finally:
+        cache.category_map = merged
+    goal = agent.buffer.strategy_id[idx].astype(int)
+    return {
+        int(c): np.bincount(goal[raw == c], minlength=len(GOALS)).tolist() for c in np.unique(raw)
+    }
 
 
 def main() -> None:
@@ -90,6 +114,10 @@ def main() -> None:
                 f"{g.category.nunique():10d}  {g.changed.mean():7.2f}  "
                 f"{g.alpha.mean():.4f}  {g.reward.mean():7.2f}"
             )
+        split = goals_per_raw_category(run, args.block)
+        if split:
+            print(f"  raw encoder category -> goals 0/1/2 of its interactions, last {args.block}:")
+            print("  " + ", ".join(f"{c}: {'/'.join(map(str, k))}" for c, k in split.items()))
 
 
 if __name__ == "__main__":

@@ -31,13 +31,19 @@ def test_breakdown_reads_the_replay_of_a_real_run(tmp_path: Path) -> None:
     args = ["train", "--task", "sawyer-reach", "--method", "sili", "--interactions", "12"]
     args += ["--seed", "0", "--out", str(out), "--no-progress", *FAST_ARGS]
     assert main(args) == 0
-    table, _ = _load().trajectories(out)  # raises if the replay's rewards disagree
+    module = _load()
+    table, _ = module.trajectories(out)  # raises if the replay's rewards disagree
     assert len(table) == 12
     # interaction j's strategy_changed says whether the goal changed after interaction j - 1
     above = table["above plane"].to_numpy()[:-1]
     kept = table["stable"].to_numpy()[1:].astype(bool)
     assert np.array_equal(above, kept)
     assert (table["travel"] > 0).all() and (table["goal signal"] >= 0).all()
+    # every one of the last 8 interactions is counted once, under its true goal
+    split = module.goals_per_raw_category(out, 8)
+    goals = np.bincount(table["goal"].to_numpy()[-8:], minlength=3).tolist()
+    assert sum(sum(k) for k in split.values()) == 8
+    assert np.sum(list(split.values()), axis=0).tolist() == goals
 
 
 def test_breakdown_refuses_another_task(tmp_path: Path) -> None:
