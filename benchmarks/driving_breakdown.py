@@ -6,7 +6,8 @@ which decides the opponent's next merge) and when the opponent cuts in (after st
 the lane the opponent merged into (the true strategy), with the collision rate of each; the
 decision step at which the collisions happened (the opponent cuts in at step 5; later ones are
 the hazard); the latent categories used and how often the category changed; the entropy
-temperature alpha.
+temperature alpha; the lanes behind each latent category, as the encoder gives it and after the
+package merges categories whose decoder heads predict alike.
 
     python benchmarks/driving_breakdown.py RUN [RUN ...] [--window 200]
 
@@ -23,6 +24,7 @@ import numpy as np
 import pandas as pd
 import torch
 
+from sili_robots.diagnostics import strategies_per_category
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import load_trained
 from sili_robots.tasks.driving import DrivingEnv
@@ -65,6 +67,18 @@ def breakdown(run: Path, window: int) -> None:
         f"{m['latent_changed'].mean():.2f}"
     )
     print("  " + pairs.round(2).to_string().replace("\n", "\n  "))
+    # which lanes each latent category stands for, before and after the package merges
+    # categories whose decoder heads predict alike (the index of the strategy: 0 right, 2 left)
+    idx = np.arange(n - window, n)
+    raw = agent.latents.raw_categories(idx)
+    strategies = agent.buffer.strategy_id[idx]
+    print(f"  category -> {{opponent lane: interactions}}: raw {_lanes(raw, strategies)}")
+    print(f"  after merging {_lanes(agent.latents.category_map[raw], strategies)}")
+
+
+def _lanes(categories: np.ndarray, strategies: np.ndarray) -> dict[int, dict[str, int]]:
+    split = strategies_per_category(categories, strategies)
+    return {c: {LANES[float(s)]: k for s, k in per.items()} for c, per in split.items()}
 
 
 def main() -> None:

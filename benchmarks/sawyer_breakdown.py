@@ -27,6 +27,7 @@ import numpy as np
 import pandas as pd
 import torch
 
+from sili_robots.diagnostics import strategies_per_category
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import load_trained
 from sili_robots.tasks.sawyer_reach import SawyerReachEnv
@@ -70,25 +71,18 @@ def trajectories(run: Path) -> tuple[pd.DataFrame, SawyerReachEnv]:
     return table, task
 
 
-def goals_per_raw_category(run: Path, window: int) -> dict[int, list[int]]:
-    """Over the last ``window`` interactions: raw encoder category (before the package merges
-    categories whose decoder heads predict alike) -> how many of its interactions had each goal.
-    One category, or categories with the goals mixed alike, mean the encoder does not tell the
-    goals apart: the collapse is the encoder's, not the merge's."""
+def category_split(run: Path, window: int) -> tuple[dict, dict]:
+    """Over the last ``window`` interactions: the goals behind each raw encoder category and
+    behind each category after merging (empty for a run without discrete latents)."""
     _, _, agent, _ = load_trained(run)
-    cache, n = agent.latents, agent.buffer.n
-    if cache.kind != "discrete":
-        return {}
-    merged, cache.category_map = cache.category_map, np.arange(cache.dim)
+    if agent.latents.kind != "discrete":
+        return {}, {}
+    n = agent.buffer.n
     idx = np.arange(max(n - window, 0), n)
-    try:
-        raw = cache.encode(idx).argmax(-1)
-    finally:
-        cache.category_map = merged
-    goal = agent.buffer.strategy_id[idx].astype(int)
-    return {
-        int(c): np.bincount(goal[raw == c], minlength=len(GOALS)).tolist() for c in np.unique(raw)
-    }
+    goals = agent.buffer.strategy_id[idx]
+    raw = agent.latents.raw_categories(idx)
+    merged = agent.latents.category_map[raw]
+    return strategies_per_category(raw, goals), strategies_per_category(merged, goals)
 
 
 def main() -> None:
@@ -114,10 +108,10 @@ def main() -> None:
                 f"{g.category.nunique():10d}  {g.changed.mean():7.2f}  "
                 f"{g.alpha.mean():.4f}  {g.reward.mean():7.2f}"
             )
-        split = goals_per_raw_category(run, args.block)
-        if split:
-            print(f"  raw encoder category -> goals 0/1/2 of its interactions, last {args.block}:")
-            print("  " + ", ".join(f"{c}: {'/'.join(map(str, k))}" for c, k in split.items()))
+        raw, merged = category_split(run, args.block)
+        if raw:
+            print(f"  category -> {{goal: interactions}}, last {args.block}: raw {raw}")
+            print(f"  after merging {merged}")
 
 
 if __name__ == "__main__":

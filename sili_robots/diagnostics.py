@@ -142,3 +142,13 @@ def filter_corrections(df: pd.DataFrame, start: int = 0) -> dict[str, float]:
         "reward_false_alarms": mean(reward[~moved & corrected]),
         "reward_held": mean(reward[~moved]),
     }
+
+
+def strategies_per_category(categories: np.ndarray, strategy_ids: np.ndarray) -> dict[int, dict]:
+    """category -> {true strategy id: interactions}: a category holding one strategy separates
+    it; one holding several in like shares does not."""
+    categories, strategy_ids = np.asarray(categories), np.asarray(strategy_ids).astype(int)
+    return {
+        int(c): pd.Series(strategy_ids[categories == c]).value_counts().sort_index().to_dict()
+        for c in np.unique(categories)
+    }

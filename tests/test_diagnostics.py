@@ -11,6 +11,7 @@ from sili_robots.diagnostics import (
     foresight_by_exit,
     latent_diagnostics,
     purity,
+    strategies_per_category,
 )
 
 
@@ -124,3 +125,8 @@ def test_filter_corrections_split_moves_from_false_alarms():
     assert out["reward_false_alarms"] == pytest.approx(-6.5)
     assert out["reward_held"] == pytest.approx(-5.75)
     assert filter_corrections(df.drop(columns="filter_step"))["false_alarms"] == 0  # no filter
+
+
+def test_strategies_per_category_counts_each_interaction_under_its_category():
+    split = strategies_per_category(np.array([3, 3, 1, 3, 1]), np.array([0, 2, 0, 0, 0.0]))
+    assert split == {1: {0: 2}, 3: {0: 2, 2: 1}}

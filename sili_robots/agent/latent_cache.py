@@ -86,6 +86,16 @@ class LatentCache:
         )
         return self.grouped(self.model.encode(traj, sample=self.sample).numpy())
 
+    def raw_categories(self, idx: np.ndarray) -> np.ndarray:
+        """Discrete latents: the encoder's own category of each interaction in ``idx``, before
+        categories whose decoder heads predict alike are merged (diagnostics: which of the two
+        joined the strategies)."""
+        merged, self.category_map = self.category_map, np.arange(self.dim)
+        try:
+            return self.encode(idx).argmax(-1)
+        finally:
+            self.category_map = merged
+
     def grouped(self, z: np.ndarray) -> np.ndarray:
         """Discrete latents: each category replaced by its behaviour group's category."""
         if self.kind != "discrete":
