@@ -117,11 +117,11 @@ def time_train(
 def machine() -> str:
     """CPU model, its vector extensions and any instruction-set cap (``ATEN_CPU_CAPABILITY``
     and the like, which emulate an older processor), as every timing here is reported with."""
-    from sili_robots.agent.matmul import machine_key
+    from sili_robots.agent.matmul import isa_caps, machine_key
 
-    model, flags, *rest = machine_key().split(" | ")
-    caps = [part for part in rest if "=" in part]
-    return "; ".join([model, flags or "flags unknown", *(f"capped: {c}" for c in caps)])
+    model, flags, *_ = machine_key().split(" | ")
+    caps = [f"capped: {v}={value}" for v, value in isa_caps().items()]
+    return "; ".join([model, flags or "flags unknown", *caps])
 
 
 def time_matmul(m: int, k: int, n: int, matmul: str, repeats: int = 2000) -> float:

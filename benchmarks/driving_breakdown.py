@@ -24,7 +24,7 @@ import numpy as np
 import pandas as pd
 import torch
 
-from sili_robots.diagnostics import strategies_per_category
+from sili_robots.diagnostics import category_strategies
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import load_trained
 from sili_robots.tasks.driving import DrivingEnv
@@ -67,17 +67,12 @@ def breakdown(run: Path, window: int) -> None:
         f"{m['latent_changed'].mean():.2f}"
     )
     print("  " + pairs.round(2).to_string().replace("\n", "\n  "))
-    # which lanes each latent category stands for, before and after the package merges
-    # categories whose decoder heads predict alike (the index of the strategy: 0 right, 2 left)
-    idx = np.arange(n - window, n)
-    raw = agent.latents.raw_categories(idx)
-    strategies = agent.buffer.strategy_id[idx]
-    print(f"  category -> {{opponent lane: interactions}}: raw {_lanes(raw, strategies)}")
-    print(f"  after merging {_lanes(agent.latents.category_map[raw], strategies)}")
+    raw, merged = category_strategies(agent, window)
+    print(f"  category -> {{opponent lane: interactions}}: raw {_lanes(raw)}")
+    print(f"  after merging {_lanes(merged)}")
 
 
-def _lanes(categories: np.ndarray, strategies: np.ndarray) -> dict[int, dict[str, int]]:
-    split = strategies_per_category(categories, strategies)
+def _lanes(split: dict[int, dict]) -> dict[int, dict[str, int]]:
     return {c: {LANES[float(s)]: k for s, k in per.items()} for c, per in split.items()}
 
 

@@ -27,30 +27,35 @@ import numpy as np
 import pandas as pd
 import torch
 
-from sili_robots.diagnostics import strategies_per_category
+from sili_robots.agent.agent import SILIAgent
+from sili_robots.diagnostics import category_strategies
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import load_trained
 from sili_robots.tasks.sawyer_reach import SawyerReachEnv
 from sili_robots.tasks.sawyer_scene import GOALS
 
 
-def trajectories(run: Path) -> tuple[pd.DataFrame, SawyerReachEnv]:
-    """Per stored interaction: end height, closest approaches, travel, the goal it went for."""
+def load_run(run: Path) -> tuple[SILIAgent, SawyerReachEnv, pd.DataFrame]:
+    """The run's agent (with its whole replay), its task and its metrics, loaded once."""
     cfg, env, agent, _ = load_trained(run)
     task = env.unwrapped
     if not isinstance(task, SawyerReachEnv):
         raise ConfigError(f"{run}: a Sawyer-Reach run is needed, got task {cfg.task!r}")
+    return agent, task, pd.read_csv(run / "metrics.csv").iloc[: agent.buffer.n]
+
+
+def trajectories(agent: SILIAgent, task: SawyerReachEnv, m: pd.DataFrame) -> pd.DataFrame:
+    """Per stored interaction: end height, closest approaches, travel, the goal it went for."""
     n = agent.buffer.n
     ee = agent.buffer.obs[:n, :, :3].astype(np.float64)  # (interactions, H + 1, 3)
     goal = agent.buffer.strategy_id[:n].astype(int)
     to_goals = np.linalg.norm(ee[:, :, None, :] - GOALS[None, None], axis=-1)  # (n, H+1, 3)
     closest = to_goals.min(axis=1)  # (n, 3): closest approach to each goal
     returns = -to_goals[:, 1:].sum(axis=1)  # (n, 3): the task reward under each goal
-    m = pd.read_csv(run / "metrics.csv").iloc[:n]
     replayed = returns[np.arange(n), goal]
     if not np.allclose(replayed, m["task_reward"], atol=1e-3):
-        raise ConfigError(f"{run}: the replay does not match metrics.csv; was the run extended?")
-    table = pd.DataFrame(
+        raise ConfigError("the replay does not match metrics.csv; was the run extended?")
+    return pd.DataFrame(
         {
             "interaction": np.arange(n),
             "goal": goal,
@@ -68,21 +73,6 @@ def trajectories(run: Path) -> tuple[pd.DataFrame, SawyerReachEnv]:
             "reward": m["task_reward"].to_numpy(),
         }
     )
-    return table, task
-
-
-def category_split(run: Path, window: int) -> tuple[dict, dict]:
-    """Over the last ``window`` interactions: the goals behind each raw encoder category and
-    behind each category after merging (empty for a run without discrete latents)."""
-    _, _, agent, _ = load_trained(run)
-    if agent.latents.kind != "discrete":
-        return {}, {}
-    n = agent.buffer.n
-    idx = np.arange(max(n - window, 0), n)
-    goals = agent.buffer.strategy_id[idx]
-    raw = agent.latents.raw_categories(idx)
-    merged = agent.latents.category_map[raw]
-    return strategies_per_category(raw, goals), strategies_per_category(merged, goals)
 
 
 def main() -> None:
@@ -92,8 +82,9 @@ def main() -> None:
     args = p.parse_args()
     torch.set_num_threads(1)
     for run in args.runs:
-        t, task = trajectories(run)
+        agent, task, metrics = load_run(run)
         print(f"{run.name} (plane z = {task.plane_z:.2f} m, start z = {task.start[2]:.2f} m):")
+        t = trajectories(agent, task, metrics)
         print(
             "  interactions  above plane  stable  to true / any goal (m)  went for true  "
             "goal signal  travel (m)  end z (m)  categories  changed  alpha   reward"
@@ -108,7 +99,7 @@ def main() -> None:
                 f"{g.category.nunique():10d}  {g.changed.mean():7.2f}  "
                 f"{g.alpha.mean():.4f}  {g.reward.mean():7.2f}"
             )
-        raw, merged = category_split(run, args.block)
+        raw, merged = category_strategies(agent, args.block)
         if raw:
             print(f"  category -> {{goal: interactions}}, last {args.block}: raw {raw}")
             print(f"  after merging {merged}")

@@ -6,8 +6,13 @@ prediction of the *next* interaction's strategy, so it is compared with row j+1'
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import pandas as pd
+
+if TYPE_CHECKING:
+    from sili_robots.agent.agent import SILIAgent
 
 
 def purity(pred: np.ndarray, true: np.ndarray) -> float:
@@ -152,3 +157,20 @@ def strategies_per_category(categories: np.ndarray, strategy_ids: np.ndarray) ->
         int(c): pd.Series(strategy_ids[categories == c]).value_counts().sort_index().to_dict()
         for c in np.unique(categories)
     }
+
+
+def category_strategies(agent: SILIAgent, window: int) -> tuple[dict[int, dict], dict[int, dict]]:
+    """Over the agent's last ``window`` stored interactions: the true strategies behind each
+    discrete latent category as the encoder gives it, and after categories whose decoder heads
+    predict alike are merged; tells an encoder that does not separate the strategies from a merge
+    that joined categories that did. Empty for an agent without discrete latents."""
+    latents, n = agent.latents, agent.buffer.n
+    if latents.kind != "discrete":
+        return {}, {}
+    idx = np.arange(max(n - window, 0), n)
+    strategies = agent.buffer.strategy_id[idx]
+    raw = latents.raw_categories(idx)
+    return (
+        strategies_per_category(raw, strategies),
+        strategies_per_category(latents.category_map[raw], strategies),
+    )

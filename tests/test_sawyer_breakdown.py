@@ -14,6 +14,7 @@ import pytest
 from fast_settings import FAST_ARGS
 
 from sili_robots.cli import main
+from sili_robots.diagnostics import category_strategies
 from sili_robots.errors import ConfigError
 
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "sawyer_breakdown.py"
@@ -32,8 +33,9 @@ def test_breakdown_reads_the_replay_of_a_real_run(tmp_path: Path) -> None:
     args = ["train", "--task", "sawyer-reach", "--method", "sili", "--interactions", "12"]
     args += ["--seed", "0", "--out", str(out), "--no-progress", *FAST_ARGS]
     assert main(args) == 0
-    module = _load()
-    table, _ = module.trajectories(out)  # raises if the replay's rewards disagree
+    breakdown = _load()
+    agent, task, metrics = breakdown.load_run(out)
+    table = breakdown.trajectories(agent, task, metrics)  # raises if the replay's rewards disagree
     assert len(table) == 12
     # interaction j's strategy_changed says whether the goal changed after interaction j - 1
     above = table["above plane"].to_numpy()[:-1]
@@ -42,7 +44,7 @@ def test_breakdown_reads_the_replay_of_a_real_run(tmp_path: Path) -> None:
     assert (table["travel"] > 0).all() and (table["goal signal"] >= 0).all()
     # every one of the last 8 interactions is counted once, under its true goal, before and
     # after merging; merging only joins categories
-    raw, merged = module.category_split(out, 8)
+    raw, merged = category_strategies(agent, 8)
     goals = pd.Series(table["goal"].to_numpy()[-8:]).value_counts().to_dict()
     for split in (raw, merged):
         total = pd.DataFrame(list(split.values())).fillna(0).sum().to_dict()
@@ -55,4 +57,4 @@ def test_breakdown_refuses_another_task(tmp_path: Path) -> None:
     args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "2"]
     assert main([*args, "--seed", "0", "--out", str(out), "--no-progress", *FAST_ARGS]) == 0
     with pytest.raises(ConfigError, match="Sawyer-Reach run is needed"):
-        _load().trajectories(out)
+        _load().load_run(out)

@@ -77,24 +77,23 @@ class LatentCache:
     def append(self, z: np.ndarray) -> None:
         self.Z = np.concatenate([self.Z, z[None]])
 
-    @torch.no_grad()
     def encode(self, idx: np.ndarray) -> np.ndarray:
         """z^{j+1} = E(tau^j) for each j in ``idx`` (a Gumbel-max sample with ``sample``)."""
-        b = self.buffer
-        traj = transitions(
-            torch.from_numpy(b.obs[idx]), torch.from_numpy(b.act[idx]), torch.from_numpy(b.rew[idx])
-        )
-        return self.grouped(self.model.encode(traj, sample=self.sample).numpy())
+        return self.grouped(self._encode_ungrouped(idx))
 
     def raw_categories(self, idx: np.ndarray) -> np.ndarray:
         """Discrete latents: the encoder's own category of each interaction in ``idx``, before
         categories whose decoder heads predict alike are merged (diagnostics: which of the two
         joined the strategies)."""
-        merged, self.category_map = self.category_map, np.arange(self.dim)
-        try:
-            return self.encode(idx).argmax(-1)
-        finally:
-            self.category_map = merged
+        return self._encode_ungrouped(idx).argmax(-1)
+
+    @torch.no_grad()
+    def _encode_ungrouped(self, idx: np.ndarray) -> np.ndarray:
+        b = self.buffer
+        traj = transitions(
+            torch.from_numpy(b.obs[idx]), torch.from_numpy(b.act[idx]), torch.from_numpy(b.rew[idx])
+        )
+        return self.model.encode(traj, sample=self.sample).numpy()
 
     def grouped(self, z: np.ndarray) -> np.ndarray:
         """Discrete latents: each category replaced by its behaviour group's category."""

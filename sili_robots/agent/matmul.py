@@ -73,6 +73,11 @@ ISA_CAPS = (
 )
 
 
+def isa_caps() -> dict[str, str]:
+    """The instruction-set caps set in this process (``ISA_CAPS`` that have a value)."""
+    return {v: os.environ[v] for v in ISA_CAPS if os.environ.get(v)}
+
+
 def machine_key() -> str:
     """What a kernel timing depends on: CPU model and flags, any instruction-set cap, torch
     version (one thread, as training runs)."""
@@ -88,7 +93,7 @@ def machine_key() -> str:
                 break
     except OSError:
         pass
-    caps = "".join(f" | {v}={os.environ[v]}" for v in ISA_CAPS if os.environ.get(v))
+    caps = "".join(f" | {v}={value}" for v, value in isa_caps().items())
     return f"{model} | {flags}{caps} | torch {torch.__version__} | 1 thread"
 
 
