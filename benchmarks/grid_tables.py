@@ -40,7 +40,10 @@ def _wall_minutes(source: Path, runs: pd.Series) -> str:
         summary = source / "runs" / run / "summary.json"
         if summary.is_file():
             minutes.append(json.loads(summary.read_text())["wall_time_s"] / 60)
-    return f"{min(minutes):.0f}-{max(minutes):.0f} min" if minutes else "-"
+    if not minutes:
+        return "-"
+    low, high = f"{min(minutes):.0f}", f"{max(minutes):.0f}"
+    return f"{low} min" if low == high else f"{low}-{high} min"
 
 
 def task_table(df: pd.DataFrame, source: Path, task: str) -> str:

@@ -1,0 +1,28 @@
+"""The grid's per-task tables are rebuilt from the committed results alone: a row per method
+with each seed's last-100 task reward, and equal wall times printed once."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_tables_come_from_the_committed_collection() -> None:
+    script = ROOT / "benchmarks" / "grid_tables.py"
+    out = subprocess.run(
+        [sys.executable, str(script), str(ROOT / "results" / "paper-grid"), "--tasks", "circle-3"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
+    rows = {
+        line.split(" | ")[0].lstrip("| "): line
+        for line in out.splitlines()
+        if line.startswith("| ")
+    }
+    assert "-16.93, -15.86, -8.32 | -13.70 | 0.79" in rows["SILI"]
+    assert "| 16 min |" in rows["SILI (paper)"]  # all three seeds took 16 minutes: no "16-16"
+    assert "circle-8" not in out
