@@ -272,7 +272,40 @@ def test_the_default_profile_is_decided_against_the_paper_profile(paper_reward, 
     assert set(rows) == {"circle-3", "driving"}
     assert rows["circle-3"].verdict == verdict
     assert rows["circle-3"].measured.startswith("score package 0.95 (reward -6.00")
-    assert rows["driving"].verdict == "not measured yet (runs: package 0/3, paper 0/3)"
+    assert rows["driving"].verdict == "not measured yet (runs: package 0/5, paper 0/5)"
+
+
+def test_the_default_on_driving_is_decided_on_five_seeds_of_each_profile():
+    from sili_robots.sweep.runner import plan
+
+    n = 2500
+    names = {
+        profile: [r.name for b in blocks for r in plan(block(b).specs(("driving",)))]
+        for profile, blocks in {
+            "package": ("sili-oracle", "default-seeds"),
+            "paper": ("paper-profile", "paper-seeds"),
+        }.items()
+    }
+    assert len(names["package"]) == 6 + 2 and len(names["paper"]) == 3 + 2  # sili-oracle: + Oracle
+    parts = []
+    for profile, reward in (("package", -0.5), ("paper", -0.2)):
+        for name in names[profile]:
+            if "oracle" in name:
+                continue
+            seed = int(name.rsplit("__s", 1)[1])
+            # the first three seeds alike; the two added seeds decide
+            rewards = _const(n, -0.5 if seed < 3 else reward)
+            parts.append(_rows("driving", "sili/Driving-v0", "sili", seed, rewards, _const(n, 1),
+                               profile=profile, name=name))  # fmt: skip
+    df = pd.concat(parts, ignore_index=True)
+    rows = {c.task: c for c in claims_table(df) if c.claim == "package default over paper profile"}
+    assert rows["driving"].verdict == NO  # -0.5 against (3 x -0.5 + 2 x -0.2) / 5 = -0.38
+    assert rows["driving"].measured.startswith("score package 0.50 (reward -0.50")
+    four = claims_table(df[df.run != names["paper"][-1]])
+    (row,) = [
+        c for c in four if c.claim == "package default over paper profile" and c.task == "driving"
+    ]
+    assert row.verdict == "not measured yet (runs: paper 4/5)"
 
 
 def test_first_finished_run_finals():
