@@ -4,6 +4,7 @@
 import gzip
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -104,6 +105,18 @@ def test_plot_reads_a_collection_without_writing_into_it(sweep_and_collection, t
     assert not (collection / "results.csv").exists()
 
 
+def test_grid_progress_counts_only_runs_at_the_blocks_budget(sweep_and_collection, capsys):
+    _, collection = sweep_and_collection  # holds circle-3__sili-bschedule__s0 at 6 interactions
+    args = ["grid", "--dry-run", "--blocks", "sili-oracle", "--tasks", "circle-3", "--sweep-dir"]
+    assert main([*args, str(collection)]) == 0
+    assert "6 runs, 0 done" in capsys.readouterr().out
+    committed = Path(__file__).resolve().parents[1] / "results" / "paper-grid"
+    assert main([*args, str(committed)]) == 0
+    assert capsys.readouterr().out.strip().splitlines()[-1] == (
+        "6 of 6 runs done, 12,000 of 12,000 interactions"
+    )
+
+
 def test_grid_blocks_and_budgets(capsys):
     assert (
         main(
@@ -120,10 +133,10 @@ def test_grid_blocks_and_budgets(capsys):
         )
         == 0
     )
-    assert (
-        capsys.readouterr().out.strip()
-        == "sili-oracle on driving (2500 interactions): 6 runs, 0 done"
-    )
+    assert capsys.readouterr().out.strip().splitlines() == [
+        "sili-oracle on driving (2500 interactions): 6 runs, 0 done",
+        "0 of 6 runs done, 0 of 15,000 interactions",
+    ]
     (spec,) = block("stable-smirl").specs(("circle-8",))
     assert spec.interactions == TASK_BUDGETS["circle-8"] // 2 and spec.methods == [
         "stable",

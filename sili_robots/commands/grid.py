@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.sweep import LocalBackend, plan, run_sweep
     from sili_robots.sweep.collect import collect
     from sili_robots.sweep.spec import parse_list
-    from sili_robots.sweep.state import run_path, run_state
+    from sili_robots.sweep.state import run_path
 
     blocks = [block(b) for b in parse_list(args.blocks)] if args.blocks else list(BLOCKS)
     tasks = tuple(parse_list(args.tasks)) if args.tasks else TASKS
@@ -54,13 +54,17 @@ def run(args: argparse.Namespace) -> int:
     if bad:
         raise ConfigError(f"unknown grid task {bad[0]!r}; allowed: {', '.join(TASKS)}")
     failed: list[str] = []
+    planned = done = planned_interactions = done_interactions = 0
     for b in blocks:
         for spec in [recorded(args.sweep_dir, s) for s in b.specs(tasks)]:
             label = f"{b.name} on {spec.tasks[0]} ({spec.interactions} interactions)"
             if args.dry_run:
                 runs = plan([spec])
-                states = [run_state(run_path(args.sweep_dir, r.name)) for r in runs]
-                print(f"{label}: {len(runs)} runs, {states.count('done')} done")
+                n_done = sum(_finished(run_path(args.sweep_dir, r.name), spec) for r in runs)
+                print(f"{label}: {len(runs)} runs, {n_done} done")
+                planned, done = planned + len(runs), done + n_done
+                planned_interactions += len(runs) * spec.interactions
+                done_interactions += n_done * spec.interactions
                 continue
             print(f"grid: {label}", flush=True)
             backend = LocalBackend(args.workers or os.cpu_count() or 1)
@@ -68,9 +72,24 @@ def run(args: argparse.Namespace) -> int:
             failed += list(report.failed)
             added = collect([args.sweep_dir], args.into).added
             print(json.dumps({"block": b.name, "task": spec.tasks[0], "collected": added}))
+    if args.dry_run:
+        print(
+            f"{done} of {planned} runs done, "
+            f"{done_interactions:,} of {planned_interactions:,} interactions"
+        )
     if failed:
         print(json.dumps({"failed": failed}))
     return 1 if failed else 0
+
+
+def _finished(run_dir: Path, spec) -> bool:
+    """Done at the block's budget (a collection may hold a shorter run of the same name)."""
+    from sili_robots.runs import SUMMARY
+
+    summary = run_dir / SUMMARY
+    return summary.is_file() and json.loads(summary.read_text()).get("interactions") == (
+        spec.interactions
+    )
 
 
 def recorded(sweep_dir: Path, spec):
