@@ -301,9 +301,8 @@ def _sweet_spot(finals: pd.DataFrame) -> Claim:
 
 def _default_profile(task: str, finals: pd.DataFrame) -> Claim:
     name = "package default over paper profile"
-    (package, n_package), (paper, n_paper) = (
-        _profile_runs(finals, task, p) for p in PROFILE_BLOCKS
-    )
+    package, n_package = _profile_runs(finals, task, "package")
+    paper, n_paper = _profile_runs(finals, task, "paper")
     missing = _missing(
         {"package": package, "paper": paper}, {"package": n_package, "paper": n_paper}
     )
