@@ -9,7 +9,13 @@ the hazard); the latent categories used and how often the category changed; the 
 temperature alpha; the lanes behind each latent category, as the encoder gives it and after the
 package merges categories whose decoder heads predict alike.
 
-    python benchmarks/driving_breakdown.py RUN [RUN ...] [--window 200]
+With ``--phases N`` it prints instead, for every N interactions of the whole run: the share of
+interactions with the ego in the left lane at the red line (which makes the opponent merge right,
+the non-colliding hold), the share the opponent merged right, collisions, true stability, the
+mean entropy temperature alpha and stability weight b: when a run settled on a lane, and whether
+it was still exploring then.
+
+    python benchmarks/driving_breakdown.py RUN [RUN ...] [--window 200] [--phases 250]
 
 Why: a run that holds the opponent and still collides in every interaction (the stable
 equilibrium of passing on the right) has to be told apart from one that fails to hold it.
@@ -72,6 +78,30 @@ def breakdown(run: Path, window: int) -> None:
     print(f"  after merging {_lanes(merged)}")
 
 
+def phases(run: Path, size: int) -> pd.DataFrame:
+    """One row per ``size`` interactions of the whole run (see the module's docstring)."""
+    cfg, env, agent, _ = load_trained(run)
+    env.close()  # only the replay is read; libsumo allows one live simulation per process
+    if not isinstance(env.unwrapped, DrivingEnv):
+        raise ConfigError(f"{run}: a Driving run is needed, got task {cfg.task!r}")
+    n = agent.buffer.n
+    m = pd.read_csv(run / "metrics.csv").iloc[:n]
+    table = pd.DataFrame(
+        {
+            "left at red line": _side(agent.buffer.obs[:n, RED_LINE_STEP, 1]) == "left",
+            "opponent merged right": m["strategy_id"].map(LANES).to_numpy() == "right",
+            "collisions": (agent.buffer.rew[:n] < 0).any(axis=1),
+            "true stability": 1.0 - m["strategy_changed"].to_numpy(),
+            "alpha": m["alpha"].to_numpy(),
+            "b": m["beta"].to_numpy(),
+        }
+    )
+    start = (np.arange(n) // size) * size
+    out = table.groupby(start).mean()
+    out.index = [f"{i}-{min(i + size, n) - 1}" for i in out.index]
+    return out
+
+
 def _lanes(split: dict[int, dict]) -> dict[int, dict[str, int]]:
     return {c: {LANES[float(s)]: k for s, k in per.items()} for c, per in split.items()}
 
@@ -80,10 +110,14 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("runs", nargs="+", type=Path)
     p.add_argument("--window", type=int, default=200)
+    p.add_argument("--phases", type=int, help="a row per this many interactions instead")
     args = p.parse_args()
     torch.set_num_threads(1)
     for run in args.runs:
-        breakdown(run, args.window)
+        if args.phases:
+            print(f"{run.name}:\n{phases(run, args.phases).round(4).to_string()}")
+        else:
+            breakdown(run, args.window)
 
 
 if __name__ == "__main__":

@@ -1,0 +1,43 @@
+"""The Driving breakdown's phases on a short real run: each block's collisions and true stability
+are the run's own (its replay's rewards and its metrics), and b and alpha are the logged ones."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from fast_settings import FAST_ARGS
+
+from sili_robots.cli import main
+
+SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "driving_breakdown.py"
+
+
+def _load():
+    spec = importlib.util.spec_from_file_location("driving_breakdown", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_phases_of_a_real_run(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    args = ["train", "--task", "driving", "--method", "sili", "--interactions", "10"]
+    args += ["--seed", "0", "--out", str(out), "--no-progress", *FAST_ARGS]
+    args += ["--beta-schedule", "4:0,5:0.5"]
+    assert main(args) == 0
+    table = _load().phases(out, 4)
+    metrics = pd.read_csv(out / "metrics.csv")
+    assert list(table.index) == ["0-3", "4-7", "8-9"]
+    blocks = metrics.interaction // 4
+    np.testing.assert_allclose(
+        table["collisions"], (metrics.task_reward < 0).groupby(blocks).mean()
+    )
+    stable = 1.0 - metrics.strategy_changed.groupby(blocks).mean()
+    np.testing.assert_allclose(table["true stability"], stable)
+    np.testing.assert_allclose(table["b"], [0.0, 0.375, 0.5])
+    assert table["left at red line"].between(0, 1).all()
