@@ -4,29 +4,22 @@ endings near the edge are counted on the right side."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 from types import ModuleType
 
 import numpy as np
 import pytest
 import torch
+from benchmark_scripts import load_script
 from fast_settings import FAST_ARGS
 
 from sili_robots.cli import main
 from sili_robots.tasks.circle import STEP
 
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "circle_reward_breakdown.py"
-
 
 @pytest.fixture(scope="module")
 def breakdown() -> ModuleType:
-    spec = importlib.util.spec_from_file_location("circle_reward_breakdown", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_script("circle_reward_breakdown")
 
 
 @pytest.fixture(scope="module")
@@ -96,13 +89,8 @@ def test_edge_examples_count_each_side_near_the_location(breakdown: ModuleType, 
     assert breakdown.edge_examples(agent, task, metrics, location) == (1, 1)
 
 
-SLIP_SCRIPT = SCRIPT.parent / "circle_slip_cost.py"
-
-
 def test_slip_cost_plays_the_held_and_the_moved_on_opponent(run: Path) -> None:
-    spec = importlib.util.spec_from_file_location("circle_slip_cost", SLIP_SCRIPT)
-    slip = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(slip)
+    slip = load_script("circle_slip_cost")
     out = slip.slip_costs(run, eps=0.01, noise=0.25, plays=1)
     plain, filtered = out["no filter"], out["filter"]
     assert all(step == -1 for rows in plain.values() for _, step in rows)  # never leaves z

@@ -3,25 +3,14 @@ are the run's own (its replay's rewards and its metrics), and b and alpha are th
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from benchmark_scripts import load_script
 from fast_settings import FAST_ARGS
 
 from sili_robots.cli import main
-
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "driving_breakdown.py"
-
-
-def _load():
-    spec = importlib.util.spec_from_file_location("driving_breakdown", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
 
 
 def test_phases_of_a_real_run(tmp_path: Path) -> None:
@@ -30,7 +19,7 @@ def test_phases_of_a_real_run(tmp_path: Path) -> None:
     args += ["--seed", "0", "--out", str(out), "--no-progress", *FAST_ARGS]
     args += ["--beta-schedule", "4:0,5:0.5"]
     assert main(args) == 0
-    table = _load().phases(out, 4)
+    table = load_script("driving_breakdown").phases(out, 4)
     metrics = pd.read_csv(out / "metrics.csv")
     assert list(table.index) == ["0-3", "4-7", "8-9"]
     blocks = metrics.interaction // 4

@@ -4,28 +4,21 @@ plane (the task's rule, seen from the replay)."""
 
 from __future__ import annotations
 
-import importlib.util
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from benchmark_scripts import load_script
 from fast_settings import FAST_ARGS
 
 from sili_robots.cli import main
 from sili_robots.diagnostics import category_strategies
 from sili_robots.errors import ConfigError
 
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "sawyer_breakdown.py"
-
 
 def _load():
-    spec = importlib.util.spec_from_file_location("sawyer_breakdown", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
+    return load_script("sawyer_breakdown")
 
 
 def test_breakdown_reads_the_replay_of_a_real_run(tmp_path: Path) -> None:
