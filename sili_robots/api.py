@@ -50,7 +50,7 @@ class SILI:
         seed: int = 0,
         *,
         latent: str | None = None,
-        profile: str = "package",
+        profile: str | None = None,
         settings: dict[str, Any] | None = None,
         env_kwargs: dict[str, Any] | None = None,
         run_dir: str | Path | None = None,

@@ -55,6 +55,14 @@ def task_name_of(env: gym.Env) -> str:
     return f"{cls.__module__}:{cls.__qualname__}"
 
 
+def default_profile(task: str, method: str) -> str:
+    """The profile a run starts from when none is given: the task's for SILI (the paper grid's
+    choice, ``TaskSpec.sili_profile``), the package's otherwise."""
+    if method != "sili" or is_class_path(task):
+        return "package"
+    return task_spec(task).sili_profile
+
+
 def make_env(task: str, **kwargs: Any) -> gym.Env:
     """A task by name, gymnasium id or class path; ``kwargs`` go to its constructor."""
     if is_class_path(task):
@@ -101,14 +109,16 @@ def make_run_config(
     interactions: int = 1000,
     *,
     latent: str | None = None,
-    profile: str = "package",
+    profile: str | None = None,
     settings: dict[str, Any] | None = None,
     env_kwargs: dict[str, Any] | None = None,
     checkpoint_every: int = 50,
     threads: int = 1,
 ) -> RunConfig:
-    """A run's full config: the method's preset in ``profile``, then ``settings`` (dotted paths
-    or earlier flat names; ``addons.*`` for the add-ons), checked as a whole."""
+    """A run's full config: the method's preset in ``profile`` (default: the task's,
+    ``default_profile``), then ``settings`` (dotted paths or earlier flat names; ``addons.*``
+    for the add-ons), checked as a whole."""
+    profile = profile or default_profile(task, method)
     agent_settings: dict[str, Any] = {}
     addon_settings: dict[str, Any] = {}
     for name, value in (settings or {}).items():

@@ -1,6 +1,8 @@
 """The paper's claims, decided from a results collection of the paper grid (``sili claims``).
 
 Every number is a run's mean over its last ``WINDOW`` interactions, then the mean over seeds.
+SILI on a task is ``--method sili`` there: the grid's runs in the task's registered profile
+(``TaskSpec.sili_profile``; the paper's on Driving, decided by the last rule below).
 Task rewards are compared as a *score*: 0 = standing still, 1 = the task's scripted oracle (its
 reference bounds, ``sili bounds``), so one margin means the same on every task. A claim is
 decided only from runs at the grid's full budget for their block (``paper_grid.py``); with any
@@ -41,6 +43,7 @@ import pandas as pd
 
 from sili_robots.bounds import stored_bounds
 from sili_robots.paper_grid import SWEEP_BETAS, TASKS, Block, block
+from sili_robots.tasks import task_spec
 
 WINDOW = 100
 COMPARABLE, COMPARABLE_PART = 0.1, 0.25
@@ -137,7 +140,7 @@ def decide(finals: pd.DataFrame, df: pd.DataFrame) -> list[Claim]:
     base = block("lili-sac")
     claims: list[Claim] = []
     for task in TASKS:
-        sili = _block_runs(finals, grid, task, "sili")
+        sili = _sili_runs(finals, task)
         oracle = _block_runs(finals, grid, task, "oracle")
         lili, sac = (_block_runs(finals, base, task, m) for m in ("lili", "sac"))
         stable, smirl = (_block_runs(finals, half, task, m) for m in ("stable", "smirl"))
@@ -167,6 +170,13 @@ def _profile_runs(finals: pd.DataFrame, task: str, profile: str) -> tuple[pd.Dat
     blocks = [b for b in blocks if task in b.tasks]
     rows = pd.concat([_block_runs(finals, b, task, "sili") for b in blocks])
     return rows.sort_values("seed"), sum(len(b.seeds) for b in blocks)
+
+
+def _sili_runs(finals: pd.DataFrame, task: str) -> pd.DataFrame:
+    """The grid's runs of ``--method sili`` on ``task``, in its registered profile (three
+    seeds, as every other method)."""
+    profile = task_spec(task).sili_profile
+    return _block_runs(finals, block(PROFILE_BLOCKS[profile][0]), task, "sili")
 
 
 def _comparable(task: str, sili: pd.DataFrame, oracle: pd.DataFrame, n: int) -> Claim:
@@ -226,7 +236,7 @@ def _driving(
 ) -> Claim:
     name, task = "only SILI avoids all collisions", "driving"
     runs = {
-        "SILI": _block_runs(finals, grid, task, "sili"),
+        "SILI": _sili_runs(finals, task),
         "Oracle": _block_runs(finals, grid, task, "oracle"),
         "LILI": _block_runs(finals, base, task, "lili"),
         "SAC": _block_runs(finals, base, task, "sac"),
@@ -260,7 +270,7 @@ def _speaker_listener(
 ) -> Claim:
     name = "SILI stable by ~250, beats baselines"
     task = "speaker-listener"
-    sili = _block_runs(finals, grid, task, "sili")
+    sili = _sili_runs(finals, task)
     baselines = {
         "LILI": _block_runs(finals, base, task, "lili"),
         "SAC": _block_runs(finals, base, task, "sac"),

@@ -66,3 +66,39 @@ def test_method_and_profile_are_chosen_not_overridden():
         method_config("sili", overrides={"profile": "paper"})
     with pytest.raises(ConfigError, match="method is not a setting to override"):
         method_config("lili", overrides={"method": "sili"})
+
+
+def test_sili_starts_from_the_profile_its_task_registers():
+    from sili_robots.build import make_run_config
+    from sili_robots.tasks import TASKS
+
+    # Driving registers the paper's profile (the grid's choice); every other task the package's
+    assert {name for name, spec in TASKS.items() if spec.sili_profile != "package"} == {"driving"}
+    assert make_run_config("driving", "sili").agent.profile == "paper"
+    assert make_run_config("driving", "sili").agent.model.estimator == "gumbel"
+    assert make_run_config("driving", "sac").agent.profile == "package"
+    assert make_run_config("circle-3", "sili").agent.profile == "package"
+    assert make_run_config("driving", "sili", profile="package").agent.profile == "package"
+
+
+def test_a_sweep_records_each_tasks_sili_profile_and_keeps_it_on_resume():
+    from sili_robots.sweep import SweepSpec, expand
+
+    spec = SweepSpec(
+        tasks=["driving", "circle-3"], methods=["sili", "lili"], seeds=[0], interactions=5
+    )
+    assert spec.sili_profiles == {"driving": "paper", "circle-3": "package"}
+    names = [r.name for r in expand(spec)]
+    assert names == [
+        "driving__sili-paper-b0.5__s0",
+        "driving__lili__s0",
+        "circle-3__sili-bschedule__s0",
+        "circle-3__lili__s0",
+    ]
+    # recorded before Driving's default moved: resumed as it was planned
+    older = {**spec.to_dict(), "sili_profiles": {"driving": "package", "circle-3": "package"}}
+    assert expand(SweepSpec.from_dict(older))[0].name == "driving__sili-bschedule__s0"
+    # recorded before profiles existed: the package's
+    before = {k: v for k, v in spec.to_dict().items() if k not in ("profile", "sili_profiles")}
+    assert SweepSpec.from_dict(before).profile == "package"
+    assert expand(SweepSpec.from_dict(before))[0].name == "driving__sili-bschedule__s0"

@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 from fast_settings import FAST_AGENT as FAST
 
+from sili_robots.build import default_profile
 from sili_robots.claims import HOLDS, NO, PART, claims_table, markdown, run_finals, score
 from sili_robots.cli import main
 from sili_robots.commands.claims import END, START
@@ -152,11 +153,14 @@ def test_grid_blocks_and_budgets(capsys):
 
 
 # ---------------------------------------------------------------- the claims' decision rules
-def _rows(task, task_id, method, seed, rewards, stability, profile="package", beta=0.5, name=None):
-    """A run's rows in the results table, named as the grid names it (unless ``name``)."""
+def _rows(task, task_id, method, seed, rewards, stability, profile=None, beta=0.5, name=None):
+    """A run's rows in the results table, named as the grid names it (unless ``name``); in the
+    task's profile for the method unless ``profile``."""
     n = len(rewards)
+    profile = profile or default_profile(task, method)
     if name is None:
-        name = run_name(task, method, seed, beta={"sili": "schedule", "smirl": 0.5}.get(method))
+        label = {"sili": "schedule" if profile == "package" else 0.5, "smirl": 0.5}.get(method)
+        name = run_name(task, method, seed, beta=label, profile=profile)
     return pd.DataFrame(
         {
             "run": name,

@@ -54,9 +54,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--profile",
         choices=PROFILES,
-        default="package",
         help="settings every run starts from: the package's defaults or the paper's appendix "
-        "(run names get -paper)",
+        "(run names get -paper; default: each task's, the paper's for sili on driving)",
     )
     p.add_argument("--interactions", type=positive_int, default=1000)
     p.add_argument("--checkpoint-every", type=positive_int, default=50)

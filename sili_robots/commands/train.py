@@ -36,9 +36,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--method", default="sili", choices=METHODS)
     p.add_argument(
         "--profile",
-        default="package",
         choices=PROFILES,
-        help="starting settings: the package's defaults, or the paper's appendix exactly",
+        help="starting settings: the package's defaults, or the paper's appendix exactly "
+        "(default: the task's; for sili on driving the paper's, else the package's)",
     )
     p.add_argument(
         "--latent",

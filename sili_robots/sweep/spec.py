@@ -18,7 +18,7 @@ from typing import Any
 from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, PROFILES, Schedule
 from sili_robots.agent.matmul import default_matmul
 from sili_robots.agent.methods import PRESETS
-from sili_robots.build import make_run_config
+from sili_robots.build import default_profile, make_run_config
 from sili_robots.errors import ConfigError, check_choice
 from sili_robots.migrations import setting_path
 from sili_robots.runs import RunConfig
@@ -44,8 +44,9 @@ class SweepSpec:
     lr_schedule: list[tuple[int, float]] | None = None
     controllers: list[str] | None = None  # None: each task's default
     latent: str | None = None  # None: each task's default latent kind
-    #: the settings every run starts from: ``package`` or ``paper`` (agent/methods.py)
-    profile: str = "package"
+    #: the settings every run starts from: ``package`` or ``paper`` (agent/methods.py); None:
+    #: SILI starts from each task's (``sili_profiles``), the other methods from the package's
+    profile: str | None = None
     agent_overrides: dict[str, Any] = field(default_factory=dict)
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     checkpoint_every: int = 50
@@ -54,6 +55,9 @@ class SweepSpec:
     #: SILI's default b when the sweep was planned (a number, or a schedule's dict), so
     #: ``--resume`` keeps it when the default moves on
     sili_beta: float | dict[str, Any] | None = None
+    #: task name -> the profile SILI starts from there when ``profile`` is None, recorded when
+    #: planned so ``--resume`` keeps it when a task's default moves on
+    sili_profiles: dict[str, str] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         # the kernel library is resolved once, when the sweep is planned, and recorded with it
@@ -67,6 +71,9 @@ class SweepSpec:
         }
         # likewise each task's version, so ``--resume`` keeps it when a name moves on
         self.task_ids = {**_task_ids(self.tasks, task_spec), **self.task_ids}
+        if self.profile is None:
+            now = {t: default_profile(t, "sili") for t in self.tasks}
+            self.sili_profiles = {**now, **self.sili_profiles}
         if self.sili_beta is None:
             b = PRESETS["sili"].defaults["sili.beta"]
             self.sili_beta = b.to_dict() if isinstance(b, Schedule) else float(b)
@@ -78,8 +85,9 @@ class SweepSpec:
     def from_dict(cls, data: dict[str, Any]) -> SweepSpec:
         """Read a recorded invocation; one recorded before ``matmul`` existed ran on aten, one
         recorded before task versions ran each task's first version, one recorded before SILI's
-        default b was a schedule ran at b = 0.5, and one recorded before a default in
-        ``CHANGED_DEFAULTS`` changed ran at the earlier value."""
+        default b was a schedule ran at b = 0.5, one recorded before profiles ran the package's,
+        and one recorded before a default in ``CHANGED_DEFAULTS`` changed ran at the earlier
+        value."""
         given = {setting_path(k) for k in data.get("agent_overrides", {})}
         older = {"matmul": "aten", **CHANGED_DEFAULTS}
         overrides = {
@@ -89,7 +97,8 @@ class SweepSpec:
         task_ids = data.get("task_ids")
         if task_ids is None:
             task_ids = _task_ids(data.get("tasks", []), first_version)
-        data = {"sili_beta": 0.5, **data, "agent_overrides": overrides, "task_ids": task_ids}
+        data = {"sili_beta": 0.5, "profile": "package", **data}
+        data = {**data, "agent_overrides": overrides, "task_ids": task_ids}
         return cls(**data)
 
     def default_beta(self) -> float | Schedule:
@@ -241,7 +250,8 @@ def validate(spec: SweepSpec) -> None:
         task_spec(task)
     for method in spec.methods:
         check_choice("method", method, METHODS)
-    check_choice("profile", spec.profile, PROFILES)
+    if spec.profile is not None:
+        check_choice("profile", spec.profile, PROFILES)
     if spec.latent is not None:
         check_choice("latent kind", spec.latent, LATENT_KINDS)
     if spec.interactions < 1:
@@ -292,6 +302,9 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
             if controller is not None:
                 env_kwargs["controller"] = controller
             for method in spec.methods:
+                profile = spec.profile or (
+                    spec.sili_profiles.get(task, "package") if method == "sili" else "package"
+                )
                 betas: list[float | None] = [None]
                 if method in BETA_METHODS:
                     betas = list(spec.betas) if spec.betas is not None else [None]
@@ -299,14 +312,14 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                     settings = dict(spec.agent_overrides)
                     if beta is not None:
                         settings["sili.beta"] = beta
-                    elif method == "sili" and spec.profile == "package":
+                    elif method == "sili" and profile == "package":
                         settings["sili.beta"] = spec.default_beta()
                     settings.update(schedule_overrides(spec, method))
                     base = make_run_config(
                         tspec.name,
                         method,
                         latent=spec.latent if method in learned else None,
-                        profile=spec.profile,
+                        profile=profile,
                         settings=settings,
                         env_kwargs=env_kwargs,
                     )
@@ -320,7 +333,7 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                             beta=label if method in BETA_METHODS else None,
                             controller=controller,
                             latent=None if latent == tspec.default_latent else latent,
-                            profile=spec.profile,
+                            profile=profile,
                         )
                         cfg = replace(
                             base,
