@@ -66,7 +66,7 @@ def task_table(df: pd.DataFrame, source: Path, task: str) -> str:
         g = g.sort_values("seed")
         name = NAMES.get(method, method)
         name = name if profile == "package" else f"{name} ({profile})"
-        if method in ("sili", "lili", "stable") and profile == "package" and logged <= 1000:
+        if method == "sili" and profile == "package" and logged <= 1000:  # the b sweep
             name += f" b={beta:g}"
         first = ", ".join("never" if pd.isna(v) else str(int(v)) for v in g.first_stable)
         lines.append(
