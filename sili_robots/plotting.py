@@ -227,7 +227,10 @@ def variant_labels(df: pd.DataFrame) -> pd.Series:
     same method differ in them (e.g. ``SILI b=0.2``, ``SAC [osc]``)."""
     df = with_profile(df)
     labels = pd.Series([METHOD_NAMES.get(m, m) for m in df["method"]], index=df.index)
-    labels += df["profile"].map(lambda p: "" if p == "package" else f" ({p})")
+    # a profile is named where the method ran in more than one (else the package's is plain)
+    several = df.groupby("method")["profile"].transform("nunique") > 1
+    named = several | (df["profile"] != "package")
+    labels[named] += " (" + df.loc[named, "profile"] + ")"
     for _, rows in df.groupby(["method", "profile"]):
         idx = rows.index
         if rows[["config_beta", "beta_scheduled"]].drop_duplicates().shape[0] > 1:

@@ -373,8 +373,12 @@ def test_the_b_sweep_pools_only_constant_b_runs_of_the_sweeps_length():
     )
     assert sorted(b_sweep_rows(df, "circle-3")["run"].unique()) == ["b0", "b0.5", "b1"]
     labels = dict(zip(df["run"], variant_labels(df), strict=True))
-    assert labels["scheduled"] == "SILI b→0.5" and labels["b0.5"] == "SILI b=0.5"
+    assert (
+        labels["scheduled"] == "SILI (package) b→0.5" and labels["b0.5"] == "SILI (package) b=0.5"
+    )
     assert labels["paper"] == "SILI (paper)"
+    alone = df[df.profile == "package"]  # one profile: not named
+    assert set(variant_labels(alone)) == {"SILI b→0.5", "SILI b=0", "SILI b=0.5", "SILI b=1"}
     # the task's learning curves leave the b sweep to its own figure, but draw a lone b sweep
     assert sorted(curve_rows(df, "circle-3")["run"].unique()) == ["long", "paper", "scheduled"]
     alone = df[df.run.isin(["b0", "b0.5", "b1"])]
