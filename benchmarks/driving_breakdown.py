@@ -30,6 +30,7 @@ import numpy as np
 import pandas as pd
 import torch
 
+from sili_robots.agent.agent import SILIAgent
 from sili_robots.diagnostics import category_strategies
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import load_trained
@@ -45,13 +46,21 @@ def _side(y: np.ndarray) -> np.ndarray:
     return np.where(y > 0.5, "left", np.where(y < -0.5, "right", "centre"))
 
 
-def breakdown(run: Path, window: int) -> None:
+def load_run(run: Path) -> tuple[SILIAgent, pd.DataFrame]:
+    """The run's agent (with its whole replay) and its metrics; the task is closed at once, as
+    only the replay is read (libsumo allows one live simulation per process)."""
     cfg, env, agent, _ = load_trained(run)
+    env.close()
     if not isinstance(env.unwrapped, DrivingEnv):
         raise ConfigError(f"{run}: a Driving run is needed, got task {cfg.task!r}")
+    return agent, pd.read_csv(run / "metrics.csv").iloc[: agent.buffer.n]
+
+
+def breakdown(run: Path, window: int) -> None:
+    agent, metrics = load_run(run)
     n = agent.buffer.n
     obs, rew = agent.buffer.obs[n - window : n], agent.buffer.rew[n - window : n]
-    m = pd.read_csv(run / "metrics.csv").iloc[n - window : n]
+    m = metrics.iloc[n - window : n]
     hit = (rew < 0).any(axis=1)
     table = pd.DataFrame(
         {
@@ -80,12 +89,8 @@ def breakdown(run: Path, window: int) -> None:
 
 def phases(run: Path, size: int) -> pd.DataFrame:
     """One row per ``size`` interactions of the whole run (see the module's docstring)."""
-    cfg, env, agent, _ = load_trained(run)
-    env.close()  # only the replay is read; libsumo allows one live simulation per process
-    if not isinstance(env.unwrapped, DrivingEnv):
-        raise ConfigError(f"{run}: a Driving run is needed, got task {cfg.task!r}")
+    agent, m = load_run(run)
     n = agent.buffer.n
-    m = pd.read_csv(run / "metrics.csv").iloc[:n]
     table = pd.DataFrame(
         {
             "left at red line": _side(agent.buffer.obs[:n, RED_LINE_STEP, 1]) == "left",

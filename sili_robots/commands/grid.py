@@ -60,7 +60,9 @@ def run(args: argparse.Namespace) -> int:
             label = f"{b.name} on {spec.tasks[0]} ({spec.interactions} interactions)"
             if args.dry_run:
                 runs = plan([spec])
-                n_done = sum(_finished(run_path(args.sweep_dir, r.name), spec) for r in runs)
+                n_done = sum(
+                    _finished(run_path(args.sweep_dir, r.name), spec.interactions) for r in runs
+                )
                 print(f"{label}: {len(runs)} runs, {n_done} done")
                 planned, done = planned + len(runs), done + n_done
                 planned_interactions += len(runs) * spec.interactions
@@ -82,14 +84,12 @@ def run(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
-def _finished(run_dir: Path, spec) -> bool:
+def _finished(run_dir: Path, interactions: int) -> bool:
     """Done at the block's budget (a collection may hold a shorter run of the same name)."""
     from sili_robots.runs import SUMMARY
 
     summary = run_dir / SUMMARY
-    return summary.is_file() and json.loads(summary.read_text()).get("interactions") == (
-        spec.interactions
-    )
+    return summary.is_file() and json.loads(summary.read_text()).get("interactions") == interactions
 
 
 def recorded(sweep_dir: Path, spec):
