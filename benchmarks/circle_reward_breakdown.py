@@ -22,24 +22,26 @@ locations: only the first item, where its interactions ended and how its latent 
   foreseen ones split by how the interaction that caused them ended: clearly inside (final
   radius below 0.9, an exit inside on purpose) or near the edge (a slip); for continuous
   latents, how far z moved when the strategy changed against when it did not;
-* the critic's min(Q1, Q2) on the last step of an interaction, standing on the held opponent
-  (radius 1), for radial actions that end at radius 0.90 ... 1.10, and the final radius of the
-  policy's own (deterministic) action. The opponent is held by ending on or outside radius 1,
-  so a critic that knows this exactly peaks at or just past 1.00, and where the interactions
+* the critic's min(Q1, Q2) on the last step of an interaction, standing at the circle's edge
+  next to the held opponent, for radial actions that end within 0.1 of the edge, and the final
+  radius of the policy's own (deterministic) action. The opponent is held by ending on or
+  outside the edge (radius 1 + the task's ``outside_margin``: 1 on the -v0 tasks, 1.1 on v1),
+  so a critic that knows this exactly peaks at or just past it, and where the interactions
   actually played ended (mean, spread and nearest to the centre): the margin a policy needs
   grows with that spread;
 * for latent methods, the encoder's side of the same edge: the run's last interaction replayed
-  with only its final position moved radially to radius 0.90 ... 1.10 (last action and reward
-  rewritten to match), and the probability the encoder gives the category it predicts for the
-  unmodified interaction. An encoder that has learned the rule switches category at 1.00;
+  with only its final position moved radially to within 0.1 of the edge (last action and
+  reward rewritten to match), and the probability the encoder gives the category it predicts
+  for the unmodified interaction. An encoder that has learned the rule switches category at
+  the edge;
 * for latent methods, what ending nearer the circle would cost: the last interaction replayed
-  with its exit (last 10 steps) scaled radially so that it ends at radius 0.90 ... 1.40
+  with its exit (last 10 steps) scaled radially so that it ends at the edge -0.10 ... +0.30
   (each step's distance outside radius 1 scaled by one factor, directions kept, actions and
   rewards rewritten to match), how far the encoder's z^{j+1} then lies from the one it gives
   the interaction as played, and the task reward of the next interaction played greedily on
   that z^{j+1} (and the played z^j) against the opponent where that ending leaves it (moved on
-  below radius 1, held from 1 out). An encoder that has learned the rule gives the played
-  z^{j+1} and reward from 1.00 out and a z^{j+1} that finds the moved opponent below it; one
+  inside the edge, held from it out). An encoder that has learned the rule gives the played
+  z^{j+1} and reward from the edge out and a z^{j+1} that finds the moved opponent inside; one
   that changes gradually across the edge makes every ending near it cost the next
   interaction, and the policy's margin outside the circle pays for that. Next to it, how many
   interactions of the whole replay ended within 0.05 of the edge near the held location, on
@@ -69,10 +71,20 @@ from sili_robots.tasks.circle import ARENA, STEP, CircleEnv
 
 PHASE_STEPS = 10
 RADIAL_ACTIONS = np.linspace(-1.0, 1.0, 9)
-FINAL_RADII = 1 + STEP * RADIAL_ACTIONS  # from radius 1, one step of each radial action
+EDGE_STEPS = STEP * RADIAL_ACTIONS  # from the edge, one step of each radial action
 CLEAR_INSIDE = 0.9  # a final radius below this is an exit inside on purpose, not a slip
-EDGE_BAND = 0.05  # endings this close to radius 1 are where the encoder must tell the sides apart
-EXIT_RADII = np.array([0.90, 0.95, 0.99, 1.01, 1.05, 1.10, 1.15, 1.20, 1.30, 1.40])
+EDGE_BAND = 0.05  # endings this close to the edge are where the encoder must tell the sides apart
+EXIT_OFFSETS = np.array([-0.10, -0.05, -0.01, 0.01, 0.05, 0.10, 0.15, 0.20, 0.30, 0.40])
+
+
+def edge(task: CircleEnv) -> float:
+    """The radius where ending outside begins: 1 on the -v0 tasks, 1.1 on v1 (the margin)."""
+    return 1.0 + task.outside_margin
+
+
+def exit_radii(task: CircleEnv) -> np.ndarray:
+    """Where the counterfactual exits end: around the task's edge, mostly outside it."""
+    return edge(task) + EXIT_OFFSETS
 
 
 def location_direction(task: CircleEnv, location: int) -> np.ndarray:
@@ -130,9 +142,9 @@ def edge_examples(
     final = agent.buffer.obs[:n, -1, :2]
     near = final @ location_direction(task, location) > radius * np.cos(np.pi / 6)
     there = near & (metrics["strategy_id"].to_numpy()[:n] == location)
-    edge = 1 + task.outside_margin  # where outside begins (radius 1 on the -v0 tasks)
-    inside = there & (radius >= edge - EDGE_BAND) & (radius < edge)
-    outside = there & (radius >= edge) & (radius < edge + EDGE_BAND)
+    rim = edge(task)
+    inside = there & (radius >= rim - EDGE_BAND) & (radius < rim)
+    outside = there & (radius >= rim) & (radius < rim + EDGE_BAND)
     return int(inside.sum()), int(outside.sum())
 
 
@@ -181,9 +193,9 @@ def continuous_latent_changes(metrics: pd.DataFrame, window: int) -> None:
 
 
 def edge_profile(agent: SILIAgent, task: CircleEnv, location: int) -> tuple[np.ndarray, float]:
-    """min Q on the last step from the held opponent's position, for radial actions."""
+    """min Q on the last step from the edge next to the held opponent, for radial actions."""
     out = location_direction(task, location)  # radial unit vector
-    obs = np.array([*out, (task.horizon - 1) / task.horizon], np.float32)
+    obs = np.array([*(edge(task) * out), (task.horizon - 1) / task.horizon], np.float32)
     if agent.cfg.method == "oracle":  # Oracle observes the opponent's position
         obs = np.concatenate([obs, out])
     x = torch.from_numpy(agent.policy_input(obs, agent.buffer.n)).unsqueeze(0)
@@ -191,7 +203,7 @@ def edge_profile(agent: SILIAgent, task: CircleEnv, location: int) -> tuple[np.n
     with torch.no_grad():
         q = agent.sac.critic(x.expand(len(actions), -1), actions).min(0).values.squeeze(-1)
         own = agent.sac.act(x, deterministic=True)[0].numpy()
-    final_radius = float(np.linalg.norm(out + STEP * own))
+    final_radius = float(np.linalg.norm(edge(task) * out + STEP * own))
     return q.numpy(), final_radius
 
 
@@ -220,7 +232,7 @@ def encoder_edge(agent: SILIAgent, task: CircleEnv, location: int) -> np.ndarray
     if agent.model is None or agent.cfg.latent != "discrete":
         return None
     out = location_direction(task, location)
-    finals = np.outer(FINAL_RADII, out).astype(np.float32)[:, None]
+    finals = np.outer(edge(task) + EDGE_STEPS, out).astype(np.float32)[:, None]
     logits = agent.model.encode_logits(rewritten_last_interaction(agent, task, location, finals, 1))
     held = int(logits[0].argmax())
     return torch.softmax(logits[1:], -1)[:, held].numpy()
@@ -244,7 +256,7 @@ def greedy_interaction(agent: SILIAgent, task: CircleEnv, location: int, z: np.n
 def ending_cost(
     agent: SILIAgent, task: CircleEnv, location: int
 ) -> tuple[np.ndarray, np.ndarray, float] | None:
-    """For the last interaction's exit scaled to end at each of ``EXIT_RADII``: how far
+    """For the last interaction's exit scaled to end at each of ``exit_radii``: how far
     z^{j+1} lies from the played one, and the next interaction's greedy task reward on it
     against the opponent where that ending leaves it (then the reward as played). None for
     runs without a latent model."""
@@ -253,7 +265,7 @@ def ending_cost(
     n = agent.buffer.n
     exit_path = agent.buffer.obs[n - 1, -PHASE_STEPS:, :2]
     radius = np.linalg.norm(exit_path, axis=-1, keepdims=True)
-    scale = (EXIT_RADII - 1) / (radius[-1] - 1)  # of each step's distance outside radius 1
+    scale = (exit_radii(task) - 1) / (radius[-1] - 1)  # of each step's distance outside radius 1
     paths = exit_path / radius * (1 + (radius - 1) * scale[:, None, None])
     traj = rewritten_last_interaction(agent, task, location, paths.astype(np.float32), PHASE_STEPS)
     z = agent.latents.grouped(agent.model.encode(traj).numpy())
@@ -290,8 +302,6 @@ def main() -> None:
     p.add_argument("--window", type=int, default=100)
     args = p.parse_args()
     torch.set_num_threads(1)
-    radii = " ".join(f"{r:.3f}" for r in FINAL_RADII)
-    print(f"edge profile: min Q for final radius {radii}")
     for run in args.runs:
         agent, task, metrics = load_run(run)
         d = phase_distances(agent, args.window)
@@ -301,7 +311,7 @@ def main() -> None:
         location = int(metrics["strategy_id"].iloc[-1])
         held = metrics["strategy_id"].tail(args.window)
         q, own = edge_profile(agent, task, location)
-        best = FINAL_RADII[int(np.argmax(q))]
+        best = edge(task) + EDGE_STEPS[int(np.argmax(q))]
         print(
             f"{run.name}: distance summed: total {d['total']:.2f} = approach {d['approach']:.2f}"
             f" + middle {d['middle']:.2f} + exit {d['exit']:.2f}; alpha {agent.sac.alpha:.4f}"
@@ -315,7 +325,9 @@ def main() -> None:
         else:
             print(f"  locations over the window: {held.astype(int).value_counts().to_dict()}")
         print(
-            f"  edge: Q {np.array2string(q - q.max(), precision=2)} (minus its max), "
+            f"  edge at radius {edge(task):.2f}: min Q for final radius "
+            f"{np.array2string(edge(task) + EDGE_STEPS, precision=3)}: "
+            f"{np.array2string(q - q.max(), precision=2)} (minus its max), "
             f"argmax radius {best:.3f}, the policy ends at {own:.3f}"
         )
         ended = final_radii(agent)[-args.window :]
@@ -335,7 +347,7 @@ def main() -> None:
             dz, rewards, played = cost
             radii, moved = (
                 np.array2string(x, precision=2, floatmode="fixed", suppress_small=True)
-                for x in (EXIT_RADII, dz)
+                for x in (exit_radii(task), dz)
             )
             print(
                 f"  last interaction's exit scaled to end at radius {radii}: z^(j+1) moves by "

@@ -14,6 +14,7 @@ from benchmark_scripts import load_script
 from fast_settings import FAST_ARGS
 
 from sili_robots.cli import main
+from sili_robots.tasks import make_task
 from sili_robots.tasks.circle import STEP
 
 
@@ -68,10 +69,20 @@ def test_ending_inside_is_played_against_the_moved_on_opponent(
 
     monkeypatch.setattr(breakdown, "greedy_interaction", record)
     dz, rewards, as_played = breakdown.ending_cost(agent, task, 2)
-    radii = breakdown.EXIT_RADII
+    radii = breakdown.exit_radii(task)
     assert dz.shape == rewards.shape == radii.shape
     assert played_at[0] == 2 and as_played == -2.0
     np.testing.assert_array_equal(played_at[1:], np.where(radii < 1, 0, 2))  # 2 -> 0 moved on
+
+
+@pytest.mark.parametrize(("version", "rim"), [("v0", 1.0), ("v1", 1.1)])
+def test_probes_straddle_the_tasks_edge(breakdown: ModuleType, version: str, rim: float) -> None:
+    task = make_task(f"sili/Circle3-{version}").unwrapped
+    assert breakdown.edge(task) == pytest.approx(rim)
+    radii = breakdown.exit_radii(task)
+    inside = np.array([task.ends_inside(np.array([r, 0.0])) for r in radii])
+    assert inside.any() and not inside.all()  # some counterfactual exits on each side
+    np.testing.assert_array_equal(inside, radii < rim)
 
 
 def test_edge_examples_count_each_side_near_the_location(breakdown: ModuleType, run: Path) -> None:

@@ -51,6 +51,9 @@ def test_paper_profile_writes_the_papers_values(tmp_path):
     package = method_config("sili")
     assert package.profile == "package" and package.model.estimator == "expected"
     assert method_config("sili", profile="paper").hidden == 256
+    continuous = method_config("sili", "continuous", profile="paper")
+    assert continuous.model.preact_penalty == 0.0  # the package adds 1e-3 (README's table)
+    assert method_config("sili", "continuous").model.preact_penalty == 1e-3
 
 
 def test_an_output_directory_that_cannot_be_created_exits_2_naming_it(capsys):

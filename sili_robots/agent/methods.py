@@ -71,6 +71,7 @@ PAPER_PROFILE: dict[str, Any] = {
     "model.sample": True,
     "model.usage_bonus": 0.0,
     "model.merge_threshold": 0.0,
+    "model.preact_penalty": 0.0,  # continuous latents: the plain tanh output
     "sili.beta": 0.5,
     "sili.credit": "per_step",
     "sili.scale": None,

@@ -58,7 +58,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="RUN_DIR",
         help="continue a killed run (or, with --interactions, extend a finished one)",
     )
-    p.add_argument("--beta", type=unit_float, help="stability weight b in [0, 1] (default 0.5)")
+    p.add_argument(
+        "--beta",
+        type=unit_float,
+        help="stability weight b in [0, 1], fixed (default: the method's schedule)",
+    )
     p.add_argument(
         "--beta-anneal",
         nargs="+",
