@@ -345,7 +345,7 @@ def learning_curves(df: pd.DataFrame, task: str, smooth: int | None = None) -> F
     fig.suptitle(
         f"{task_title(task)}: mean ± std over {_seed_note(rows)}, "
         f"smoothed over {window} interaction{'s' if window > 1 else ''}"
-        + (f"; bounds: scripted policies on {ids}" if ids else "")
+        + (f"\nbounds: scripted policies on {ids}" if ids else "")
     )
     fig.legend(*axes[0].get_legend_handles_labels(), loc="outside right upper")
     return fig
