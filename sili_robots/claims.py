@@ -6,7 +6,8 @@ SILI on a task is ``--method sili`` there: the grid's runs in the task's registe
 Task rewards are compared as a *score*: 0 = standing still, 1 = the task's scripted oracle (its
 reference bounds, ``sili bounds``), so one margin means the same on every task. A claim is
 decided only from runs at the grid's full budget for their block (``paper_grid.py``); with any
-of its runs missing it is "not measured yet" and says how many it has.
+of its runs missing it is "not measured yet" and says how many it has, and so is a claim decided
+by scores on a task version without reference bounds.
 
 Rules (the margins are the table's, fixed before the grid ran):
 
@@ -82,6 +83,7 @@ def run_finals(df: pd.DataFrame, upto: dict[str, int] | None = None) -> pd.DataF
                 "profile": first.get("profile", "package"),
                 "config_beta": float(first["config_beta"]),
                 "seed": int(first["seed"]),
+                "task_id": str(first["task_id"]),
                 "logged": len(g),
                 "task_reward": reward,
                 "stability": float(tail["true_stability"].mean()),
@@ -98,11 +100,13 @@ def score(task_reward: float, task_id: str) -> float:
     if "still" not in b or "oracle" not in b:
         return float("nan")
     still, best = b["still"]["task_reward"], b["oracle"]["task_reward"]
+    if best == still:  # no range to score in
+        return float("nan")
     return (task_reward - still) / (best - still)
 
 
 def first_stable(stability: np.ndarray, window: int = 50) -> int | None:
-    """First interaction whose ``window``-interaction trailing window has stability >= 0.9."""
+    """Where the first ``window``-interaction window with mean stability >= 0.9 starts."""
     if len(stability) < window:
         return None
     means = np.convolve(stability, np.ones(window) / window, mode="valid")
@@ -153,7 +157,28 @@ def decide(finals: pd.DataFrame, df: pd.DataFrame) -> list[Claim]:
     claims.append(_sweet_spot(finals))
     for task in block("paper-profile").tasks:
         claims.append(_default_profile(task, finals))
-    return claims
+    return [_unscored(c, finals) for c in claims]
+
+
+#: the claims decided from task rewards alone, which need no score
+REWARD_CLAIMS = ("only SILI avoids all collisions",)
+
+
+def _unscored(claim: Claim, finals: pd.DataFrame) -> Claim:
+    """A claim on a task version without reference bounds is not measured, whatever its scores
+    (NaN) would have decided."""
+    if claim.claim in REWARD_CLAIMS or claim.verdict not in (HOLDS, PART, NO):
+        return claim
+    runs = finals[finals.task == claim.task]
+    ids = sorted(runs.loc[runs.score.isna(), "task_id"].unique())
+    if not ids:
+        return claim
+    return Claim(
+        claim.claim,
+        claim.task,
+        claim.measured,
+        f"not measured yet (no reference bounds for {', '.join(ids)}: `sili bounds --all --write`)",
+    )
 
 
 #: the blocks that run SILI in each profile for the choice of the default

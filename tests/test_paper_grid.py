@@ -206,6 +206,21 @@ def test_comparable_to_oracle(sili_reward, verdict):
     assert "| circle-3 |" in markdown(claims)
 
 
+def test_a_task_version_without_reference_bounds_is_not_decided(monkeypatch):
+    n = 2000
+    parts = [
+        _rows("circle-3", "sili/Circle3-v9", m, s, _const(n, r), _const(n, 1))
+        for m, r in (("sili", -30.0), ("oracle", -4.5))
+        for s in range(3)
+    ]
+    first = claims_table(pd.concat(parts, ignore_index=True))[0]
+    assert first.verdict.startswith("not measured yet (no reference bounds for sili/Circle3-v9")
+    # bounds that give no range to score in are no bounds either
+    flat = {"still": {"task_reward": -50.0}, "oracle": {"task_reward": -50.0}}
+    monkeypatch.setattr("sili_robots.claims.stored_bounds", lambda task_id: flat)
+    assert np.isnan(score(-10.0, "sili/Circle3-v1"))
+
+
 def test_a_run_short_of_its_budget_or_outside_the_grid_does_not_count():
     parts = [
         _rows("circle-3", "sili/Circle3-v1", m, s, _const(1999, -5), _const(1999, 1))

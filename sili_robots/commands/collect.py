@@ -14,7 +14,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Copies every finished run of each SOURCE (a sweep or another collection) "
         "into DIR/runs/NAME/ as config.json, summary.json and metrics.csv.gz: what `sili plot`, "
         "`sili runs` and `sili claims` read, small enough to commit. Unfinished runs are "
-        "skipped; a run already collected is left as is.",
+        "skipped; a run already collected is left as is unless its source's summary.json differs "
+        "(an extended or retrained run of the same config), which replaces it.",
     )
     p.add_argument("sources", type=Path, nargs="+", metavar="SOURCE")
     p.add_argument("--into", type=Path, required=True, metavar="DIR", help="collection directory")
