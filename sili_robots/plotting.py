@@ -22,7 +22,7 @@ curve is a ``Line2D`` labelled with its variant, and each bound a ``LineCollecti
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -222,13 +222,17 @@ def with_profile(df: pd.DataFrame) -> pd.DataFrame:
     return df
 
 
-def variant_labels(df: pd.DataFrame) -> pd.Series:
+def variant_labels(df: pd.DataFrame, profiled: Collection[str] | None = None) -> pd.Series:
     """A label per row naming its method, plus b / controller / latent where the rows of the
-    same method differ in them (e.g. ``SILI b=0.2``, ``SAC [osc]``)."""
+    same method differ in them (e.g. ``SILI b=0.2``, ``SAC [osc]``). The profile is named for
+    the methods in ``profiled`` (default: those that ran in more than one profile in ``df``)
+    and wherever it is not the package's."""
     df = with_profile(df)
     labels = pd.Series([METHOD_NAMES.get(m, m) for m in df["method"]], index=df.index)
-    # a profile is named where the method ran in more than one (else the package's is plain)
-    several = df.groupby("method")["profile"].transform("nunique") > 1
+    if profiled is None:
+        several = df.groupby("method")["profile"].transform("nunique") > 1
+    else:
+        several = df["method"].isin(list(profiled))
     named = several | (df["profile"] != "package")
     labels[named] += " (" + df.loc[named, "profile"] + ")"
     for _, rows in df.groupby(["method", "profile"]):
@@ -294,24 +298,33 @@ def curve(rows: pd.DataFrame, metric: str, window: int) -> pd.DataFrame:
 
 
 def _draw_curves(
-    axes: Sequence[Axes], task_rows: pd.DataFrame, metrics: Sequence[tuple[str, str]], window: int
+    axes: Sequence[Axes],
+    task_rows: pd.DataFrame,
+    metrics: Sequence[tuple[str, str]],
+    window: int,
+    profiled: Collection[str] | None = None,
+    palette: dict[str, object] | None = None,
 ) -> None:
-    labels = variant_labels(task_rows)
+    """``profiled`` and ``palette`` (label -> colour, filled as labels first appear) keep one
+    label and one colour per variant across the rows of a multi-task figure."""
+    labels = variant_labels(task_rows, profiled)
     variants = _variant_order(task_rows)
     colors = _colors(variants)
+    palette = {} if palette is None else palette
     keyed = task_rows[list(VARIANT_KEYS)].fillna("").apply(tuple, axis=1)
     for variant in variants:
         rows = task_rows[keyed == variant]
         label = labels[rows.index[0]]
+        color = palette.setdefault(label, colors[variant])
         style = "--" if variant[0] == "oracle" else "-"
         for ax, (metric, _) in zip(axes, metrics, strict=True):
             stats = curve(rows, metric, window)
             x = stats.index.to_numpy(float)
             mean, std = stats["mean"].to_numpy(), stats["std"].to_numpy()
-            ax.plot(x, mean, style, color=colors[variant], label=label, lw=1.6)
+            ax.plot(x, mean, style, color=color, label=label, lw=1.6)
             low, high = METRIC_RANGES.get(metric, (-np.inf, np.inf))
             band = np.clip(mean - std, low, high), np.clip(mean + std, low, high)
-            ax.fill_between(x, *band, color=colors[variant], alpha=0.18, lw=0)
+            ax.fill_between(x, *band, color=color, alpha=0.18, lw=0)
     task_ids = _task_ids(task_rows, str(task_rows["task"].iloc[0]))
     for ax, (metric, ylabel) in zip(axes, metrics, strict=True):
         draw_bounds(ax, metric, task_ids)
@@ -441,10 +454,14 @@ def overview(df: pd.DataFrame, smooth: int | None = None) -> Figure:
     fig = Figure(figsize=(11, 2.7 * len(tasks) + 0.6), layout="constrained")
     grid = np.atleast_2d(fig.subplots(len(tasks), len(metrics), squeeze=False))
     handles: dict[str, object] = {}
+    shown = {task: curve_rows(df, task) for task in tasks}
+    # a method that ran in two profiles anywhere names its profile in every row, one colour each
+    both = pd.concat(shown.values()).groupby("method")["profile"].nunique() > 1
+    profiled, palette = set(both[both].index), {}
     for row, task in zip(grid, tasks, strict=True):
-        rows = curve_rows(df, task)
+        rows = shown[task]
         window = smooth or default_smoothing(int(rows["interaction"].max()) + 1)
-        _draw_curves(row, rows, metrics, window)
+        _draw_curves(row, rows, metrics, window, profiled, palette)
         row[0].set_title(task_title(task), loc="left", fontsize=10)
         for h, lab in zip(*row[0].get_legend_handles_labels(), strict=True):
             handles.setdefault(lab, h)

@@ -184,3 +184,43 @@ def test_the_stability_band_stays_within_0_and_1():
     verts = np.concatenate([p.vertices for p in _band(ax, _line(ax, "SAC")).get_paths()])
     assert verts[:, 1].max() == pytest.approx(1.0)  # clipped
     assert verts[:, 1].min() == pytest.approx(2 / 3 - np.sqrt(2) / 3, abs=1e-9)  # mean - std
+
+
+def test_the_overview_names_and_colours_a_profile_alike_in_every_row():
+    # SILI ran in both profiles on Circle 3 and in the package's alone on Circle 8
+    n, parts = 6, []
+    for task, task_id, profiles in (
+        ("circle-3", "sili/Circle3-v1", ("package", "paper")),
+        ("circle-8", "sili/Circle8-v1", ("package",)),
+    ):
+        for profile in profiles:
+            parts.append(
+                pd.DataFrame(
+                    {
+                        "run": f"{task}__sili-{profile}__s0",
+                        "task": task,
+                        "task_id": task_id,
+                        "method": "sili",
+                        "profile": profile,
+                        "config_beta": 0.5,
+                        "beta_scheduled": profile == "package",
+                        "controller": "",
+                        "latent": "discrete",
+                        "seed": 0,
+                        "interaction": np.arange(n),
+                        "task_reward": np.full(n, -20.0),
+                        "true_stability": np.full(n, 1.0),
+                        "stability_reward": np.zeros(n),
+                    }
+                )
+            )
+    fig = overview(pd.concat(parts, ignore_index=True), smooth=1)
+    rows = [ax for ax in fig.axes if ax.get_gid() == "task_reward"]
+    labels = [[line.get_label() for line in ax.get_lines()] for ax in rows]
+    assert [lab for lab in labels[0] if lab.startswith("SILI")] == [
+        "SILI (package)",
+        "SILI (paper)",
+    ]
+    assert [lab for lab in labels[1] if lab.startswith("SILI")] == ["SILI (package)"]
+    colours = [_line(ax, "SILI (package)").get_color() for ax in rows]
+    assert colours[0] == colours[1] != _line(rows[0], "SILI (paper)").get_color()
