@@ -82,6 +82,11 @@ def edge(task: CircleEnv) -> float:
     return 1.0 + task.outside_margin
 
 
+def edge_radii(task: CircleEnv) -> np.ndarray:
+    """Where one radial step from the edge ends: the critic's and the encoder's probes."""
+    return edge(task) + EDGE_STEPS
+
+
 def exit_radii(task: CircleEnv) -> np.ndarray:
     """Where the counterfactual exits end: around the task's edge, mostly outside it."""
     return edge(task) + EXIT_OFFSETS
@@ -232,7 +237,7 @@ def encoder_edge(agent: SILIAgent, task: CircleEnv, location: int) -> np.ndarray
     if agent.model is None or agent.cfg.latent != "discrete":
         return None
     out = location_direction(task, location)
-    finals = np.outer(edge(task) + EDGE_STEPS, out).astype(np.float32)[:, None]
+    finals = np.outer(edge_radii(task), out).astype(np.float32)[:, None]
     logits = agent.model.encode_logits(rewritten_last_interaction(agent, task, location, finals, 1))
     held = int(logits[0].argmax())
     return torch.softmax(logits[1:], -1)[:, held].numpy()
@@ -311,7 +316,7 @@ def main() -> None:
         location = int(metrics["strategy_id"].iloc[-1])
         held = metrics["strategy_id"].tail(args.window)
         q, own = edge_profile(agent, task, location)
-        best = edge(task) + EDGE_STEPS[int(np.argmax(q))]
+        best = edge_radii(task)[int(np.argmax(q))]
         print(
             f"{run.name}: distance summed: total {d['total']:.2f} = approach {d['approach']:.2f}"
             f" + middle {d['middle']:.2f} + exit {d['exit']:.2f}; alpha {agent.sac.alpha:.4f}"
@@ -326,7 +331,7 @@ def main() -> None:
             print(f"  locations over the window: {held.astype(int).value_counts().to_dict()}")
         print(
             f"  edge at radius {edge(task):.2f}: min Q for final radius "
-            f"{np.array2string(edge(task) + EDGE_STEPS, precision=3)}: "
+            f"{np.array2string(edge_radii(task), precision=3)}: "
             f"{np.array2string(q - q.max(), precision=2)} (minus its max), "
             f"argmax radius {best:.3f}, the policy ends at {own:.3f}"
         )

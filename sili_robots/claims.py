@@ -37,7 +37,7 @@ Rules (the margins are the table's, fixed before the grid ran):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -173,12 +173,8 @@ def _unscored(claim: Claim, finals: pd.DataFrame) -> Claim:
     ids = sorted(runs.loc[runs.score.isna(), "task_id"].unique())
     if not ids:
         return claim
-    return Claim(
-        claim.claim,
-        claim.task,
-        claim.measured,
-        f"not measured yet (no reference bounds for {', '.join(ids)}: `sili bounds --all --write`)",
-    )
+    bounds = f"no reference bounds for {', '.join(ids)}: `sili bounds --all --write`"
+    return replace(claim, verdict=f"not measured yet ({bounds})")
 
 
 #: the blocks that run SILI in each profile for the choice of the default
