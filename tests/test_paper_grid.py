@@ -106,9 +106,12 @@ def test_plot_reads_a_collection_without_writing_into_it(sweep_and_collection, t
     assert not (collection / "results.csv").exists()
 
 
-def test_grid_progress_counts_only_runs_at_the_blocks_budget(sweep_and_collection, capsys):
+def test_grid_progress_counts_only_runs_at_the_blocks_budget(
+    sweep_and_collection, tmp_path, capsys
+):
     _, collection = sweep_and_collection  # holds circle-3__sili-bschedule__s0 at 6 interactions
-    args = ["grid", "--dry-run", "--blocks", "sili-oracle", "--tasks", "circle-3", "--sweep-dir"]
+    args = ["grid", "--dry-run", "--blocks", "sili-oracle", "--tasks", "circle-3"]
+    args += ["--sweep-dir", str(tmp_path / "no-sweep"), "--into"]  # a fresh clone's
     assert main([*args, str(collection)]) == 0
     assert "6 runs, 0 done" in capsys.readouterr().out
     committed = Path(__file__).resolve().parents[1] / "results" / "paper-grid"
@@ -129,6 +132,8 @@ def test_grid_blocks_and_budgets(capsys):
                 "--tasks",
                 "driving",
                 "--sweep-dir",
+                "/nonexistent",
+                "--into",
                 "/nonexistent",
             ]
         )
@@ -412,3 +417,39 @@ def test_a_resumed_grid_plans_each_block_as_it_was_recorded(tmp_path):
     assert again.agent_overrides["model.updates_per_interaction"] == 20
     (other,) = block("lili-sac").specs(("circle-8",))
     assert recorded(tmp_path, other) is other  # not recorded yet: planned anew
+
+
+def test_a_fresh_clone_resumes_the_grid_from_its_collection(tmp_path, monkeypatch, capsys):
+    """Without its sweep directory (a fresh clone) ``sili grid`` counts the collected runs as
+    done, even on a machine that would choose another kernel library, and trains only the
+    rest; with every run collected it trains nothing."""
+    from dataclasses import replace
+
+    import sili_robots.sweep.spec as spec_module
+    from sili_robots import paper_grid
+
+    tiny = paper_grid.Block("tiny", ("sili",), ("circle-3",), seeds=(0,), interactions=3)
+    monkeypatch.setattr(paper_grid, "BLOCKS", (tiny,))
+    collection = tmp_path / "collection"
+    args = ["grid", "--blocks", "tiny", "--workers", "1", "--into", str(collection)]
+    assert main([*args, "--sweep-dir", str(tmp_path / "first")]) == 0
+    (first,) = (collection / "runs").iterdir()
+    matmul = json.loads((first / "config.json").read_text())["run"]["agent"]["matmul"]
+    other = "aten" if matmul == "onednn" else "onednn"
+    monkeypatch.setattr(spec_module, "default_matmul", lambda: other)
+    monkeypatch.setattr(paper_grid, "BLOCKS", (replace(tiny, seeds=(0, 1)),))
+    capsys.readouterr()
+    assert main([*args, "--sweep-dir", str(tmp_path / "fresh")]) == 0
+    second = first.name.replace("__s0", "__s1")
+    assert f'"collected": ["{second}"]' in capsys.readouterr().out  # seed 0 not trained again
+    restored = tmp_path / "fresh" / "runs" / first.name
+    assert sorted(p.name for p in restored.iterdir()) == [
+        "config.json",
+        "metrics.csv.gz",
+        "summary.json",
+    ]
+    added = json.loads((collection / "runs" / second / "config.json").read_text())
+    assert added["run"]["agent"]["matmul"] == matmul  # the block's, not this machine's
+    assert main([*args, "--sweep-dir", str(tmp_path / "third")]) == 0
+    assert "all 2 runs collected" in capsys.readouterr().out
+    assert not (tmp_path / "third").exists()

@@ -18,7 +18,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="the paper's experiment grid: run it (resumably) and collect its finished runs",
         description="Runs the grid's blocks in order (each block on each task is one sweep "
         "invocation into SWEEP_DIR, so an interrupted grid resumes where it stopped) and after "
-        "each invocation copies the finished runs into the collection (`sili collect`). "
+        "each invocation copies the finished runs into the collection (`sili collect`). Runs "
+        "already in the collection count as done, so a fresh clone does not train them again. "
         f"Blocks: {', '.join(b.name for b in BLOCKS)}.",
     )
     p.add_argument("--blocks", help="comma-separated blocks to run (default: all, in order)")
@@ -44,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.errors import ConfigError
     from sili_robots.paper_grid import BLOCKS, TASKS, block
     from sili_robots.sweep import LocalBackend, plan, run_sweep
-    from sili_robots.sweep.collect import collect
+    from sili_robots.sweep.collect import collect, restore
     from sili_robots.sweep.spec import parse_list
     from sili_robots.sweep.state import run_path
 
@@ -53,22 +54,31 @@ def run(args: argparse.Namespace) -> int:
     bad = [t for t in tasks if t not in TASKS]
     if bad:
         raise ConfigError(f"unknown grid task {bad[0]!r}; allowed: {', '.join(TASKS)}")
+    dirs = (args.sweep_dir, args.into)  # a run is done in either (a fresh clone has no sweep)
     failed: list[str] = []
     planned = done = planned_interactions = done_interactions = 0
     for b in blocks:
-        for spec in [recorded(args.sweep_dir, s) for s in b.specs(tasks)]:
+        for spec in [recorded(args.sweep_dir, s, args.into) for s in b.specs(tasks)]:
             label = f"{b.name} on {spec.tasks[0]} ({spec.interactions} interactions)"
+            runs = plan([spec])
             if args.dry_run:
-                runs = plan([spec])
                 n_done = sum(
-                    _finished(run_path(args.sweep_dir, r.name), spec.interactions) for r in runs
+                    any(_finished(run_path(d, r.name), spec.interactions) for d in dirs)
+                    for r in runs
                 )
                 print(f"{label}: {len(runs)} runs, {n_done} done")
                 planned, done = planned + len(runs), done + n_done
                 planned_interactions += len(runs) * spec.interactions
                 done_interactions += n_done * spec.interactions
                 continue
+            collected = [
+                r.name for r in runs if _finished(run_path(args.into, r.name), spec.interactions)
+            ]
+            if len(collected) == len(runs):  # nothing to train (its settings may have moved on)
+                print(f"grid: {label}: all {len(runs)} runs collected", flush=True)
+                continue
             print(f"grid: {label}", flush=True)
+            restore(args.into, args.sweep_dir, collected)
             backend = LocalBackend(args.workers or os.cpu_count() or 1)
             report = run_sweep(spec, args.sweep_dir, backend, progress=False)
             failed += list(report.failed)
@@ -92,18 +102,43 @@ def _finished(run_dir: Path, interactions: int) -> bool:
     return summary.is_file() and json.loads(summary.read_text()).get("interactions") == interactions
 
 
-def recorded(sweep_dir: Path, spec):
+def recorded(sweep_dir: Path, spec, collection: Path | None = None):
     """The invocation as ``sweep_dir`` recorded it when this block already ran on this task, so
-    a resumed grid keeps the defaults, kernels and task versions its runs started with."""
+    a resumed grid keeps the defaults, kernels and task versions its runs started with; when
+    ``sweep_dir`` has no record (a fresh clone), as its runs in ``collection`` were planned."""
     from sili_robots.errors import ConfigError
     from sili_robots.sweep.state import recorded_specs
 
     try:
         specs = recorded_specs(sweep_dir)
     except ConfigError:  # nothing recorded yet
-        return spec
+        specs = []
 
     def key(s):
         return (s.tasks, s.methods, s.seeds, s.interactions, s.betas, s.profile)
 
-    return next((r for r in specs if key(r) == key(spec)), spec)
+    found = next((r for r in specs if key(r) == key(spec)), None)
+    if found is not None:
+        return found
+    return spec if collection is None else as_collected(collection, spec)
+
+
+def as_collected(collection: Path, spec):
+    """``spec`` with the settings recorded when it was first planned (kernel library, changed
+    defaults, task version) read from one of its runs in ``collection``: another machine would
+    plan its own kernel library, and the collected runs would no longer be the same runs."""
+    from dataclasses import replace
+
+    from sili_robots.agent.config import get_path
+    from sili_robots.runs import CONFIG, RunConfig
+    from sili_robots.sweep import plan
+    from sili_robots.sweep.state import run_path
+
+    for r in plan([spec]):
+        path = run_path(collection, r.name) / CONFIG
+        if path.is_file():
+            config = RunConfig.from_dict(json.loads(path.read_text())["run"])
+            overrides = {k: get_path(config.agent, k) for k in spec.agent_overrides}
+            task_ids = {**spec.task_ids, config.task: config.task_id}
+            return replace(spec, agent_overrides=overrides, task_ids=task_ids)
+    return spec

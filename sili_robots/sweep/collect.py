@@ -86,6 +86,22 @@ def collect(sources: list[Path], dest: Path) -> CollectReport:
     return report
 
 
+def restore(collection: Path, sweep_dir: Path, names: list[str]) -> list[str]:
+    """Copy the named finished runs from ``collection`` into ``sweep_dir`` where it has no run
+    of that name, so a sweep resumed without its working directory (a fresh clone, a lost
+    disk) counts them as done instead of training them again. Returns the names copied."""
+    copied = []
+    for name in names:
+        source, target = Path(collection) / RUNS_DIR / name, Path(sweep_dir) / RUNS_DIR / name
+        if target.exists() or not (source / SUMMARY).is_file():
+            continue
+        target.mkdir(parents=True)
+        for file in (COMPRESSED_METRICS, CONFIG, SUMMARY):  # the summary last: it marks done
+            _write(target / file, (source / file).read_bytes())
+        copied.append(name)
+    return copied
+
+
 def _write(path: Path, data: bytes) -> None:
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_bytes(data)
