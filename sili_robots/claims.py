@@ -323,8 +323,8 @@ def _sweet_spot(finals: pd.DataFrame) -> Claim:
     in_range = SWEET_SPOT[0] <= best <= SWEET_SPOT[1]
     ends = min(SWEEP_BETAS), max(SWEEP_BETAS)
     separated = all(scores[best] - scores[e] > ABOVE for e in ends)
-    measured = "score " + ", ".join(
-        f"b={k:g} {v:.2f} (stability {_mean(per_b[k], 'stability'):.2f})" for k, v in scores.items()
+    measured = "score (stability) " + ", ".join(
+        f"b={k:g} {v:.2f} ({_mean(per_b[k], 'stability'):.2f})" for k, v in scores.items()
     )
     verdict = HOLDS if in_range and separated else PART if in_range else NO
     return Claim(name, task, measured, verdict)
