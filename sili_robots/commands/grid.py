@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.errors import ConfigError
     from sili_robots.paper_grid import BLOCKS, TASKS, block
     from sili_robots.sweep import LocalBackend, plan, run_sweep
-    from sili_robots.sweep.collect import collect, restore
+    from sili_robots.sweep.collect import collect
     from sili_robots.sweep.spec import parse_list
     from sili_robots.sweep.state import run_path
 
@@ -78,7 +78,8 @@ def run(args: argparse.Namespace) -> int:
                 print(f"grid: {label}: all {len(runs)} runs collected", flush=True)
                 continue
             print(f"grid: {label}", flush=True)
-            restore(args.into, args.sweep_dir, collected)
+            if collected:  # back into the sweep, so it does not train them again
+                collect([args.into], args.sweep_dir, names=collected)
             backend = LocalBackend(args.workers or os.cpu_count() or 1)
             report = run_sweep(spec, args.sweep_dir, backend, progress=False)
             failed += list(report.failed)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import gzip
 import json
 import os
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -44,8 +45,9 @@ def compressed_metrics(source: Path) -> bytes:
     return gzip.compress(text.encode(), compresslevel=9, mtime=0)
 
 
-def collect(sources: list[Path], dest: Path) -> CollectReport:
-    """Copy every finished run of the ``sources`` (sweeps or collections) into ``dest``.
+def collect(sources: list[Path], dest: Path, names: Collection[str] | None = None) -> CollectReport:
+    """Copy every finished run of the ``sources`` (sweeps or collections) into ``dest``, or only
+    those in ``names`` (a collection copied back into a lost sweep directory: ``sili grid``).
 
     A run already in ``dest`` with a different config is an error (two sweeps gave one name to
     different runs), so a collection never mixes two versions of a run."""
@@ -55,6 +57,8 @@ def collect(sources: list[Path], dest: Path) -> CollectReport:
             raise ConfigError(f"{source} holds no runs (no runs/*/config.json)")
         for run_dir in run_dirs(source):
             name = run_dir.name
+            if names is not None and name not in names:
+                continue
             metrics = metrics_file(run_dir)
             if not (run_dir / SUMMARY).is_file() or metrics is None:
                 report.unfinished.append(name)
@@ -84,22 +88,6 @@ def collect(sources: list[Path], dest: Path) -> CollectReport:
             _write(target / SUMMARY, (run_dir / SUMMARY).read_bytes())
             report.added.append(name)
     return report
-
-
-def restore(collection: Path, sweep_dir: Path, names: list[str]) -> list[str]:
-    """Copy the named finished runs from ``collection`` into ``sweep_dir`` where it has no run
-    of that name, so a sweep resumed without its working directory (a fresh clone, a lost
-    disk) counts them as done instead of training them again. Returns the names copied."""
-    copied = []
-    for name in names:
-        source, target = Path(collection) / RUNS_DIR / name, Path(sweep_dir) / RUNS_DIR / name
-        if target.exists() or not (source / SUMMARY).is_file():
-            continue
-        target.mkdir(parents=True)
-        for file in (COMPRESSED_METRICS, CONFIG, SUMMARY):  # the summary last: it marks done
-            _write(target / file, (source / file).read_bytes())
-        copied.append(name)
-    return copied
 
 
 def _write(path: Path, data: bytes) -> None:
