@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Create (or refresh) .venv with the CPU torch wheel first, then this package and its test tools.
-# Idempotent: a second run with an unchanged pyproject.toml does nothing.
+# Create (or refresh) .venv with the CPU torch wheel first, then this package, with the optional
+# dependency groups named as arguments (`bash scripts/setup.sh dev` adds the test tools).
+# Idempotent: a second run with an unchanged pyproject.toml and groups already installed does nothing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=${SILI_VENV:-.venv}
@@ -8,12 +9,23 @@ PY=${PYTHON:-python3}
 if [ ! -x "$VENV/bin/python" ]; then
     "$PY" -m venv "$VENV"
 fi
-stamp="$VENV/.sili-installed"
-want=$(sha256sum pyproject.toml | cut -d' ' -f1)
-if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+hash=$(sha256sum pyproject.toml | cut -d' ' -f1)
+stamp="$VENV/.sili-installed"  # the pyproject hash, then the groups installed with it
+have=$(cat "$stamp" 2>/dev/null || true)
+groups=""
+[ "${have%% *}" = "$hash" ] && groups=$(echo "$have" | cut -s -d' ' -f2-)
+missing=0
+[ "${have%% *}" = "$hash" ] || missing=1
+for g in "$@"; do
+    case " $groups " in *" $g "*) ;; *) missing=1; groups="$groups $g" ;; esac
+done
+if [ "$missing" = 1 ]; then
+    groups=$(echo $groups)  # trimmed, one space apart
     "$VENV/bin/python" -m pip install -q --upgrade pip
     # CPU build first so no dependency range pulls a CUDA build of torch.
     "$VENV/bin/python" -m pip install -q torch==2.13.0
-    "$VENV/bin/python" -m pip install -q -e ".[dev]"
-    echo "$want" > "$stamp"
+    spec="."
+    [ -n "$groups" ] && spec=".[${groups// /,}]"
+    "$VENV/bin/python" -m pip install -q -e "$spec"
+    echo "$hash${groups:+ $groups}" > "$stamp"
 fi
