@@ -6,12 +6,18 @@ thread count. Also reports end-to-end interactions per second of ``sili train`` 
 
     python benchmarks/bench_sac_speed.py [--updates 300] [--threads 1] [--rounds 3]
     python benchmarks/bench_sac_speed.py --matmul-only   # the products alone, per library
+    python benchmarks/bench_sac_speed.py --compile       # also a torch.compile'd update
 
 Our SAC is timed in float32 with its float32 products on oneDNN (``matmul="onednn"``) and on
 PyTorch's default BLAS (``matmul="aten"``, the kernels stable-baselines3 uses), both the same
 arithmetic as stable-baselines3, and with ``precision="bfloat16"`` (matrix products under CPU
 autocast). ``sili train`` is timed on the machine's default kernels (library and precision
 chosen by timing, ``sili_robots/agent/matmul.py``) and on each float32 library.
+``--compile`` adds float32 on aten with the update's two objectives (``SAC.critic_objective``,
+``SAC.actor_objective``) compiled by ``torch.compile`` (inductor's CPU code, the optimizer steps
+eager); its compile time is left out of the rate and printed beside it. Measured on torch 2.13
+(benchmarks/RESULTS.md) it was slower than eager and its generated code crashed in 4 of 7 runs, so
+the package does not compile.
 """
 
 from __future__ import annotations
@@ -32,21 +38,35 @@ VARIANTS = {
     "float32, aten": ("float32", "aten"),
     "bfloat16": ("bfloat16", "aten"),
 }
+COMPILED = "compiled, aten"
 
 
 def time_ours(
-    in_dim: int, act_dim: int, batch: int, updates: int, precision: str, matmul: str
+    in_dim: int,
+    act_dim: int,
+    batch: int,
+    updates: int,
+    precision: str,
+    matmul: str,
+    compiled: bool = False,
+    warmup_seconds: list[float] | None = None,
 ) -> float:
     from sili_robots.agent.sac import SAC
 
     sac = SAC(in_dim, act_dim, hidden=256, precision=precision, matmul=matmul)
+    if compiled:
+        sac.critic_objective = torch.compile(sac.critic_objective, dynamic=False)
+        sac.actor_objective = torch.compile(sac.actor_objective, dynamic=False)
     g = torch.Generator().manual_seed(0)
     x = torch.randn(updates, batch, in_dim, generator=g)
     a = torch.rand(updates, batch, act_dim, generator=g) * 2 - 1
     r = torch.randn(updates, batch, generator=g)
     x2 = torch.randn(updates, batch, in_dim, generator=g)
+    t = time.perf_counter()
     for u in range(10):
         sac.update(x[u], a[u], r[u], x2[u])
+    if warmup_seconds is not None:
+        warmup_seconds.append(time.perf_counter() - t)
     t = time.perf_counter()
     for u in range(updates):
         sac.update(x[u], a[u], r[u], x2[u])
@@ -154,6 +174,7 @@ def main() -> None:
     p.add_argument("--interactions", type=int, default=30)
     p.add_argument("--rounds", type=int, default=3, help="alternating rounds; medians reported")
     p.add_argument("--matmul-only", action="store_true", help="time the products alone")
+    p.add_argument("--compile", action="store_true", help="also time a torch.compile'd update")
     p.add_argument(
         "--arm",
         action="append",
@@ -168,23 +189,32 @@ def main() -> None:
         matmul_only()
         return
     in_dim, act_dim, batch = 3 + 2 * 10, 2, 256
-    rates: dict[str, list[float]] = {"sb3": [], **{label: [] for label in VARIANTS}}
+    variants = {label: (p, m, False) for label, (p, m) in VARIANTS.items()}
+    if args.compile:
+        variants[COMPILED] = ("float32", "aten", True)
+    rates: dict[str, list[float]] = {"sb3": [], **{label: [] for label in variants}}
+    compile_seconds: list[float] = []
     for _ in range(args.rounds):  # alternate, so a load change hits all alike
         rates["sb3"].append(time_sb3(in_dim, act_dim, batch, args.updates))
-        for label, (precision, matmul) in VARIANTS.items():
-            rate = time_ours(in_dim, act_dim, batch, args.updates, precision, matmul)
+        for label, (precision, matmul, compiled) in variants.items():
+            warmup = compile_seconds if compiled else None
+            rate = time_ours(
+                in_dim, act_dim, batch, args.updates, precision, matmul, compiled, warmup
+            )
             rates[label].append(rate)
     med = {k: float(np.median(v)) for k, v in rates.items()}
     sb3 = med["sb3"]
     print(f"machine: {machine()}")
     print(f"torch threads: {args.threads}; batch {batch}; input {in_dim}; 2 x 256 networks")
     print(f"stable-baselines3 SAC:              {sb3:8.1f} updates/s ({1e3 / sb3:.2f} ms/update)")
-    for label in VARIANTS:
+    for label in variants:
         ours = med[label]
         print(
             f"sili_robots SAC, {label:16s}: {ours:8.1f} updates/s "
             f"({1e3 / ours:.2f} ms/update), {ours / sb3:.2f}x stable-baselines3"
         )
+    if compile_seconds:
+        print(f"({COMPILED}: first 10 updates, compiling included, {max(compile_seconds):.1f} s)")
     print(f"(medians of {args.rounds} alternating rounds)")
     sb3_50 = 50 / sb3  # stable-baselines3's time for one interaction's 50 SAC updates
     precision, matmul = default_precision(), default_matmul()

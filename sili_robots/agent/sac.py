@@ -90,25 +90,35 @@ class SAC:
         q = self.critic(x, a)
         return F.mse_loss(q, y.expand_as(q)) * q.shape[0]
 
-    def update(
+    def critic_objective(
         self, x: torch.Tensor, a: torch.Tensor, r: torch.Tensor, x2: torch.Tensor
-    ) -> dict[str, torch.Tensor]:
-        """One gradient step of critic, actor and temperature on a batch of transitions."""
+    ) -> torch.Tensor:
+        """The critics' loss, its targets from the current actor and target critics."""
         with torch.no_grad(), self._forward_precision():
             a2, logp2 = self.actor.sample(x2)
-
         with self._forward_precision():
-            critic_loss = self.critic_loss(x, a, r, x2, a2, logp2)
-        self.critic_opt.zero_grad(set_to_none=True)
-        critic_loss.backward()
-        self.critic_opt.step()
+            return self.critic_loss(x, a, r, x2, a2, logp2)
 
+    def actor_objective(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(actor loss, temperature loss) against the critics as they are now."""
         alpha = self.log_alpha.exp().detach()
-        self.critic.requires_grad_(False)
         with self._forward_precision():
             a_pi, logp = self.actor.sample(x)
             actor_loss = (alpha * logp - self.critic(x, a_pi).min(0).values).mean()
         alpha_loss = -(self.log_alpha * (logp.detach() + self.target_entropy)).mean()
+        return actor_loss, alpha_loss
+
+    def update(
+        self, x: torch.Tensor, a: torch.Tensor, r: torch.Tensor, x2: torch.Tensor
+    ) -> dict[str, torch.Tensor]:
+        """One gradient step of critic, actor and temperature on a batch of transitions."""
+        critic_loss = self.critic_objective(x, a, r, x2)
+        self.critic_opt.zero_grad(set_to_none=True)
+        critic_loss.backward()
+        self.critic_opt.step()
+
+        self.critic.requires_grad_(False)
+        actor_loss, alpha_loss = self.actor_objective(x)
         self.actor_opt.zero_grad(set_to_none=True)
         self.alpha_opt.zero_grad(set_to_none=True)
         # one backward pass for both: each loss sees the other's variable detached
