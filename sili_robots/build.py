@@ -15,9 +15,10 @@ import gymnasium as gym
 
 from sili_robots.addons import build_addons
 from sili_robots.agent import SILIAgent, method_config
+from sili_robots.agent.config import UnknownSetting
 from sili_robots.errors import ConfigError
 from sili_robots.migrations import setting_path
-from sili_robots.runs import RunConfig
+from sili_robots.runs import RunConfig, unknown_setting
 from sili_robots.tasks import RepeatedInteractionEnv, make_task, task_spec
 from sili_robots.wrappers import OracleObservation, StrategyFlag
 
@@ -124,7 +125,10 @@ def make_run_config(
     for name, value in (settings or {}).items():
         path = setting_path(name)
         (addon_settings if path.startswith("addons.") else agent_settings)[path] = value
-    agent = method_config(method, latent, profile, agent_settings, default_latent(task))
+    try:
+        agent = method_config(method, latent, profile, agent_settings, default_latent(task))
+    except UnknownSetting as err:
+        raise unknown_setting(err.name) from None
     cfg = RunConfig(
         task=task,
         method=method,

@@ -10,6 +10,7 @@ import argparse
 import importlib
 import sys
 from collections.abc import Sequence
+from typing import NoReturn
 
 from sili_robots.errors import ConfigError
 
@@ -40,8 +41,16 @@ def _available_commands() -> list:
     return modules
 
 
+class OneLineErrorParser(argparse.ArgumentParser):
+    """argparse with its errors on one line (its own prints the whole usage before them);
+    sub-command parsers inherit the class."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineErrorParser(
         prog="sili", description="Stable Influencing of Latent Intent: train, evaluate, preview."
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")

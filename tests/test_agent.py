@@ -20,6 +20,7 @@ from sili_robots.agent.latent import (
 )
 from sili_robots.agent.matmul import onednn_available
 from sili_robots.agent.sac import SAC
+from sili_robots.build import make_run_config
 from sili_robots.errors import ConfigError
 from sili_robots.migrations import migrate_run
 
@@ -352,6 +353,11 @@ def test_mistyped_settings_fail_by_name():
     with pytest.raises(ConfigError, match=r"unknown setting 'sac.lrr'; allowed: .*sac.lr"):
         method_config("sili", sac__lrr=1.0)
     cfg = method_config("sili", lr=1, hidden=64.0, stability_scale=None, target_entropy=-3)
+    with pytest.raises(ConfigError, match=r"'addons.filter.epss'; allowed: .*sac.lr.*addons."):
+        make_run_config("circle-3", "sili", 0, 5, settings={"addons.filter.epss": 0.1})
+    for name in ("sac.lrr", "lrr"):  # whichever layer refuses it, the whole list with flat names
+        with pytest.raises(ConfigError, match=r"addons.filter.eps, .* flat names .*latent_filter"):
+            make_run_config("circle-3", "sili", 0, 5, settings={name: 0.1})
     assert (cfg.sac.lr, cfg.hidden, cfg.sili.scale, cfg.sac.target_entropy) == (1.0, 64, None, -3)
     assert isinstance(cfg.hidden, int) and isinstance(cfg.sac.lr, float)
 

@@ -29,3 +29,14 @@ def test_unknown_task_exits_2_with_choices():
 def test_non_positive_count_exits_2():
     out = _sili("rollout", "circle-3", "--interactions", "0")
     assert out.returncode == 2 and "need an integer >= 1" in out.stderr
+
+
+def test_a_parse_error_is_one_line_naming_the_value_and_the_choices():
+    out = _sili("train", "--task", "circle-3", "--method", "foo")
+    assert out.returncode == 2
+    (line,) = out.stderr.strip().splitlines()  # no usage block before it
+    assert (
+        line.startswith("sili train: error:")
+        and "'foo'" in line
+        and "sili" in line.split("'foo'")[1]
+    )

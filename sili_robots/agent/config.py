@@ -249,18 +249,26 @@ def paths(cls: type, prefix: str = "") -> list[str]:
     return out
 
 
+class UnknownSetting(ConfigError):
+    """A dotted path that names no setting (callers with more settings list them all)."""
+
+    def __init__(self, name: str, allowed: str) -> None:
+        self.name = name
+        super().__init__(f"unknown setting {name!r}; allowed: {allowed}")
+
+
 def set_path(obj: Any, path: str, value: Any, prefix: str = "") -> None:
     """Set a dotted path, converting ``value`` by the field's type; unknown paths are named."""
     *sections, leaf = path.split(".")
     target = obj
     for part in sections:
         if not dataclasses.is_dataclass(target) or part not in {f.name for f in fields(target)}:
-            raise ConfigError(f"unknown setting {prefix}{path!r}; allowed: {_listing(obj, prefix)}")
+            raise UnknownSetting(prefix + path, _listing(obj, prefix))
         target = getattr(target, part)
     names = {f.name for f in fields(target)}
     hints = _hints(type(target))
     if leaf not in names or dataclasses.is_dataclass(hints[leaf]):
-        raise ConfigError(f"unknown setting {prefix}{path!r}; allowed: {_listing(obj, prefix)}")
+        raise UnknownSetting(prefix + path, _listing(obj, prefix))
     setattr(target, leaf, convert(prefix + path, hints[leaf], value))
 
 
