@@ -295,6 +295,8 @@ def test_resume_of_a_non_sweep_and_changed_settings_exit_2(tiny_sweep, tmp_path,
     args = ["--tasks", "circle-3", "--methods", "sac", "--seeds", "0", "--interactions", "9"]
     assert main(["sweep", *args, "--out", str(out), *FAST_ARGS]) == 2
     assert "interactions: 8 on disk, 9 now" in capsys.readouterr().err
+    assert main(["sweep", "--resume", str(out), "--interactions", "9", "--workers", "1"]) == 2
+    assert "it takes no --interactions (allowed with it: --backend" in capsys.readouterr().err
 
 
 def _alive(pid):

@@ -276,6 +276,12 @@ def test_extending_a_finished_run_reproduces_the_longer_run(tmp_path):
     res = _sili("train", "--resume", extended, "--interactions", 5, "--no-progress")
     assert res.returncode == 2 and "would shorten" in res.stderr and ">= 12" in res.stderr
     assert "Traceback" not in res.stderr
+    # what the run records is not changed on resume: options that would are refused by name
+    res = _sili("train", "--resume", extended, "--interactions", 14, "--set", "sac.lr=1e-3")
+    assert res.returncode == 2 and "not --set" in res.stderr
+    res = _sili("train", "--resume", extended, "--method", "lili", "--no-progress")
+    assert res.returncode == 2 and "not --method" in res.stderr
+    assert json.loads((extended / "config.json").read_text())["run"]["interactions"] == 12
 
 
 def test_a_continuous_filter_started_late_leaves_the_run_unchanged_before_it(tmp_path):

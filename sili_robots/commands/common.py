@@ -201,3 +201,19 @@ def add_override_args(p: argparse.ArgumentParser, scope: str) -> None:
         metavar="KEY=VALUE",
         help=f"extra task constructor argument{scope} (JSON value), repeatable",
     )
+
+
+def record_option_defaults(p: argparse.ArgumentParser) -> None:
+    """Keep each option's name and default on the parsed arguments, so a command can tell which
+    options were given (``given_options``); call after the last ``add_argument``."""
+    defaults = {a.dest: (a.option_strings[0], a.default) for a in p._actions if a.option_strings}
+    p.set_defaults(option_defaults=defaults)
+
+
+def given_options(args: argparse.Namespace, allowed: set[str]) -> list[str]:
+    """The options given away from their defaults, other than those whose dest is ``allowed``."""
+    return [
+        option
+        for dest, (option, default) in args.option_defaults.items()
+        if dest not in allowed and dest != "help" and getattr(args, dest) != default
+    ]

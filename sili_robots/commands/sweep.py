@@ -11,9 +11,11 @@ from sili_robots.agent import LATENT_KINDS, PROFILES
 from sili_robots.commands.common import (
     add_override_args,
     add_schedule_args,
+    given_options,
     parse_env_kwargs,
     parse_settings,
     positive_int,
+    record_option_defaults,
     schedule_args,
 )
 from sili_robots.errors import ConfigError
@@ -85,6 +87,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-progress", action="store_true", help="no live display (log lines only)")
     p.add_argument("--dry-run", action="store_true", help="list the runs and their state, run none")
     p.set_defaults(run=run)
+    record_option_defaults(p)
+
+
+#: what ``--resume SWEEP_DIR`` takes besides: how to run the recorded sweep, not what it holds
+RESUME_OPTIONS = {
+    "resume",
+    "backend",
+    "workers",
+    "ray_address",
+    "retries",
+    "no_tensorboard",
+    "no_progress",
+    "dry_run",
+}
 
 
 def spec_from_args(args: argparse.Namespace) -> SweepSpec:
@@ -118,8 +134,13 @@ def _specs_and_dir(args: argparse.Namespace) -> tuple[list[SweepSpec], Path]:
     from sili_robots.sweep.state import recorded_specs
 
     if args.resume is not None:
-        if args.tasks or args.methods or args.out:
-            raise ConfigError("--resume SWEEP_DIR takes no --tasks, --methods or --out")
+        recorded = given_options(args, RESUME_OPTIONS)
+        if recorded:
+            raise ConfigError(
+                f"--resume SWEEP_DIR runs the sweep as {args.resume} records it; it takes no "
+                f"{', '.join(recorded)} (allowed with it: --backend, --workers, --ray-address, "
+                "--retries, --no-tensorboard, --no-progress, --dry-run)"
+            )
         return recorded_specs(args.resume), args.resume
     if args.out is None:
         raise ConfigError("--out SWEEP_DIR is required")

@@ -14,10 +14,12 @@ from sili_robots.commands.common import (
     add_override_args,
     add_schedule_args,
     check_schedule_overrides,
+    given_options,
     non_negative_int,
     parse_env_kwargs,
     parse_settings,
     positive_int,
+    record_option_defaults,
     schedule_args,
     task_name,
     unit_float,
@@ -82,6 +84,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace an existing run directory")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(run=run)
+    record_option_defaults(p)
 
 
 def config_from_args(args: argparse.Namespace) -> RunConfig:
@@ -159,6 +162,12 @@ def run(args: argparse.Namespace) -> int:
 
     if args.resume is not None:
         read_config(args.resume)  # a clear error when it is not a run
+        ignored = given_options(args, {"resume", "interactions", "no_progress"})
+        if ignored:
+            raise ConfigError(
+                f"--resume continues {args.resume} as its config.json records it; with it give "
+                f"only --interactions (to extend it) and --no-progress, not {', '.join(ignored)}"
+            )
         if args.interactions is not None:
             extend(args.resume, args.interactions)
         run_dir = resume(args.resume, progress=not args.no_progress)
