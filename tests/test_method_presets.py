@@ -36,6 +36,9 @@ def test_latent_option_is_refused_for_methods_without_a_latent():
     with pytest.raises(ConfigError, match="method 'sac' fixes latent = 'none'"):
         method_config("sac", latent="continuous")
     assert method_config("sac", task_latent="continuous").latent == "none"  # the task's default
+    for method in ("sili", "lili", "stable"):  # the methods defined by a latent need one
+        with pytest.raises(ConfigError, match=f"method '{method}' learns a latent .* 'none'"):
+            method_config(method, latent="none")
 
 
 def test_paper_profile_writes_the_papers_values(tmp_path):

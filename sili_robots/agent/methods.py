@@ -115,6 +115,12 @@ def method_config(
         given["latent"] = kind
     if method == "lili" and given.get("latent") == "partial":
         given["latent"] = "discrete"  # LILI always learns a latent; b = 0 leaves the flag unused
+    if "latent" not in fixed and given.get("latent") == "none":
+        raise ConfigError(
+            f"method {method!r} learns a latent strategy (its policy and, with b > 0, its reward "
+            f"use z); got latent 'none': choose discrete, continuous, partial or true, or "
+            f"--method sac for no latent"
+        )
     for path, value in given.items():
         if path in fixed and value != fixed[path][0]:
             want, why = fixed[path]
