@@ -112,8 +112,7 @@ class SILI:
     # ------------------------------------------------------------------ sb3 API
     def learn(self, interactions: int, progress_bar: bool = False) -> SILI:
         """Train for ``interactions`` more interactions (checkpointed in ``run_dir``)."""
-        if not isinstance(interactions, int) or interactions < 1:
-            raise ConfigError(f"interactions must be an integer >= 1, got {interactions!r}")
+        _check_count(interactions)
         if self._task_env is None:
             self.env.close()  # training builds its own (libsumo holds one simulation)
         done = self.cfg.interactions
@@ -137,8 +136,7 @@ class SILI:
     def save(self, path: str | Path) -> Path:
         """Copy the run (config, metrics, checkpoint, summary) to ``path``."""
         path = Path(path)
-        if self.cfg.interactions == 0 or not (self.run_dir / CHECKPOINT).is_file():
-            raise ConfigError("nothing to save yet: call learn() first")
+        self._check_trained("save")
         if path.resolve() != self.run_dir.resolve():
             path.mkdir(parents=True, exist_ok=True)
             for name in (CONFIG, METRICS, CHECKPOINT, SUMMARY):
@@ -148,8 +146,19 @@ class SILI:
 
     def evaluate(self, interactions: int = 100) -> dict[str, float]:
         """Greedy play continuing the saved game: mean task reward and stability."""
+        _check_count(interactions)
+        self._check_trained("evaluate")
         return evaluate(self.run_dir, interactions)
+
+    def _check_trained(self, what: str) -> None:
+        if self.cfg.interactions == 0 or not (self.run_dir / CHECKPOINT).is_file():
+            raise ConfigError(f"nothing to {what} yet: call learn() first")
 
     @property
     def config(self) -> RunConfig:
         return self.cfg
+
+
+def _check_count(interactions: Any) -> None:
+    if isinstance(interactions, bool) or not isinstance(interactions, int) or interactions < 1:
+        raise ConfigError(f"interactions must be an integer >= 1, got {interactions!r}")

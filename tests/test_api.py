@@ -74,5 +74,11 @@ def test_api_refuses_what_it_cannot_use(tmp_path):
         model.save(tmp_path / "x")
     with pytest.raises(ConfigError, match="interactions must be an integer >= 1, got 0"):
         model.learn(0)
+    with pytest.raises(ConfigError, match="nothing to evaluate yet: call learn"):
+        model.evaluate(2)
+    model.learn(1)
+    for bad in (0, -2, 1.5):  # no NaN summaries of nothing
+        with pytest.raises(ConfigError, match=f"interactions must be an integer >= 1, got {bad}"):
+            model.evaluate(bad)
     with pytest.raises(ConfigError, match=r"method 'lili' fixes sili\.beta"):
         SILI("circle-3", method="lili", settings={"beta": 0.7})
