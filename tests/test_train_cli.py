@@ -195,6 +195,10 @@ def test_every_latent_kind_trains(tmp_path, latent):
             "give one of --set beta and --beta-anneal, not both",
         ),
         (["--resume", "/nonexistent"], "is not a run directory"),
+        (
+            ["--task", "circle-3", "--controller", "osc"],
+            "(given: controller); its arguments: variant, horizon, outside_margin, near_moves (",
+        ),
     ],
 )
 def test_bad_input_exits_2_without_traceback(tmp_path, args, message):

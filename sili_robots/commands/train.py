@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import shutil
 import sys
@@ -198,5 +199,19 @@ def _check_env_builds(cfg: RunConfig) -> None:
     try:
         env = make_run_env(cfg)
     except TypeError as err:
-        raise ConfigError(f"bad argument for task {cfg.task!r}: {err}") from None
+        given = ", ".join(cfg.env_kwargs) or "none"
+        raise ConfigError(
+            f"bad argument for task {cfg.task!r} (given: {given}); its arguments: "
+            f"{', '.join(_task_arguments(cfg.task))} ({str(err).split(' was raised')[0]})"
+        ) from None
     env.close()
+
+
+def _task_arguments(task: str) -> list[str]:
+    """The constructor arguments of a task's class (``--env-kwarg`` and ``--controller``)."""
+    from sili_robots.build import is_class_path, task_class
+    from sili_robots.tasks import task_spec
+
+    path = task if is_class_path(task) else task_spec(task).entry_point
+    params = inspect.signature(task_class(path).__init__).parameters
+    return [n for n, q in params.items() if n != "self" and q.kind is q.POSITIONAL_OR_KEYWORD]
