@@ -6,11 +6,12 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 
 class TrainingProgress:
-    """Thin wrapper so the training loop does not care whether a bar is shown."""
+    """Thin wrapper so the training loop does not care whether a bar is shown (none when there
+    is nothing left to train: a finished run resumed)."""
 
     def __init__(self, total: int, completed: int, enabled: bool = True, label: str = "") -> None:
         self._progress = None
-        if enabled:
+        if enabled and completed < total:
             self._progress = Progress(
                 TextColumn("[bold]{task.description}"),
                 BarColumn(),
@@ -23,6 +24,10 @@ class TrainingProgress:
                 label, total=total, completed=completed, reward=float("nan"), stable=float("nan")
             )
             self._progress.start()
+
+    @property
+    def shown(self) -> bool:
+        return self._progress is not None
 
     def advance(self, reward: float, stable: float) -> None:
         if self._progress is not None:

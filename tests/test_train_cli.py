@@ -369,3 +369,13 @@ def test_threads_are_recorded_and_used(tmp_path):
         assert _sili("train", "--task", "circle-3", "--threads", 0, "--out", out).returncode == 2
     finally:
         torch.set_num_threads(1)
+
+
+def test_the_progress_bar_shows_only_while_there_is_training_left():
+    from sili_robots.progress import TrainingProgress
+
+    for completed, shown in ((0, True), (3, True), (5, False)):
+        bar = TrainingProgress(5, completed, enabled=True, label="x")
+        assert bar.shown is shown
+        bar.close()
+    assert not TrainingProgress(5, 0, enabled=False).shown
