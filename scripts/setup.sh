@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Create (or refresh) .venv with the CPU torch wheel first, then this package, with the optional
 # dependency groups named as arguments (`bash scripts/setup.sh dev` adds the test tools).
-# Idempotent: a second run with an unchanged pyproject.toml and groups already installed does nothing.
+# Idempotent: nothing to do when pyproject.toml is unchanged and the groups are installed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=${SILI_VENV:-.venv}
