@@ -289,14 +289,16 @@ def test_schedules_given_to_the_sweep_drive_its_runs(tmp_path):
 
 
 def test_resume_of_a_non_sweep_and_changed_settings_exit_2(tiny_sweep, tmp_path, capsys):
-    assert main(["sweep", "--resume", str(tmp_path)]) == 2
-    assert "is not a sweep directory" in capsys.readouterr().err
+    assert main(["sweep", "--resume", str(tmp_path), "--interactions", "9"]) == 2
+    assert "is not a sweep directory" in capsys.readouterr().err  # the first thing to mend
     out, _ = tiny_sweep
     args = ["--tasks", "circle-3", "--methods", "sac", "--seeds", "0", "--interactions", "9"]
     assert main(["sweep", *args, "--out", str(out), *FAST_ARGS]) == 2
     assert "interactions: 8 on disk, 9 now" in capsys.readouterr().err
     assert main(["sweep", "--resume", str(out), "--interactions", "9", "--workers", "1"]) == 2
     assert "it takes no --interactions (allowed with it: --backend" in capsys.readouterr().err
+    assert main(["sweep", "--resume", str(out), "--seeds", "0"]) == 2  # typed at its default
+    assert "it takes no --seeds (" in capsys.readouterr().err
 
 
 def _alive(pid):

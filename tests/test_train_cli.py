@@ -285,6 +285,8 @@ def test_extending_a_finished_run_reproduces_the_longer_run(tmp_path):
     assert res.returncode == 2 and "not --set" in res.stderr
     res = _sili("train", "--resume", extended, "--method", "lili", "--no-progress")
     assert res.returncode == 2 and "not --method" in res.stderr
+    res = _sili("train", "--resume", extended, "--seed", 0)  # typed, even at its default
+    assert res.returncode == 2 and "not --seed" in res.stderr
     assert json.loads((extended / "config.json").read_text())["run"]["interactions"] == 12
 
 

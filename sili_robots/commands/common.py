@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 import re
 from typing import Any
@@ -204,16 +205,26 @@ def add_override_args(p: argparse.ArgumentParser, scope: str) -> None:
 
 
 def record_option_defaults(p: argparse.ArgumentParser) -> None:
-    """Keep each option's name and default on the parsed arguments, so a command can tell which
-    options were given (``given_options``); call after the last ``add_argument``."""
-    defaults = {a.dest: (a.option_strings[0], a.default) for a in p._actions if a.option_strings}
-    p.set_defaults(option_defaults=defaults)
+    """Record on the parsed arguments which options were typed, whatever their value (an option
+    typed at its default counts), for ``given_options``; call after the last ``add_argument``."""
+    for action in p._actions:
+        if action.option_strings and not isinstance(action, argparse._HelpAction):
+            action.__class__ = _typed(type(action))
+    names = {a.dest: a.option_strings[0] for a in p._actions if a.option_strings}
+    p.set_defaults(option_names=names, typed_options=())
+
+
+@functools.cache
+def _typed(cls: type[argparse.Action]) -> type[argparse.Action]:
+    class Typed(cls):  # type: ignore[valid-type, misc]
+        def __call__(self, parser, namespace, values, option_string=None) -> None:
+            namespace.typed_options = (*namespace.typed_options, self.dest)
+            super().__call__(parser, namespace, values, option_string)
+
+    return Typed
 
 
 def given_options(args: argparse.Namespace, allowed: set[str]) -> list[str]:
-    """The options given away from their defaults, other than those whose dest is ``allowed``."""
-    return [
-        option
-        for dest, (option, default) in args.option_defaults.items()
-        if dest not in allowed and dest != "help" and getattr(args, dest) != default
-    ]
+    """The options typed on the command line, other than those whose dest is ``allowed``."""
+    typed = dict.fromkeys(args.typed_options)  # in order, once each
+    return [args.option_names[dest] for dest in typed if dest not in allowed]

@@ -134,6 +134,7 @@ def _specs_and_dir(args: argparse.Namespace) -> tuple[list[SweepSpec], Path]:
     from sili_robots.sweep.state import recorded_specs
 
     if args.resume is not None:
+        specs = recorded_specs(args.resume)  # a clear error when it is not a sweep
         recorded = given_options(args, RESUME_OPTIONS)
         if recorded:
             raise ConfigError(
@@ -141,7 +142,7 @@ def _specs_and_dir(args: argparse.Namespace) -> tuple[list[SweepSpec], Path]:
                 f"{', '.join(recorded)} (allowed with it: --backend, --workers, --ray-address, "
                 "--retries, --no-tensorboard, --no-progress, --dry-run)"
             )
-        return recorded_specs(args.resume), args.resume
+        return specs, args.resume
     if args.out is None:
         raise ConfigError("--out SWEEP_DIR is required")
     return [spec_from_args(args)], args.out
