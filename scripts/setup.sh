@@ -12,10 +12,10 @@ fi
 hash=$(sha256sum pyproject.toml | cut -d' ' -f1)
 stamp="$VENV/.sili-installed"  # the pyproject hash, then the groups installed with it
 have=$(cat "$stamp" 2>/dev/null || true)
-groups=""
-[ "${have%% *}" = "$hash" ] && groups=$(echo "$have" | cut -s -d' ' -f2-)
-missing=0
-[ "${have%% *}" = "$hash" ] || missing=1
+groups="" missing=1
+if [ "${have%% *}" = "$hash" ]; then
+    groups=$(echo "$have" | cut -s -d' ' -f2-) missing=0
+fi
 for g in "$@"; do
     case " $groups " in *" $g "*) ;; *) missing=1; groups="$groups $g" ;; esac
 done

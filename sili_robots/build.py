@@ -9,16 +9,18 @@ observation (SILI and Stable with ``latent="partial"``) through ``StrategyFlag``
 from __future__ import annotations
 
 import importlib
+import inspect
 from typing import Any
 
 import gymnasium as gym
 
 from sili_robots.addons import build_addons
+from sili_robots.addons.config import AddonsConfig
 from sili_robots.agent import SILIAgent, method_config
-from sili_robots.agent.config import UnknownSetting
+from sili_robots.agent.config import AgentConfig, UnknownSetting, paths
 from sili_robots.errors import ConfigError
-from sili_robots.migrations import setting_path
-from sili_robots.runs import RunConfig, unknown_setting
+from sili_robots.migrations import LEGACY_SETTINGS, setting_path
+from sili_robots.runs import RunConfig
 from sili_robots.tasks import RepeatedInteractionEnv, make_task, task_spec
 from sili_robots.wrappers import OracleObservation, StrategyFlag
 
@@ -69,6 +71,14 @@ def make_env(task: str, **kwargs: Any) -> gym.Env:
     if is_class_path(task):
         return task_class(task)(**kwargs)
     return make_task(task, **kwargs)
+
+
+def task_arguments(task: str) -> list[str]:
+    """The constructor arguments a task takes (``--env-kwarg``, ``--controller``), by name."""
+    path = task if is_class_path(task) else task_spec(task).entry_point
+    params = inspect.signature(task_class(path).__init__).parameters
+    kinds = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    return [n for n, q in params.items() if n != "self" and q.kind in kinds]
 
 
 def default_latent(task: str) -> str:
@@ -126,20 +136,23 @@ def make_run_config(
         path = setting_path(name)
         (addon_settings if path.startswith("addons.") else agent_settings)[path] = value
     try:
-        agent = method_config(method, latent, profile, agent_settings, default_latent(task))
-    except UnknownSetting as err:
-        raise unknown_setting(err.name) from None
-    cfg = RunConfig(
-        task=task,
-        method=method,
-        seed=seed,
-        interactions=interactions,
-        agent=agent,
-        env_kwargs=dict(env_kwargs or {}),
-        checkpoint_every=checkpoint_every,
-        threads=threads,
-    )
-    for path, value in addon_settings.items():
-        cfg.set(path, value)
+        cfg = RunConfig(
+            task=task,
+            method=method,
+            seed=seed,
+            interactions=interactions,
+            agent=method_config(method, latent, profile, agent_settings, default_latent(task)),
+            env_kwargs=dict(env_kwargs or {}),
+            checkpoint_every=checkpoint_every,
+            threads=threads,
+        )
+        for path, value in addon_settings.items():
+            cfg.set(path, value)
+    except UnknownSetting as err:  # name every setting, the agent's and the add-ons'
+        allowed = paths(AgentConfig) + paths(AddonsConfig, "addons.")
+        raise ConfigError(
+            f"unknown setting {err.name!r}; allowed: {', '.join(allowed)} "
+            f"(or the earlier flat names {', '.join(LEGACY_SETTINGS)})"
+        ) from None
     cfg.addons.validate(cfg.agent)
     return cfg

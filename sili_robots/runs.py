@@ -19,14 +19,9 @@ from typing import Any
 import torch
 
 from sili_robots.addons.config import AddonsConfig
-from sili_robots.agent.config import AgentConfig, UnknownSetting, paths, set_path
+from sili_robots.agent.config import AgentConfig, set_path
 from sili_robots.errors import ConfigError
-from sili_robots.migrations import (
-    LEGACY_SETTINGS,
-    migrate_agent_state,
-    migrate_run,
-    setting_path,
-)
+from sili_robots.migrations import migrate_agent_state, migrate_run, setting_path
 
 CONFIG, METRICS, CHECKPOINT, SUMMARY = "config.json", "metrics.csv", "checkpoint.pt", "summary.json"
 METRIC_COLUMNS = (
@@ -94,22 +89,10 @@ class RunConfig:
     def set(self, name: str, value: Any) -> None:
         """Set an agent or add-on setting by dotted path (or an earlier flat name)."""
         path = setting_path(name)
-        try:
-            if path.startswith("addons."):
-                set_path(self.addons, path.removeprefix("addons."), value, prefix="addons.")
-            else:
-                set_path(self.agent, path, value)
-        except UnknownSetting:
-            raise unknown_setting(name) from None
-
-
-def unknown_setting(name: str) -> ConfigError:
-    """The error for a name that is neither an agent nor an add-on setting, listing both."""
-    allowed = paths(AgentConfig) + paths(AddonsConfig, "addons.")
-    return ConfigError(
-        f"unknown setting {name!r}; allowed: {', '.join(allowed)} "
-        f"(or the earlier flat names {', '.join(LEGACY_SETTINGS)})"
-    )
+        if path.startswith("addons."):
+            set_path(self.addons, path.removeprefix("addons."), value, prefix="addons.")
+        else:
+            set_path(self.agent, path, value)
 
 
 def recorded_task_id(run: dict[str, Any]) -> str | None:

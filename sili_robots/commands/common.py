@@ -204,7 +204,7 @@ def add_override_args(p: argparse.ArgumentParser, scope: str) -> None:
     )
 
 
-def record_option_defaults(p: argparse.ArgumentParser) -> None:
+def track_typed_options(p: argparse.ArgumentParser) -> None:
     """Record on the parsed arguments which options were typed, whatever their value (an option
     typed at its default counts), for ``given_options``; call after the last ``add_argument``."""
     for action in p._actions:

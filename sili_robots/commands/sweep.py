@@ -15,8 +15,8 @@ from sili_robots.commands.common import (
     parse_env_kwargs,
     parse_settings,
     positive_int,
-    record_option_defaults,
     schedule_args,
+    track_typed_options,
 )
 from sili_robots.errors import ConfigError
 from sili_robots.sweep.spec import (
@@ -87,12 +87,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-progress", action="store_true", help="no live display (log lines only)")
     p.add_argument("--dry-run", action="store_true", help="list the runs and their state, run none")
     p.set_defaults(run=run)
-    record_option_defaults(p)
+    track_typed_options(p)
 
 
 #: what ``--resume SWEEP_DIR`` takes besides: how to run the recorded sweep, not what it holds
-RESUME_OPTIONS = {
-    "resume",
+RESUME_OPTIONS = (
     "backend",
     "workers",
     "ray_address",
@@ -100,7 +99,7 @@ RESUME_OPTIONS = {
     "no_tensorboard",
     "no_progress",
     "dry_run",
-}
+)
 
 
 def spec_from_args(args: argparse.Namespace) -> SweepSpec:
@@ -135,12 +134,12 @@ def _specs_and_dir(args: argparse.Namespace) -> tuple[list[SweepSpec], Path]:
 
     if args.resume is not None:
         specs = recorded_specs(args.resume)  # a clear error when it is not a sweep
-        recorded = given_options(args, RESUME_OPTIONS)
+        recorded = given_options(args, {"resume", *RESUME_OPTIONS})
         if recorded:
+            allowed = ", ".join(args.option_names[dest] for dest in RESUME_OPTIONS)
             raise ConfigError(
                 f"--resume SWEEP_DIR runs the sweep as {args.resume} records it; it takes no "
-                f"{', '.join(recorded)} (allowed with it: --backend, --workers, --ray-address, "
-                "--retries, --no-tensorboard, --no-progress, --dry-run)"
+                f"{', '.join(recorded)} (allowed with it: {allowed})"
             )
         return specs, args.resume
     if args.out is None:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import inspect
 import json
 import shutil
 import sys
@@ -20,9 +19,9 @@ from sili_robots.commands.common import (
     parse_env_kwargs,
     parse_settings,
     positive_int,
-    record_option_defaults,
     schedule_args,
     task_name,
+    track_typed_options,
     unit_float,
 )
 from sili_robots.errors import ConfigError
@@ -85,7 +84,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--overwrite", action="store_true", help="replace an existing run directory")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(run=run)
-    record_option_defaults(p)
+    track_typed_options(p)
 
 
 def config_from_args(args: argparse.Namespace) -> RunConfig:
@@ -194,7 +193,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _check_env_builds(cfg: RunConfig) -> None:
     """Fail fast, with the task's own message, on bad task arguments (e.g. a controller)."""
-    from sili_robots.build import make_run_env
+    from sili_robots.build import make_run_env, task_arguments
 
     try:
         env = make_run_env(cfg)
@@ -202,16 +201,6 @@ def _check_env_builds(cfg: RunConfig) -> None:
         given = ", ".join(cfg.env_kwargs) or "none"
         raise ConfigError(
             f"bad argument for task {cfg.task!r} (given: {given}); its arguments: "
-            f"{', '.join(_task_arguments(cfg.task))} ({str(err).split(' was raised')[0]})"
+            f"{', '.join(task_arguments(cfg.task))} ({str(err).split(' was raised')[0]})"
         ) from None
     env.close()
-
-
-def _task_arguments(task: str) -> list[str]:
-    """The constructor arguments of a task's class (``--env-kwarg`` and ``--controller``)."""
-    from sili_robots.build import is_class_path, task_class
-    from sili_robots.tasks import task_spec
-
-    path = task if is_class_path(task) else task_spec(task).entry_point
-    params = inspect.signature(task_class(path).__init__).parameters
-    return [n for n, q in params.items() if n != "self" and q.kind is q.POSITIONAL_OR_KEYWORD]

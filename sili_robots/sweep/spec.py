@@ -8,8 +8,6 @@ the same name in every sweep and a re-invoked sweep finds its earlier runs.
 from __future__ import annotations
 
 import contextlib
-import importlib
-import inspect
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from functools import cache
@@ -18,7 +16,7 @@ from typing import Any
 from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, PROFILES, Schedule
 from sili_robots.agent.matmul import default_matmul
 from sili_robots.agent.methods import PRESETS
-from sili_robots.build import default_profile, make_run_config
+from sili_robots.build import default_profile, make_run_config, task_arguments
 from sili_robots.errors import ConfigError, check_choice
 from sili_robots.migrations import setting_path
 from sili_robots.runs import RunConfig
@@ -183,9 +181,7 @@ def parse_betas(text: str) -> list[float]:
 @cache
 def task_accepts(task: str, kwarg: str) -> bool:
     """Whether the task's constructor takes ``kwarg`` (e.g. ``controller``)."""
-    module, _, name = task_spec(task).entry_point.partition(":")
-    cls = getattr(importlib.import_module(module), name)
-    return kwarg in inspect.signature(cls.__init__).parameters
+    return kwarg in task_arguments(task)
 
 
 def format_beta(beta: float) -> str:
