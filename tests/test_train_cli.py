@@ -390,7 +390,8 @@ def test_a_two_thread_run_is_reproducible(tmp_path):
             metrics.append(pd.read_csv(out / "metrics.csv").drop(columns="wall_time"))
     finally:
         torch.set_num_threads(1)
-    assert metrics[0]["critic_loss"].notna().sum() >= 4  # SAC and the latent model learned
+    learned = metrics[0][["critic_loss", "latent_loss"]].notna().sum()
+    assert (learned >= 4).all()  # SAC and the latent model updated in most interactions
     pd.testing.assert_frame_equal(metrics[0], metrics[1])
 
 
