@@ -13,23 +13,37 @@ from sili_robots.runs import METRICS, read_config
 HOLDS = 0.9  # the stability a run needs to count as holding the opponent
 
 
+def _last(run_dir: Path, window: int) -> pd.DataFrame:
+    return pd.read_csv(Path(run_dir) / METRICS).tail(window)
+
+
+def _stability(tail: pd.DataFrame) -> float:
+    return 1.0 - float(tail["strategy_changed"].mean())
+
+
+def held(run_dir: Path, window: int = 50) -> bool:
+    """Whether the opponent kept its strategy in at least 90% of the run's last interactions:
+    what scripts use to say more when a run did not hold."""
+    return _stability(_last(run_dir, window)) >= HOLDS
+
+
 def verdict(run_dir: Path, window: int = 50) -> str:
     """E.g. "SILI held the opponent (kept its strategy in 96% of its last 50 interactions;
     standing still: 0%) and earned -8.1 per interaction (standing still: -50.0, the scripted
     stabilizing policy that sees z: -4.0)"."""
     cfg = read_config(run_dir)
-    tail = pd.read_csv(Path(run_dir) / METRICS).tail(window)
-    stability = 1.0 - float(tail["strategy_changed"].mean())
+    tail = _last(run_dir, window)
+    stability = _stability(tail)
     reward = float(tail["task_reward"].mean())
     bounds = stored_bounds(cfg.task_id) if cfg.task_id else {}
     still, stab = bounds.get("still"), bounds.get("stabilizing")
-    held = "held" if stability >= HOLDS else "did not hold"
+    outcome = "held" if stability >= HOLDS else "did not hold"
     kept = f"kept its strategy in {stability:.0%} of its last {len(tail)} interactions"
     if stability < HOLDS:
         kept += f", {HOLDS:.0%} needed"
     if still:
         kept += f"; standing still: {still['stability']:.0%}"
-    line = f"{cfg.method.upper()} {held} the opponent ({kept})"
+    line = f"{cfg.method.upper()} {outcome} the opponent ({kept})"
     line += f" and earned {reward:.1f} per interaction"
     refs = []
     if still:

@@ -8,7 +8,7 @@ import pandas as pd
 from fast_settings import FAST_ARGS
 
 from sili_robots.cli import main
-from sili_robots.verdict import verdict
+from sili_robots.verdict import held, verdict
 
 
 def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys):
@@ -21,6 +21,7 @@ def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys
     assert last.startswith("SILI did not hold the opponent (kept its strategy in ")  # 4: no hold
     assert ", 90% needed; standing still: 0%)" in last and "standing still: -50.0" in last
     assert "the scripted stabilizing policy that sees z: -4.0" in last
+    assert not held(run)
     metrics = pd.read_csv(run / "metrics.csv")
     metrics["strategy_changed"] = 0
     metrics["task_reward"] = -7.25
@@ -28,3 +29,7 @@ def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys
     line = verdict(run)
     assert line.startswith("SILI held the opponent (kept its strategy in 100% of its last 4 ")
     assert "earned -7.2 per interaction" in line
+    assert held(run)
+    metrics.loc[metrics.index[0], "strategy_changed"] = 1  # 3 of 4 kept: 75% < 90%
+    metrics.to_csv(run / "metrics.csv", index=False)
+    assert not held(run) and held(run, window=3)

@@ -1,0 +1,42 @@
+"""The README's main command end to end (a few interactions): the verdict, the pointer to the
+longer recipe when the run did not hold, and that the recipe it names is a command that runs."""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import subprocess
+from pathlib import Path
+
+from fast_settings import FAST_ARGS
+
+from sili_robots.cli import main
+from sili_robots.runs import read_config
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_main_job_names_a_working_recipe_when_it_does_not_hold(tmp_path):
+    out = tmp_path / "main"
+    env = {**os.environ, "SILI_MAIN_INTERACTIONS": "4", "SILI_MAIN_OUT": str(out)}
+    done = subprocess.run(
+        ["bash", "scripts/main.sh", *FAST_ARGS, "--no-progress"],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "SILI did not hold the opponent" in done.stderr  # 4 interactions cannot hold
+    assert "stability" in done.stdout  # the greedy evaluation ran on the same run
+    recipe = re.search(r"(\.venv/bin/sili train .*?--out \S+)", done.stderr.replace("\n", " "))
+    assert recipe, done.stderr[-2000:]
+    args = shlex.split(recipe.group(1))[1:]
+    assert args[args.index("--interactions") + 1] == "1000"
+    args[args.index("--interactions") + 1] = "3"
+    args[args.index("--out") + 1] = str(tmp_path / "recipe")
+    assert main([*args, *FAST_ARGS, "--no-progress"]) == 0
+    cfg = read_config(tmp_path / "recipe")
+    assert cfg.task_id == "sili/Circle3-v0" and cfg.method == "sili"
