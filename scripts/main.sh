@@ -7,7 +7,7 @@
 # latent-model updates per interaction (the default 5 let seed 0 go at this budget:
 # benchmarks/RESULTS.md, "The main job"); float32 products on every machine (with bfloat16,
 # chosen by default on CPUs with bfloat16 units, seed 0 did not hold at this budget).
-# When it does not hold (seed 0 without AVX-512), it names the longer recipe that held everywhere.
+# When it does not hold (seed 0 without AVX-512), it names a longer recipe that held there (3 of 3).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
