@@ -3,6 +3,7 @@ longer recipe when the run did not hold, and that the recipe it names is a comma
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shlex
@@ -30,7 +31,8 @@ def test_main_job_names_a_working_recipe_when_it_does_not_hold(tmp_path):
     )
     assert done.returncode == 0, done.stderr[-2000:]
     assert "SILI did not hold the opponent" in done.stderr  # 4 interactions cannot hold
-    assert "stability" in done.stdout  # the greedy evaluation ran on the same run
+    evaluation = json.loads(done.stdout[done.stdout.rindex('{\n  "run_dir"') :])
+    assert evaluation["run_dir"] == str(out) and evaluation["interactions"] == 20
     recipe = re.search(r"(\.venv/bin/sili train .*?--out \S+)", done.stderr.replace("\n", " "))
     assert recipe, done.stderr[-2000:]
     args = shlex.split(recipe.group(1))[1:]
@@ -38,5 +40,6 @@ def test_main_job_names_a_working_recipe_when_it_does_not_hold(tmp_path):
     args[args.index("--interactions") + 1] = "3"
     args[args.index("--out") + 1] = str(tmp_path / "recipe")
     assert main([*args, *FAST_ARGS, "--no-progress"]) == 0
-    cfg = read_config(tmp_path / "recipe")
-    assert cfg.task_id == "sili/Circle3-v0" and cfg.method == "sili"
+    recorded = json.loads((tmp_path / "recipe" / "config.json").read_text())
+    assert read_config(tmp_path / "recipe").task_id == "sili/Circle3-v0"
+    assert '"points": [[250, 0.0], [300, 0.5]]' in json.dumps(recorded)  # the delayed b
