@@ -19,7 +19,7 @@ OUT=${SILI_MAIN_OUT:-runs/main}
 if ! .venv/bin/python -c "import sys; from sili_robots.verdict import held; sys.exit(not held(sys.argv[1]))" "$OUT"; then
     echo "At 600 interactions of this small agent holding depends on how the processor rounds (seed 0 did not" \
         "hold with AVX2 alone, emulated). The delayed-b recipe with the default agent held in 3 of 3 seeds on a Zen 5" \
-        "and with AVX2 alone (14-15 min a run): .venv/bin/sili train --task circle-3-v0 --method sili" \
+        "and with AVX2 alone (12-15 min): .venv/bin/sili train --task circle-3-v0 --method sili" \
         "--beta-schedule 250:0,300:0.5 --interactions 1000 --out runs/recipe (benchmarks/RESULTS.md, \"The main job\"" \
         "and \"Fewer updates per interaction: the learning check\")." >&2
 fi
