@@ -40,6 +40,6 @@ def test_main_job_names_a_working_recipe_when_it_does_not_hold(tmp_path):
     args[args.index("--interactions") + 1] = "3"
     args[args.index("--out") + 1] = str(tmp_path / "recipe")
     assert main([*args, *FAST_ARGS, "--no-progress"]) == 0
-    recorded = json.loads((tmp_path / "recipe" / "config.json").read_text())
-    assert read_config(tmp_path / "recipe").task_id == "sili/Circle3-v0"
-    assert '"points": [[250, 0.0], [300, 0.5]]' in json.dumps(recorded)  # the delayed b
+    cfg = read_config(tmp_path / "recipe")
+    assert cfg.task_id == "sili/Circle3-v0"
+    assert cfg.agent.sili.beta.points == ((250, 0.0), (300, 0.5))  # the delayed b
