@@ -27,6 +27,16 @@ def held(run_dir: Path, window: int = 50) -> bool:
     return _stability(_last(run_dir, window)) >= HOLDS
 
 
+def worked(run_dir: Path, window: int = 50) -> bool:
+    """Held the opponent and earned more per interaction than standing still: a run can hold by
+    parking away from the goal, which shows stability but not the method's trade-off."""
+    if not held(run_dir, window):
+        return False
+    still = stored_bounds(read_config(run_dir).task_id or "").get("still")
+    reward = float(_last(run_dir, window)["task_reward"].mean())
+    return still is None or reward > still["task_reward"]
+
+
 def verdict(run_dir: Path, window: int = 50) -> str:
     """E.g. "SILI held the opponent (kept its strategy in 96% of its last 50 interactions;
     standing still: 0%) and earned -8.1 per interaction (standing still: -50.0, the scripted

@@ -8,7 +8,7 @@ import pandas as pd
 from fast_settings import FAST_ARGS
 
 from sili_robots.cli import main
-from sili_robots.verdict import held, verdict
+from sili_robots.verdict import held, verdict, worked
 
 
 def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys):
@@ -33,3 +33,7 @@ def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys
     metrics.loc[metrics.index[0], "strategy_changed"] = 1  # 3 of 4 kept: 75% < 90%
     metrics.to_csv(run / "metrics.csv", index=False)
     assert not held(run) and held(run, window=3)
+    assert worked(run, window=3)  # held at -7.25, above standing still's -50.0
+    metrics["task_reward"] = -55.3  # held by parking away from the goal: below standing still
+    metrics.to_csv(run / "metrics.csv", index=False)
+    assert held(run, window=3) and not worked(run, window=3)
