@@ -30,11 +30,10 @@ def held(run_dir: Path, window: int = 50) -> bool:
 def worked(run_dir: Path, window: int = 50) -> bool:
     """Held the opponent and earned more per interaction than standing still: a run can hold by
     parking away from the goal, which shows stability but not the method's trade-off."""
-    if not held(run_dir, window):
-        return False
+    tail = _last(run_dir, window)
     still = stored_bounds(read_config(run_dir).task_id or "").get("still")
-    reward = float(_last(run_dir, window)["task_reward"].mean())
-    return still is None or reward > still["task_reward"]
+    beat_still = still is None or float(tail["task_reward"].mean()) > still["task_reward"]
+    return _stability(tail) >= HOLDS and beat_still
 
 
 def verdict(run_dir: Path, window: int = 50) -> str:
