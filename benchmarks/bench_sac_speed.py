@@ -8,6 +8,10 @@ thread count. Also reports end-to-end interactions per second of ``sili train`` 
     python benchmarks/bench_sac_speed.py --matmul-only   # the products alone, per library
     python benchmarks/bench_sac_speed.py --compile       # also a torch.compile'd update
 
+It also prints the floor of the same arithmetic: the matrix products inside each library's
+update, timed by ``torch.profiler``. Stable-baselines3's whole update divided by our products
+alone is the most any update doing the same arithmetic on these kernels can reach against it.
+
 Our SAC is timed in float32 with its float32 products on oneDNN (``matmul="onednn"``) and on
 PyTorch's default BLAS (``matmul="aten"``, the kernels stable-baselines3 uses), both the same
 arithmetic as stable-baselines3, and with ``precision="bfloat16"`` (matrix products under CPU
@@ -26,6 +30,7 @@ import argparse
 import shutil
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import gymnasium as gym
@@ -41,6 +46,41 @@ VARIANTS = {
 COMPILED = "compiled, aten"
 
 
+#: the profiler's names of the matrix products (linear layers, batched twin critics)
+PRODUCTS = ("aten::mm", "aten::bmm", "aten::addmm", "aten::baddbmm")
+
+
+def product_time(run: Callable[[], object], calls: int) -> tuple[float, float]:
+    """(seconds, GFLOP) per call of ``run`` spent in matrix products, from torch.profiler's
+    self times: what the update's arithmetic costs on these kernels with no other work."""
+    from torch.profiler import ProfilerActivity, profile
+
+    with profile(activities=[ProfilerActivity.CPU], with_flops=True) as prof:
+        run()
+    events = [e for e in prof.key_averages() if e.key in PRODUCTS]
+    seconds = sum(e.self_cpu_time_total for e in events) / 1e6 / calls
+    return seconds, sum(e.flops for e in events) / 1e9 / calls
+
+
+def make_ours(
+    in_dim: int, act_dim: int, precision: str = "float32", matmul: str = "aten"
+) -> object:
+    from sili_robots.agent.sac import SAC
+
+    return SAC(in_dim, act_dim, hidden=256, precision=precision, matmul=matmul)
+
+
+def ours_batches(
+    in_dim: int, act_dim: int, batch: int, updates: int
+) -> list[tuple[torch.Tensor, ...]]:
+    g = torch.Generator().manual_seed(0)
+    x = torch.randn(updates, batch, in_dim, generator=g)
+    a = torch.rand(updates, batch, act_dim, generator=g) * 2 - 1
+    r = torch.randn(updates, batch, generator=g)
+    x2 = torch.randn(updates, batch, in_dim, generator=g)
+    return list(zip(x, a, r, x2, strict=True))
+
+
 def time_ours(
     in_dim: int,
     act_dim: int,
@@ -51,29 +91,24 @@ def time_ours(
     compiled: bool = False,
     warmup_seconds: list[float] | None = None,
 ) -> float:
-    from sili_robots.agent.sac import SAC
-
-    sac = SAC(in_dim, act_dim, hidden=256, precision=precision, matmul=matmul)
+    sac = make_ours(in_dim, act_dim, precision, matmul)
     if compiled:
         sac.critic_objective = torch.compile(sac.critic_objective, dynamic=False)
         sac.actor_objective = torch.compile(sac.actor_objective, dynamic=False)
-    g = torch.Generator().manual_seed(0)
-    x = torch.randn(updates, batch, in_dim, generator=g)
-    a = torch.rand(updates, batch, act_dim, generator=g) * 2 - 1
-    r = torch.randn(updates, batch, generator=g)
-    x2 = torch.randn(updates, batch, in_dim, generator=g)
+    batches = ours_batches(in_dim, act_dim, batch, updates)
     t = time.perf_counter()
-    for u in range(10):
-        sac.update(x[u], a[u], r[u], x2[u])
+    for b in batches[:10]:
+        sac.update(*b)
     if warmup_seconds is not None:
         warmup_seconds.append(time.perf_counter() - t)
     t = time.perf_counter()
-    for u in range(updates):
-        sac.update(x[u], a[u], r[u], x2[u])
+    for b in batches:
+        sac.update(*b)
     return updates / (time.perf_counter() - t)
 
 
-def time_sb3(in_dim: int, act_dim: int, batch: int, updates: int) -> float:
+def make_sb3(in_dim: int, act_dim: int, batch: int) -> object:
+    """stable-baselines3's SAC on a dummy env, its buffer filled and its first updates done."""
     from stable_baselines3 import SAC as SB3SAC
 
     class Dummy(gym.Env):
@@ -108,9 +143,33 @@ def time_sb3(in_dim: int, act_dim: int, batch: int, updates: int) -> float:
         )
     model._setup_learn(total_timesteps=1)
     model.train(gradient_steps=10, batch_size=batch)
+    return model
+
+
+def time_sb3(in_dim: int, act_dim: int, batch: int, updates: int) -> float:
+    model = make_sb3(in_dim, act_dim, batch)
     t = time.perf_counter()
     model.train(gradient_steps=updates, batch_size=batch)
     return updates / (time.perf_counter() - t)
+
+
+def products_floor(in_dim: int, act_dim: int, batch: int, updates: int) -> dict[str, tuple]:
+    """Product seconds and GFLOP per update: ours (float32 on aten, the kernels
+    stable-baselines3 uses) and stable-baselines3's."""
+    sac = make_ours(in_dim, act_dim)
+    batches = ours_batches(in_dim, act_dim, batch, updates + 10)
+    for b in batches[:10]:
+        sac.update(*b)
+
+    def ours() -> None:
+        for b in batches[10:]:
+            sac.update(*b)
+
+    model = make_sb3(in_dim, act_dim, batch)
+    return {
+        "ours": product_time(ours, updates),
+        "sb3": product_time(lambda: model.train(gradient_steps=updates, batch_size=batch), updates),
+    }
 
 
 def time_train(
@@ -194,6 +253,7 @@ def main() -> None:
         variants[COMPILED] = ("float32", "aten", True)
     rates: dict[str, list[float]] = {"sb3": [], **{label: [] for label in variants}}
     compile_seconds: list[float] = []
+    floors: list[dict[str, tuple[float, float]]] = []
     for _ in range(args.rounds):  # alternate, so a load change hits all alike
         rates["sb3"].append(time_sb3(in_dim, act_dim, batch, args.updates))
         for label, (precision, matmul, compiled) in variants.items():
@@ -202,6 +262,7 @@ def main() -> None:
                 in_dim, act_dim, batch, args.updates, precision, matmul, compiled, warmup
             )
             rates[label].append(rate)
+        floors.append(products_floor(in_dim, act_dim, batch, args.updates))
     med = {k: float(np.median(v)) for k, v in rates.items()}
     sb3 = med["sb3"]
     print(f"machine: {machine()}")
@@ -217,6 +278,21 @@ def main() -> None:
         print(f"({COMPILED}: first 10 updates, compiling included, {max(compile_seconds):.1f} s)")
     print(f"(medians of {args.rounds} alternating rounds)")
     sb3_50 = 50 / sb3  # stable-baselines3's time for one interaction's 50 SAC updates
+    floor = {k: tuple(np.median([f[k] for f in floors], axis=0)) for k in ("ours", "sb3")}
+    for label, (seconds, gflop) in (
+        ("ours, float32 on aten", floor["ours"]),
+        ("stable-baselines3", floor["sb3"]),
+    ):
+        print(
+            f"matrix products inside an update, {label:21s}: {1e3 * seconds:.2f} ms, "
+            f"{gflop:.3f} GFLOP ({gflop / seconds:.0f} GFLOP/s)"
+        )
+    ours_products = floor["ours"][0]
+    print(
+        f"floor of the same arithmetic: an update of products alone would be "
+        f"{1 / sb3 / ours_products:.2f}x stable-baselines3's; 50 updates' products alone "
+        f"{50 * ours_products / sb3_50:.2f}x its 50 updates"
+    )
     precision, matmul = default_precision(), default_matmul()
     runs = [(f"default: {precision}, {matmul}", precision, matmul, {})]
     runs += [(label, p, m, {}) for label, (p, m) in VARIANTS.items() if p == "float32"]

@@ -252,13 +252,9 @@ def ensemble_linear(
     x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor, matmul: str
 ) -> torch.Tensor | None:
     """x_i W_i + b_i per ensemble member for ``onednn``, or None where ``aten``'s batched
-    product should do it. Narrow layers (a critic's output) take one ``addmm`` per member:
-    ``bmm`` into a width-1 output is slow (measured: 91 us against 16 us for [2, 256, 256] x
-    [2, 256, 1])."""
+    product should do it (a width-1 output never gets here: ``EnsembleLinear`` sums it)."""
     if matmul != "onednn" or torch.is_autocast_enabled("cpu"):
         return None
-    if weight.shape[-1] < MIN_WIDTH:
-        return torch.stack([torch.addmm(bias[i], x[i], weight[i]) for i in range(len(weight))])
     return _EnsembleFunction.apply(x, weight, bias)
 
 
