@@ -53,16 +53,15 @@ def test_floor_counts_every_product_of_our_update(bench: ModuleType) -> None:
         for batch in batches:
             sac.update(*batch)
 
-    seconds, gflop = bench.product_time(run, updates)
+    gflop = bench.product_gflop(run, updates)
     assert gflop * 1e9 == pytest.approx(update_flop(d, a, h, b, False), rel=1e-9)
-    assert seconds > 0
 
 
 def test_stable_baselines3_also_computes_critic_weight_grads(bench: ModuleType) -> None:
     pytest.importorskip("stable_baselines3")
     d, a, b = 23, 2, 256
-    floor = bench.products_floor(d, a, b, 2)
-    (_, ours), (_, sb3) = floor["ours"], floor["sb3"]
+    gflop = bench.update_gflop(d, a, b)
+    ours, sb3 = gflop["ours"], gflop["sb3"]
     assert ours * 1e9 == pytest.approx(update_flop(d, a, 256, b, False), rel=1e-9)
     extra = critic_weight_grads(d, a, 256, b)
     assert sb3 * 1e9 == pytest.approx(update_flop(d, a, 256, b) + extra, rel=1e-9)
