@@ -10,8 +10,9 @@ thread count. Also reports end-to-end interactions per second of ``sili train`` 
 
 It also prints the floor of the same arithmetic: the FLOP of the matrix products inside each
 library's update (counted by ``torch.profiler``) at the rate of a 256 x 256 x 256 product in a
-tight loop, the fastest shape the update has. No update doing our arithmetic on these kernels
-runs faster, so stable-baselines3's time over it bounds the ratio any such update can reach.
+tight loop, the update's widest shape and its fastest in the profiles measured. It bounds the
+time of our arithmetic on these kernels from below, so stable-baselines3's time over it bounds
+the ratio an update doing that arithmetic can reach.
 
 Our SAC is timed in float32 with its float32 products on oneDNN (``matmul="onednn"``) and on
 PyTorch's default BLAS (``matmul="aten"``, the kernels stable-baselines3 uses), both the same
