@@ -4,9 +4,10 @@
 # standing still and the scripted stabilizing policy), then a greedy evaluation.
 # The delayed-b recipe (b = 0 until interaction 250, the latent model learning from a policy
 # that pursues the task; 0.5 from 300) on a small agent (2 x 64 networks) so 1,000 interactions
-# fit in minutes on 2 CPU cores; float32 products on every machine. It held above standing still's
-# reward in 9 of 12 seeds across two instruction sets (benchmarks/RESULTS.md, "The main job"). When a run did not hold,
-# or held below standing still's reward, it names the default agent's longer recipe.
+# fit in minutes on 2 CPU cores; float32 products on every machine. It held above standing
+# still's reward in 9 of 12 seeds across two instruction sets (benchmarks/RESULTS.md, "The main
+# job"). When a run did not hold, or held below that reward, it names the default agent's longer
+# recipe.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh

@@ -22,7 +22,8 @@ def mlp(inp: int, out: int, hidden: int, layers: int = 2, matmul: str = "aten") 
 
 
 class EnsembleLinear(nn.Module):
-    """``n`` independent linear layers evaluated in one batched matmul."""
+    """``n`` independent linear layers evaluated in one batched matmul (a width-1 layer, a
+    critic's Q, as one weighted sum)."""
 
     def __init__(self, n: int, inp: int, out: int, matmul: str = "aten") -> None:
         super().__init__()
