@@ -12,7 +12,9 @@ It also prints the floor of the same arithmetic: the FLOP of the matrix products
 library's update (counted by ``torch.profiler``) at the rate of a 256 x 256 x 256 product in a
 tight loop, the update's widest shape and its fastest in the profiles measured. It bounds the
 time of our arithmetic on these kernels from below, so stable-baselines3's time over it bounds
-the ratio an update doing that arithmetic can reach.
+the ratio an update doing that arithmetic can reach. The latent model's update is timed alone
+and counted the same way, so the floor of a whole learning interaction (50 SAC updates and the
+latent model's updates) is printed against stable-baselines3's time for its 50 updates.
 
 Our SAC is timed in float32 with its float32 products on oneDNN (``matmul="onednn"``) and on
 PyTorch's default BLAS (``matmul="aten"``, the kernels stable-baselines3 uses), both the same
@@ -152,14 +154,56 @@ def time_sb3(in_dim: int, act_dim: int, batch: int, updates: int) -> float:
     return updates / (time.perf_counter() - t)
 
 
+def latent_step(
+    obs_dim: int, act_dim: int, horizon: int, matmul: str = "aten"
+) -> Callable[[], float]:
+    """One update of the default latent model (``model.batch`` interaction pairs of
+    ``horizon`` steps) on fixed random data, as ``SILIAgent.update_latent_model`` makes it."""
+    from sili_robots.agent.config import AgentConfig
+    from sili_robots.agent.latent import LatentModel
+    from sili_robots.agent.schedule import value_at
+
+    cfg = AgentConfig()
+    torch.manual_seed(0)
+    model = LatentModel(obs_dim, act_dim, cfg.model.dim, cfg.hidden, "discrete", matmul=matmul)
+    opt = torch.optim.Adam(model.parameters(), lr=value_at(cfg.model.lr, 0))
+    n = cfg.model.batch
+    prev = torch.randn(n, horizon, 2 * obs_dim + act_dim + 1)
+    obs, act = torch.randn(n, horizon + 1, obs_dim), torch.rand(n, horizon, act_dim) * 2 - 1
+    rew = torch.randn(n, horizon)
+
+    def step() -> float:
+        loss = model.loss(prev, obs[:, :-1], act, obs[:, 1:], rew)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        return float(loss.detach())
+
+    return step
+
+
+def time_latent(matmul: str, updates: int, obs_dim: int = 3, act_dim: int = 2) -> float:
+    """Seconds per latent-model update on Circle (3 Goals)'s shapes (horizon 50)."""
+    step = latent_step(obs_dim, act_dim, 50, matmul)
+    for _ in range(3):
+        step()
+    t = time.perf_counter()
+    for _ in range(updates):
+        step()
+    return (time.perf_counter() - t) / updates
+
+
 def update_gflop(in_dim: int, act_dim: int, batch: int) -> dict[str, float]:
-    """GFLOP of matrix products per update: ours (float32 on aten) and stable-baselines3's."""
+    """GFLOP of matrix products per update: our SAC's (float32 on aten), stable-baselines3's
+    and our latent model's (Circle (3 Goals)'s shapes)."""
     sac = make_ours(in_dim, act_dim)
     batches = ours_batches(in_dim, act_dim, batch, 2)
     model = make_sb3(in_dim, act_dim, batch)
+    step = latent_step(3, 2, 50)
     return {
         "ours": product_gflop(lambda: [sac.update(*b) for b in batches], len(batches)),
         "sb3": product_gflop(lambda: model.train(gradient_steps=2, batch_size=batch), 2),
+        "latent": product_gflop(lambda: [step() for _ in range(2)], 2),
     }
 
 
@@ -215,6 +259,7 @@ def matmul_only() -> None:
 
 
 def main() -> None:
+    from sili_robots.agent.config import AgentConfig
     from sili_robots.agent.matmul import default_matmul, default_precision
     from sili_robots.commands.common import parse_settings
 
@@ -278,6 +323,19 @@ def main() -> None:
         f"50 of them at least {50 * floor / sb3_50:.2f}x its 50 updates"
     )
     precision, matmul = default_precision(), default_matmul()
+    per = AgentConfig().model.updates_per_interaction
+    latent = per * float(np.median([time_latent(matmul, 20) for _ in range(args.rounds)]))
+    sac_50 = 50 / med["float32, aten"]
+    print(
+        f"latent model, {per} updates of {gflop['latent']:.3f} GFLOP on {matmul}: "
+        f"{latent:.3f} s per interaction, {latent / sac_50:.2f}x our 50 float32 SAC updates"
+    )
+    work = 50 * gflop["ours"] + per * gflop["latent"]
+    print(
+        f"floor of a learning interaction: {work:.1f} GFLOP of products (50 SAC updates, "
+        f"{per} latent-model updates) at {rate:.0f} GFLOP/s = {work / rate:.3f} s, at least "
+        f"{work / rate / sb3_50:.2f}x stable-baselines3's 50 updates"
+    )
     runs = [(f"default: {precision}, {matmul}", precision, matmul, {})]
     runs += [(label, p, m, {}) for label, (p, m) in VARIANTS.items() if p == "float32"]
     for arm in args.arm:  # the default kernels unless the arm sets them

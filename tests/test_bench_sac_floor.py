@@ -65,3 +65,32 @@ def test_stable_baselines3_also_computes_critic_weight_grads(bench: ModuleType) 
     assert ours * 1e9 == pytest.approx(update_flop(d, a, 256, b, False), rel=1e-9)
     extra = critic_weight_grads(d, a, 256, b)
     assert sb3 * 1e9 == pytest.approx(update_flop(d, a, 256, b) + extra, rel=1e-9)
+
+
+def latent_update_flop(o: int, a: int, k: int, h: int, n: int, horizon: int) -> int:
+    """FLOP of the products of one latent-model update: the encoder's per-step MLP on the
+    previous interactions' transitions and its head on the mean and max pools, the discrete
+    decoder's k heads on the current ones; backward, the weight gradients of every layer and
+    the input gradients of every layer but each network's first (its input is data)."""
+    rows = n * horizon
+    forward = (
+        linear(rows, 2 * o + a + 1, h)
+        + linear(rows, h, h)
+        + linear(n, 2 * h, k)
+        + linear(rows, o + a, h)
+        + linear(rows, h, h)
+        + linear(rows, h, k * (o + 1))
+    )
+    input_grads = linear(rows, h, h) + linear(n, 2 * h, k) + linear(rows, h, h)
+    input_grads += linear(rows, h, k * (o + 1))
+    return 2 * forward + input_grads
+
+
+def test_floor_counts_every_product_of_a_latent_update(bench: ModuleType) -> None:
+    from sili_robots.agent.config import AgentConfig
+
+    cfg = AgentConfig()
+    step = bench.latent_step(3, 2, 7)
+    gflop = bench.product_gflop(lambda: [step() for _ in range(2)], 2)
+    flop = latent_update_flop(3, 2, cfg.model.dim, cfg.hidden, cfg.model.batch, 7)
+    assert gflop * 1e9 == pytest.approx(flop, rel=1e-9)
