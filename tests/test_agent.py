@@ -509,6 +509,37 @@ def test_every_discrete_estimator_trains_encoder_and_decoder(estimator):
     assert model.decoder[-1].weight.grad.abs().sum() > 0  # the decoder learns
 
 
+@pytest.mark.parametrize("kind", ["discrete", "continuous"])
+def test_decoder_backward_copies_no_slices(kind):
+    """The decoder runs on the 2-D view of its rows: in-place ReLUs on a 3-D layer output make
+    autograd copy slices into a zero-filled buffer in every backward pass; the value is the
+    same as the MLP applied to the 3-D rows directly."""
+    torch.manual_seed(0)
+    model = LatentModel(3, 2, latent_dim=4, hidden=16, kind=kind)
+    traj, obs, act = (
+        torch.randn(6, H, 3 + 2 + 1 + 3),
+        torch.randn(6, H + 1, 3),
+        torch.randn(6, H, 2),
+    )
+    loss = model.loss(traj, obs[:, :-1], act, obs[:, 1:], torch.randn(6, H))
+    seen, stack = set(), [loss.grad_fn]
+    while stack:
+        fn = stack.pop()
+        if fn is not None and fn not in seen:
+            seen.add(fn)
+            stack.extend(nxt for nxt, _ in fn.next_functions)
+    names = {type(fn).__name__ for fn in seen}
+    assert "ReluBackward0" in names and not names & {"CopySlices", "AsStridedBackward0"}
+    z = model.encode(traj)
+    x = torch.cat(
+        [obs[:, :-1], act] + ([] if kind == "discrete" else [z[:, None].expand(6, H, 4)]), -1
+    )
+    direct = model.decoder(x.clone())
+    if kind == "discrete":
+        direct = (z[:, None, :, None] * direct.unflatten(-1, (4, 4))).sum(-2)
+    torch.testing.assert_close(model.decode(obs[:, :-1], act, z), direct, rtol=0, atol=0)
+
+
 def test_preact_penalty_pulls_a_saturated_continuous_encoder_back():
     """Saturated tanh passes no gradient, so only the penalty brings the output back."""
     prev, obs = torch.randn(8, H, 3 + 2 + 1 + 3), torch.randn(8, H + 1, 3)

@@ -168,9 +168,15 @@ class LatentModel(nn.Module):
             return gumbel_straight_through(out)
         return F.one_hot(out.argmax(-1), self.latent_dim).to(out.dtype)
 
+    def _decoder(self, x: torch.Tensor) -> torch.Tensor:
+        """The decoder MLP on rows of any leading shape, run on their 2-D view: its in-place
+        ReLUs on a 3-D layer output (itself a view) would make autograd copy the slices and
+        zero-fill a buffer in every backward pass (7% of a latent-model update)."""
+        return self.decoder(x.reshape(-1, x.shape[-1])).unflatten(0, x.shape[:-1])
+
     def _heads(self, obs: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
         """Per-category predictions [..., k, out] of a discrete decoder."""
-        out = self.decoder(torch.cat([obs, act], dim=-1))
+        out = self._decoder(torch.cat([obs, act], dim=-1))
         return out.unflatten(-1, (self.latent_dim, self.out_dim))
 
     def decode(self, obs: torch.Tensor, act: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
@@ -178,7 +184,7 @@ class LatentModel(nn.Module):
         z = z.unsqueeze(-2).expand(*obs.shape[:-1], z.shape[-1])
         if self.kind == "discrete":
             return (z.unsqueeze(-1) * self._heads(obs, act)).sum(-2)
-        return self.decoder(torch.cat([obs, act, z], dim=-1))
+        return self._decoder(torch.cat([obs, act, z], dim=-1))
 
     def loss(
         self,
