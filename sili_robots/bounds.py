@@ -163,7 +163,7 @@ def write_bounds_file(results: list[dict[str, Any]], path: Path = BOUNDS_FILE) -
     return path
 
 
-def stored_bounds(task_id: str, path: Path = BOUNDS_FILE) -> dict[str, dict[str, float]]:
+def stored_bounds(task_id: str | None, path: Path = BOUNDS_FILE) -> dict[str, dict[str, float]]:
     """The stored bounds of one task version, ``{kind: {task_reward, stability}}``; ``{}`` when
     none are stored (an unknown or unmeasured version: nothing is drawn)."""
     if not isinstance(task_id, str) or not task_id:

@@ -22,8 +22,7 @@ def _stability(tail: pd.DataFrame) -> float:
 
 
 def held(run_dir: Path, window: int = 50) -> bool:
-    """Whether the opponent kept its strategy in at least 90% of the run's last interactions:
-    what scripts use to say more when a run did not hold."""
+    """Whether the opponent kept its strategy in at least 90% of the run's last interactions."""
     return _stability(_last(run_dir, window)) >= HOLDS
 
 
@@ -31,7 +30,7 @@ def worked(run_dir: Path, window: int = 50) -> bool:
     """Held the opponent and earned more per interaction than standing still: a run can hold by
     parking away from the goal, which shows stability but not the method's trade-off."""
     tail = _last(run_dir, window)
-    still = stored_bounds(read_config(run_dir).task_id or "").get("still")
+    still = stored_bounds(read_config(run_dir).task_id).get("still")
     beat_still = still is None or float(tail["task_reward"].mean()) > still["task_reward"]
     return _stability(tail) >= HOLDS and beat_still
 
@@ -44,7 +43,7 @@ def verdict(run_dir: Path, window: int = 50) -> str:
     tail = _last(run_dir, window)
     stability = _stability(tail)
     reward = float(tail["task_reward"].mean())
-    bounds = stored_bounds(cfg.task_id) if cfg.task_id else {}
+    bounds = stored_bounds(cfg.task_id)
     still, stab = bounds.get("still"), bounds.get("stabilizing")
     outcome = "held" if stability >= HOLDS else "did not hold"
     kept = f"kept its strategy in {stability:.0%} of its last {len(tail)} interactions"
