@@ -466,6 +466,36 @@ def test_relabel_keeps_the_function_and_refresh_keeps_category_names():
     assert agent.latents.relabels == relabels + 1
 
 
+def test_relabel_moves_the_optimizers_moments_with_the_categories():
+    torch.manual_seed(0)
+    model = LatentModel(3, 2, latent_dim=4, hidden=16, kind="discrete")
+    opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+    traj, obs, act = torch.randn(8, H, 9), torch.randn(8, H, 3), torch.randn(8, H, 2)
+    for _ in range(3):
+        opt.zero_grad()
+        model.loss(traj, obs[:, :-1], act[:, :-1], obs[:, 1:], act[:, :-1, 0]).backward()
+        opt.step()
+    moments = {p: {k: v.clone() for k, v in opt.state[p].items()} for p in model.parameters()}
+    perm = torch.tensor([2, 0, 3, 1])
+    model.relabel(perm, opt)
+    head, last = model.head, model.decoder[-1]
+    for name in ("exp_avg", "exp_avg_sq"):
+        assert torch.equal(opt.state[head.weight][name], moments[head.weight][name][perm])
+        assert torch.equal(opt.state[head.bias][name], moments[head.bias][name][perm])
+        before = moments[last.weight][name].unflatten(0, (4, model.out_dim))
+        assert torch.equal(opt.state[last.weight][name], before[perm].flatten(0, 1))
+        trunk = model.phi[0].weight  # not per category: left alone
+        assert torch.equal(opt.state[trunk][name], moments[trunk][name])
+    assert opt.state[head.weight]["step"] == moments[head.weight]["step"]
+    agent = _agent()
+    assert agent.latents.optimizer is agent.model_opt  # refreshes rename through it
+
+
+def test_a_stability_scale_of_zero_is_kept_and_none_means_the_horizon():
+    assert _agent(stability_scale=0.0).stability_scale == 0.0
+    assert _agent().stability_scale == H
+
+
 def test_categories_with_the_same_behaviour_count_as_one_strategy():
     torch.manual_seed(0)
     model = LatentModel(3, 2, latent_dim=3, hidden=16, kind="discrete")

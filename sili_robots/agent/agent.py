@@ -100,10 +100,11 @@ class SILIAgent:
             self.rng,
             cfg.model.merge_threshold,
             cfg.model.sample and cfg.latent == "discrete",
+            self.model_opt if self.model is not None else None,
         )
         self.smirl = RunningGaussian(obs_dim, cfg.sili.smirl_std_floor)
         self.beta = float(value_at(cfg.sili.beta, 0))  # b now (the schedules add-on moves it)
-        self.stability_scale = float(cfg.sili.scale or horizon)
+        self.stability_scale = float(horizon if cfg.sili.scale is None else cfg.sili.scale)
         self._update_credit = 0.0
         for addon in self.addons:
             addon.attach(self)

@@ -12,8 +12,11 @@ pooled ones; the ``last_step`` add-on (sili_robots/addons/last_step.py) uses one
 transition unpooled.
 
 Decoder. Continuous latents are concatenated to (s, a). For discrete latents the decoder has one
-prediction head per category and the one-hot z selects the head: D(s, a, z) = sum_k z_k D_k(s, a),
-the same function class, but a category can only matter by predicting differently.
+output head per category on a shared trunk and the one-hot z selects the head: D(s, a, z) =
+sum_k z_k D_k(s, a). This departs from the paper's decoder, which takes z as an input: a one-hot
+input shifts the first layer per category, the heads share every hidden feature and differ in the
+output layer. The heads give every category's error in one pass (the ``expected`` estimator's
+exact expectation) and let categories that predict alike be compared (``category_groups``).
 
 Training objective for discrete latents (``estimator``):
 
@@ -115,18 +118,25 @@ class LatentModel(nn.Module):
             self.decoder = mlp(obs_dim + act_dim + latent_dim, self.out_dim, hidden, matmul=matmul)
 
     @torch.no_grad()
-    def relabel(self, perm: torch.Tensor) -> None:
+    def relabel(self, perm: torch.Tensor, optimizer: torch.optim.Optimizer | None = None) -> None:
         """Rename categories: new category i is old category ``perm[i]`` (encoder output and
-        decoder head move together, so the model computes the same function)."""
+        decoder head move together, so the model computes the same function). The optimizer's
+        per-parameter state (Adam's moments) moves with them, or each renamed category would
+        go on with another's step sizes."""
         if self.kind != "discrete":
             raise ValueError("only discrete latents have categories to relabel")
-        self.head.weight.copy_(self.head.weight[perm])
-        self.head.bias.copy_(self.head.bias[perm])
         last = self.decoder[-1]
-        w = last.weight.unflatten(0, (self.latent_dim, self.out_dim))
-        b = last.bias.unflatten(0, (self.latent_dim, self.out_dim))
-        last.weight.copy_(w[perm].flatten(0, 1))
-        last.bias.copy_(b[perm].flatten(0, 1))
+        for param, per_category in (
+            (self.head.weight, 1),
+            (self.head.bias, 1),
+            (last.weight, self.out_dim),
+            (last.bias, self.out_dim),
+        ):
+            state = optimizer.state.get(param, {}) if optimizer is not None else {}
+            moved = [param, *(v for v in state.values() if v.shape == param.shape)]
+            for tensor in moved:
+                rows = tensor.unflatten(0, (self.latent_dim, per_category))
+                tensor.copy_(rows[perm].flatten(0, 1))
 
     @torch.no_grad()
     def head_distances(

@@ -66,9 +66,11 @@ class LatentCache:
         rng: np.random.Generator,
         merge_threshold: float = 0.0,
         sample: bool = False,
+        optimizer: torch.optim.Optimizer | None = None,
     ) -> None:
         self.model, self.buffer, self.kind, self.dim = model, buffer, kind, dim
         self.rng, self.merge_threshold, self.sample = rng, merge_threshold, sample
+        self.optimizer = optimizer  # the model's: a rename moves its state too
         self.Z = np.zeros((1, dim), np.float32)
         #: discrete latents: category -> the category standing for its behaviour group
         self.category_map = np.arange(dim)
@@ -125,7 +127,7 @@ class LatentCache:
         perm[rows] = cols  # new name i <- old model category perm[i]
         if np.array_equal(perm, np.arange(k)):
             return new
-        self.model.relabel(torch.from_numpy(perm))
+        self.model.relabel(torch.from_numpy(perm), self.optimizer)
         self.category_map = np.argsort(perm)[self.category_map[perm]]
         self.relabels += 1
         return new[:, perm]
