@@ -25,7 +25,14 @@ import gymnasium as gym
 import numpy as np
 
 from sili_robots.agent import SILIAgent
-from sili_robots.build import build_agent, make_run_config, make_run_env, observed_as, task_name_of
+from sili_robots.build import (
+    build_agent,
+    canonical_task,
+    make_run_config,
+    make_run_env,
+    observed_as,
+    task_name_of,
+)
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import AgentFeedback, evaluate
 from sili_robots.runs import CHECKPOINT, CONFIG, METRICS, SUMMARY, RunConfig, load_checkpoint
@@ -65,7 +72,7 @@ class SILI:
                 )
             self._task_env, task = env, task_name_of(env)
         else:
-            task = env
+            task = canonical_task(env)
         cfg = make_run_config(
             task,
             method,

@@ -46,12 +46,22 @@ def is_class_path(task: str) -> bool:
     return ":" in task and "/" not in task
 
 
+def canonical_task(task: str) -> str:
+    """How a run records a task given by any of its names: the registered task's CLI name
+    (``sili/Circle3-v1`` -> ``circle-3``), or a user's class path (checked), so runs of one
+    task group together whichever name started them."""
+    if is_class_path(task):
+        task_class(task)
+        return task
+    return task_spec(task).name
+
+
 def task_name_of(env: gym.Env) -> str:
-    """How a run records an environment instance: its registered id, else its class path."""
+    """How a run records an environment instance: its task's name, else its class path."""
     spec = env.spec if env.spec is not None else env.unwrapped.spec
     if spec is not None:
         try:
-            return task_spec(spec.id).gym_id
+            return task_spec(spec.id).name
         except ConfigError:
             pass
     cls = type(env.unwrapped)

@@ -7,6 +7,17 @@ class ConfigError(ValueError):
     """A value given by the user is not allowed; the message names the value and the choices."""
 
 
+#: seeds are what numpy's legacy seeding, torch and gymnasium all accept: 0 .. 2**32 - 1
+MAX_SEED = 2**32 - 1
+
+
+def check_seed(seed: object) -> int:
+    """``seed`` as an int, or ``ConfigError`` naming it and the allowed range."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise ConfigError(f"seed {seed!r} is not allowed: give an integer in [0, {MAX_SEED}]")
+    return seed
+
+
 def check_choice(name: str, value: object, allowed: list[str] | tuple[str, ...]) -> None:
     """Raise ``ConfigError`` unless ``value`` is one of ``allowed``."""
     if value not in allowed:

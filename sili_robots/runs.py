@@ -11,6 +11,7 @@ import contextlib
 import csv
 import json
 import os
+import pickle
 import platform
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -20,7 +21,7 @@ import torch
 
 from sili_robots.addons.config import AddonsConfig
 from sili_robots.agent.config import AgentConfig, set_path
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, check_seed
 from sili_robots.migrations import migrate_agent_state, migrate_run, setting_path
 
 CONFIG, METRICS, CHECKPOINT, SUMMARY = "config.json", "metrics.csv", "checkpoint.pt", "summary.json"
@@ -62,6 +63,7 @@ class RunConfig:
     task_id: str | None = None
 
     def __post_init__(self) -> None:
+        check_seed(self.seed)
         if self.task_id is None:
             from sili_robots.tasks import task_spec
 
@@ -151,7 +153,12 @@ def read_config(run_dir: Path) -> RunConfig:
             f"{run_dir} is not a run directory (no {CONFIG}); "
             "give a directory written by `sili train --out`"
         )
-    return RunConfig.from_dict(json.loads(path.read_text())["run"])
+    try:
+        run = json.loads(path.read_text())["run"]
+    except (ValueError, KeyError, TypeError) as err:
+        why = _first_line(err)
+        raise ConfigError(f"{path} is damaged ({why}); it is not a run's config") from None
+    return RunConfig.from_dict(run)
 
 
 class MetricsWriter:
@@ -192,11 +199,22 @@ def save_checkpoint(run_dir: Path, state: dict[str, Any]) -> None:
     os.replace(tmp, path)
 
 
+def _first_line(err: Exception) -> str:
+    return f"{type(err).__name__}: {str(err).split('. ')[0]}"
+
+
 def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
     """The last checkpoint (in today's layout), or None before the first."""
     path = Path(run_dir) / CHECKPOINT
     if not path.is_file():
         return None
-    state = torch.load(path, weights_only=False)
-    state["agent"] = migrate_agent_state(state["agent"])
+    try:
+        state = torch.load(path, weights_only=False)
+        agent = state["agent"]
+    except (pickle.UnpicklingError, RuntimeError, EOFError, ValueError, KeyError, TypeError) as err:
+        raise ConfigError(
+            f"{path} is damaged ({_first_line(err)}); it cannot be resumed: train the run again "
+            "(sili train ... --overwrite)"
+        ) from None
+    state["agent"] = migrate_agent_state(agent)
     return state

@@ -82,3 +82,14 @@ def test_api_refuses_what_it_cannot_use(tmp_path):
             model.evaluate(bad)
     with pytest.raises(ConfigError, match=r"method 'lili' fixes sili\.beta"):
         SILI("circle-3", method="lili", settings={"beta": 0.7})
+
+
+def test_a_task_given_by_any_name_is_recorded_by_its_name(tmp_path):
+    import gymnasium as gym
+
+    by_id = SILI("sili/Circle3-v1", method="sac", settings=FAST_AGENT, run_dir=tmp_path / "a")
+    by_env = SILI(gym.make("sili/Circle3-v0"), method="sac", settings=FAST_AGENT)
+    assert (by_id.cfg.task, by_id.cfg.task_id) == ("circle-3", "sili/Circle3-v1")
+    assert (by_env.cfg.task, by_env.cfg.task_id) == ("circle-3-v0", "sili/Circle3-v0")
+    with pytest.raises(ConfigError, match=r"seed -1 is not allowed: give an integer in \[0, "):
+        SILI("circle-3", method="sac", seed=-1)

@@ -3,6 +3,9 @@
 import subprocess
 import sys
 
+import pytest
+from cli_helpers import sili as sili_in_process
+
 
 def _sili(*args):
     return subprocess.run(
@@ -40,3 +43,73 @@ def test_a_parse_error_is_one_line_naming_the_value_and_the_choices():
         and "'foo'" in line
         and "sili" in line.split("'foo'")[1]
     )
+
+
+def _main(*args: str) -> tuple[int, str, str]:
+    res = sili_in_process(*args)
+    return res.returncode, res.stdout, res.stderr
+
+
+@pytest.mark.parametrize("bad", ["-1", str(2**32), "1.5"])
+@pytest.mark.parametrize("command", ["train", "rollout", "bounds", "preview"])
+def test_a_bad_seed_exits_2_naming_it_and_the_range(tmp_path, command, bad):
+    task = ["--task", "circle-3"] if command == "train" else ["circle-3"]
+    code, _, err = _main(command, *task, "--seed", bad, "--out", str(tmp_path / "o"))
+    assert code == 2 and f"'{bad}' is not a seed: give an integer in [0, 4294967295]" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_sweep_refuses_bad_seeds_a_task_twice_and_a_latent_no_method_takes(tmp_path):
+    sweep = ["sweep", "--out", str(tmp_path / "s"), "--dry-run", "--methods"]
+    code, _, err = _main(*sweep, "oracle", "--tasks", "circle-3", "--seeds", "-1")
+    assert code == 2 and "seed -1 is not allowed" in err
+    code, _, err = _main(*sweep, "oracle", "--tasks", "sili/Circle3-v1,circle-3")
+    assert code == 2 and "'sili/Circle3-v1' and 'circle-3' are the same task (circle-3)" in err
+    code, _, err = _main(*sweep, "sac", "--tasks", "circle-3", "--latent", "continuous")
+    assert code == 2 and "--latent applies to methods sili, lili, stable only" in err
+    mixed = ["sac,lili", "--tasks", "circle-3", "--latent", "continuous"]
+    code, out, _ = _main(*sweep, *mixed)
+    assert code == 0 and "circle-3__sac__s0\t" in out and "circle-3__lili-continuous__s0\t" in out
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["sweep", "--tasks", "circle-3", "--methods", "oracle", "--interactions", "1", "--out"],
+        ["collect", "SRC", "--into"],
+        ["bounds", "circle-3", "--interactions", "300", "--write"],
+        ["preview", "circle-3", "--out"],
+        ["preview", "circle-3", "--out", "p.html", "--png"],
+        ["plot", "SRC", "--out"],
+    ],
+    ids=["sweep", "collect", "bounds", "preview-html", "preview-png", "plot"],
+)
+def test_an_output_path_that_cannot_be_written_exits_2_before_any_work(tmp_path, args):
+    (tmp_path / "file").write_text("")
+    blocked = tmp_path / "file" / "out"  # under a regular file: no directory can be made
+    args = [a.replace("SRC", str(tmp_path)).replace("p.html", f"{tmp_path}/p.html") for a in args]
+    code, out, err = _main(*args, str(blocked))
+    assert code == 2 and f"{blocked}: cannot write there" in err, err
+    assert out == "" and "Traceback" not in err  # nothing computed first
+
+
+def test_beta_and_a_set_of_b_together_exit_2(tmp_path):
+    train = ["train", "--task", "circle-3", "--out", str(tmp_path / "r")]
+    code, _, err = _main(*train, "--beta", "0.3", "--set", "sili.beta=0.7")
+    assert code == 2 and "give one of --beta and --set sili.beta, not both" in err
+
+
+def test_a_reader_that_stops_early_is_not_an_error():
+    """``sili ... | head``: the closed pipe ends the command quietly."""
+    cmd = [sys.executable, "-m", "sili_robots.cli", "rollout", "circle-3", "--interactions", "2"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc.stdout.close()  # before it prints anything
+    err = proc.stderr.read()
+    assert proc.wait(timeout=120) == 0 and "BrokenPipeError" not in err, err
+
+
+def test_a_schedule_for_a_setting_that_takes_one_number_names_those_that_take_one(tmp_path):
+    train = ["train", "--task", "circle-3", "--out", str(tmp_path / "r")]
+    code, _, err = _main(*train, "--set", "addons.recent.fraction=0:0,10:0.5")
+    assert code == 2 and "recent.fraction takes one number, not a schedule (0:0,10:0.5)" in err
+    assert "take schedules: sac.lr, sac.gamma," in err and "sili.beta" in err

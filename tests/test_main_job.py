@@ -39,10 +39,10 @@ def test_main_job_names_a_working_recipe_when_it_does_not_hold(tmp_path):
     recipe = re.search(r"(\.venv/bin/sili train .*?--out \S+)", done.stderr.replace("\n", " "))
     assert recipe, done.stderr[-2000:]
     args = shlex.split(recipe.group(1))[1:]
-    assert args[args.index("--interactions") + 1] == "1000"
+    assert args[args.index("--interactions") + 1] == "2000"  # the paper grid's budget
     args[args.index("--interactions") + 1] = "3"
     args[args.index("--out") + 1] = str(tmp_path / "recipe")
     assert main([*args, *FAST_ARGS, "--no-progress"]) == 0
     cfg = read_config(tmp_path / "recipe")
-    assert cfg.task_id == "sili/Circle3-v0"
+    assert cfg.task_id == main_cfg.task_id == "sili/Circle3-v1"  # the main job's own task
     assert cfg.agent.sili.beta.points == ((250, 0.0), (300, 0.5))  # the delayed b

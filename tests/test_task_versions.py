@@ -49,6 +49,7 @@ def test_cli_names_build_v1_and_every_v0_id_is_still_registered():
         assert task_spec(old).name == f"{name}-v0" == EARLIER_VERSIONS[f"{name}-v0"].name
         assert task_spec(f"{name}-v0").gym_id == old
         assert first_version(name).gym_id == old == first_version(gym_id).gym_id
+        assert task_spec(f"{name}-v1").name == name  # the current version by its version too
     assert TASKS["driving"].gym_id == "sili/Driving-v0"  # unchanged: no v1
     assert first_version("driving").gym_id == "sili/Driving-v0"
 

@@ -1,7 +1,5 @@
 """``sili train`` / ``sili eval`` end to end: run directories, bad input, kill and resume."""
 
-import contextlib
-import io
 import json
 import os
 import signal
@@ -9,30 +7,17 @@ import subprocess
 import sys
 import time
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
 import pytest
+from cli_helpers import sili as _sili
 from fast_settings import FAST_ARGS
 
 from sili_robots.addons import LatentFilter
-from sili_robots.cli import main
 from sili_robots.evaluation import load_trained
 
 FAST = [*FAST_ARGS, "--no-progress"]
-
-
-def _sili(*args):
-    """``sili ARGS`` in this process (a fresh process costs seconds of imports per call); an
-    exception the CLI does not turn into an exit code escapes and fails the test."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            code = main([str(a) for a in args])
-        except SystemExit as exit_:  # argparse's own errors
-            code = exit_.code if isinstance(exit_.code, int) else 1
-    return SimpleNamespace(returncode=code, stdout=out.getvalue(), stderr=err.getvalue())
 
 
 def test_train_writes_a_complete_run_and_eval_reads_it(tmp_path):
@@ -212,6 +197,21 @@ def test_bad_input_exits_2_without_traceback(tmp_path, args, message):
 def test_eval_of_a_non_run_exits_2(tmp_path):
     res = _sili("eval", tmp_path)
     assert res.returncode == 2 and "is not a run directory" in res.stderr
+
+
+def test_a_damaged_checkpoint_or_config_exits_2_naming_the_file(tmp_path):
+    run = tmp_path / "run"
+    assert (
+        _sili("train", "--task", "circle-3", "--interactions", 2, *FAST, "--out", run).returncode
+        == 0
+    )
+    ckpt = run / "checkpoint.pt"
+    ckpt.write_bytes(ckpt.read_bytes()[:1000])  # cut short, as by a full disk
+    res = _sili("train", "--resume", run, "--interactions", 3)
+    assert res.returncode == 2 and f"{ckpt} is damaged" in res.stderr, res.stderr
+    (run / "config.json").write_text("{not json")
+    res = _sili("eval", run, "--interactions", 1)
+    assert res.returncode == 2 and f"{run / 'config.json'} is damaged" in res.stderr
 
 
 def test_resume_after_kill_reproduces_the_uninterrupted_run(tmp_path):

@@ -174,6 +174,11 @@ def convert(name: str, tp: Any, value: Any) -> Any:
             if kind in args:
                 return convert(name, kind, value)
         raise ConfigError(f"setting {name} must be {_allowed(tp)}, got {value!r}")
+    if isinstance(value, Schedule) and tp in (float, int):
+        raise ConfigError(
+            f"setting {name} takes one number, not a schedule ({value}); the settings that take "
+            f"schedules: {', '.join(paths(AgentConfig, schedulable=True))}"
+        )
     is_number = isinstance(value, int | float) and not isinstance(value, bool)
     if tp is float:
         if not is_number:
@@ -236,15 +241,16 @@ def get_path(obj: Any, path: str) -> Any:
     return obj
 
 
-def paths(cls: type, prefix: str = "") -> list[str]:
-    """Every leaf setting's dotted path, in declaration order."""
+def paths(cls: type, prefix: str = "", schedulable: bool = False) -> list[str]:
+    """Every leaf setting's dotted path, in declaration order (``schedulable``: only those that
+    take a schedule)."""
     out: list[str] = []
     hints = _hints(cls)
     for f in fields(cls):
         tp = hints[f.name]
         if dataclasses.is_dataclass(tp):
-            out += paths(tp, f"{prefix}{f.name}.")
-        else:
+            out += paths(tp, f"{prefix}{f.name}.", schedulable)
+        elif not schedulable or Schedule in typing.get_args(tp):
             out.append(f"{prefix}{f.name}")
     return out
 

@@ -10,10 +10,12 @@
 | smirl   | no           | s                   | (1-b) R_task + b log p(s) (SMiRL)       |
 
 Two profiles give the starting settings: ``package`` (the defaults of ``AgentConfig``) and
-``paper`` (the paper's appendix exactly: discrete latents by straight-through Gumbel-Softmax at
-temperature 1, z^j sampled as its Eq. for z^j says, b = 0.5 constant (the package's SILI
-starts b at 0 and raises it to 0.5 over interactions 250-300), 2 x 256 networks, latent
-dimension 10, R_stable = -d(z^j, z^{j-1}) on every step, no grouping of categories).
+``paper`` (the settings of the paper's appendix: discrete latents by straight-through
+Gumbel-Softmax at temperature 1, z^j sampled as its Eq. for z^j says, b = 0.5 constant (the
+package's SILI starts b at 0 and raises it to 0.5 over interactions 250-300), 2 x 256 networks,
+latent dimension 10, R_stable = -d(z^j, z^{j-1}) on every step, no grouping of categories).
+Both keep the model's structure, which the paper leaves open or states loosely (the encoder's
+pooling, a discrete decoder with one head per category; README, "Two profiles").
 """
 
 from __future__ import annotations
@@ -62,6 +64,9 @@ PRESETS: dict[str, Preset] = {
     ),
     "smirl": Preset({"latent": ("none", "SMiRL's stability is a state density, no latent")}),
 }
+
+#: the methods whose latent kind is a choice (the others fix it to "none")
+LATENT_METHODS = tuple(m for m, preset in PRESETS.items() if "latent" not in preset.fixed)
 
 #: the paper's appendix (the latent kind stays the task's: discrete, continuous or partial)
 PAPER_PROFILE: dict[str, Any] = {

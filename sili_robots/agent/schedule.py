@@ -40,6 +40,10 @@ class Schedule:
     def to_dict(self) -> dict[str, Any]:
         return {"points": [list(p) for p in self.points]}
 
+    def __str__(self) -> str:
+        """As ``--set`` takes it: ``250:0,300:0.5``."""
+        return ",".join(f"{i}:{v:g}" for i, v in self.points)
+
     def value(self, interaction: int) -> float:
         first, last = self.points[0], self.points[-1]
         if interaction <= first[0]:

@@ -11,6 +11,7 @@ import argparse
 import json
 from pathlib import Path
 
+from sili_robots.commands.common import seed, writable_file
 from sili_robots.errors import ConfigError
 
 
@@ -49,7 +50,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         " fewer if the interactions are few)",
     )
     p.add_argument(
-        "--seed", default=str(DEFAULT_SEED), help=f"first game's seed (default {DEFAULT_SEED})"
+        "--seed",
+        type=seed,
+        default=DEFAULT_SEED,
+        help=f"first game's seed (default {DEFAULT_SEED})",
     )
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument(
@@ -74,10 +78,8 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.tasks import task_spec
     from sili_robots.tasks.registry import all_versions
 
-    try:
-        seed = int(args.seed)
-    except ValueError:
-        raise ConfigError(f"--seed must be an integer, got {args.seed!r}") from None
+    if args.write:
+        writable_file(Path(args.write), "--write")  # before minutes of games, not after
     if args.all == (args.task is not None):
         raise ConfigError("give either a TASK (e.g. circle-3) or --all, not both or neither")
     specs = all_versions() if args.all else [task_spec(args.task)]
@@ -85,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
         check_counts(args.interactions or default_interactions(spec.name), args.games)
     results = []
     for spec in specs:
-        result = compute_bounds(spec.gym_id, args.interactions, seed, args.games)
+        result = compute_bounds(spec.gym_id, args.interactions, args.seed, args.games)
         results.append(result)
         if args.json:
             print(json.dumps({k: result[k] for k in ("task", "task_id", "bounds")}))

@@ -6,6 +6,8 @@ import argparse
 import json
 from pathlib import Path
 
+from sili_robots.commands.common import writable_dir
+
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
@@ -25,7 +27,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from sili_robots.sweep.collect import collect
 
-    report = collect(args.sources, args.into)
+    report = collect(args.sources, writable_dir(args.into, "--into"))
     print(
         json.dumps(
             {

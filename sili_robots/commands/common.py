@@ -6,13 +6,14 @@ import argparse
 import functools
 import math
 import re
+import tempfile
+from pathlib import Path
 from typing import Any
 
 from sili_robots.agent.schedule import Schedule
-from sili_robots.build import is_class_path, task_class
-from sili_robots.errors import ConfigError
+from sili_robots.build import canonical_task
+from sili_robots.errors import MAX_SEED, ConfigError, check_seed
 from sili_robots.migrations import setting_path
-from sili_robots.tasks import task_spec
 
 
 def _int_at_least(text: str, minimum: int) -> int:
@@ -33,6 +34,46 @@ def positive_int(text: str) -> int:
 
 def non_negative_int(text: str) -> int:
     return _int_at_least(text, 0)
+
+
+def seed(text: str) -> int:
+    """A seed: an integer in [0, MAX_SEED]."""
+    try:
+        return check_seed(int(text))
+    except (ValueError, ConfigError):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a seed: give an integer in [0, {MAX_SEED}]"
+        ) from None
+
+
+def _cannot_write(option: str, path: Path, err: OSError, what: str) -> ConfigError:
+    return ConfigError(
+        f"{option} {path}: cannot write there ({err.strerror or err}); give {what} that can be "
+        "written"
+    )
+
+
+def writable_dir(path: Path, option: str) -> Path:
+    """Create ``path`` (a directory) now, or ``ConfigError`` naming it, before any work."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=path).close()
+    except OSError as err:
+        raise _cannot_write(option, path, err, "a directory") from None
+    return path
+
+
+def writable_file(path: Path, option: str) -> Path:
+    """``path`` if a file can be written there (its directory is created now), else
+    ``ConfigError`` naming it, before any work."""
+    if path.is_dir():
+        raise ConfigError(f"{option} {path} is a directory; give a file name")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tempfile.TemporaryFile(dir=path.parent).close()
+    except OSError as err:
+        raise _cannot_write(option, path, err, "a file") from None
+    return path
 
 
 def float_in(text: str, low: float = -math.inf, high: float = math.inf) -> float:
@@ -114,8 +155,8 @@ def add_schedule_args(p: argparse.ArgumentParser, scope: str) -> None:
             option,
             metavar=metavar,
             help=f"{what}{scope}, piecewise linear through (interaction, value) points, held "
-            f"before the first and after the last; e.g. {example} (any float setting takes "
-            "the same form through --set PATH=I:V,I:V)",
+            f"before the first and after the last; e.g. {example} (the other settings that take "
+            "schedules take the same form through --set PATH=I:V,I:V)",
         )
 
 
@@ -160,10 +201,7 @@ SCHEDULE_TEXT = re.compile(r"\s*\d+\s*:[^,]+(,\s*\d+\s*:[^,]+)*")
 def task_name(text: str) -> str:
     """A registered task's CLI name, or a user's ``package.module:ClassName`` (checked)."""
     try:
-        if is_class_path(text):
-            task_class(text)
-            return text
-        return task_spec(text).name
+        return canonical_task(text)
     except ConfigError as err:
         raise argparse.ArgumentTypeError(str(err)) from None
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from sili_robots.commands.common import positive_int
+from sili_robots.commands.common import positive_int, writable_dir
 from sili_robots.errors import ConfigError
 
 FORMATS = ("png", "pdf", "svg")
@@ -49,6 +49,8 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(
             f"unknown figure format {bad or args.formats!r}; allowed: {', '.join(FORMATS)}"
         )
+    if args.out is not None:
+        writable_dir(args.out, "--out")
     for path in plot_sweep(
         args.sweep_dir,
         args.out,

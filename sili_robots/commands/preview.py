@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
-from sili_robots.commands.common import positive_int, task_name
+from sili_robots.commands.common import positive_int, seed, task_name, writable_file
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -31,7 +32,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     who.add_argument("--checkpoint", metavar="RUN_DIR", help="play the agent trained in RUN_DIR")
     p.add_argument("--interactions", type=positive_int, default=3)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed, default=0, help="first interaction's seed (default 0)")
     p.add_argument("--out", default="preview.html", help="HTML file to write (preview.html)")
     p.add_argument("--png", default=None, help="also render the last frame to this PNG")
     p.add_argument("--serve", action="store_true", help="serve live on 127.0.0.1 until Ctrl-C")
@@ -45,6 +46,10 @@ def run(args: argparse.Namespace) -> int:
     def announce(url: str) -> None:
         print(f"meshcat server: {url}  (Ctrl-C to stop)", flush=True)
 
+    if args.out is not None and not args.serve:
+        writable_file(Path(args.out), "--out")
+    if args.png is not None:
+        writable_file(Path(args.png), "--png")
     try:
         result = preview(
             args.task,

@@ -6,7 +6,7 @@ import argparse
 
 import numpy as np
 
-from sili_robots.commands.common import positive_int, task_name
+from sili_robots.commands.common import positive_int, seed, task_name
 from sili_robots.policies import SCRIPTED_KINDS, scripted_policy
 from sili_robots.rollout import run_interactions
 from sili_robots.tasks import make_task
@@ -17,7 +17,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("task", type=task_name, help="task name, e.g. circle-3")
     p.add_argument("--policy", default="stabilizing", choices=SCRIPTED_KINDS)
     p.add_argument("--interactions", type=positive_int, default=20)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=seed, default=0, help="first interaction's seed (default 0)")
     p.set_defaults(run=run)
 
 

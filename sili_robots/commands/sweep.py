@@ -17,6 +17,7 @@ from sili_robots.commands.common import (
     positive_int,
     schedule_args,
     track_typed_options,
+    writable_dir,
 )
 from sili_robots.errors import ConfigError
 from sili_robots.sweep.spec import (
@@ -167,6 +168,8 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.sweep.state import check_existing, run_path, run_state
 
     specs, sweep_dir = _specs_and_dir(args)
+    if not args.dry_run:
+        writable_dir(sweep_dir, "--resume" if args.resume else "--out")
     if args.dry_run:
         planned = plan(specs)
         for run_ in planned:

@@ -20,11 +20,13 @@ from sili_robots.commands.common import (
     parse_settings,
     positive_int,
     schedule_args,
+    seed,
     task_name,
     track_typed_options,
     unit_float,
 )
 from sili_robots.errors import ConfigError
+from sili_robots.migrations import setting_path
 from sili_robots.runs import CONFIG, RunConfig, make_run_dir, read_config
 
 
@@ -39,7 +41,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--profile",
         choices=PROFILES,
-        help="starting settings: the package's defaults, or the paper's appendix exactly "
+        help="starting settings: the package's defaults, or the settings of the paper's appendix "
         "(default: the task's; for sili on driving the paper's, else the package's)",
     )
     p.add_argument(
@@ -52,7 +54,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=positive_int,
         help="interactions to train (default 1000); with --resume, extend the run to this many",
     )
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--seed", type=seed, default=0, help="the run's seed, 0 .. 2**32 - 1 (default 0)"
+    )
     p.add_argument("--out", type=Path, help="run directory to create")
     p.add_argument(
         "--resume",
@@ -114,6 +118,9 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         given = options.get("sili.beta", "--beta-schedule")
         raise ConfigError(f"give one of --beta and {given}, not both")
     check_schedule_overrides(schedules, settings, options)
+    given = {setting_path(name): name for name in settings}
+    if args.beta is not None and "sili.beta" in given:
+        raise ConfigError(f"give one of --beta and --set {given['sili.beta']}, not both")
     if args.beta is not None:
         settings["sili.beta"] = args.beta
     settings.update(schedules)

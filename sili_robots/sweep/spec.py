@@ -15,9 +15,9 @@ from typing import Any
 
 from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, PROFILES, Schedule
 from sili_robots.agent.matmul import default_matmul
-from sili_robots.agent.methods import PRESETS
+from sili_robots.agent.methods import LATENT_METHODS, PRESETS
 from sili_robots.build import default_profile, make_run_config, task_arguments
-from sili_robots.errors import ConfigError, check_choice
+from sili_robots.errors import ConfigError, check_choice, check_seed
 from sili_robots.migrations import setting_path
 from sili_robots.runs import RunConfig
 from sili_robots.tasks import TASKS, TaskSpec, task_spec
@@ -150,6 +150,8 @@ def parse_seeds(text: str) -> list[int]:
             ) from None
         if b < a:
             raise ConfigError(f"seed range {part!r} is empty; write LOW-HIGH with LOW <= HIGH")
+        for end in (a, b):
+            check_seed(end)
         seeds.update(range(a, b + 1))
     if not seeds:
         raise ConfigError(f"no seeds in {text!r}; give e.g. 0-4 or 0,2,7")
@@ -242,14 +244,25 @@ def validate(spec: SweepSpec) -> None:
         raise ConfigError(f"no tasks given; allowed: {', '.join(TASKS)}")
     if not spec.methods:
         raise ConfigError(f"no methods given; allowed: {', '.join(METHODS)}")
+    named: dict[str, str] = {}
     for task in spec.tasks:
-        task_spec(task)
+        name = task_spec(task).name
+        if name in named:
+            raise ConfigError(
+                f"tasks {named[name]!r} and {task!r} are the same task ({name}); give it once"
+            )
+        named[name] = task
     for method in spec.methods:
         check_choice("method", method, METHODS)
     if spec.profile is not None:
         check_choice("profile", spec.profile, PROFILES)
     if spec.latent is not None:
         check_choice("latent kind", spec.latent, LATENT_KINDS)
+        if not set(spec.methods) & set(LATENT_METHODS):
+            raise ConfigError(
+                f"--latent applies to methods {', '.join(LATENT_METHODS)} only, none of which is "
+                f"in the sweep ({', '.join(spec.methods)}); the others fix latent = 'none'"
+            )
     if spec.interactions < 1:
         raise ConfigError(f"interactions must be >= 1, got {spec.interactions}")
     if spec.checkpoint_every < 1:
@@ -289,7 +302,7 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
     for task in spec.tasks:
         tspec = task_spec(task)
         latent = spec.latent or tspec.default_latent
-        learned = ("sili", "lili", "stable")
+        learned = LATENT_METHODS
         controllers: list[str | None] = [None]
         if spec.controllers is not None and task_accepts(tspec.name, "controller"):
             controllers = list(spec.controllers)
@@ -328,7 +341,9 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                             seed,
                             beta=label if method in BETA_METHODS else None,
                             controller=controller,
-                            latent=None if latent == tspec.default_latent else latent,
+                            latent=None
+                            if latent == tspec.default_latent or method not in learned
+                            else latent,
                             profile=profile,
                         )
                         cfg = replace(

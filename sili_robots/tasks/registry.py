@@ -75,9 +75,10 @@ def all_versions() -> list[TaskSpec]:
 
 
 def task_spec(name: str) -> TaskSpec:
-    """Look a task up by CLI name (``circle-3``, ``circle-3-v0``) or gymnasium id."""
+    """Look a task up by CLI name (``circle-3``, ``circle-3-v0``), the current version's name
+    with its version (``circle-3-v1``) or gymnasium id."""
     for spec in all_versions():
-        if name in (spec.name, spec.gym_id):
+        if name in (spec.name, spec.gym_id, f"{spec.family}-v{spec.version}"):
             return spec
     raise ConfigError(
         f"unknown task {name!r}; allowed: {', '.join(TASKS)} "
