@@ -4,7 +4,7 @@
 before the filter: a refresh recomputes them in that order). With none switched on the agent is
 the paper's algorithm and runs none of their code.
 
-- ``schedules`` (any float setting given as a schedule): the value per interaction.
+- ``schedules`` (a setting given as a schedule): the value per interaction.
 - ``last_step`` (``addons.last_step``): the encoder also reads the last transition.
 - ``posteriors`` (``addons.stability_distance``, ``addons.change_fraction``): R_stable from
   hindsight posteriors; latent batches from the pairs across which the strategy changed.

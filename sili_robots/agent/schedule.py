@@ -1,7 +1,8 @@
 """A float setting as a piecewise-linear function of the interaction index.
 
-Any float setting of the agent (b, SAC's learning rate, discount, target entropy, ...) may be
-given as a ``Schedule`` instead of a number. ``value_at`` reads either; the ``schedules``
+The agent's settings typed ``Scheduled`` (b, SAC's learning rate, discount, target entropy, ...;
+``paths(AgentConfig, schedulable=True)`` lists them) may be given as a ``Schedule`` instead of a
+number. ``value_at`` reads either; the ``schedules``
 add-on (sili_robots/addons/schedules.py) applies the scheduled values before each update.
 """
 
