@@ -12,7 +12,9 @@ from sili_robots.commands.common import positive_int
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("eval", help="evaluate a trained run without exploration")
     p.add_argument("run_dir", type=Path)
-    p.add_argument("--interactions", type=positive_int, default=100)
+    p.add_argument(
+        "--interactions", type=positive_int, default=100, help="interactions to play (default 100)"
+    )
     p.set_defaults(run=run)
 
 

@@ -31,7 +31,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--window",
         type=positive_int,
         default=100,
-        help="final values (b sweep) = mean over each run's last WINDOW interactions",
+        help="final values (b sweep) = mean over each run's last WINDOW interactions (default 100)",
     )
     p.add_argument("--formats", default="png,pdf", help=f"comma-separated, of {', '.join(FORMATS)}")
     p.add_argument(

@@ -31,7 +31,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="scripted = the task's stabilizing reference policy (default)",
     )
     who.add_argument("--checkpoint", metavar="RUN_DIR", help="play the agent trained in RUN_DIR")
-    p.add_argument("--interactions", type=positive_int, default=3)
+    p.add_argument(
+        "--interactions", type=positive_int, default=3, help="interactions to record (default 3)"
+    )
     p.add_argument("--seed", type=seed, default=0, help="first interaction's seed (default 0)")
     p.add_argument("--out", default="preview.html", help="HTML file to write (preview.html)")
     p.add_argument("--png", default=None, help="also render the last frame to this PNG")

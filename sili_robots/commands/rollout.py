@@ -16,7 +16,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("rollout", help="play a scripted policy on a task")
     p.add_argument("task", type=task_name, help="task name, e.g. circle-3")
     p.add_argument("--policy", default="stabilizing", choices=SCRIPTED_KINDS)
-    p.add_argument("--interactions", type=positive_int, default=20)
+    p.add_argument(
+        "--interactions", type=positive_int, default=20, help="interactions to play (default 20)"
+    )
     p.add_argument("--seed", type=seed, default=0, help="first interaction's seed (default 0)")
     p.set_defaults(run=run)
 

@@ -78,7 +78,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_schedule_args(p, scope="")
     p.add_argument("--controller", help="controller for robot tasks (e.g. sawyer-reach: mink)")
     add_override_args(p, scope="")
-    p.add_argument("--checkpoint-every", type=positive_int, default=50)
+    p.add_argument(
+        "--checkpoint-every",
+        type=positive_int,
+        default=50,
+        help="interactions between checkpoints, where --resume continues (default 50)",
+    )
     p.add_argument(
         "--threads",
         type=positive_int,
