@@ -121,8 +121,7 @@ def train(
 
 
 def write_summary(run_dir: Path, window: int = 100) -> dict[str, Any]:
-    """Final task reward and true stability over the last ``window`` interactions (stability
-    after the first interaction, which has no strategy before it: NaN for a one-interaction run)."""
+    """Final task reward and true stability over the last ``window`` interactions."""
     import pandas as pd
 
     df = pd.read_csv(Path(run_dir) / "metrics.csv")
@@ -130,7 +129,7 @@ def write_summary(run_dir: Path, window: int = 100) -> dict[str, Any]:
     summary = {
         "interactions": len(df),
         "final_task_reward": float(tail["task_reward"].mean()),
-        "final_stability": float(1.0 - df["strategy_changed"].iloc[1:].tail(window).mean()),
+        "final_stability": float(1.0 - tail["strategy_changed"].mean()),
         "window": window,
         "wall_time_s": float(df["wall_time"].iloc[-1]) if len(df) else 0.0,
         **latent_diagnostics(df, window),

@@ -14,9 +14,7 @@ HOLDS = 0.9  # the stability a run needs to count as holding the opponent
 
 
 def _last(run_dir: Path, window: int) -> pd.DataFrame:
-    """The last ``window`` interactions after the first, which has no strategy before it to
-    keep (its ``strategy_changed`` is 0 by construction)."""
-    return pd.read_csv(Path(run_dir) / METRICS).iloc[1:].tail(window)
+    return pd.read_csv(Path(run_dir) / METRICS).tail(window)
 
 
 def _stability(tail: pd.DataFrame) -> float:
@@ -43,8 +41,6 @@ def verdict(run_dir: Path, window: int = 50) -> str:
     stabilizing policy that sees z: -4.0)"."""
     cfg = read_config(run_dir)
     tail = _last(run_dir, window)
-    if tail.empty:
-        return f"{cfg.method.upper()} played one interaction: too few to tell whether it holds"
     stability = _stability(tail)
     reward = float(tail["task_reward"].mean())
     bounds = stored_bounds(cfg.task_id)
