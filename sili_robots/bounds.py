@@ -157,6 +157,7 @@ def write_bounds_file(results: list[dict[str, Any]], path: Path = BOUNDS_FILE) -
         data["tasks"][result["task_id"]] = result
     data["tasks"] = dict(sorted(data["tasks"].items()))
     path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(data, indent=1) + "\n")
     tmp.replace(path)

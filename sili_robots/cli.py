@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import select
 import sys
 from collections.abc import Sequence
 from typing import NoReturn
@@ -65,17 +66,37 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         code = int(args.run(args) or 0)
-        sys.stdout.flush()  # a closed pipe fails here, not in the interpreter's exit
-        return code
     except ConfigError as err:
         print(f"sili {args.command}: error: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"sili {args.command}: interrupted", file=sys.stderr)
         return 130
-    except BrokenPipeError:  # the reader stopped early (`sili runs DIR | head`): not an error
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no error at exit
-        return 0
+    except BrokenPipeError:
+        if not _stdout_closed():
+            raise  # another pipe (e.g. the browser's): a real failure
+        _silence_stdout()
+        return 1  # the reader stopped mid-output (`sili runs DIR | head`): cut short, quietly
+    try:
+        sys.stdout.flush()  # a closed pipe fails here, not in the interpreter's exit
+    except BrokenPipeError:
+        _silence_stdout()
+    return code
+
+
+def _stdout_closed() -> bool:
+    """Whether stdout is a pipe whose reader has gone."""
+    try:
+        poll = select.poll()
+        poll.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(events & select.POLLERR for _, events in poll.poll(0))
+    except (AttributeError, OSError, ValueError):  # not a file, or no poll here
+        return False
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null, so the interpreter's own flush at exit does not fail too."""
+    os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
 
 
 if __name__ == "__main__":

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numbers
+
 
 class ConfigError(ValueError):
     """A value given by the user is not allowed; the message names the value and the choices."""
@@ -12,10 +14,12 @@ MAX_SEED = 2**32 - 1
 
 
 def check_seed(seed: object) -> int:
-    """``seed`` as an int, or ``ConfigError`` naming it and the allowed range."""
-    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
-        raise ConfigError(f"seed {seed!r} is not allowed: give an integer in [0, {MAX_SEED}]")
-    return seed
+    """``seed`` as an int (numpy's integers too), or ``ConfigError`` naming it and the range."""
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
+        raise ConfigError(f"seed {seed!r} is not an integer; give one in [0, {MAX_SEED}]")
+    if not 0 <= int(seed) <= MAX_SEED:
+        raise ConfigError(f"seed {int(seed)} is not allowed: give an integer in [0, {MAX_SEED}]")
+    return int(seed)
 
 
 def check_choice(name: str, value: object, allowed: list[str] | tuple[str, ...]) -> None:

@@ -63,7 +63,7 @@ class RunConfig:
     task_id: str | None = None
 
     def __post_init__(self) -> None:
-        check_seed(self.seed)
+        self.seed = check_seed(self.seed)
         if self.task_id is None:
             from sili_robots.tasks import task_spec
 

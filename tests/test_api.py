@@ -93,3 +93,5 @@ def test_a_task_given_by_any_name_is_recorded_by_its_name(tmp_path):
     assert (by_env.cfg.task, by_env.cfg.task_id) == ("circle-3-v0", "sili/Circle3-v0")
     with pytest.raises(ConfigError, match=r"seed -1 is not allowed: give an integer in \[0, "):
         SILI("circle-3", method="sac", seed=-1)
+    seeded = SILI("circle-3", method="sac", seed=np.int64(3), settings=FAST_AGENT)
+    assert type(seeded.cfg.seed) is int and seeded.cfg.seed == 3  # recorded as JSON can

@@ -56,7 +56,7 @@ def test_a_bad_seed_exits_2_naming_it_and_the_range(tmp_path, command, bad):
     task = ["--task", "circle-3"] if command == "train" else ["circle-3"]
     code, _, err = _main(command, *task, "--seed", bad, "--out", str(tmp_path / "o"))
     assert code == 2 and f"'{bad}' is not a seed: give an integer in [0, 4294967295]" in err
-    assert not (tmp_path / "o").exists()
+    assert not (tmp_path / "o").exists()  # train: no run directory left behind
 
 
 def test_sweep_refuses_bad_seeds_a_task_twice_and_a_latent_no_method_takes(tmp_path):
@@ -68,8 +68,9 @@ def test_sweep_refuses_bad_seeds_a_task_twice_and_a_latent_no_method_takes(tmp_p
     code, _, err = _main(*sweep, "sac", "--tasks", "circle-3", "--latent", "continuous")
     assert code == 2 and "--latent applies to methods sili, lili, stable only" in err
     mixed = ["sac,lili", "--tasks", "circle-3", "--latent", "continuous"]
-    code, out, _ = _main(*sweep, *mixed)
-    assert code == 0 and "circle-3__sac__s0\t" in out and "circle-3__lili-continuous__s0\t" in out
+    code, out, _ = _main(*sweep, *mixed)  # names as recorded sweeps have them, so they resume
+    assert code == 0 and "circle-3__sac-continuous__s0\t" in out, out
+    assert not (tmp_path / "s").exists()  # a dry run writes nothing
 
 
 @pytest.mark.parametrize(
@@ -93,19 +94,43 @@ def test_an_output_path_that_cannot_be_written_exits_2_before_any_work(tmp_path,
     assert out == "" and "Traceback" not in err  # nothing computed first
 
 
+def test_bad_input_found_after_the_output_check_leaves_no_directory(tmp_path):
+    new = tmp_path / "new" / "sweep"
+    code, _, err = _main(
+        "sweep", "--tasks", "circle-3,sili/Circle3-v1", "--methods", "sac", "--out", str(new)
+    )
+    assert code == 2 and "same task" in err
+    code, _, err = _main("collect", str(tmp_path), "--into", str(new))
+    assert code == 2 and "holds no runs" in err
+    assert not (tmp_path / "new").exists()
+
+
 def test_beta_and_a_set_of_b_together_exit_2(tmp_path):
     train = ["train", "--task", "circle-3", "--out", str(tmp_path / "r")]
     code, _, err = _main(*train, "--beta", "0.3", "--set", "sili.beta=0.7")
     assert code == 2 and "give one of --beta and --set sili.beta, not both" in err
 
 
-def test_a_reader_that_stops_early_is_not_an_error():
-    """``sili ... | head``: the closed pipe ends the command quietly."""
+def test_a_reader_that_stops_early_ends_the_command_quietly():
+    """``sili ... | head``: no traceback; exit 1, the output was cut short."""
     cmd = [sys.executable, "-m", "sili_robots.cli", "rollout", "circle-3", "--interactions", "2"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     proc.stdout.close()  # before it prints anything
     err = proc.stderr.read()
-    assert proc.wait(timeout=120) == 0 and "BrokenPipeError" not in err, err
+    assert proc.wait(timeout=120) == 1 and err == "", err
+
+
+def test_a_broken_pipe_that_is_not_stdout_is_a_failure(monkeypatch):
+    """Only a closed stdout is the reader stopping; another pipe (the browser's) failing is an
+    error and keeps its traceback."""
+    from sili_robots.commands import rollout
+
+    def broken(_args):
+        raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr(rollout, "run", broken)
+    with pytest.raises(BrokenPipeError):
+        sili_in_process("rollout", "circle-3")
 
 
 def test_a_schedule_for_a_setting_that_takes_one_number_names_those_that_take_one(tmp_path):

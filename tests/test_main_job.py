@@ -46,3 +46,4 @@ def test_main_job_names_a_working_recipe_when_it_does_not_hold(tmp_path):
     cfg = read_config(tmp_path / "recipe")
     assert cfg.task_id == main_cfg.task_id == "sili/Circle3-v1"  # the main job's own task
     assert cfg.agent.sili.beta.points == ((250, 0.0), (300, 0.5))  # the delayed b
+    assert cfg.agent.sac.precision == "float32"  # as the grid ran it

@@ -46,33 +46,36 @@ def seed(text: str) -> int:
         ) from None
 
 
-def _cannot_write(option: str, path: Path, err: OSError, what: str) -> ConfigError:
-    return ConfigError(
-        f"{option} {path}: cannot write there ({err.strerror or err}); give {what} that can be "
-        "written"
-    )
+def _check_can_create(path: Path, option: str, given: Path, what: str) -> None:
+    """ConfigError naming ``given`` unless ``path`` (a directory) exists or can be created:
+    the nearest existing ancestor must be a directory a file can be written in. Nothing is
+    created, so input found bad later leaves no trace."""
+    base = path
+    while not base.exists() and base != base.parent:
+        base = base.parent
+    try:
+        if not base.is_dir():
+            raise NotADirectoryError(0, f"{base} is a file")
+        tempfile.TemporaryFile(dir=base).close()
+    except OSError as err:
+        raise ConfigError(
+            f"{option} {given}: cannot write there ({err.strerror or err}); give {what} that "
+            "can be written"
+        ) from None
 
 
 def writable_dir(path: Path, option: str) -> Path:
-    """Create ``path`` (a directory) now, or ``ConfigError`` naming it, before any work."""
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-        tempfile.TemporaryFile(dir=path).close()
-    except OSError as err:
-        raise _cannot_write(option, path, err, "a directory") from None
+    """``path`` if it is, or can be made, a directory to write in; else ``ConfigError``."""
+    _check_can_create(path, option, path, "a directory")
     return path
 
 
 def writable_file(path: Path, option: str) -> Path:
-    """``path`` if a file can be written there (its directory is created now), else
-    ``ConfigError`` naming it, before any work."""
+    """``path`` if a file can be written there (its directory may not exist yet), else
+    ``ConfigError`` naming it."""
     if path.is_dir():
         raise ConfigError(f"{option} {path} is a directory; give a file name")
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tempfile.TemporaryFile(dir=path.parent).close()
-    except OSError as err:
-        raise _cannot_write(option, path, err, "a file") from None
+    _check_can_create(path.parent, option, path, "a file")
     return path
 
 

@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
     def announce(url: str) -> None:
         print(f"meshcat server: {url}  (Ctrl-C to stop)", flush=True)
 
-    if args.out is not None and not args.serve:
+    if args.out is not None:
         writable_file(Path(args.out), "--out")
     if args.png is not None:
         writable_file(Path(args.png), "--png")

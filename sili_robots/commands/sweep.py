@@ -105,10 +105,17 @@ RESUME_OPTIONS = (
 
 def spec_from_args(args: argparse.Namespace) -> SweepSpec:
     from sili_robots.agent import METHODS
+    from sili_robots.agent.methods import LATENT_METHODS
 
     if not args.tasks or not args.methods:
         raise ConfigError("--tasks and --methods are required (or --resume SWEEP_DIR)")
     methods = list(METHODS) if args.methods.strip() == "all" else parse_list(args.methods)
+    if args.latent is not None and not set(methods) & set(LATENT_METHODS):
+        # checked for new sweeps only: a recorded one that gave it resumes as it ran
+        raise ConfigError(
+            f"--latent applies to methods {', '.join(LATENT_METHODS)} only, none of which is in "
+            f"the sweep ({', '.join(methods)}); the others fix latent = 'none'"
+        )
     schedules = schedule_args(args)
     return SweepSpec(
         tasks=parse_list(args.tasks),

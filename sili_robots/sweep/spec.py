@@ -258,11 +258,6 @@ def validate(spec: SweepSpec) -> None:
         check_choice("profile", spec.profile, PROFILES)
     if spec.latent is not None:
         check_choice("latent kind", spec.latent, LATENT_KINDS)
-        if not set(spec.methods) & set(LATENT_METHODS):
-            raise ConfigError(
-                f"--latent applies to methods {', '.join(LATENT_METHODS)} only, none of which is "
-                f"in the sweep ({', '.join(spec.methods)}); the others fix latent = 'none'"
-            )
     if spec.interactions < 1:
         raise ConfigError(f"interactions must be >= 1, got {spec.interactions}")
     if spec.checkpoint_every < 1:
@@ -341,9 +336,7 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                             seed,
                             beta=label if method in BETA_METHODS else None,
                             controller=controller,
-                            latent=None
-                            if latent == tspec.default_latent or method not in learned
-                            else latent,
+                            latent=None if latent == tspec.default_latent else latent,
                             profile=profile,
                         )
                         cfg = replace(
