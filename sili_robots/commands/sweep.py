@@ -175,8 +175,6 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.sweep.state import check_existing, run_path, run_state
 
     specs, sweep_dir = _specs_and_dir(args)
-    if not args.dry_run:
-        writable_dir(sweep_dir, "--resume" if args.resume else "--out")
     if args.dry_run:
         planned = plan(specs)
         for run_ in planned:
@@ -184,6 +182,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"{run_.name}\t{run_state(run_path(sweep_dir, run_.name))}")
         print(f"{len(planned)} runs")
         return 0
+    writable_dir(sweep_dir, "--resume" if args.resume else "--out")
     backend = _backend(args)
     report = run_sweep(
         specs,

@@ -297,7 +297,6 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
     for task in spec.tasks:
         tspec = task_spec(task)
         latent = spec.latent or tspec.default_latent
-        learned = LATENT_METHODS
         controllers: list[str | None] = [None]
         if spec.controllers is not None and task_accepts(tspec.name, "controller"):
             controllers = list(spec.controllers)
@@ -322,7 +321,7 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                     base = make_run_config(
                         tspec.name,
                         method,
-                        latent=spec.latent if method in learned else None,
+                        latent=spec.latent if method in LATENT_METHODS else None,
                         profile=profile,
                         settings=settings,
                         env_kwargs=env_kwargs,
