@@ -1,9 +1,10 @@
-"""Reading runs and checkpoints written before the settings were nested by section.
+"""Reading runs and checkpoints written by earlier versions.
 
 Earlier runs saved every agent setting flat (``latent_dim``, ``beta_schedule``, ...) and the
 agent's state with the latent cache and the add-ons' state at the top level. These functions
 turn both into today's layout, so an old run resumes exactly where it stopped; the flat names
-also stay valid for ``--set`` (``LEGACY_SETTINGS``).
+also stay valid for ``--set`` (``LEGACY_SETTINGS``). A setting an earlier version recorded but
+did not apply is recorded as what the run trained with.
 """
 
 from __future__ import annotations
@@ -63,10 +64,25 @@ def _nest(tree: dict[str, Any], path: str, value: Any) -> None:
 
 def migrate_run(run: dict[str, Any]) -> dict[str, Any]:
     """A saved run (config.json's "run") in today's layout; unchanged when already current."""
-    agent = run["agent"]
-    if "sac" in agent:
+    return _posteriors_as_run(run if "sac" in run["agent"] else _nested(run))
+
+
+def _posteriors_as_run(run: dict[str, Any]) -> dict[str, Any]:
+    """Earlier versions accepted the posteriors add-on with continuous latents and left it
+    out; such a run says so now (it trained without it), and resumes as it trained."""
+    addons = run.get("addons", {})
+    on = (
+        addons.get("change_fraction", 0) > 0
+        or addons.get("stability_distance", "latents") != "latents"
+    )
+    if not on or run["agent"].get("latent") != "continuous":
         return run
-    flat = dict(agent)
+    return {**run, "addons": {**addons, "change_fraction": 0.0, "stability_distance": "latents"}}
+
+
+def _nested(run: dict[str, Any]) -> dict[str, Any]:
+    """A run saved with flat settings, nested by section."""
+    flat = dict(run["agent"])
     flat.pop("extra", None)
     flat.setdefault("latent_preact_penalty", 0.0)  # saved before it existed: trained without
     flat.setdefault("matmul", "aten")  # likewise: trained on PyTorch's default kernels

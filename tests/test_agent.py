@@ -743,3 +743,84 @@ def test_refreshes_use_few_batch_sizes_and_the_same_latents(monkeypatch):
     np.testing.assert_array_equal(cache_module.pad_rows(np.arange(5)), [0, 1, 2, 3, 4, 4, 4, 4])
     assert [cache_module.padded_size(m) for m in (3, 64, 65, 130, 512)] == [4, 64, 128, 192, 512]
     assert largest_power_of_two(700) == 512
+
+
+def test_per_step_credit_pays_the_change_into_each_interaction_on_every_step():
+    """The paper's credit (its profile): every step of interaction j is paid -d(z^{j-1}, z^j),
+    and nothing is paid for the change into z^1 (z^0 is no history)."""
+    agent = _agent(sili__credit="per_step")
+    _fill(agent, 6)
+    agent.Z = np.eye(4, dtype=np.float32)[[0, 1, 1, 2, 2, 3, 3]]  # z^0..z^6
+    j = np.repeat(np.arange(6)[:, None], H, 1)
+    t = np.tile(np.arange(H), (6, 1))
+    r = agent._stability_rewards(j, t, t == H - 1, np.zeros((6, H, 3)))
+    # into z^1 free, z^1->z^2 same, z^2->z^3 change, same, z^4->z^5 change
+    np.testing.assert_array_equal(r, np.repeat([[0, 0, 0, -1, 0, -1]], H, 0).T)
+
+
+@pytest.mark.parametrize("sample", [False, True])
+def test_the_paper_profiles_sampled_latents_differ_between_encodings_of_one_interaction(sample):
+    """``model.sample`` (the paper's Gumbel-max z^j) draws a category per encoding; the package's
+    argmax gives one interaction one category."""
+    agent = _agent(model__sample=sample)
+    _fill(agent, 3)
+    categories = agent.latents.encode(np.full(200, 1)).argmax(-1)
+    assert (len(np.unique(categories)) > 1) == sample
+
+
+def test_smirls_reward_is_the_log_likelihood_under_the_states_seen_before():
+    """SMiRL pays log N(s_{t+1}; mean, std) of every state visited before the interaction."""
+    agent = _agent("smirl", sili__beta=1.0)
+    _fill(agent, 4)
+    seen = agent.buffer.obs[:3, 1:].reshape(-1, 3).astype(np.float64)
+    mean, std = seen.mean(0), np.maximum(seen.std(0), agent.cfg.sili.smirl_std_floor)
+    s = agent.buffer.obs[3, 1:].astype(np.float64)
+    expected = (
+        -0.5 * (((s - mean) / std) ** 2).sum(-1) - np.log(std).sum() - 1.5 * np.log(2 * np.pi)
+    )
+    np.testing.assert_allclose(agent.buffer.aux[3], expected, rtol=1e-5)
+    j, t = np.full((1, H), 3), np.arange(H)[None]
+    np.testing.assert_array_equal(
+        agent._stability_rewards(j, t, t == H - 1, np.zeros((1, H, 3))), agent.buffer.aux[j, t]
+    )
+    s0 = agent.buffer.obs[0, 1:].astype(np.float64)  # before any state: a unit Gaussian at 0
+    first = -0.5 * (s0**2).sum(-1) - 1.5 * np.log(2 * np.pi)
+    np.testing.assert_allclose(agent.buffer.aux[0], first, rtol=1e-5)
+
+
+@pytest.mark.parametrize("method", ["sili", "sac"])
+def test_latent_model_schedules_move_the_model_and_are_ignored_without_one(method):
+    """The model's rate, usage bonus and penalty follow their schedules; a method without a
+    latent model ignores them, as it ignores their constant values."""
+    agent = _agent(
+        method,
+        random_interactions=0,
+        model__lr=Schedule([(4, 1e-3), (6, 1e-4)]),
+        model__usage_bonus=Schedule([(4, 0.1), (6, 0.0)]),
+        model__preact_penalty=Schedule([(4, 0.0), (6, 0.01)]),
+    )
+    _fill(agent, 8)
+    for j in (3, 5, 7):
+        losses = agent.update(j)
+    assert "critic_loss" in losses
+    if method == "sili":
+        assert [g["lr"] for g in agent.model_opt.param_groups] == [pytest.approx(1e-4)]
+        assert (agent.model.usage_bonus, agent.model.preact_penalty) == (0.0, 0.01)
+
+
+@pytest.mark.parametrize("setting", [{"addons__stability_distance": "hindsight"},
+                                     {"addons__change_fraction": 0.2}])  # fmt: skip
+def test_posteriors_need_discrete_latents_and_runs_saved_with_them_record_them_off(setting):
+    """Continuous latents have no categories to take posteriors of: refused, where earlier
+    versions left the add-on out; a run saved then resumes as it trained."""
+    with pytest.raises(ConfigError, match=r"posteriors .* needs discrete latents, got latent 'co"):
+        run_config("sili", "continuous", **setting)
+    assert run_config("sili", "discrete", **setting).addons.active() == ["posteriors"]
+    saved = run_config("sili", "continuous").to_dict()
+    saved["addons"].update({k.removeprefix("addons__"): v for k, v in setting.items()})
+    migrated = migrate_run(saved)
+    assert migrated["addons"] == run_config("sili", "continuous").to_dict()["addons"]
+    assert migrate_run(run_config("sili", "discrete", **setting).to_dict())["addons"] == {
+        **saved["addons"],
+        **{k.removeprefix("addons__"): v for k, v in setting.items()},
+    }

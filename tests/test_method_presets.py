@@ -5,12 +5,14 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 from fast_settings import FAST_ARGS
 
 from sili_robots.agent import method_config
 from sili_robots.cli import main
 from sili_robots.errors import ConfigError
+from sili_robots.evaluation import load_trained
 
 
 @pytest.mark.parametrize(
@@ -108,3 +110,19 @@ def test_a_sweep_records_each_tasks_sili_profile_and_keeps_it_on_resume():
     before = {k: v for k, v in spec.to_dict().items() if k not in ("profile", "sili_profiles")}
     assert SweepSpec.from_dict(before).profile == "package"
     assert expand(SweepSpec.from_dict(before))[0].name == "driving__sili-bschedule__s0"
+
+
+@pytest.mark.parametrize("method", ["oracle", "sac", "smirl", "lili"])
+def test_oracle_alone_observes_the_true_strategy(tmp_path, method):
+    """Oracle's policy reads z's encoding after the task's observation; no other method sees it."""
+    out = tmp_path / method
+    args = ["train", "--task", "circle-3", "--method", method, "--interactions", "2"]
+    assert main([*args, "--out", str(out), *FAST_ARGS, "--no-progress"]) == 0
+    _, env, agent, _ = load_trained(out)
+    task = env.unwrapped
+    extra = task.strategy_dim if method == "oracle" else 0
+    assert agent.obs_dim == task.observation_space.shape[0] + extra
+    obs, info = env.reset(seed=0)
+    assert obs.shape == (agent.obs_dim,)
+    if extra:
+        np.testing.assert_array_equal(obs[-extra:], info["strategy"])

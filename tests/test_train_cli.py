@@ -15,7 +15,8 @@ from cli_helpers import sili as _sili
 from fast_settings import FAST_ARGS
 
 from sili_robots.addons import LatentFilter
-from sili_robots.evaluation import load_trained
+from sili_robots.evaluation import evaluate, load_trained
+from sili_robots.training import write_summary
 
 FAST = [*FAST_ARGS, "--no-progress"]
 
@@ -59,12 +60,39 @@ def test_train_writes_a_complete_run_and_eval_reads_it(tmp_path):
     ):
         assert col in df.columns
     assert df["critic_loss"].notna().sum() > 0
-    assert (out / "checkpoint.pt").is_file()
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["final_task_reward"] == pytest.approx(df["task_reward"].mean())
+    assert summary["final_stability"] == pytest.approx(1 - df["strategy_changed"].mean())
+    checkpoint = (out / "checkpoint.pt").read_bytes()
     ev = _sili("eval", out, "--interactions", 4)
     assert ev.returncode == 0, ev.stderr
     result = json.loads(ev.stdout)
     assert result["interactions"] == 4 and 0.0 <= result["fraction_strategy_unchanged"] <= 1.0
     assert result["mean_task_reward"] < 0
+    # greedy, from the checkpointed game, learning nothing: the same numbers again
+    assert {**evaluate(out, 4), "run_dir": str(out)} == result
+    assert (out / "checkpoint.pt").read_bytes() == checkpoint
+
+
+def test_the_summary_is_the_last_window_of_the_metrics(tmp_path):
+    rows = 150
+    df = pd.DataFrame(
+        {
+            "interaction": range(rows),
+            "task_reward": np.arange(rows, dtype=float),
+            "stability_reward": 0.0,
+            "strategy_changed": np.arange(rows) < 75,  # changed in the first half only
+            "latent_category": -1,
+            "wall_time": np.linspace(0, 9, rows),
+        }
+    )
+    df.to_csv(tmp_path / "metrics.csv", index=False)
+    summary = write_summary(tmp_path)
+    assert summary == json.loads((tmp_path / "summary.json").read_text())
+    assert summary["interactions"] == rows and summary["window"] == 100
+    assert summary["final_task_reward"] == pytest.approx(np.arange(50, 150).mean())
+    assert summary["final_stability"] == pytest.approx(0.75)
+    assert summary["wall_time_s"] == 9.0
 
 
 @pytest.mark.parametrize("method", ["lili", "stable", "sac", "oracle", "smirl"])
@@ -111,6 +139,12 @@ def test_every_latent_kind_trains(tmp_path, latent):
         *FAST,
     )
     assert res.returncode == 0, res.stderr
+    cfg, env, agent, _ = load_trained(out)
+    assert cfg.agent.latent == latent
+    base = env.unwrapped.observation_space.shape[0]
+    assert agent.obs_dim == base + (latent == "partial")  # the "strategy changed" flag
+    assert agent.zdim == (env.unwrapped.strategy_dim if latent == "true" else cfg.agent.model.dim)
+    assert (agent.model is not None) == (latent == "continuous")
 
 
 @pytest.mark.parametrize(

@@ -32,7 +32,7 @@ def build_addons(addons: AddonsConfig, agent: AgentConfig) -> list[AgentAddon]:
     active = addons.validate(agent).active()
     if "last_step" in active:
         out.append(LastStep())
-    if "posteriors" in active and agent.latent == "discrete":
+    if "posteriors" in active:
         out.append(HindsightPosteriors(addons.stability_distance, addons.change_fraction))
     if "recent" in active:
         out.append(RecentBatches(addons.recent.fraction, addons.recent.interactions))

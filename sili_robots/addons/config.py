@@ -66,13 +66,20 @@ class AddonsConfig:
 
     def validate(self, agent: AgentConfig) -> AddonsConfig:
         check(self, "addons.")
-        learned = agent.uses_latent_model
-        for name in self.active():
+        learned, active = agent.uses_latent_model, self.active()
+        for name in active:
             if name == "recent" or learned:
                 continue
             raise ConfigError(
                 f"add-on {name} needs learned latents (discrete or continuous) of a method "
                 f"with a latent model (sili, lili, stable), got method {agent.method!r} with "
                 f"latent {agent.latent!r}; switch it off for this method"
+            )
+        if "posteriors" in active and agent.latent != "discrete":
+            raise ConfigError(
+                f"add-on posteriors (addons.stability_distance {self.stability_distance!r}, "
+                f"addons.change_fraction {self.change_fraction}) needs discrete latents, got "
+                f"latent {agent.latent!r}; allowed with it: stability_distance 'latents' and "
+                "change_fraction 0"
             )
         return self

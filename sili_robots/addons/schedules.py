@@ -3,7 +3,8 @@
 Wired in whenever a setting is a ``Schedule``: before the updates after each interaction it
 applies every scheduled value to the learner that uses it (b, SAC's rate, discount, target
 entropy and tau, the latent model's rate, usage bonus and penalty). Settings the agent reads at
-use time (``sac.updates_per_step``) need nothing here.
+use time (``sac.updates_per_step``) need nothing here. A method without a latent model ignores
+the model's schedules, as it ignores the model's constant settings.
 """
 
 from __future__ import annotations
@@ -40,7 +41,10 @@ class Schedules(AgentAddon):
 
     def attach(self, agent: SILIAgent) -> None:
         super().attach(agent)
-        self.paths = scheduled_paths(agent.cfg)
+        paths = scheduled_paths(agent.cfg)
+        if agent.model is None:  # no latent model to apply them to
+            paths = [p for p in paths if not p.startswith("model.")]
+        self.paths = paths
 
     def before_update(self, interaction: int) -> None:
         for path in self.paths:
