@@ -11,11 +11,14 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+import torch
 from cli_helpers import sili as _sili
 from fast_settings import FAST_ARGS
 
 from sili_robots.addons import LatentFilter
+from sili_robots.cli import main
 from sili_robots.evaluation import evaluate, load_trained
+from sili_robots.runs import load_checkpoint, save_checkpoint
 from sili_robots.training import write_summary
 
 FAST = [*FAST_ARGS, "--no-progress"]
@@ -437,3 +440,48 @@ def test_the_progress_bar_shows_only_while_there_is_training_left():
         assert bar.shown is shown
         bar.close()
     assert not TrainingProgress(5, 0, enabled=False).shown
+
+
+def test_env_kwargs_reach_the_task_and_a_bad_one_is_named(tmp_path, capsys):
+    doors = "sili_robots.examples.two_doors:TwoDoorsEnv"
+    out = tmp_path / "doors"
+    args = ["train", "--task", doors, "--interactions", "2", *FAST]
+    assert main([*args, "--env-kwarg", "horizon=6", "--out", str(out)]) == 0
+    cfg, env, _, _ = load_trained(out)
+    assert cfg.env_kwargs == {"horizon": 6} and env.unwrapped.horizon == 6
+    assert len(pd.read_csv(out / "metrics.csv")) == 2
+    capsys.readouterr()
+    assert main([*args, "--env-kwarg", "doors=3", "--out", str(tmp_path / "bad")]) == 2
+    err = capsys.readouterr().err
+    assert "bad argument for task" in err and "(given: doors); its arguments: horizon" in err
+    assert not (tmp_path / "bad").exists()
+
+
+def test_a_run_directory_is_replaced_only_with_overwrite(tmp_path, capsys):
+    out = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--method", "sac", *FAST, "--out", str(out)]
+    assert main([*args, "--interactions", "4", "--seed", "1"]) == 0
+    (out / "notes.txt").write_text("mine")
+    capsys.readouterr()
+    assert main([*args, "--interactions", "2", "--seed", "2"]) == 2
+    assert f"{out} already holds a run; use --resume" in capsys.readouterr().err
+    assert len(pd.read_csv(out / "metrics.csv")) == 4  # untouched
+    assert main([*args, "--interactions", "2", "--seed", "2", "--overwrite"]) == 0
+    assert json.loads((out / "config.json").read_text())["run"]["seed"] == 2
+    assert len(pd.read_csv(out / "metrics.csv")) == 2 and not (out / "notes.txt").exists()
+
+
+def test_a_checkpoint_write_cut_short_leaves_the_previous_one(tmp_path, monkeypatch):
+    """The write goes to a side file that replaces the checkpoint only once it is complete."""
+    state = {"agent": {"latents": {"Z": np.zeros(2)}, "addons": {}}, "interaction": 5}
+    save_checkpoint(tmp_path, state)
+
+    def cut_short(obj, path):
+        Path(path).write_bytes(b"half a checkpoint")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(torch, "save", cut_short)
+    with pytest.raises(KeyboardInterrupt):
+        save_checkpoint(tmp_path, {**state, "interaction": 10})
+    monkeypatch.undo()
+    assert load_checkpoint(tmp_path)["interaction"] == 5
