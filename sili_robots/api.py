@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import shutil
 import tempfile
+import weakref
 from pathlib import Path
 from typing import Any
 
@@ -31,11 +32,21 @@ from sili_robots.build import (
     make_run_config,
     make_run_env,
     observed_as,
+    task_kwargs_of,
     task_name_of,
 )
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import AgentFeedback, evaluate
-from sili_robots.runs import CHECKPOINT, CONFIG, METRICS, SUMMARY, RunConfig, load_checkpoint
+from sili_robots.runs import (
+    CHECKPOINT,
+    COMPRESSED_METRICS,
+    CONFIG,
+    METRICS,
+    SUMMARY,
+    RunConfig,
+    check_resumable,
+    load_checkpoint,
+)
 from sili_robots.runs import read_config as read_run_config
 from sili_robots.tasks import RepeatedInteractionEnv
 from sili_robots.training import extend, resume, train
@@ -48,7 +59,7 @@ class SILI:
     ``package.module:ClassName`` of a task class, or a ``RepeatedInteractionEnv`` instance
     (a user's own task included). ``settings`` are agent settings by dotted path
     (``{"sac.lr": 1e-3, "addons.filter.eps": 0.01}``); ``run_dir`` keeps the run (default: a
-    new temporary directory)."""
+    temporary directory, removed with the model)."""
 
     def __init__(
         self,
@@ -70,7 +81,13 @@ class SILI:
                     f"env {type(env.unwrapped).__name__} does not follow the repeated-interaction "
                     "contract; give a RepeatedInteractionEnv (see README, 'Your own task')"
                 )
+            if env_kwargs:
+                raise ConfigError(
+                    "env_kwargs apply to a task built by name; this instance was built with "
+                    f"{env.unwrapped.init_kwargs}: give its arguments to its constructor"
+                )
             self._task_env, task = env, task_name_of(env)
+            env_kwargs = task_kwargs_of(env)
         else:
             task = canonical_task(env)
         cfg = make_run_config(
@@ -84,7 +101,10 @@ class SILI:
             env_kwargs=env_kwargs,
             checkpoint_every=checkpoint_every,
         )
-        self.run_dir = Path(run_dir) if run_dir else Path(tempfile.mkdtemp(prefix="sili-run-"))
+        if run_dir is None:  # removed with the model; save() keeps a copy
+            run_dir = tempfile.mkdtemp(prefix="sili-run-")
+            weakref.finalize(self, shutil.rmtree, run_dir, ignore_errors=True)
+        self.run_dir = Path(run_dir)
         self.cfg = cfg
         self._setup(None)
 
@@ -110,6 +130,7 @@ class SILI:
         cfg = read_run_config(path)
         state = load_checkpoint(path)
         if state is None:
+            check_resumable(path)  # a run kept without its checkpoint says so
             raise ConfigError(f"{path} has no checkpoint yet ({CHECKPOINT}); train it first")
         model = cls.__new__(cls)
         model.cfg, model.run_dir, model._task_env = cfg, path, env
@@ -141,21 +162,37 @@ class SILI:
         return self.agent.act(np.asarray(obs, np.float32), deterministic=deterministic)
 
     def save(self, path: str | Path) -> Path:
-        """Copy the run (config, metrics, checkpoint, summary) to ``path``."""
+        """Copy the run (config, metrics, checkpoint, summary) to ``path``, replacing a run
+        saved there before, as stable-baselines3's ``save`` replaces its file."""
         path = Path(path)
         self._check_trained("save")
+        if path.exists() and not path.is_dir():
+            raise ConfigError(f"cannot save to {path}: it is a file; give a directory")
         if path.resolve() != self.run_dir.resolve():
             path.mkdir(parents=True, exist_ok=True)
-            for name in (CONFIG, METRICS, CHECKPOINT, SUMMARY):
+            for name in (CONFIG, METRICS, CHECKPOINT, SUMMARY, COMPRESSED_METRICS):
                 if (self.run_dir / name).is_file():
                     shutil.copy2(self.run_dir / name, path / name)
+                else:  # nothing of the replaced run stays to mix with this one
+                    (path / name).unlink(missing_ok=True)
         return path
 
     def evaluate(self, interactions: int = 100) -> dict[str, float]:
-        """Greedy play continuing the saved game: mean task reward and stability."""
+        """Greedy play continuing the saved game: mean task reward and stability. ``model.env``
+        starts again from the saved game afterwards (the evaluation plays on the same task:
+        libsumo holds one simulation per process)."""
         _check_count(interactions)
         self._check_trained("evaluate")
-        return evaluate(self.run_dir, interactions)
+        self.close()
+        try:
+            return evaluate(self.run_dir, interactions, self._task_env)
+        finally:
+            self._setup(load_checkpoint(self.run_dir))
+
+    def close(self) -> None:
+        """Close ``model.env`` (a task instance given to ``SILI`` stays open: it is yours)."""
+        if self._task_env is None:
+            self.env.close()
 
     def _check_trained(self, what: str) -> None:
         if self.cfg.interactions == 0 or not (self.run_dir / CHECKPOINT).is_file():

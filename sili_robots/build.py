@@ -10,9 +10,13 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import json
+import os
+import sys
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
 from sili_robots.addons import build_addons
 from sili_robots.addons.config import AddonsConfig
@@ -28,15 +32,21 @@ from sili_robots.wrappers import OracleObservation, StrategyFlag
 def task_class(path: str) -> type[RepeatedInteractionEnv]:
     """A user's task class from ``package.module:ClassName``."""
     module_name, _, class_name = path.partition(":")
+    if os.getcwd() not in sys.path:  # a console script, unlike `python -m`, leaves it out
+        sys.path.append(os.getcwd())
     try:
         obj: Any = importlib.import_module(module_name)
         for part in class_name.split("."):
             obj = getattr(obj, part)
     except (ImportError, AttributeError, ValueError) as err:
-        raise ConfigError(
-            f"cannot load task class {path!r} ({err}); give a registered task or "
-            "package.module:ClassName of a RepeatedInteractionEnv subclass"
-        ) from None
+        where = (
+            "a class defined in a script loads only in that script: put it in a module, "
+            "or pass the task instance (SILI.load(path, env=...))"
+            if module_name == "__main__"
+            else "give a registered task or package.module:ClassName of a "
+            "RepeatedInteractionEnv subclass importable from the current directory"
+        )
+        raise ConfigError(f"cannot load task class {path!r} ({err}); {where}") from None
     if not (isinstance(obj, type) and issubclass(obj, RepeatedInteractionEnv)):
         raise ConfigError(f"{path!r} is not a RepeatedInteractionEnv subclass")
     return obj
@@ -66,6 +76,32 @@ def task_name_of(env: gym.Env) -> str:
             pass
     cls = type(env.unwrapped)
     return f"{cls.__module__}:{cls.__qualname__}"
+
+
+def task_kwargs_of(env: gym.Env) -> dict[str, Any]:
+    """The arguments ``task_name_of(env)`` needs to build the same task again: those the
+    instance was built with, less a registered version's own."""
+    task = env.unwrapped
+    given = getattr(task, "init_kwargs", None)
+    if given is None:
+        raise ConfigError(
+            f"cannot record the arguments {type(task).__name__} was built with (its constructor "
+            "takes *args); give its arguments by name"
+        )
+    spec = env.spec if env.spec is not None else task.spec
+    registered = gym.spec(spec.id).kwargs if spec is not None else {}
+    missing = object()
+    kwargs = {k: v for k, v in given.items() if registered.get(k, missing) != v}
+    kwargs = {k: v.item() if isinstance(v, np.generic) else v for k, v in kwargs.items()}
+    for name, value in kwargs.items():
+        try:
+            json.dumps(value)
+        except (TypeError, ValueError):
+            raise ConfigError(
+                f"task argument {name}={value!r} cannot be recorded in config.json; allowed: "
+                "numbers, strings, booleans, None and lists or dicts of them"
+            ) from None
+    return kwargs
 
 
 def default_profile(task: str, method: str) -> str:

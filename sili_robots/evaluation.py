@@ -17,7 +17,7 @@ from sili_robots.agent import SILIAgent
 from sili_robots.build import build_agent, make_run_env, observed_as
 from sili_robots.errors import ConfigError
 from sili_robots.rollout import run_interactions
-from sili_robots.runs import RunConfig, load_checkpoint, read_config
+from sili_robots.runs import RunConfig, check_resumable, load_checkpoint, read_config
 from sili_robots.tasks.base import resume_game
 
 
@@ -69,13 +69,17 @@ class AgentFeedback(gym.Wrapper):
         return obs, r, term, trunc, info
 
 
-def load_trained(run_dir: Path) -> tuple[RunConfig, gym.Env, SILIAgent, dict[str, Any]]:
-    """Rebuild a run's env and agent from its config and last checkpoint."""
+def load_trained(
+    run_dir: Path, task_env: gym.Env | None = None
+) -> tuple[RunConfig, gym.Env, SILIAgent, dict[str, Any]]:
+    """Rebuild a run's env (or observe ``task_env``, the task instance) and agent from its config
+    and last checkpoint."""
     cfg = read_config(run_dir)
     state = load_checkpoint(run_dir)
     if state is None:
+        check_resumable(run_dir)  # a run kept without its checkpoint says so
         raise ConfigError(f"{run_dir} has no checkpoint yet (no checkpoint.pt); train it first")
-    env = make_run_env(cfg)
+    env = make_run_env(cfg) if task_env is None else observed_as(task_env, cfg)
     agent = build_agent(cfg, env)
     agent.load_state_dict(state["agent"])
     return cfg, env, agent, state["game"]
@@ -98,17 +102,19 @@ def policy_from_run(
     return cfg.task_id or cfg.task, dict(cfg.env_kwargs), make_policy
 
 
-def evaluate(run_dir: Path, interactions: int) -> dict[str, float]:
+def evaluate(run_dir: Path, interactions: int, task_env: gym.Env | None = None) -> dict[str, float]:
     """Mean task reward and fraction of interactions whose true strategy stayed the same,
-    acting deterministically (no exploration, no learning)."""
-    _, env, agent, game = load_trained(run_dir)
+    acting deterministically (no exploration, no learning); on ``task_env``, the task instance,
+    when given (left open)."""
+    _, env, agent, game = load_trained(run_dir, task_env)
     wrapped = AgentFeedback(env, agent, game)
     try:
         summary = run_interactions(
             wrapped, lambda _env, obs: agent.act(obs, deterministic=True), interactions, seed=None
         )
     finally:
-        wrapped.close()
+        if task_env is None:
+            wrapped.close()
     return {
         "interactions": interactions,
         "mean_task_reward": float(np.mean([s.task_reward for s in summary])),

@@ -25,6 +25,7 @@ from sili_robots.errors import ConfigError, check_seed
 from sili_robots.migrations import migrate_agent_state, migrate_run, setting_path
 
 CONFIG, METRICS, CHECKPOINT, SUMMARY = "config.json", "metrics.csv", "checkpoint.pt", "summary.json"
+COMPRESSED_METRICS = f"{METRICS}.gz"  # a run kept small (``sili collect``)
 METRIC_COLUMNS = (
     "interaction",
     "task_reward",
@@ -201,6 +202,22 @@ def save_checkpoint(run_dir: Path, state: dict[str, Any]) -> None:
 
 def _first_line(err: Exception) -> str:
     return f"{type(err).__name__}: {str(err).split('. ')[0]}"
+
+
+def check_resumable(run_dir: Path) -> None:
+    """Refuse a finished run kept without its checkpoint (``sili collect``, or the checkpoint
+    deleted): resuming it would train it again from the start over its results. A run killed
+    before its first checkpoint has neither and starts over, losing nothing."""
+    run_dir = Path(run_dir)
+    if (run_dir / CHECKPOINT).is_file():
+        return
+    kept = [name for name in (SUMMARY, COMPRESSED_METRICS) if (run_dir / name).is_file()]
+    if kept:
+        raise ConfigError(
+            f"{run_dir} holds a finished run without its {CHECKPOINT} (it has "
+            f"{', '.join(kept)}): it cannot be resumed or extended; train it again with --out "
+            "elsewhere"
+        )
 
 
 def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:

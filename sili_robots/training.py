@@ -21,6 +21,7 @@ from sili_robots.runs import (
     SUMMARY,
     MetricsWriter,
     RunConfig,
+    check_resumable,
     load_checkpoint,
     read_config,
     save_checkpoint,
@@ -154,4 +155,5 @@ def extend(run_dir: Path, interactions: int) -> None:
 
 
 def resume(run_dir: Path, progress: bool = True) -> Path:
+    check_resumable(run_dir)
     return train(read_config(run_dir), run_dir, resume=True, progress=progress)

@@ -3,13 +3,16 @@ task class, and on a run of the CLI."""
 
 from __future__ import annotations
 
+import gc
 import json
+import sys
 
 import numpy as np
 import pytest
 from fast_settings import FAST_AGENT
 
 from sili_robots import SILI
+from sili_robots.build import task_class
 from sili_robots.cli import main
 from sili_robots.errors import ConfigError
 from sili_robots.examples.two_doors import TwoDoorsEnv
@@ -54,7 +57,7 @@ def test_a_users_task_class_trains_through_the_api_and_the_cli(tmp_path):
     model = SILI(env, method="lili", seed=1, settings=FAST_AGENT, run_dir=tmp_path / "api")
     model.learn(interactions=4)
     config = json.loads((tmp_path / "api" / "config.json").read_text())["run"]
-    assert config["task"] == TWO_DOORS and config["env_kwargs"] == {}
+    assert config["task"] == TWO_DOORS and config["env_kwargs"] == {"horizon": 8}
     action = model.predict(model.env.reset()[0])
     assert action.shape == (1,) and np.all(np.abs(action) <= 1)
     args = ["train", "--task", TWO_DOORS, "--method", "sili", "--interactions", "4"]
@@ -95,3 +98,76 @@ def test_a_task_given_by_any_name_is_recorded_by_its_name(tmp_path):
         SILI("circle-3", method="sac", seed=-1)
     seeded = SILI("circle-3", method="sac", seed=np.int64(3), settings=FAST_AGENT)
     assert type(seeded.cfg.seed) is int and seeded.cfg.seed == 3  # recorded as JSON can
+
+
+def test_a_task_instance_is_recorded_with_its_arguments_and_rebuilt_with_them(tmp_path):
+    import gymnasium as gym
+
+    SILI(TwoDoorsEnv(horizon=6), method="sac", settings=FAST_AGENT, run_dir=tmp_path / "d").learn(2)
+    loaded = SILI.load(tmp_path / "d")  # built again from config.json: the same horizon
+    assert loaded.cfg.env_kwargs == {"horizon": 6} and loaded.env.unwrapped.horizon == 6
+    assert loaded.evaluate(2)["interactions"] == 2
+    made = SILI(gym.make("sili/Circle3-v1", outside_margin=0.3), method="sac", settings=FAST_AGENT)
+    assert made.cfg.env_kwargs == {"outside_margin": 0.3}  # not the version's own arguments
+    with pytest.raises(ConfigError, match=r"env_kwargs apply to a task built by name; this ins"):
+        SILI(TwoDoorsEnv(horizon=6), env_kwargs={"horizon": 7})
+    numpy_horizon = SILI(TwoDoorsEnv(horizon=np.int64(6)), method="sac", settings=FAST_AGENT)
+    assert type(numpy_horizon.cfg.env_kwargs["horizon"]) is int  # recorded as JSON can
+
+    class LabelledDoors(TwoDoorsEnv):
+        def __init__(self, horizon: int = 20, label: object = None) -> None:
+            super().__init__(horizon)
+
+    with pytest.raises(ConfigError, match=r"task argument label=<object .* cannot be recorded"):
+        SILI(LabelledDoors(label=object()))
+
+
+def test_evaluate_plays_on_the_models_own_simulation_and_close_frees_it():
+    """Driving holds libsumo's one simulation per process: evaluating a model whose ``env`` is
+    open must not start a second, and ``close`` hands the simulation back."""
+    model = SILI("driving", method="sac", settings=FAST_AGENT).learn(2)
+    run_dir = model.run_dir
+    model.env.reset()
+    assert model.evaluate(2)["interactions"] == 2
+    assert model.env.action_space.contains(model.predict(model.env.reset()[0]))
+    model.close()
+    other = SILI("driving", method="sac", settings=FAST_AGENT)  # the simulation is free again
+    other.close()
+    del model
+    gc.collect()
+    assert not run_dir.exists()  # a temporary run goes with its model
+
+
+def test_save_replaces_a_run_and_refuses_a_file(tmp_path):
+    model = SILI("circle-3", method="sac", settings=FAST_AGENT).learn(1)
+    target = tmp_path / "saved"
+    target.mkdir()
+    (target / "metrics.csv.gz").write_text("")  # of an earlier run
+    model.save(target)
+    saved = sorted(p.name for p in target.iterdir())
+    assert saved == sorted(p.name for p in model.run_dir.iterdir())  # no metrics.csv.gz
+    assert SILI.load(target).cfg.interactions == 1
+    (tmp_path / "file").write_text("")
+    with pytest.raises(ConfigError, match=r"cannot save to .*file: it is a file; give a directory"):
+        model.save(tmp_path / "file")
+
+
+def test_a_task_module_in_the_current_directory_trains_and_a_scripts_class_is_explained(
+    tmp_path, monkeypatch, capsys
+):
+    """A console script does not search the current directory as ``python -m`` does; a task's
+    module there is found all the same."""
+    monkeypatch.setattr(sys, "path", list(sys.path))
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "mydoors.py").write_text(
+        "from sili_robots.examples.two_doors import TwoDoorsEnv\n\n\n"
+        "class Doors(TwoDoorsEnv):\n    pass\n"
+    )
+    args = ["train", "--task", "mydoors:Doors", "--method", "sac", "--interactions", "2"]
+    fast = [x for k, v in FAST_AGENT.items() for x in ("--set", f"{k}={v}")]
+    assert main([*args, *fast, "--out", "run", "--no-progress"]) == 0
+    assert json.loads((tmp_path / "run" / "config.json").read_text())["run"]["task"] == (
+        "mydoors:Doors"
+    )
+    with pytest.raises(ConfigError, match=r"a class defined in a script loads only in that scr"):
+        task_class("__main__:Doors")

@@ -485,3 +485,24 @@ def test_a_checkpoint_write_cut_short_leaves_the_previous_one(tmp_path, monkeypa
         save_checkpoint(tmp_path, {**state, "interaction": 10})
     monkeypatch.undo()
     assert load_checkpoint(tmp_path)["interaction"] == 5
+
+
+def test_a_run_kept_without_its_checkpoint_is_not_trained_again(tmp_path, capsys):
+    """A collected run (config, summary, gzipped metrics) cannot be resumed or extended: it would
+    start over and replace its results. One killed before its first checkpoint starts over."""
+    out = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "3", *FAST]
+    assert main([*args, "--out", str(out)]) == 0
+    (out / "checkpoint.pt").unlink()
+    kept = {p.name: p.read_bytes() for p in out.iterdir()}
+    capsys.readouterr()
+    for extra in ([], ["--interactions", "6"]):
+        assert main(["train", "--resume", str(out), *extra, "--no-progress"]) == 2
+        err = capsys.readouterr().err
+        assert f"{out} holds a finished run without its checkpoint.pt (it has summary.json)" in err
+        assert {p.name: p.read_bytes() for p in out.iterdir()} == kept
+    assert main(["eval", str(out)]) == 2
+    assert "cannot be resumed" in capsys.readouterr().err
+    (out / "summary.json").unlink()  # as if killed before its first checkpoint
+    assert main(["train", "--resume", str(out), "--no-progress"]) == 0
+    assert len(pd.read_csv(out / "metrics.csv")) == 3

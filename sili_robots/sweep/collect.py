@@ -22,11 +22,9 @@ from pathlib import Path
 import pandas as pd
 
 from sili_robots.errors import ConfigError
-from sili_robots.runs import CONFIG, METRICS, SUMMARY
+from sili_robots.runs import COMPRESSED_METRICS, CONFIG, SUMMARY
 from sili_robots.sweep.results import metrics_file, run_dirs
 from sili_robots.sweep.state import RUNS_DIR
-
-COMPRESSED_METRICS = f"{METRICS}.gz"
 
 
 @dataclass

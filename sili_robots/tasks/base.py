@@ -18,6 +18,7 @@ changed since the last step".
 
 from __future__ import annotations
 
+import inspect
 from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
@@ -42,6 +43,14 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     #: attributes that hold the opponent's strategy between interactions; with the RNG state
     #: they are what ``game_state()`` saves so a run can resume at an interaction boundary.
     game_state_fields: ClassVar[tuple[str, ...]] = ()
+    #: the arguments the instance was built with, by name (None when some have no name), so a
+    #: run given an instance can record them and rebuild the same task
+    init_kwargs: dict[str, Any] | None
+
+    def __new__(cls, *args: Any, **kwargs: Any) -> RepeatedInteractionEnv:
+        env = super().__new__(cls)
+        env.init_kwargs = _named_arguments(cls, args, kwargs)
+        return env
 
     def __init__(self, horizon: int) -> None:
         if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 1:
@@ -268,3 +277,21 @@ def resume_game(env: gym.Env, state: dict[str, Any]) -> tuple[np.ndarray, dict[s
     """Restore a saved game through any wrappers (each sees a reset, as they require, and
     shapes the restored observation as it shapes any other)."""
     return env.reset(options={"restore": state})
+
+
+def _named_arguments(cls: type, args: tuple, kwargs: dict[str, Any]) -> dict[str, Any] | None:
+    """``cls(*args, **kwargs)``'s constructor arguments by name; None if some are unnamed."""
+    try:
+        bound = inspect.signature(cls.__init__).bind(None, *args, **kwargs)
+    except TypeError:
+        return None  # the constructor raises its own error
+    named: dict[str, Any] = {}
+    for name, value in list(bound.arguments.items())[1:]:  # after self
+        kind = bound.signature.parameters[name].kind
+        if kind is inspect.Parameter.VAR_POSITIONAL:
+            return None
+        if kind is inspect.Parameter.VAR_KEYWORD:
+            named.update(value)
+        else:
+            named[name] = value
+    return named
