@@ -354,7 +354,10 @@ def claims_table(df: pd.DataFrame) -> list[Claim]:
 
 
 def markdown(claims: list[Claim]) -> str:
-    lines = ["| claim | task | measured (last 100 interactions, mean of seeds) | verdict |"]
+    lines = [
+        "| claim | task | measured (last 100 interactions, mean of seeds; SILI in parentheses: "
+        "at the end of the other method's runs, half the budget for Stable and SMiRL) | verdict |"
+    ]
     lines.append("|---|---|---|---|")
     for c in claims:
         verdict = f"**{c.verdict}**" if c.verdict in (HOLDS, NO, PART) else c.verdict

@@ -32,6 +32,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from sili_robots.errors import ConfigError
+from sili_robots.labels import METHOD_NAMES
 
 TASK_TITLES = {
     "circle-3": "Circle (3 Goals)",
@@ -43,14 +44,6 @@ TASK_TITLES = {
     "sawyer-reach": "Sawyer-Reach",
 }
 METHOD_ORDER = ("sili", "oracle", "lili", "stable", "sac", "smirl")
-METHOD_NAMES = {
-    "sili": "SILI",
-    "oracle": "Oracle",
-    "lili": "LILI",
-    "stable": "Stable",
-    "sac": "SAC",
-    "smirl": "SMiRL",
-}
 #: one colour family per method; variants of a method (e.g. b values) take shades of it
 METHOD_CMAPS = {
     "sili": "Blues",

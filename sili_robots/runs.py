@@ -111,9 +111,9 @@ def recorded_task_id(run: dict[str, Any]) -> str | None:
         return None
 
 
-def versions() -> dict[str, str]:
+def versions(threads: int = 1) -> dict[str, str]:
     """The software and the processor a run used: seeded runs repeat exactly only on the same
-    kernels, which torch picks by CPU and instruction-set cap (``machine``)."""
+    kernels, which torch picks by CPU, instruction-set cap and thread count (``machine``)."""
     import gymnasium
     import numpy
 
@@ -121,7 +121,7 @@ def versions() -> dict[str, str]:
     from sili_robots.agent.matmul import machine_key
 
     return {
-        "machine": machine_key(),
+        "machine": machine_key(threads),
         "sili_robots": sili_robots.__version__,
         "torch": torch.__version__,
         "numpy": numpy.__version__,
@@ -143,7 +143,7 @@ def make_run_dir(run_dir: Path) -> None:
 
 def write_config(run_dir: Path, cfg: RunConfig) -> None:
     make_run_dir(run_dir)
-    payload = {"run": cfg.to_dict(), "versions": versions()}
+    payload = {"run": cfg.to_dict(), "versions": versions(cfg.threads)}
     (run_dir / CONFIG).write_text(json.dumps(payload, indent=2, sort_keys=True))
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 import pandas as pd
 
 from sili_robots.bounds import stored_bounds
+from sili_robots.labels import METHOD_NAMES
 from sili_robots.runs import METRICS, read_config
 
 HOLDS = 0.9  # the stability a run needs to count as holding the opponent
@@ -51,7 +52,7 @@ def verdict(run_dir: Path, window: int = 50) -> str:
         kept += f", {HOLDS:.0%} needed"
     if still:
         kept += f"; standing still: {still['stability']:.0%}"
-    line = f"{cfg.method.upper()} {outcome} the opponent ({kept})"
+    line = f"{METHOD_NAMES.get(cfg.method, cfg.method)} {outcome} the opponent ({kept})"
     line += f" and earned {reward:.1f} per interaction"
     refs = []
     if still:

@@ -115,6 +115,12 @@ def test_write_adds_to_a_bounds_file(tmp_path, capsys):
     assert set(data["tasks"]) == {"sili/Circle3-v0", "sili/Circle3-v1"}
     assert f"wrote {path}" in capsys.readouterr().out
     assert BOUNDS_FILE.is_file()
+    packaged = BOUNDS_FILE.read_bytes()
+    for counts in (["--interactions", "4"], ["--games", "3"], ["--seed", "1"]):
+        assert main(["bounds", "circle-3", *counts, "--write"]) == 2
+        err = capsys.readouterr().err
+        assert "are measured at the default counts" in err and f"with {' '.join(counts)}" in err
+    assert BOUNDS_FILE.read_bytes() == packaged
 
 
 # -- the bound lines in the figures -----------------------------------------------------------

@@ -262,6 +262,10 @@ def test_a_second_sweep_on_the_same_directory_is_refused(tmp_path):
             "'inf' is not a finite number",
         ),
         (["--tasks", "circle-3", "--methods", "sili", "--ray-address", "x"], "needs --backend ray"),
+        (
+            ["--tasks", "circle-3,driving", "--methods", "sac", "--env-kwarg", "outside_margin=1"],
+            "task 'driving' takes no argument outside_margin (--env-kwarg); its arguments: ",
+        ),
     ],
 )
 def test_bad_sweep_input_exits_2_with_the_allowed_values(tmp_path, capsys, args, message):

@@ -64,6 +64,7 @@ def test_train_writes_a_complete_run_and_eval_reads_it(tmp_path):
         assert col in df.columns
     assert df["critic_loss"].notna().sum() > 0
     summary = json.loads((out / "summary.json").read_text())
+    assert summary["window"] == 12  # all of a run shorter than 100
     assert summary["final_task_reward"] == pytest.approx(df["task_reward"].mean())
     assert summary["final_stability"] == pytest.approx(1 - df["strategy_changed"].mean())
     checkpoint = (out / "checkpoint.pt").read_bytes()
@@ -155,6 +156,7 @@ def test_every_latent_kind_trains(tmp_path, latent):
     [
         (["--task", "circle-9"], "unknown task 'circle-9'"),
         (["--task", "circle-3", "--method", "ppo"], "invalid choice: 'ppo'"),
+        (["--task", "circle-3", "--latent", "none"], "invalid choice: 'none'"),
         (["--task", "circle-3", "--beta", "1.5"], "outside the allowed range [0, 1]"),
         (["--task", "circle-3", "--interactions", "0"], "need an integer >= 1"),
         (["--task", "circle-3", "--set", "gamma=2"], "sac.gamma must be in [1e-09, 1], got 2"),
@@ -404,7 +406,8 @@ def test_threads_are_recorded_and_used(tmp_path):
         )
         assert res.returncode == 0, res.stderr
         assert torch.get_num_threads() == 2  # the run's arithmetic ran on two threads
-        assert json.loads((out / "config.json").read_text())["run"]["threads"] == 2
+        cfg = json.loads((out / "config.json").read_text())
+        assert cfg["run"]["threads"] == 2 and cfg["versions"]["machine"].endswith("| 2 threads")
         assert _sili("train", "--task", "circle-3", "--threads", 0, "--out", out).returncode == 2
     finally:
         torch.set_num_threads(1)

@@ -3,6 +3,7 @@
 from sili_robots.agent.addon import AgentAddon
 from sili_robots.agent.agent import InteractionStats, SILIAgent
 from sili_robots.agent.config import (
+    LATENT_CHOICES,
     LATENT_KINDS,
     METHODS,
     AgentConfig,
@@ -15,6 +16,7 @@ from sili_robots.agent.schedule import Schedule
 
 __all__ = [
     "BETA_METHODS",
+    "LATENT_CHOICES",
     "LATENT_KINDS",
     "METHODS",
     "PROFILES",

@@ -33,6 +33,8 @@ Credit = Literal["boundary", "per_step"]
 
 METHODS: tuple[str, ...] = typing.get_args(Method)
 LATENT_KINDS: tuple[str, ...] = typing.get_args(LatentKind)
+#: the kinds ``--latent`` offers ("none" is what the methods without a latent model fix)
+LATENT_CHOICES: tuple[str, ...] = tuple(k for k in LATENT_KINDS if k != "none")
 
 
 def setting(default: Any, low: float = -math.inf, high: float = math.inf, **kw: Any) -> Any:

@@ -78,9 +78,9 @@ def isa_caps() -> dict[str, str]:
     return {v: os.environ[v] for v in ISA_CAPS if os.environ.get(v)}
 
 
-def machine_key() -> str:
+def machine_key(threads: int = 1) -> str:
     """What a kernel timing depends on: CPU model and flags, any instruction-set cap, torch
-    version (one thread, as training runs)."""
+    version and thread count (timings run on one thread, as training does by default)."""
     model, flags = platform.processor(), ""
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
@@ -94,7 +94,8 @@ def machine_key() -> str:
     except OSError:
         pass
     caps = "".join(f" | {v}={value}" for v, value in isa_caps().items())
-    return f"{model} | {flags}{caps} | torch {torch.__version__} | 1 thread"
+    count = f"{threads} thread" + ("s" if threads > 1 else "")
+    return f"{model} | {flags}{caps} | torch {torch.__version__} | {count}"
 
 
 def time_matmuls(width: int = 256, batch: int = 256, rounds: int = 4) -> dict[str, float]:

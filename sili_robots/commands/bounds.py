@@ -80,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.write:
         writable_file(Path(args.write), "--write")  # before minutes of games, not after
+        _check_packaged_counts(args)
     if args.all == (args.task is not None):
         raise ConfigError("give either a TASK (e.g. circle-3) or --all, not both or neither")
     specs = all_versions() if args.all else [task_spec(args.task)]
@@ -96,3 +97,26 @@ def run(args: argparse.Namespace) -> int:
     if args.write:
         print(f"wrote {write_bounds_file(results, Path(args.write))}")
     return 0
+
+
+def _check_packaged_counts(args: argparse.Namespace) -> None:
+    """The packaged file holds every task at the default counts, the lines `sili plot` draws;
+    an estimate at other counts goes to a file of its own."""
+    from sili_robots.bounds import BOUNDS_FILE, DEFAULT_SEED
+
+    if Path(args.write).resolve() != BOUNDS_FILE:
+        return
+    given = [
+        f"{flag} {value}"
+        for flag, value, default in (
+            ("--interactions", args.interactions, None),
+            ("--games", args.games, None),
+            ("--seed", args.seed, DEFAULT_SEED),
+        )
+        if value != default
+    ]
+    if given:
+        raise ConfigError(
+            f"the packaged bounds ({BOUNDS_FILE}) are measured at the default counts, which "
+            f"`sili plot` draws; with {', '.join(given)} give --write FILE of your own"
+        )

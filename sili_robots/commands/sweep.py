@@ -7,7 +7,7 @@ import json
 import os
 from pathlib import Path
 
-from sili_robots.agent import LATENT_KINDS, PROFILES
+from sili_robots.agent import LATENT_CHOICES, PROFILES
 from sili_robots.commands.common import (
     add_override_args,
     add_schedule_args,
@@ -53,7 +53,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="C1,C2,...",
         help="controllers to sweep on the tasks that take one (e.g. sawyer-reach: mink,osc)",
     )
-    p.add_argument("--latent", choices=LATENT_KINDS, help="latent kind (default: each task's)")
+    p.add_argument("--latent", choices=LATENT_CHOICES, help="latent kind (default: each task's)")
     p.add_argument(
         "--profile",
         choices=PROFILES,

@@ -8,7 +8,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, PROFILES, Schedule
+from sili_robots.agent import BETA_METHODS, LATENT_CHOICES, METHODS, PROFILES, Schedule
 from sili_robots.build import make_run_config
 from sili_robots.commands.common import (
     add_override_args,
@@ -46,7 +46,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--latent",
-        choices=LATENT_KINDS,
+        choices=LATENT_CHOICES,
         help="latent kind for sili/stable/lili (default: the task's, usually discrete)",
     )
     p.add_argument(

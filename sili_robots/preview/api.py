@@ -137,7 +137,8 @@ def make_env_and_policy(
         check_choice("preview policy", policy, POLICIES)
         env = make_task(name)
         try:
-            return name, env, scripted_policy(env, SCRIPTED_KIND[policy]), f"{policy} policy"
+            label = "random actions" if policy == "random" else f"scripted {SCRIPTED_KIND[policy]}"
+            return name, env, scripted_policy(env, SCRIPTED_KIND[policy]), label
         except BaseException:
             env.close()
             raise
