@@ -23,8 +23,10 @@ def _stability(tail: pd.DataFrame) -> float:
 
 
 def held(run_dir: Path, window: int = 50) -> bool:
-    """Whether the opponent kept its strategy in at least 90% of the run's last interactions."""
-    return _stability(_last(run_dir, window)) >= HOLDS
+    """Whether the opponent kept its strategy in at least 90% of the run's last ``window``
+    interactions (a run shorter than that has not shown it)."""
+    tail = _last(run_dir, window)
+    return len(tail) == window and _stability(tail) >= HOLDS
 
 
 def worked(run_dir: Path, window: int = 50) -> bool:
@@ -33,7 +35,7 @@ def worked(run_dir: Path, window: int = 50) -> bool:
     tail = _last(run_dir, window)
     still = stored_bounds(read_config(run_dir).task_id).get("still")
     beat_still = still is None or float(tail["task_reward"].mean()) > still["task_reward"]
-    return _stability(tail) >= HOLDS and beat_still
+    return held(run_dir, window) and beat_still
 
 
 def verdict(run_dir: Path, window: int = 50) -> str:
@@ -46,13 +48,21 @@ def verdict(run_dir: Path, window: int = 50) -> str:
     reward = float(tail["task_reward"].mean())
     bounds = stored_bounds(cfg.task_id)
     still, stab = bounds.get("still"), bounds.get("stabilizing")
-    outcome = "held" if stability >= HOLDS else "did not hold"
+    name = METHOD_NAMES.get(cfg.method, cfg.method)
     kept = f"kept its strategy in {stability:.0%} of its last {len(tail)} interactions"
-    if stability < HOLDS:
-        kept += f", {HOLDS:.0%} needed"
-    if still:
-        kept += f"; standing still: {still['stability']:.0%}"
-    line = f"{METHOD_NAMES.get(cfg.method, cfg.method)} {outcome} the opponent ({kept})"
+    if len(tail) < window:  # its first interactions say little: z^1 is kept by any policy
+        kept = f"kept its strategy in {stability:.0%} of them"
+        line = f"{name} ran {len(tail)} interactions, too few to tell whether it holds the opponent"
+        line += f" (the verdict reads the last {window}): it {kept}"
+        if still:
+            line += f" (standing still: {still['stability']:.0%})"
+    else:
+        if stability < HOLDS:
+            kept += f", {HOLDS:.0%} needed"
+        if still:
+            kept += f"; standing still: {still['stability']:.0%}"
+        outcome = "held" if stability >= HOLDS else "did not hold"
+        line = f"{name} {outcome} the opponent ({kept})"
     line += f" and earned {reward:.1f} per interaction"
     refs = []
     if still:

@@ -18,21 +18,27 @@ def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys
     printed = capsys.readouterr()
     json.loads(printed.out)  # stdout stays one JSON document for tools
     last = printed.err.strip().splitlines()[-1]
-    assert last.startswith("SILI did not hold the opponent (kept its strategy in ")  # 4: no hold
-    assert ", 90% needed; standing still: 0%)" in last and "standing still: -50.0" in last
+    assert last.startswith(
+        "SILI ran 4 interactions, too few to tell whether it holds the opponent (the verdict "
+        "reads the last 50): it kept its strategy in "
+    )
+    assert "of them (standing still: 0%) and earned" in last and "standing still: -50.0" in last
     assert "the scripted stabilizing policy that sees z: -4.0" in last
-    assert not held(run)
     metrics = pd.read_csv(run / "metrics.csv")
     metrics["strategy_changed"] = 0
     metrics["task_reward"] = -7.25
     metrics.to_csv(run / "metrics.csv", index=False)
-    line = verdict(run)
+    assert not held(run) and not worked(run)  # 4 kept of the 50 a verdict reads
+    line = verdict(run, window=4)
     assert line.startswith("SILI held the opponent (kept its strategy in 100% of its last 4 ")
     assert "earned -7.2 per interaction" in line
-    assert held(run)
+    assert held(run, window=4)
     metrics.loc[metrics.index[0], "strategy_changed"] = 1  # 3 of 4 kept: 75% < 90%
     metrics.to_csv(run / "metrics.csv", index=False)
-    assert not held(run) and held(run, window=3)
+    assert not held(run, window=4) and held(run, window=3)
+    line = verdict(run, window=4)
+    assert line.startswith("SILI did not hold the opponent (kept its strategy in 75% of its last")
+    assert ", 90% needed; standing still: 0%)" in line
     assert worked(run, window=3)  # held at -7.25, above standing still's -50.0
     metrics["task_reward"] = -55.3  # held by parking away from the goal: below standing still
     metrics.to_csv(run / "metrics.csv", index=False)
