@@ -15,7 +15,7 @@ with probability ``CHANGE_PROBABILITY`` = 0.5, under one of two rules (``change_
   one change per interaction, seen at its first step.
 - ``"step"``: the mapping is *locked* while the ego has visited the speaker in the current
   interaction or in the previous one; while unlocked, before every step and at the interaction
-  boundary it changes with probability 0.5 (about 27 changes in an unvisited interaction).
+  boundary it changes with probability 0.5 (about 25 changes in an unvisited interaction).
 
 Either way the flag "changed since the last step" (``sili_robots.wrappers.StrategyFlag``) is
 the partial observation the paper uses on this task.
