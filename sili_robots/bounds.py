@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from sili_robots.atomic import write_text
 from sili_robots.errors import ConfigError
 from sili_robots.policies.scripted import KIND_DESCRIPTIONS, available_kinds, scripted_policy
 from sili_robots.rollout import run_interactions
@@ -158,9 +159,7 @@ def write_bounds_file(results: list[dict[str, Any]], path: Path = BOUNDS_FILE) -
     data["tasks"] = dict(sorted(data["tasks"].items()))
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(data, indent=1) + "\n")
-    tmp.replace(path)
+    write_text(path, json.dumps(data, indent=1) + "\n", shared=True)
     return path
 
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 import contextlib
 import csv
 import json
-import os
 import pickle
 import platform
 from dataclasses import asdict, dataclass, field
@@ -21,10 +20,14 @@ import torch
 
 from sili_robots.addons.config import AddonsConfig
 from sili_robots.agent.config import AgentConfig, set_path
+from sili_robots.atomic import replacing, write_text
 from sili_robots.errors import ConfigError, check_seed
 from sili_robots.migrations import migrate_agent_state, migrate_run, setting_path
 
 CONFIG, METRICS, CHECKPOINT, SUMMARY = "config.json", "metrics.csv", "checkpoint.pt", "summary.json"
+#: what to do about a damaged file (``read_json``)
+DAMAGED_CONFIG = "it is not a run's config: train the run again (sili train ... --overwrite)"
+DAMAGED_SUMMARY = "delete it and resume the run (sili train --resume, or sili sweep --resume)"
 COMPRESSED_METRICS = f"{METRICS}.gz"  # a run kept small (``sili collect``)
 METRIC_COLUMNS = (
     "interaction",
@@ -144,7 +147,16 @@ def make_run_dir(run_dir: Path) -> None:
 def write_config(run_dir: Path, cfg: RunConfig) -> None:
     make_run_dir(run_dir)
     payload = {"run": cfg.to_dict(), "versions": versions(cfg.threads)}
-    (run_dir / CONFIG).write_text(json.dumps(payload, indent=2, sort_keys=True))
+    write_text(run_dir / CONFIG, json.dumps(payload, indent=2, sort_keys=True))
+
+
+def read_json(path: Path, what: str) -> Any:
+    """A JSON file a run or sweep wrote, or ConfigError naming it when it is damaged (``what``
+    it should be, and what to do)."""
+    try:
+        return json.loads(Path(path).read_text())
+    except ValueError as err:
+        raise ConfigError(f"{path} is damaged ({_first_line(err)}); {what}") from None
 
 
 def read_config(run_dir: Path) -> RunConfig:
@@ -177,12 +189,10 @@ class MetricsWriter:
         self._writer = csv.DictWriter(self._file, METRIC_COLUMNS)
 
     def _rewrite(self, rows: list[dict[str, str]]) -> None:
-        tmp = self.path.with_suffix(".tmp")
-        with tmp.open("w", newline="") as f:
+        with replacing(self.path) as tmp, tmp.open("w", newline="") as f:
             w = csv.DictWriter(f, METRIC_COLUMNS)
             w.writeheader()
             w.writerows(rows)
-        os.replace(tmp, self.path)
 
     def write(self, row: dict[str, Any]) -> None:
         self._writer.writerow({k: row.get(k, "") for k in METRIC_COLUMNS})
@@ -194,10 +204,8 @@ class MetricsWriter:
 
 def save_checkpoint(run_dir: Path, state: dict[str, Any]) -> None:
     """Write atomically: a kill during the write leaves the previous checkpoint intact."""
-    path = Path(run_dir) / CHECKPOINT
-    tmp = path.with_suffix(".tmp")
-    torch.save(state, tmp)
-    os.replace(tmp, path)
+    with replacing(Path(run_dir) / CHECKPOINT) as tmp:
+        torch.save(state, tmp)
 
 
 def _first_line(err: Exception) -> str:

@@ -12,6 +12,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from sili_robots.atomic import write_text
 from sili_robots.build import build_agent, make_run_env
 from sili_robots.diagnostics import latent_diagnostics
 from sili_robots.errors import ConfigError
@@ -46,6 +47,7 @@ def train(
     env = make_run_env(cfg) if env is None else env
     agent = build_agent(cfg, env)
     state = load_checkpoint(run_dir) if resume else None
+    (run_dir / SUMMARY).unlink(missing_ok=True)  # unfinished until it writes a new one
     if state is None:
         write_config(run_dir, cfg)
         obs, info = env.reset(seed=cfg.seed)
@@ -135,7 +137,7 @@ def write_summary(run_dir: Path, window: int = 100) -> dict[str, Any]:
         "wall_time_s": float(df["wall_time"].iloc[-1]) if len(df) else 0.0,
         **latent_diagnostics(df, window),
     }
-    (Path(run_dir) / SUMMARY).write_text(json.dumps(summary, indent=2))
+    write_text(Path(run_dir) / SUMMARY, json.dumps(summary, indent=2))
     return summary
 
 

@@ -87,6 +87,34 @@ def test_collect_refuses_a_different_run_of_the_same_name(sweep_and_collection, 
     assert main(["collect", str(tmp_path / "nothing"), "--into", str(other)]) == 2
 
 
+def test_collect_takes_a_run_extended_or_trained_again_and_refuses_before_copying(
+    sweep_and_collection, tmp_path, capsys
+):
+    sweep, collection = sweep_and_collection
+    name, paper = "circle-3__sili-bschedule__s0", "circle-3__sili-paper-b0.5__s0"
+    source, into = tmp_path / "sweep", tmp_path / "collection"
+    shutil.copytree(sweep, source)
+    shutil.copytree(collection, into)
+    run = source / "runs" / name
+    assert main(["train", "--resume", str(run), "--interactions", "8", "--no-progress"]) == 0
+    cfg = json.loads((run / "config.json").read_text())
+    cfg["versions"]["sili_robots"] = "0.0.1"  # trained again by another version
+    (run / "config.json").write_text(json.dumps(cfg))
+    assert main(["collect", str(source), "--into", str(into)]) == 0
+    metrics = gzip.decompress((into / "runs" / name / "metrics.csv.gz").read_bytes())
+    assert len(metrics.decode().strip().splitlines()) == 1 + 8
+    assert json.loads((into / "runs" / name / "summary.json").read_text())["interactions"] == 8
+    # another run under a name already taken: refused before anything is copied
+    shutil.rmtree(into / "runs" / name)
+    other = json.loads((into / "runs" / paper / "config.json").read_text())
+    other["run"]["seed"] = 7
+    (into / "runs" / paper / "config.json").write_text(json.dumps(other))
+    capsys.readouterr()
+    assert main(["collect", str(source), "--into", str(into)]) == 2
+    assert f"holds a different run named {paper}" in capsys.readouterr().err
+    assert not (into / "runs" / name).exists()
+
+
 def test_runs_counts_runs_and_interactions(sweep_and_collection, capsys):
     sweep, collection = sweep_and_collection
     assert main(["runs", str(sweep)]) == 0
@@ -453,3 +481,19 @@ def test_a_fresh_clone_resumes_the_grid_from_its_collection(tmp_path, monkeypatc
     assert main([*args, "--sweep-dir", str(tmp_path / "third")]) == 0
     assert "all 2 runs collected" in capsys.readouterr().out
     assert not (tmp_path / "third").exists()
+
+
+def test_a_damaged_summary_or_config_is_named_not_a_traceback(
+    sweep_and_collection, tmp_path, capsys
+):
+    sweep, _ = sweep_and_collection
+    source = tmp_path / "sweep"
+    shutil.copytree(sweep, source)
+    run = source / "runs" / "circle-3__sili-bschedule__s0"
+    (run / "summary.json").write_text("")  # a full disk, say
+    assert main(["runs", str(source)]) == 2
+    err = capsys.readouterr().err
+    assert f"{run / 'summary.json'} is damaged" in err and "delete it and resume the run" in err
+    (run / "config.json").write_text("{")
+    assert main(["sweep", "--resume", str(source), "--dry-run"]) == 2
+    assert f"{run / 'config.json'} is damaged" in capsys.readouterr().err

@@ -15,11 +15,13 @@ import torch
 from cli_helpers import sili as _sili
 from fast_settings import FAST_ARGS
 
+from sili_robots import training
 from sili_robots.addons import LatentFilter
 from sili_robots.cli import main
 from sili_robots.evaluation import evaluate, load_trained
 from sili_robots.runs import load_checkpoint, save_checkpoint
-from sili_robots.training import write_summary
+from sili_robots.sweep.state import run_state
+from sili_robots.training import extend, resume, write_summary
 
 FAST = [*FAST_ARGS, "--no-progress"]
 
@@ -509,3 +511,23 @@ def test_a_run_kept_without_its_checkpoint_is_not_trained_again(tmp_path, capsys
     (out / "summary.json").unlink()  # as if killed before its first checkpoint
     assert main(["train", "--resume", str(out), "--no-progress"]) == 0
     assert len(pd.read_csv(out / "metrics.csv")) == 3
+
+
+def test_a_run_being_extended_is_unfinished_until_it_ends(tmp_path, monkeypatch):
+    """A finished run's summary goes when it resumes: one killed while extended is resumable,
+    not counted finished (sweeps and collect read the summary as "done")."""
+    out = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "3", *FAST]
+    assert main([*args, "--out", str(out)]) == 0
+    extend(out, 5)
+
+    def killed(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(training, "play_interaction", killed)
+    with pytest.raises(KeyboardInterrupt):
+        resume(out, progress=False)
+    assert not (out / "summary.json").exists() and run_state(out) == "resumable"
+    monkeypatch.undo()
+    resume(out, progress=False)
+    assert json.loads((out / "summary.json").read_text())["interactions"] == 5

@@ -39,6 +39,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from sili_robots.atomic import write_text
+
 MATMULS = ("onednn", "aten")
 PRECISIONS = ("float32", "bfloat16")
 #: bfloat16 changes the numerics, so it is chosen only where it clearly pays (a SAC update:
@@ -154,9 +156,7 @@ def _cached_choice(name: str, measure: Callable[[], tuple[str, dict[str, float]]
     cached[key] = {**entry, name: choice, seconds: times}
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(cached, indent=2))
-        os.replace(tmp, path)
+        write_text(path, json.dumps(cached, indent=2), shared=True)
     except OSError:
         pass  # an unwritable cache only means measuring again next time
     return choice

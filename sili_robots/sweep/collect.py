@@ -13,16 +13,15 @@ float32 the agent computes), so collecting the same run twice gives the same byt
 from __future__ import annotations
 
 import gzip
-import json
-import os
 from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
 
+from sili_robots.atomic import write_bytes
 from sili_robots.errors import ConfigError
-from sili_robots.runs import COMPRESSED_METRICS, CONFIG, SUMMARY
+from sili_robots.runs import COMPRESSED_METRICS, CONFIG, DAMAGED_CONFIG, SUMMARY, read_json
 from sili_robots.sweep.results import metrics_file, run_dirs
 from sili_robots.sweep.state import RUNS_DIR
 
@@ -47,9 +46,12 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
     """Copy every finished run of the ``sources`` (sweeps or collections) into ``dest``, or only
     those in ``names`` (a collection copied back into a lost sweep directory: ``sili grid``).
 
-    A run already in ``dest`` with a different config is an error (two sweeps gave one name to
-    different runs), so a collection never mixes two versions of a run."""
+    A run already in ``dest`` is replaced by the same run extended or trained again (with
+    another version of the package); one with another config is an error, found before anything
+    is copied (two sweeps gave one name to different runs), so a collection never mixes two
+    versions of a run."""
     report = CollectReport()
+    copies: list[tuple[Path, Path]] = []
     for source in sources:
         if not run_dirs(source):
             raise ConfigError(f"{source} holds no runs (no runs/*/config.json)")
@@ -57,38 +59,39 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
             name = run_dir.name
             if names is not None and name not in names:
                 continue
-            metrics = metrics_file(run_dir)
-            if not (run_dir / SUMMARY).is_file() or metrics is None:
+            if not (run_dir / SUMMARY).is_file() or metrics_file(run_dir) is None:
                 report.unfinished.append(name)
                 continue
             target = Path(dest) / RUNS_DIR / name
-            new_config = json.loads((run_dir / CONFIG).read_text())
             if (target / CONFIG).is_file():
-                old_config = json.loads((target / CONFIG).read_text())
-                if old_config != new_config:
+                if _run_of(target) != _run_of(run_dir):
                     raise ConfigError(
                         f"{target} holds a different run named {name} (its config.json differs "
-                        f"from {run_dir}'s); remove one of them first"
+                        f"from {run_dir}'s beyond its length); remove one of them first"
                     )
                 complete = (target / SUMMARY).is_file() and (target / COMPRESSED_METRICS).is_file()
                 if complete and (target / SUMMARY).read_bytes() == (run_dir / SUMMARY).read_bytes():
                     report.unchanged.append(name)
                     continue
-            target.mkdir(parents=True, exist_ok=True)
-            data = (
-                metrics.read_bytes()
-                if metrics.name == COMPRESSED_METRICS
-                else compressed_metrics(metrics)
-            )
-            # the summary last, each file whole: an interrupted copy is redone next time
-            _write(target / COMPRESSED_METRICS, data)
-            _write(target / CONFIG, (run_dir / CONFIG).read_bytes())
-            _write(target / SUMMARY, (run_dir / SUMMARY).read_bytes())
-            report.added.append(name)
+            copies.append((run_dir, target))
+    for run_dir, target in copies:
+        metrics = metrics_file(run_dir)
+        target.mkdir(parents=True, exist_ok=True)
+        data = (
+            metrics.read_bytes()
+            if metrics.name == COMPRESSED_METRICS
+            else compressed_metrics(metrics)
+        )
+        # the summary last, each file whole: an interrupted copy is redone next time
+        write_bytes(target / COMPRESSED_METRICS, data)
+        write_bytes(target / CONFIG, (run_dir / CONFIG).read_bytes())
+        write_bytes(target / SUMMARY, (run_dir / SUMMARY).read_bytes())
+        report.added.append(target.name)
     return report
 
 
-def _write(path: Path, data: bytes) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
+def _run_of(run_dir: Path) -> dict:
+    """What makes a run the run it is: its config without its length."""
+    run = dict(read_json(run_dir / CONFIG, DAMAGED_CONFIG)["run"])
+    run.pop("interactions", None)
+    return run

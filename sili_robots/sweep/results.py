@@ -10,15 +10,23 @@
 
 from __future__ import annotations
 
-import json
-import os
 from pathlib import Path
 
 import pandas as pd
 
 from sili_robots.agent.schedule import Schedule
+from sili_robots.atomic import replacing
 from sili_robots.migrations import migrate_run
-from sili_robots.runs import CONFIG, METRIC_COLUMNS, METRICS, SUMMARY, recorded_task_id
+from sili_robots.runs import (
+    CONFIG,
+    DAMAGED_CONFIG,
+    DAMAGED_SUMMARY,
+    METRIC_COLUMNS,
+    METRICS,
+    SUMMARY,
+    read_json,
+    recorded_task_id,
+)
 from sili_robots.sweep.state import ERROR_FILE, RESULTS, RUNS_DIR, RUNS_TABLE
 
 ID_COLUMNS = (
@@ -53,7 +61,7 @@ def run_dirs(sweep_dir: Path) -> list[Path]:
 
 
 def _identity(run_dir: Path) -> tuple[dict, dict]:
-    cfg = migrate_run(json.loads((run_dir / CONFIG).read_text())["run"])
+    cfg = migrate_run(read_json(run_dir / CONFIG, DAMAGED_CONFIG)["run"])
     agent = cfg["agent"]
     beta = agent.get("sili", {}).get("beta", 0.5)
     scheduled = isinstance(beta, dict)
@@ -114,7 +122,7 @@ def runs_table(sweep_dir: Path) -> pd.DataFrame:
             logged = len(pd.read_csv(path, usecols=["interaction"]))
         row = {**ident, "interactions": int(cfg["interactions"]), "interactions_logged": logged}
         if summary_path.is_file():
-            summary = json.loads(summary_path.read_text())
+            summary = read_json(summary_path, DAMAGED_SUMMARY)
             row.update(
                 status="done",
                 final_task_reward=summary["final_task_reward"],
@@ -135,7 +143,6 @@ def write_tables(sweep_dir: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     results, runs = results_table(sweep_dir), runs_table(sweep_dir)
     for frame, name in ((results, RESULTS), (runs, RUNS_TABLE)):
         path = Path(sweep_dir) / name
-        tmp = path.with_suffix(".tmp")
-        frame.to_csv(tmp, index=False)
-        os.replace(tmp, path)  # readers never see half a table (`sili plot` during a sweep)
+        with replacing(path, shared=True) as tmp:  # readers never see half a table, and
+            frame.to_csv(tmp, index=False)  # `sili plot` may write it while a sweep does
     return results, runs

@@ -17,13 +17,13 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import json
-import os
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, Literal
 
+from sili_robots.atomic import write_text
 from sili_robots.errors import ConfigError
-from sili_robots.runs import CHECKPOINT, CONFIG, SUMMARY, RunConfig
+from sili_robots.runs import CHECKPOINT, CONFIG, DAMAGED_CONFIG, SUMMARY, RunConfig, read_json
 from sili_robots.sweep.spec import PlannedRun, SweepSpec
 
 SWEEP_FILE, RUNS_DIR, RESULTS, RUNS_TABLE, LOCK = (
@@ -33,6 +33,7 @@ SWEEP_FILE, RUNS_DIR, RESULTS, RUNS_TABLE, LOCK = (
     "runs.csv",
     ".lock",
 )
+DAMAGED_SWEEP = "it is not a sweep's record, so the sweep cannot resume"
 #: written by a failed run (the traceback or how its worker died); removed when it succeeds
 ERROR_FILE = "error.txt"
 #: written by a worker while it trains a run: {"pid": ..., "host": ...}
@@ -67,7 +68,7 @@ def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
     path = run_path(sweep_dir, planned.name) / CONFIG
     if not path.is_file():
         return
-    raw = json.loads(path.read_text())["run"]
+    raw = read_json(path, DAMAGED_CONFIG)["run"]
     try:  # through RunConfig, so settings added to the package since get their defaults
         on_disk = RunConfig.from_dict(raw).to_dict()
     except (ConfigError, TypeError, KeyError):
@@ -85,13 +86,11 @@ def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
 def record_invocation(sweep_dir: Path, spec: SweepSpec) -> None:
     """Append ``spec`` to ``sweep.json`` unless the same spec is already there."""
     path = Path(sweep_dir) / SWEEP_FILE
-    data = json.loads(path.read_text()) if path.is_file() else {"invocations": []}
+    data = read_json(path, DAMAGED_SWEEP) if path.is_file() else {"invocations": []}
     entry = json.loads(json.dumps(spec.to_dict()))
     if entry not in data["invocations"]:
         data["invocations"].append(entry)
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(data, indent=2))
-    os.replace(tmp, path)
+    write_text(path, json.dumps(data, indent=2), shared=True)
 
 
 def recorded_specs(sweep_dir: Path) -> list[SweepSpec]:
@@ -101,7 +100,7 @@ def recorded_specs(sweep_dir: Path) -> list[SweepSpec]:
             f"{sweep_dir} is not a sweep directory (no {SWEEP_FILE}); give a directory written "
             "by `sili sweep --out`"
         )
-    return [SweepSpec.from_dict(d) for d in json.loads(path.read_text())["invocations"]]
+    return [SweepSpec.from_dict(d) for d in read_json(path, DAMAGED_SWEEP)["invocations"]]
 
 
 @contextlib.contextmanager

@@ -1,0 +1,36 @@
+"""Files replaced whole: a reader, or a kill during the write, sees the old file or the new one,
+never part of one."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+
+@contextlib.contextmanager
+def replacing(path: Path, shared: bool = False) -> Iterator[Path]:
+    """A temporary path beside ``path`` to write, which replaces ``path`` when the block
+    completes and is removed when it fails. ``shared``: other processes may write ``path`` at the
+    same time (a sweep's tables, caches), so the temporary is this write's own; otherwise it has
+    a fixed name, which the next write of a killed one reuses."""
+    path = Path(path)
+    tag = f".{os.getpid()}-{uuid.uuid4().hex[:8]}" if shared else ""
+    tmp = path.with_name(f"{path.name}{tag}.tmp")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def write_text(path: Path, text: str, shared: bool = False) -> None:
+    with replacing(path, shared) as tmp:
+        tmp.write_text(text)
+
+
+def write_bytes(path: Path, data: bytes, shared: bool = False) -> None:
+    with replacing(path, shared) as tmp:
+        tmp.write_bytes(data)
