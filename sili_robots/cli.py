@@ -7,11 +7,14 @@ Every sub-command module exposes ``add_parser(subparsers)`` and ``run(args) -> i
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import select
+import signal
 import sys
-from collections.abc import Sequence
+import threading
+from collections.abc import Iterator, Sequence
 from typing import NoReturn
 
 from sili_robots.errors import ConfigError
@@ -61,14 +64,49 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP (``timeout``, a closed terminal, a job scheduler) stops a command as
+    Ctrl-C does: ``finally`` blocks run, a sweep stops its workers and writes its tables."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _terminate(signum: int, frame: object) -> None:
+    raise Terminated(signum)
+
+
+@contextlib.contextmanager
+def _stop_signals_as_ctrl_c() -> Iterator[None]:
+    """While a command runs; a signal already ignored (``nohup``'s SIGHUP) stays ignored."""
+    handled = []
+    if threading.current_thread() is threading.main_thread():
+        handled = [
+            s for s in (signal.SIGTERM, signal.SIGHUP) if signal.getsignal(s) == signal.SIG_DFL
+        ]
+    previous = {s: signal.signal(s, _terminate) for s in handled}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        code = int(args.run(args) or 0)
+        with _stop_signals_as_ctrl_c():
+            code = int(args.run(args) or 0)
     except ConfigError as err:
         print(f"sili {args.command}: error: {err}", file=sys.stderr)
         return 2
+    except Terminated as stop:
+        print(
+            f"sili {args.command}: stopped by {signal.Signals(stop.signum).name}", file=sys.stderr
+        )
+        return 128 + stop.signum
     except KeyboardInterrupt:
         print(f"sili {args.command}: interrupted", file=sys.stderr)
         return 130

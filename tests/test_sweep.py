@@ -336,6 +336,34 @@ def test_workers_stop_when_the_sweep_process_is_killed(tmp_path):
     assert _rows(run_dir / "metrics.csv") < 5000
 
 
+def test_sigterm_stops_a_sweep_as_ctrl_c_does(tmp_path):
+    """`timeout`, a job scheduler or `kill`: the workers stop, the tables and the report are
+    written, the exit code says which signal."""
+    out = tmp_path / "sweep"
+    args = ["--tasks", "circle-3", "--methods", "sac", "--seeds", "0", "--interactions", 5000]
+    args += [*FAST_ARGS, "--no-progress", "--out", out]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sili_robots.cli", "sweep", *map(str, args)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    run_dir = out / "runs" / "circle-3__sac__s0"
+    try:
+        assert _wait_for(lambda: _rows(run_dir / "metrics.csv") >= 5)
+        pid = json.loads((run_dir / "worker.json").read_text())["pid"]
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 128 + signal.SIGTERM, stderr
+    assert "sweep: 0 done, 0 failed, 1 not run (1 stopped midway, resumable)" in stderr
+    assert "sili sweep: stopped by SIGTERM" in stderr and "Traceback" not in stderr
+    assert pd.read_csv(out / "runs.csv")["status"].tolist() == ["incomplete"]
+    assert _wait_for(lambda: not _alive(pid), timeout=20)
+
+
 def test_progress_display_counts_runs_and_interactions(tmp_path):
     import io
 

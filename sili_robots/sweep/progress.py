@@ -172,7 +172,9 @@ class SweepProgress:
         if self._live is not None:
             self._refresh(force=True)
             self._live.stop()
+        stopped = f" ({len(self.running)} stopped midway, resumable)" if self.running else ""
+        not_run = self.total_runs - self.done - self.failed
         self._log(
-            f"sweep: {self.done} done, {self.failed} failed, {self.pending} not run, "
+            f"sweep: {self.done} done, {self.failed} failed, {not_run} not run{stopped}, "
             f"{time.perf_counter() - self._t0:.1f} s"
         )
