@@ -68,7 +68,16 @@ CURVE_METRICS = (
     ("stability_reward", "stability reward\n(agent's, per interaction)"),
 )
 FINAL_METRICS = (("task_reward", "final task reward"), ("true_stability", "final true stability"))
-VARIANT_KEYS = ("method", "profile", "config_beta", "beta_scheduled", "controller", "latent")
+#: what sets one curve apart from another of the same task (two versions of it never share one)
+VARIANT_KEYS = (
+    "method",
+    "profile",
+    "config_beta",
+    "beta_scheduled",
+    "controller",
+    "latent",
+    "task_id",
+)
 #: metrics that are fractions: their seed band is clipped to the range (a mean +- std of a
 #: fraction can leave it, which would draw a stability below 0 or above 1)
 METRIC_RANGES = {"true_stability": (0.0, 1.0)}
@@ -212,6 +221,8 @@ def with_profile(df: pd.DataFrame) -> pd.DataFrame:
         df = df.assign(profile="package")
     if "beta_scheduled" not in df:
         df = df.assign(beta_scheduled=False)
+    if "task_id" not in df:
+        df = df.assign(task_id="")
     return df
 
 
@@ -239,6 +250,9 @@ def variant_labels(df: pd.DataFrame, profiled: Collection[str] | None = None) ->
             labels[idx] += rows["controller"].fillna("").map(lambda c: f" [{c or 'default'}]")
         if rows["latent"].nunique() > 1:
             labels[idx] += rows["latent"].map(lambda k: f" ({k})")
+    versions = df["task_id"].fillna("")
+    if versions.nunique() > 1:  # e.g. "SAC (v0)" beside "SAC (v1)"
+        labels += versions.map(lambda t: f" ({t.rsplit('-', 1)[-1]})" if t else "")
     return labels
 
 

@@ -191,3 +191,14 @@ def test_results_of_two_versions_get_both_bounds_labelled_and_overview_draws_the
     sawyer = "sili/SawyerReach-v1"
     grid = overview(_results("sawyer-reach", sawyer)).axes
     assert set(_bound_lines(grid[0])) == {f"bound: {k}" for k in stored_bounds(sawyer)}
+
+
+def test_runs_of_two_versions_of_a_task_are_never_averaged_together():
+    old, new = "sili/Circle3-v0", "sili/Circle3-v1"
+    v0 = _results("circle-3", old)
+    v1 = _results("circle-3", new).assign(run=lambda d: d.run + "-new", task_reward=-40.0)
+    fig = learning_curves(pd.concat([v0, v1], ignore_index=True), "circle-3", smooth=1)
+    legend = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "SAC (v0)" in legend and "SAC (v1)" in legend
+    reward = {line.get_label(): line.get_ydata() for line in fig.axes[0].get_lines()}
+    assert np.allclose(reward["SAC (v1)"], -40.0)  # not pulled towards the v0 runs

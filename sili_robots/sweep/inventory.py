@@ -11,6 +11,7 @@ from sili_robots.sweep.results import runs_table
 #: one row per (task, variant)
 INVENTORY_KEYS = (
     "task",
+    "task_id",  # two versions of a task are two experiments
     "method",
     "profile",
     "config_beta",
@@ -25,6 +26,7 @@ def inventory(directory: Path) -> pd.DataFrame:
     max), interactions trained in all, mean final task reward and stability, CPU hours."""
     runs = runs_table(directory)
     runs["controller"] = runs["controller"].fillna("")
+    runs["task_id"] = runs["task_id"].fillna("") if "task_id" in runs else ""
     rows = []
     for key, group in runs.groupby(list(INVENTORY_KEYS), sort=False):
         done = group[group["status"] == "done"]
