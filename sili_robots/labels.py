@@ -1,6 +1,7 @@
-"""How the paper writes each method, for figures and the lines printed for people (a module of
-its own so neither pulls in the other's libraries)."""
+"""How results are named and grouped for people: the figures, `sili runs` and the verdict share
+them (a module of its own so none pulls in another's libraries)."""
 
+#: how the paper writes each method
 METHOD_NAMES = {
     "sili": "SILI",
     "oracle": "Oracle",
@@ -9,3 +10,15 @@ METHOD_NAMES = {
     "sac": "SAC",
     "smirl": "SMiRL",
 }
+
+#: what sets one variant of a task's runs apart from another: one curve, one row of `sili runs`
+#: (two versions of a task are never averaged together)
+VARIANT_KEYS = (
+    "method",
+    "profile",
+    "config_beta",
+    "beta_scheduled",
+    "controller",
+    "latent",
+    "task_id",
+)

@@ -32,7 +32,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from sili_robots.errors import ConfigError
-from sili_robots.labels import METHOD_NAMES
+from sili_robots.labels import METHOD_NAMES, VARIANT_KEYS
 
 TASK_TITLES = {
     "circle-3": "Circle (3 Goals)",
@@ -68,16 +68,7 @@ CURVE_METRICS = (
     ("stability_reward", "stability reward\n(agent's, per interaction)"),
 )
 FINAL_METRICS = (("task_reward", "final task reward"), ("true_stability", "final true stability"))
-#: what sets one curve apart from another of the same task (two versions of it never share one)
-VARIANT_KEYS = (
-    "method",
-    "profile",
-    "config_beta",
-    "beta_scheduled",
-    "controller",
-    "latent",
-    "task_id",
-)
+
 #: metrics that are fractions: their seed band is clipped to the range (a mean +- std of a
 #: fraction can leave it, which would draw a stability below 0 or above 1)
 METRIC_RANGES = {"true_stability": (0.0, 1.0)}

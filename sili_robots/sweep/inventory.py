@@ -6,19 +6,11 @@ from pathlib import Path
 
 import pandas as pd
 
+from sili_robots.labels import VARIANT_KEYS
 from sili_robots.sweep.results import runs_table
 
 #: one row per (task, variant)
-INVENTORY_KEYS = (
-    "task",
-    "task_id",  # two versions of a task are two experiments
-    "method",
-    "profile",
-    "config_beta",
-    "beta_scheduled",
-    "controller",
-    "latent",
-)
+INVENTORY_KEYS = ("task", *VARIANT_KEYS)
 
 
 def inventory(directory: Path) -> pd.DataFrame:
