@@ -3,6 +3,7 @@
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -531,3 +532,18 @@ def test_a_run_being_extended_is_unfinished_until_it_ends(tmp_path, monkeypatch)
     monkeypatch.undo()
     resume(out, progress=False)
     assert json.loads((out / "summary.json").read_text())["interactions"] == 5
+
+
+def test_a_run_a_sweep_worker_is_training_is_not_resumed_beside_it(tmp_path, capsys):
+    out = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "2", *FAST]
+    assert main([*args, "--out", str(out)]) == 0
+    host = socket.gethostname()
+    (out / "worker.json").write_text(json.dumps({"pid": os.getpid(), "host": host}))
+    capsys.readouterr()
+    assert main(["train", "--resume", str(out), "--interactions", "3", "--no-progress"]) == 2
+    assert f"is being trained by a sweep worker (process {os.getpid()})" in capsys.readouterr().err
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], check=True,
+                          capture_output=True, text=True)  # fmt: skip
+    (out / "worker.json").write_text(json.dumps({"pid": int(gone.stdout), "host": host}))
+    assert main(["train", "--resume", str(out), "--interactions", "3", "--no-progress"]) == 0

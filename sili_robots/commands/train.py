@@ -170,12 +170,19 @@ def _task_names() -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.runs import check_resumable
+    from sili_robots.sweep.state import training_worker
     from sili_robots.training import extend, resume, train, write_summary
     from sili_robots.verdict import verdict
 
     if args.resume is not None:
         read_config(args.resume)  # a clear error when it is not a run
         check_resumable(args.resume)
+        pid = training_worker(args.resume)
+        if pid is not None:
+            raise ConfigError(
+                f"{args.resume} is being trained by a sweep worker (process {pid}); resume the "
+                "sweep instead (sili sweep --resume), or stop it first"
+            )
         ignored = given_options(args, {"resume", "interactions", "no_progress"})
         if ignored:
             raise ConfigError(

@@ -17,6 +17,8 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import json
+import os
+import socket
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, Literal
@@ -44,6 +46,25 @@ RunState = Literal["done", "resumable", "new"]
 
 def run_path(sweep_dir: Path, name: str) -> Path:
     return Path(sweep_dir) / RUNS_DIR / name
+
+
+def training_worker(run_dir: Path) -> int | None:
+    """The process id of a live sweep worker on this host training ``run_dir``, if any (a
+    second process training the same run would interleave its files)."""
+    try:
+        info = json.loads((Path(run_dir) / RUNNING_FILE).read_text())
+        pid = int(info["pid"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if info.get("host") != socket.gethostname():
+        return None  # another machine's (Ray): nothing to ask from here
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return None
+    except PermissionError:
+        pass  # alive, another user's
+    return pid
 
 
 def run_state(run_dir: Path) -> RunState:
