@@ -333,9 +333,15 @@ def _draw_curves(
 
 
 def _seed_note(rows: pd.DataFrame) -> str:
-    seeds = rows.groupby(list(VARIANT_KEYS), dropna=False)["seed"].nunique()
+    """How many seeds each curve averages; unfinished runs of a variant average fewer late."""
+    keys = list(VARIANT_KEYS)
+    seeds = rows.groupby(keys, dropna=False)["seed"].nunique()
     lo, hi = int(seeds.min()), int(seeds.max())
-    return f"{lo} seeds" if lo == hi else f"{lo}-{hi} seeds"
+    note = f"{lo} seeds" if lo == hi else f"{lo}-{hi} seeds"
+    ends = rows.groupby([*keys, "run"], dropna=False)["interaction"].max()
+    if (ends.groupby(level=keys, dropna=False).nunique() > 1).any():
+        note += " (fewer where a run ended early)"
+    return note
 
 
 def learning_curves(df: pd.DataFrame, task: str, smooth: int | None = None) -> Figure:

@@ -146,6 +146,11 @@ def test_unfinished_runs_are_left_out_unless_asked(sweep_dir, tmp_path):
     only_s0 = df[df.run == "circle-3__sac__s0"].sort_values("interaction")["task_reward"]
     np.testing.assert_allclose(xy[:, 1], only_s0)
     assert "circle-3__sac__s1" in set(load_results(copy, include_unfinished=True)["run"])
+    assert "fewer where" not in learning_curves(df, "circle-3").get_suptitle()
+    metrics = copy / "runs" / "circle-3__sac__s1" / "metrics.csv"
+    pd.read_csv(metrics).head(3).to_csv(metrics, index=False)  # it stopped at 3
+    partial = learning_curves(load_results(copy, include_unfinished=True), "circle-3")
+    assert "2 seeds (fewer where a run ended early)" in partial.get_suptitle()
 
 
 def test_plot_of_a_non_sweep_exits_2(tmp_path, capsys):
