@@ -26,8 +26,11 @@ from sili_robots.migrations import migrate_agent_state, migrate_run, setting_pat
 
 CONFIG, METRICS, CHECKPOINT, SUMMARY = "config.json", "metrics.csv", "checkpoint.pt", "summary.json"
 #: what to do about a damaged file (``read_json``)
-DAMAGED_CONFIG = "it is not a run's config: train the run again (sili train ... --overwrite)"
-DAMAGED_SUMMARY = "delete it and resume the run (sili train --resume, or sili sweep --resume)"
+DAMAGED_CONFIG = "it is not a run's config: train the run again"
+DAMAGED_SUMMARY = (
+    "delete it, then resume the run from its checkpoint (sili train --resume or sili sweep "
+    "--resume), or collect a collected one again"
+)
 COMPRESSED_METRICS = f"{METRICS}.gz"  # a run kept small (``sili collect``)
 METRIC_COLUMNS = (
     "interaction",
@@ -150,13 +153,17 @@ def write_config(run_dir: Path, cfg: RunConfig) -> None:
     write_text(run_dir / CONFIG, json.dumps(payload, indent=2, sort_keys=True))
 
 
-def read_json(path: Path, what: str) -> Any:
-    """A JSON file a run or sweep wrote, or ConfigError naming it when it is damaged (``what``
-    it should be, and what to do)."""
+def read_json(path: Path, what: str, *keys: str) -> dict[str, Any]:
+    """A JSON object a run or sweep wrote, with ``keys``; ConfigError naming the file when it is
+    damaged (``what``: what it should be, and what to do)."""
     try:
-        return json.loads(Path(path).read_text())
+        data = json.loads(Path(path).read_text())
+        missing = [k for k in keys if k not in data] if isinstance(data, dict) else ["an object"]
     except ValueError as err:
         raise ConfigError(f"{path} is damaged ({_first_line(err)}); {what}") from None
+    if missing:
+        raise ConfigError(f"{path} is damaged (no {', '.join(missing)}); {what}")
+    return data
 
 
 def read_config(run_dir: Path) -> RunConfig:
@@ -166,12 +173,7 @@ def read_config(run_dir: Path) -> RunConfig:
             f"{run_dir} is not a run directory (no {CONFIG}); "
             "give a directory written by `sili train --out`"
         )
-    try:
-        run = json.loads(path.read_text())["run"]
-    except (ValueError, KeyError, TypeError) as err:
-        why = _first_line(err)
-        raise ConfigError(f"{path} is damaged ({why}); it is not a run's config") from None
-    return RunConfig.from_dict(run)
+    return RunConfig.from_dict(read_json(path, DAMAGED_CONFIG, "run")["run"])
 
 
 class MetricsWriter:

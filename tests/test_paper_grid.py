@@ -113,6 +113,19 @@ def test_collect_takes_a_run_extended_or_trained_again_and_refuses_before_copyin
     assert main(["collect", str(source), "--into", str(into)]) == 2
     assert f"holds a different run named {paper}" in capsys.readouterr().err
     assert not (into / "runs" / name).exists()
+    # of one run in two sources the longer is kept, whatever their order; two runs clash
+    for sources in ([sweep, source], [source, sweep]):
+        fresh = tmp_path / f"fresh-{len(list(tmp_path.iterdir()))}"
+        assert main(["collect", *map(str, sources), "--into", str(fresh)]) == 0
+        summary = json.loads((fresh / "runs" / name / "summary.json").read_text())
+        assert summary["interactions"] == 8
+        assert main(["collect", str(sweep), "--into", str(fresh)]) == 0  # the shorter: kept out
+        assert json.loads((fresh / "runs" / name / "summary.json").read_text()) == summary
+    (source / "runs" / paper / "config.json").write_text(json.dumps(other))
+    capsys.readouterr()
+    assert main(["collect", str(sweep), str(source), "--into", str(tmp_path / "two")]) == 2
+    assert f"holds a different run named {paper}" in capsys.readouterr().err
+    assert not (tmp_path / "two" / "runs").exists()
 
 
 def test_runs_counts_runs_and_interactions(sweep_and_collection, capsys):
@@ -493,7 +506,10 @@ def test_a_damaged_summary_or_config_is_named_not_a_traceback(
     (run / "summary.json").write_text("")  # a full disk, say
     assert main(["runs", str(source)]) == 2
     err = capsys.readouterr().err
-    assert f"{run / 'summary.json'} is damaged" in err and "delete it and resume the run" in err
+    assert f"{run / 'summary.json'} is damaged" in err and "delete it, then resume the run" in err
+    (run / "summary.json").write_text("{}")  # well-formed, but not a summary
+    assert main(["runs", str(source)]) == 2
+    assert "is damaged (no final_task_reward" in capsys.readouterr().err
     (run / "config.json").write_text("{")
     assert main(["sweep", "--resume", str(source), "--dry-run"]) == 2
     assert f"{run / 'config.json'} is damaged" in capsys.readouterr().err

@@ -13,15 +13,25 @@ float32 the agent computes), so collecting the same run twice gives the same byt
 from __future__ import annotations
 
 import gzip
+import json
 from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
 from sili_robots.atomic import write_bytes
 from sili_robots.errors import ConfigError
-from sili_robots.runs import COMPRESSED_METRICS, CONFIG, DAMAGED_CONFIG, SUMMARY, read_json
+from sili_robots.runs import (
+    COMPRESSED_METRICS,
+    CONFIG,
+    DAMAGED_CONFIG,
+    DAMAGED_SUMMARY,
+    SUMMARY,
+    RunConfig,
+    read_json,
+)
 from sili_robots.sweep.results import metrics_file, run_dirs
 from sili_robots.sweep.state import RUNS_DIR
 
@@ -46,12 +56,12 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
     """Copy every finished run of the ``sources`` (sweeps or collections) into ``dest``, or only
     those in ``names`` (a collection copied back into a lost sweep directory: ``sili grid``).
 
-    A run already in ``dest`` is replaced by the same run extended or trained again (with
-    another version of the package); one with another config is an error, found before anything
-    is copied (two sweeps gave one name to different runs), so a collection never mixes two
-    versions of a run."""
+    Of one run (the same config but its length) the longest is kept, whichever version of the
+    package trained it: an extended run replaces its shorter copy. Two different runs under one
+    name, in ``dest`` or among the sources, are an error found before anything is copied, so a
+    collection never mixes two versions of a run."""
     report = CollectReport()
-    copies: list[tuple[Path, Path]] = []
+    chosen: dict[str, tuple[Path, dict, int]] = {}  # name -> source run, identity, length
     for source in sources:
         if not run_dirs(source):
             raise ConfigError(f"{source} holds no runs (no runs/*/config.json)")
@@ -62,36 +72,49 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
             if not (run_dir / SUMMARY).is_file() or metrics_file(run_dir) is None:
                 report.unfinished.append(name)
                 continue
+            ident, length = _identity(run_dir), _length(run_dir)
             target = Path(dest) / RUNS_DIR / name
+            if name in chosen:
+                _check_same_run(name, chosen[name][0], chosen[name][1], run_dir, ident)
             if (target / CONFIG).is_file():
-                if _run_of(target) != _run_of(run_dir):
-                    raise ConfigError(
-                        f"{target} holds a different run named {name} (its config.json differs "
-                        f"from {run_dir}'s beyond its length); remove one of them first"
-                    )
-                complete = (target / SUMMARY).is_file() and (target / COMPRESSED_METRICS).is_file()
-                if complete and (target / SUMMARY).read_bytes() == (run_dir / SUMMARY).read_bytes():
-                    report.unchanged.append(name)
-                    continue
-            copies.append((run_dir, target))
-    for run_dir, target in copies:
+                _check_same_run(name, target, _identity(target), run_dir, ident)
+            if name not in chosen or length > chosen[name][2]:
+                chosen[name] = (run_dir, ident, length)
+    for name, (run_dir, _, length) in chosen.items():
+        target = Path(dest) / RUNS_DIR / name
+        complete = (target / SUMMARY).is_file() and (target / COMPRESSED_METRICS).is_file()
+        if complete and (
+            (target / SUMMARY).read_bytes() == (run_dir / SUMMARY).read_bytes()
+            or _length(target) > length  # the collection holds it longer
+        ):
+            report.unchanged.append(name)
+            continue
         metrics = metrics_file(run_dir)
         target.mkdir(parents=True, exist_ok=True)
-        data = (
-            metrics.read_bytes()
-            if metrics.name == COMPRESSED_METRICS
-            else compressed_metrics(metrics)
-        )
+        gz = metrics.name == COMPRESSED_METRICS
+        data = metrics.read_bytes() if gz else compressed_metrics(metrics)
         # the summary last, each file whole: an interrupted copy is redone next time
         write_bytes(target / COMPRESSED_METRICS, data)
         write_bytes(target / CONFIG, (run_dir / CONFIG).read_bytes())
         write_bytes(target / SUMMARY, (run_dir / SUMMARY).read_bytes())
-        report.added.append(target.name)
+        report.added.append(name)
     return report
 
 
-def _run_of(run_dir: Path) -> dict:
-    """What makes a run the run it is: its config without its length."""
-    run = dict(read_json(run_dir / CONFIG, DAMAGED_CONFIG)["run"])
-    run.pop("interactions", None)
-    return run
+def _identity(run_dir: Path) -> dict[str, Any]:
+    """What makes a run the run it is: its config in today's layout, without its length."""
+    run = RunConfig.from_dict(read_json(run_dir / CONFIG, DAMAGED_CONFIG, "run")["run"]).to_dict()
+    run.pop("interactions")
+    return json.loads(json.dumps(run))
+
+
+def _length(run_dir: Path) -> int:
+    return int(read_json(run_dir / SUMMARY, DAMAGED_SUMMARY, "interactions")["interactions"])
+
+
+def _check_same_run(name: str, there: Path, ident: dict, run_dir: Path, mine: dict) -> None:
+    if ident != mine:
+        raise ConfigError(
+            f"{there} holds a different run named {name} (its config.json differs from "
+            f"{run_dir}'s beyond its length); remove one of them first"
+        )

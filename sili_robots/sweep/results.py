@@ -61,7 +61,7 @@ def run_dirs(sweep_dir: Path) -> list[Path]:
 
 
 def _identity(run_dir: Path) -> tuple[dict, dict]:
-    cfg = migrate_run(read_json(run_dir / CONFIG, DAMAGED_CONFIG)["run"])
+    cfg = migrate_run(read_json(run_dir / CONFIG, DAMAGED_CONFIG, "run")["run"])
     agent = cfg["agent"]
     beta = agent.get("sili", {}).get("beta", 0.5)
     scheduled = isinstance(beta, dict)
@@ -122,13 +122,9 @@ def runs_table(sweep_dir: Path) -> pd.DataFrame:
             logged = len(pd.read_csv(path, usecols=["interaction"]))
         row = {**ident, "interactions": int(cfg["interactions"]), "interactions_logged": logged}
         if summary_path.is_file():
-            summary = read_json(summary_path, DAMAGED_SUMMARY)
-            row.update(
-                status="done",
-                final_task_reward=summary["final_task_reward"],
-                final_stability=summary["final_stability"],
-                wall_time_s=summary["wall_time_s"],
-            )
+            keys = ("final_task_reward", "final_stability", "wall_time_s")
+            summary = read_json(summary_path, DAMAGED_SUMMARY, *keys)
+            row.update(status="done", **{k: summary[k] for k in keys})
         elif error_path.is_file():
             text = error_path.read_text().strip().splitlines()
             row.update(status="failed", error=text[-1] if text else "")

@@ -89,7 +89,7 @@ def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
     path = run_path(sweep_dir, planned.name) / CONFIG
     if not path.is_file():
         return
-    raw = read_json(path, DAMAGED_CONFIG)["run"]
+    raw = read_json(path, DAMAGED_CONFIG, "run")["run"]
     try:  # through RunConfig, so settings added to the package since get their defaults
         on_disk = RunConfig.from_dict(raw).to_dict()
     except (ConfigError, TypeError, KeyError):
@@ -107,7 +107,7 @@ def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
 def record_invocation(sweep_dir: Path, spec: SweepSpec) -> None:
     """Append ``spec`` to ``sweep.json`` unless the same spec is already there."""
     path = Path(sweep_dir) / SWEEP_FILE
-    data = read_json(path, DAMAGED_SWEEP) if path.is_file() else {"invocations": []}
+    data = read_json(path, DAMAGED_SWEEP, "invocations") if path.is_file() else {"invocations": []}
     entry = json.loads(json.dumps(spec.to_dict()))
     if entry not in data["invocations"]:
         data["invocations"].append(entry)
@@ -121,7 +121,9 @@ def recorded_specs(sweep_dir: Path) -> list[SweepSpec]:
             f"{sweep_dir} is not a sweep directory (no {SWEEP_FILE}); give a directory written "
             "by `sili sweep --out`"
         )
-    return [SweepSpec.from_dict(d) for d in read_json(path, DAMAGED_SWEEP)["invocations"]]
+    return [
+        SweepSpec.from_dict(d) for d in read_json(path, DAMAGED_SWEEP, "invocations")["invocations"]
+    ]
 
 
 @contextlib.contextmanager
