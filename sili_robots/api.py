@@ -16,6 +16,7 @@ the agent the interaction just played, from which it infers z^{j+1}.
 
 from __future__ import annotations
 
+import os
 import shutil
 import tempfile
 import weakref
@@ -101,9 +102,11 @@ class SILI:
             env_kwargs=env_kwargs,
             checkpoint_every=checkpoint_every,
         )
-        if run_dir is None:  # removed with the model; save() keeps a copy
+        if run_dir is None:  # removed with the model, unless saved or loaded where it is
             run_dir = tempfile.mkdtemp(prefix="sili-run-")
-            weakref.finalize(self, shutil.rmtree, run_dir, ignore_errors=True)
+            _TEMPORARY[Path(run_dir).resolve()] = weakref.finalize(
+                self, _remove_temporary, Path(run_dir), os.getpid()
+            )
         self.run_dir = Path(run_dir)
         self.cfg = cfg
         self._setup(None)
@@ -127,6 +130,7 @@ class SILI:
         """A model saved by ``save`` or a run directory of ``sili train``; ``env``: the task
         instance for a run of a user's task class that cannot be imported by name."""
         path = Path(path)
+        _keep_temporary(path)  # another model's temporary run, now the user's to keep
         cfg = read_run_config(path)
         state = load_checkpoint(path)
         if state is None:
@@ -168,6 +172,7 @@ class SILI:
         self._check_trained("save")
         if path.exists() and not path.is_dir():
             raise ConfigError(f"cannot save to {path}: it is a file; give a directory")
+        _keep_temporary(path)
         if path.resolve() != self.run_dir.resolve():
             path.mkdir(parents=True, exist_ok=True)
             for name in (CONFIG, METRICS, CHECKPOINT, SUMMARY, COMPRESSED_METRICS):
@@ -201,6 +206,23 @@ class SILI:
     @property
     def config(self) -> RunConfig:
         return self.cfg
+
+
+#: temporary run directories of live models, removed with their model
+_TEMPORARY: dict[Path, weakref.finalize] = {}
+
+
+def _remove_temporary(path: Path, owner: int) -> None:
+    _TEMPORARY.pop(path.resolve(), None)
+    if os.getpid() == owner:  # not a forked child's copy of the model
+        shutil.rmtree(path, ignore_errors=True)
+
+
+def _keep_temporary(path: Path) -> None:
+    """A temporary run saved or loaded where it is stays after its model."""
+    finalizer = _TEMPORARY.pop(Path(path).resolve(), None)
+    if finalizer is not None:
+        finalizer.detach()
 
 
 def _check_count(interactions: Any) -> None:

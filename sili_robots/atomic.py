@@ -27,10 +27,12 @@ def replacing(path: Path, shared: bool = False) -> Iterator[Path]:
 
 
 def write_text(path: Path, text: str, shared: bool = False) -> None:
+    """``path`` replaced whole by ``text`` (``replacing``)."""
     with replacing(path, shared) as tmp:
         tmp.write_text(text)
 
 
 def write_bytes(path: Path, data: bytes, shared: bool = False) -> None:
+    """``path`` replaced whole by ``data`` (``replacing``)."""
     with replacing(path, shared) as tmp:
         tmp.write_bytes(data)

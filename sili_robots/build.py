@@ -88,20 +88,30 @@ def task_kwargs_of(env: gym.Env) -> dict[str, Any]:
             f"cannot record the arguments {type(task).__name__} was built with (its constructor "
             "takes *args); give its arguments by name"
         )
-    spec = env.spec if env.spec is not None else task.spec
-    registered = gym.spec(spec.id).kwargs if spec is not None else {}
+    registered: dict[str, Any] = {}
+    if not is_class_path(task_name_of(env)):  # rebuilt from this package's registered version
+        spec = env.spec if env.spec is not None else task.spec
+        registered = {k: _as_json(k, v) for k, v in gym.spec(spec.id).kwargs.items()}
     missing = object()
-    kwargs = {k: v for k, v in given.items() if registered.get(k, missing) != v}
-    kwargs = {k: v.item() if isinstance(v, np.generic) else v for k, v in kwargs.items()}
-    for name, value in kwargs.items():
-        try:
-            json.dumps(value)
-        except (TypeError, ValueError):
-            raise ConfigError(
-                f"task argument {name}={value!r} cannot be recorded in config.json; allowed: "
-                "numbers, strings, booleans, None and lists or dicts of them"
-            ) from None
-    return kwargs
+    kwargs = {k: _as_json(k, v) for k, v in given.items()}
+    return {k: v for k, v in kwargs.items() if registered.get(k, missing) != v}
+
+
+def _as_json(name: str, value: Any) -> Any:
+    """A task argument as config.json records it (arrays as lists), or ConfigError."""
+
+    def plain(obj: Any) -> Any:
+        if isinstance(obj, (np.ndarray, np.generic)):
+            return obj.tolist()
+        raise TypeError(type(obj).__name__)
+
+    try:
+        return json.loads(json.dumps(value, default=plain))
+    except (TypeError, ValueError):
+        raise ConfigError(
+            f"task argument {name}={value!r} cannot be recorded in config.json; allowed: "
+            "numbers, strings, booleans, None, arrays and lists or dicts of them"
+        ) from None
 
 
 def default_profile(task: str, method: str) -> str:

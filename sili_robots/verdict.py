@@ -51,9 +51,9 @@ def verdict(run_dir: Path, window: int = 50) -> str:
     name = METHOD_NAMES.get(cfg.method, cfg.method)
     kept = f"kept its strategy in {stability:.0%} of its last {len(tail)} interactions"
     if len(tail) < window:  # its first interactions say little: z^1 is kept by any policy
-        kept = f"kept its strategy in {stability:.0%} of them"
         line = f"{name} ran {len(tail)} interactions, too few to tell whether it holds the opponent"
-        line += f" (the verdict reads the last {window}): it {kept}"
+        line += f" (the verdict reads the last {window}): the opponent kept its strategy in "
+        line += f"{stability:.0%} of them"
         if still:
             line += f" (standing still: {still['stability']:.0%})"
     else:

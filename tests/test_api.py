@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import gc
 import json
+import shutil
 import sys
 
 import numpy as np
@@ -16,6 +17,7 @@ from sili_robots.build import task_class
 from sili_robots.cli import main
 from sili_robots.errors import ConfigError
 from sili_robots.examples.two_doors import TwoDoorsEnv
+from sili_robots.tasks import make_task
 
 TWO_DOORS = "sili_robots.examples.two_doors:TwoDoorsEnv"
 
@@ -113,6 +115,14 @@ def test_a_task_instance_is_recorded_with_its_arguments_and_rebuilt_with_them(tm
         SILI(TwoDoorsEnv(horizon=6), env_kwargs={"horizon": 7})
     numpy_horizon = SILI(TwoDoorsEnv(horizon=np.int64(6)), method="sac", settings=FAST_AGENT)
     assert type(numpy_horizon.cfg.env_kwargs["horizon"]) is int  # recorded as JSON can
+    speaker = make_task("speaker-listener", speaker=np.array([0.3, -0.8]))
+    assert SILI(speaker, method="sac").cfg.env_kwargs == {"speaker": [0.3, -0.8]}
+    gym.register("test/Doors-v0", entry_point=TWO_DOORS, kwargs={"horizon": 7})
+    try:  # a version registered elsewhere is rebuilt from its class: with all its arguments
+        mine = SILI(gym.make("test/Doors-v0"), method="sac", settings=FAST_AGENT)
+        assert (mine.cfg.task, mine.cfg.env_kwargs) == (TWO_DOORS, {"horizon": 7})
+    finally:
+        del gym.registry["test/Doors-v0"]
 
     class LabelledDoors(TwoDoorsEnv):
         def __init__(self, horizon: int = 20, label: object = None) -> None:
@@ -171,3 +181,16 @@ def test_a_task_module_in_the_current_directory_trains_and_a_scripts_class_is_ex
     )
     with pytest.raises(ConfigError, match=r"a class defined in a script loads only in that scr"):
         task_class("__main__:Doors")
+
+
+def test_a_temporary_run_stays_when_saved_or_loaded_where_it_is():
+    kept = []
+    for keep in (lambda m: m.save(m.run_dir), lambda m: SILI.load(m.run_dir)):
+        model = SILI("circle-3", method="sac", settings=FAST_AGENT).learn(1)
+        run_dir, still_used = model.run_dir, keep(model)
+        del model
+        gc.collect()
+        assert (run_dir / "checkpoint.pt").is_file(), still_used
+        kept.append(run_dir)
+    for run_dir in kept:
+        shutil.rmtree(run_dir)

@@ -20,7 +20,7 @@ def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys
     last = printed.err.strip().splitlines()[-1]
     assert last.startswith(
         "SILI ran 4 interactions, too few to tell whether it holds the opponent (the verdict "
-        "reads the last 50): it kept its strategy in "
+        "reads the last 50): the opponent kept its strategy in "
     )
     assert "of them (standing still: 0%) and earned" in last and "standing still: -50.0" in last
     assert "the scripted stabilizing policy that sees z: -4.0" in last

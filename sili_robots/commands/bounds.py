@@ -80,12 +80,13 @@ def run(args: argparse.Namespace) -> int:
 
     if args.write:
         writable_file(Path(args.write), "--write")  # before minutes of games, not after
-        _check_packaged_counts(args)
     if args.all == (args.task is not None):
         raise ConfigError("give either a TASK (e.g. circle-3) or --all, not both or neither")
     specs = all_versions() if args.all else [task_spec(args.task)]
     for spec in specs:  # the counts checked before anything runs
         check_counts(args.interactions or default_interactions(spec.name), args.games)
+    if args.write:
+        _check_packaged_counts(args, [default_interactions(s.name) for s in specs])
     results = []
     for spec in specs:
         result = compute_bounds(spec.gym_id, args.interactions, args.seed, args.games)
@@ -99,9 +100,10 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _check_packaged_counts(args: argparse.Namespace) -> None:
-    """The packaged file holds every task at the default counts, the lines `sili plot` draws;
-    an estimate at other counts goes to a file of its own."""
+def _check_packaged_counts(args: argparse.Namespace, defaults: list[int]) -> None:
+    """The packaged file holds every task at the default counts (``defaults``: the tasks'
+    interactions), the lines `sili plot` draws; an estimate at other counts goes to a file of
+    its own."""
     from sili_robots.bounds import BOUNDS_FILE, DEFAULT_SEED
 
     if Path(args.write).resolve() != BOUNDS_FILE:
@@ -109,12 +111,13 @@ def _check_packaged_counts(args: argparse.Namespace) -> None:
     given = [
         f"{flag} {value}"
         for flag, value, default in (
-            ("--interactions", args.interactions, None),
             ("--games", args.games, None),
             ("--seed", args.seed, DEFAULT_SEED),
         )
         if value != default
     ]
+    if args.interactions is not None and {int(args.interactions)} != set(defaults):
+        given.insert(0, f"--interactions {args.interactions}")
     if given:
         raise ConfigError(
             f"the packaged bounds ({BOUNDS_FILE}) are measured at the default counts, which "

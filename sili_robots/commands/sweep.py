@@ -23,6 +23,7 @@ from sili_robots.errors import ConfigError
 from sili_robots.sweep.spec import (
     SWEEP_SCHEDULES,
     SweepSpec,
+    check_task_arguments,
     parse_betas,
     parse_list,
     parse_seeds,
@@ -117,7 +118,7 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
             f"the sweep ({', '.join(methods)}); the others fix latent = 'none'"
         )
     schedules = schedule_args(args)
-    return SweepSpec(
+    spec = SweepSpec(
         tasks=parse_list(args.tasks),
         methods=methods,
         seeds=parse_seeds(args.seeds),
@@ -135,6 +136,8 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
         env_kwargs=parse_env_kwargs(args.env_kwarg, "--env-kwarg"),
         checkpoint_every=args.checkpoint_every,
     )
+    check_task_arguments(spec)  # new sweeps only, as --latent above
+    return spec
 
 
 def _specs_and_dir(args: argparse.Namespace) -> tuple[list[SweepSpec], Path]:

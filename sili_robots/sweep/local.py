@@ -60,6 +60,7 @@ def _child(job: Job, conn: Connection, alive: Connection) -> None:
     """Entry point of a worker process."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the sweep's to handle
     signal.signal(signal.SIGTERM, _raise_exit)  # run `finally` blocks (closes simulators)
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)  # a hangup too: the sweep stops its workers
     _exit_when_orphaned(alive)
     limit_threads()
     outcome = run_job(job)

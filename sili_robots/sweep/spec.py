@@ -186,6 +186,18 @@ def task_accepts(task: str, kwarg: str) -> bool:
     return kwarg in task_arguments(task)
 
 
+def check_task_arguments(spec: SweepSpec) -> None:
+    """Every task of a new sweep takes every ``--env-kwarg`` by name (a recorded sweep resumes as
+    it ran: such runs fail one by one)."""
+    for task in spec.tasks:
+        unknown = [k for k in spec.env_kwargs if not task_accepts(task, k)]
+        if unknown:
+            raise ConfigError(
+                f"task {task!r} takes no argument {', '.join(unknown)} (--env-kwarg); its "
+                f"arguments: {', '.join(task_arguments(task))}"
+            )
+
+
 def format_beta(beta: float) -> str:
     return f"{beta:g}"
 
@@ -238,8 +250,8 @@ def schedule_overrides(spec: SweepSpec, method: str) -> dict[str, Any]:
 
 
 def validate(spec: SweepSpec) -> None:
-    """Reject bad axes up front with the allowed values. A task argument every task must take is
-    checked by name here; its value when a run builds its task, so a bad one fails that run."""
+    """Reject bad axes up front with the allowed values (tasks' own arguments are checked when a
+    run builds its task, so a bad one fails that run only)."""
     if not spec.tasks:
         raise ConfigError(f"no tasks given; allowed: {', '.join(TASKS)}")
     if not spec.methods:
@@ -276,13 +288,6 @@ def validate(spec: SweepSpec) -> None:
             raise ConfigError(f"give one of --set {given[path]} and {option}, not both")
     if "controller" in spec.env_kwargs:
         raise ConfigError("give controllers with --controller, not as a task argument")
-    for task in spec.tasks:
-        unknown = [k for k in spec.env_kwargs if not task_accepts(task, k)]
-        if unknown:
-            raise ConfigError(
-                f"task {task!r} takes no argument {', '.join(unknown)} (--env-kwarg); its "
-                f"arguments: {', '.join(task_arguments(task))}"
-            )
     for option, given in (("--beta", spec.betas), ("--beta-schedule", spec.beta_schedule)):
         if given is not None and not set(spec.methods) & set(BETA_METHODS):
             raise ConfigError(
