@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 
+from sili_robots.agent.matmul import machine_key
 from sili_robots.tasks.driving import DrivingEnv
 
 
@@ -54,6 +55,7 @@ def main() -> None:
     parser.add_argument("--interactions", type=int, default=100)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
+    print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
     results = {b: run(b, args.interactions, args.seed) for b in ("libsumo", "traci")}
     if results["libsumo"]["returns"] != results["traci"]["returns"]:
         raise SystemExit("libsumo and TraCI runs differ: not the same scenario")

@@ -15,6 +15,7 @@ import gymnasium as gym
 import numpy as np
 
 import sili_robots  # noqa: F401  (registers the tasks)
+from sili_robots.agent.matmul import machine_key
 from sili_robots.tasks import TASKS
 
 
@@ -52,6 +53,7 @@ def main() -> None:
     p.add_argument("--steps", type=int, default=20_000)
     p.add_argument("--num-envs", type=int, default=4)
     args = p.parse_args()
+    print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
     ids = [("Pendulum-v1 (reference)", "Pendulum-v1")]
     ids += [
         (name, spec.gym_id)

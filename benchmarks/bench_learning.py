@@ -28,6 +28,7 @@ import numpy as np
 import pandas as pd
 
 from sili_robots.diagnostics import latent_diagnostics
+from sili_robots.sweep.results import metrics_file
 
 
 def run_one(task: str, method: str, seed: int, args: argparse.Namespace) -> Path:
@@ -69,7 +70,7 @@ def table(run_dirs: list[Path], window: int) -> pd.DataFrame:
     for d in run_dirs:
         cfg = json.loads((d / "config.json").read_text())["run"]
         summary = json.loads((d / "summary.json").read_text())
-        df = pd.read_csv(d / "metrics.csv")
+        df = pd.read_csv(metrics_file(d))  # metrics.csv, or a collected run's .csv.gz
         rows.append(
             {
                 "task": cfg["task"],

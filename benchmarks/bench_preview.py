@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 from tempfile import TemporaryDirectory
 
+from sili_robots.agent.matmul import machine_key
 from sili_robots.policies import scripted_policy
 from sili_robots.preview import Browser, Preview, make_env_and_policy
 from sili_robots.rollout import run_interactions
@@ -75,6 +76,7 @@ def main() -> None:
     parser.add_argument("--tasks", nargs="*", default=sorted(TASKS))
     parser.add_argument("--docs", type=Path, default=None)
     args = parser.parse_args()
+    print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
     t0 = time.perf_counter()
     browser = Browser().start()
     startup = time.perf_counter() - t0

@@ -23,6 +23,8 @@ import time
 
 import numpy as np
 
+from sili_robots.agent.matmul import machine_key
+
 CONFIGS = {
     "continuous": {"latent": "continuous", "latent_last_step": True},
     "filter": {"latent": "discrete", "latent_last_step": True, "latent_filter": 0.1},
@@ -85,6 +87,7 @@ def main() -> None:
     p.add_argument("--configs", default="continuous,filter")
     p.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     args = p.parse_args()
+    print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
     if args.child:
         config, padded, n = args.child
         print(json.dumps(measure(config, padded == "1", int(n))))

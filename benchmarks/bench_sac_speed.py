@@ -279,6 +279,8 @@ def main() -> None:
         "kernels), e.g. model.updates_per_interaction=20; repeatable",
     )
     args = p.parse_args()
+    if args.interactions < 7:  # 5 random interactions, then at least 2 learning ones to time
+        p.error(f"--interactions {args.interactions}: need at least 7")
     torch.set_num_threads(args.threads)
     if args.matmul_only:
         matmul_only()

@@ -24,6 +24,7 @@ import time
 
 import numpy as np
 
+from sili_robots.agent.matmul import machine_key
 from sili_robots.controllers import CONTROLLER_NAMES
 from sili_robots.tasks import make_task
 from sili_robots.tasks.sawyer_reach import RISE_MARGIN, action_toward
@@ -80,6 +81,7 @@ def main() -> None:
     parser.add_argument("--extra", type=int, default=14, help="random workspace targets")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
+    print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
     points = targets(args.extra, args.seed)
     n = len(points)
     print(f"{n} targets, H = 50 steps of 50 ms; success = within {REACHED * 100:.0f} cm at the end")

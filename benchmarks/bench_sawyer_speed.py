@@ -26,9 +26,10 @@ from collections.abc import Callable
 import mujoco
 import numpy as np
 
+from sili_robots.agent.matmul import machine_key
 from sili_robots.controllers import CONTROLLER_NAMES
 from sili_robots.controllers.robosuite_logging import quiet_robosuite_import
-from sili_robots.tasks import make_task
+from sili_robots.tasks import make_task, task_spec
 from sili_robots.tasks.sawyer_scene import N_SUBSTEPS, SawyerScene
 
 Block = Callable[[int], None]
@@ -76,8 +77,11 @@ def raw_block(model: mujoco.MjModel, data: mujoco.MjData) -> Block:
     return block
 
 
+TASK_ID = task_spec("sawyer-reach").gym_id  # the current version, named in the output
+
+
 def ours_block(controller: str, seed: int) -> tuple[Block, float]:
-    env = make_task("sawyer-reach", controller=controller)
+    env = make_task(TASK_ID, controller=controller)
     env.reset(seed=seed)
     env.action_space.seed(seed)
     t0 = time.perf_counter()
@@ -101,6 +105,7 @@ def main() -> None:
     parser.add_argument("--block", type=int, default=300, help="steps per timed block")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
+    print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
 
     lift, lift_raw, lift_reset = lift_blocks(args.seed)
     resets = {"robosuite Lift": lift_reset}
@@ -113,7 +118,7 @@ def main() -> None:
     for name in CONTROLLER_NAMES:
         steps = args.block // 3 if name == "osc" else args.block
         block, resets[f"SawyerReach {name}"] = ours_block(name, args.seed)
-        entries.append((f"sili/SawyerReach-v0, controller={name}", block, steps))
+        entries.append((f"{TASK_ID}, controller={name}", block, steps))
     entries.append(
         ("raw mj_step x25, Sawyer-Reach scene", raw_block(scene.model, scene.data), args.block)
     )

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from sili_robots.agent.matmul import machine_key
 from sili_robots.sweep import LocalBackend, NullMonitor, RayBackend, SweepSpec, run_sweep
 
 FAST = {
@@ -55,6 +56,7 @@ def main() -> None:
     ap.add_argument("--interactions", type=int, default=10)
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
+    print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
     backends = {
         "local spawn (reference)": LocalBackend(args.workers, start_method="spawn"),
         "local forkserver (default)": LocalBackend(args.workers),

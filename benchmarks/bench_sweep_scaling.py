@@ -3,7 +3,8 @@
 Each worker is a process with one torch thread, so on a 2-core machine two workers should train
 nearly twice the interactions per second of one; what falls short is the cores' shared caches
 and memory bandwidth. The runs are the default SILI agent on Circle (3 Goals), a few random
-interactions first, then learning ones, as a real sweep's runs are.
+interactions first, then learning ones, as a real sweep's runs are. The worker launcher starts
+once before timing, and each arm runs twice, in both orders (1, 2, 2, 1 workers).
 
     python benchmarks/bench_sweep_scaling.py [--runs 2] [--interactions 30]
 """
@@ -40,12 +41,19 @@ def main() -> None:
     args = ap.parse_args()
     model, flags, *_ = machine_key().split(" | ")
     print(f"machine: {model}; {flags}")
+    rates: dict[int, list[float]] = {1: [], 2: []}
     with tempfile.TemporaryDirectory() as tmp:
-        one = rate(1, args.runs, args.interactions, Path(tmp) / "one")
-        two = rate(2, args.runs, args.interactions, Path(tmp) / "two")
+        # untimed: the process that starts workers (preloading torch) starts once, for both
+        rate(1, 1, 1, Path(tmp) / "warm-up")
+        for i, workers in enumerate((1, 2, 2, 1)):  # each order once: drift cancels
+            rates[workers].append(rate(workers, args.runs, args.interactions, Path(tmp) / str(i)))
+    one, two = (sum(r) / len(r) for r in (rates[1], rates[2]))
     print(f"{args.runs} SILI runs x {args.interactions} interactions (circle-3, default agent)")
-    print(f"1 worker:  {one:.3f} interactions/s")
-    print(f"2 workers: {two:.3f} interactions/s, {two / one:.2f}x one worker")
+    print(f"1 worker:  {one:.3f} interactions/s (mean of {rates[1][0]:.3f}, {rates[1][1]:.3f})")
+    print(
+        f"2 workers: {two:.3f} interactions/s (mean of {rates[2][0]:.3f}, {rates[2][1]:.3f}), "
+        f"{two / one:.2f}x one worker"
+    )
 
 
 if __name__ == "__main__":
