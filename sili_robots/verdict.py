@@ -9,7 +9,7 @@ import pandas as pd
 
 from sili_robots.bounds import stored_bounds
 from sili_robots.labels import METHOD_NAMES
-from sili_robots.runs import METRICS, read_config
+from sili_robots.runs import METRICS, RunConfig, read_config
 
 HOLDS = 0.9  # the stability a run needs to count as holding the opponent
 
@@ -20,6 +20,12 @@ def _last(run_dir: Path, window: int) -> pd.DataFrame:
 
 def _stability(tail: pd.DataFrame) -> float:
     return 1.0 - float(tail["strategy_changed"].mean())
+
+
+def _references(cfg: RunConfig) -> dict[str, dict[str, float]]:
+    """The scripted references of the run's task version, stored for its default arguments
+    (none for a run given others, e.g. another controller)."""
+    return {} if cfg.env_kwargs else stored_bounds(cfg.task_id)
 
 
 def held(run_dir: Path, window: int = 50) -> bool:
@@ -33,7 +39,7 @@ def worked(run_dir: Path, window: int = 50) -> bool:
     """Held the opponent and earned more per interaction than standing still: a run can hold by
     parking away from the goal, which shows stability but not the method's trade-off."""
     tail = _last(run_dir, window)
-    still = stored_bounds(read_config(run_dir).task_id).get("still")
+    still = _references(read_config(run_dir)).get("still")
     beat_still = still is None or float(tail["task_reward"].mean()) > still["task_reward"]
     return held(run_dir, window) and beat_still
 
@@ -46,7 +52,7 @@ def verdict(run_dir: Path, window: int = 50) -> str:
     tail = _last(run_dir, window)
     stability = _stability(tail)
     reward = float(tail["task_reward"].mean())
-    bounds = stored_bounds(cfg.task_id)
+    bounds = _references(cfg)
     still, stab = bounds.get("still"), bounds.get("stabilizing")
     name = METHOD_NAMES.get(cfg.method, cfg.method)
     kept = f"kept its strategy in {stability:.0%} of its last {len(tail)} interactions"

@@ -43,3 +43,14 @@ def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys
     metrics["task_reward"] = -55.3  # held by parking away from the goal: below standing still
     metrics.to_csv(run / "metrics.csv", index=False)
     assert held(run, window=3) and not worked(run, window=3)
+
+
+def test_a_run_with_other_task_arguments_is_not_read_against_the_defaults_references(tmp_path):
+    run = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--interactions", "4", "--out", str(run)]
+    assert main([*args, "--env-kwarg", "outside_margin=0.5", *FAST_ARGS, "--no-progress"]) == 0
+    metrics = pd.read_csv(run / "metrics.csv").assign(strategy_changed=0, task_reward=-60.0)
+    metrics.to_csv(run / "metrics.csv", index=False)
+    line = verdict(run, window=4)
+    assert "standing still" not in line and "stabilizing" not in line
+    assert worked(run, window=4)  # no stored standing-still reward to fall below
