@@ -45,8 +45,8 @@ from sili_robots.runs import (
     METRICS,
     SUMMARY,
     RunConfig,
-    check_resumable,
     load_checkpoint,
+    require_checkpoint,
 )
 from sili_robots.runs import read_config as read_run_config
 from sili_robots.tasks import RepeatedInteractionEnv
@@ -132,10 +132,7 @@ class SILI:
         path = Path(path)
         _keep_temporary(path)  # another model's temporary run, now the user's to keep
         cfg = read_run_config(path)
-        state = load_checkpoint(path)
-        if state is None:
-            check_resumable(path)  # a run kept without its checkpoint says so
-            raise ConfigError(f"{path} has no checkpoint yet ({CHECKPOINT}); train it first")
+        state = require_checkpoint(path)
         model = cls.__new__(cls)
         model.cfg, model.run_dir, model._task_env = cfg, path, env
         model._setup(state)

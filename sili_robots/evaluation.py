@@ -15,9 +15,8 @@ import numpy as np
 
 from sili_robots.agent import SILIAgent
 from sili_robots.build import build_agent, make_run_env, observed_as
-from sili_robots.errors import ConfigError
 from sili_robots.rollout import run_interactions
-from sili_robots.runs import RunConfig, check_resumable, load_checkpoint, read_config
+from sili_robots.runs import RunConfig, read_config, require_checkpoint
 from sili_robots.tasks.base import resume_game
 
 
@@ -75,10 +74,7 @@ def load_trained(
     """Rebuild a run's env (or observe ``task_env``, the task instance) and agent from its config
     and last checkpoint."""
     cfg = read_config(run_dir)
-    state = load_checkpoint(run_dir)
-    if state is None:
-        check_resumable(run_dir)  # a run kept without its checkpoint says so
-        raise ConfigError(f"{run_dir} has no checkpoint yet (no checkpoint.pt); train it first")
+    state = require_checkpoint(run_dir)
     env = make_run_env(cfg) if task_env is None else observed_as(task_env, cfg)
     agent = build_agent(cfg, env)
     agent.load_state_dict(state["agent"])

@@ -230,6 +230,26 @@ def check_resumable(run_dir: Path) -> None:
         )
 
 
+def require_checkpoint(run_dir: Path) -> dict[str, Any]:
+    """The last checkpoint, or ConfigError saying why there is none."""
+    state = load_checkpoint(run_dir)
+    if state is None:
+        check_resumable(run_dir)  # a run kept without its checkpoint says so
+        raise ConfigError(f"{run_dir} has no checkpoint yet (no {CHECKPOINT}); train it first")
+    return state
+
+
+def recorded_run(run_dir: Path) -> dict[str, Any]:
+    """A run's recorded config (config.json's "run") in today's layout, as JSON compares it:
+    settings added since get their defaults; as recorded when it no longer reads."""
+    raw = read_json(Path(run_dir) / CONFIG, DAMAGED_CONFIG, "run")["run"]
+    try:
+        run = RunConfig.from_dict(raw).to_dict()
+    except (ConfigError, TypeError, KeyError):
+        run = raw
+    return json.loads(json.dumps(run))
+
+
 def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
     """The last checkpoint (in today's layout), or None before the first."""
     path = Path(run_dir) / CHECKPOINT

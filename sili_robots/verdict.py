@@ -31,7 +31,10 @@ def _references(cfg: RunConfig) -> dict[str, dict[str, float]]:
 def held(run_dir: Path, window: int = 50) -> bool:
     """Whether the opponent kept its strategy in at least 90% of the run's last ``window``
     interactions (a run shorter than that has not shown it)."""
-    tail = _last(run_dir, window)
+    return _held(_last(run_dir, window), window)
+
+
+def _held(tail: pd.DataFrame, window: int) -> bool:
     return len(tail) == window and _stability(tail) >= HOLDS
 
 
@@ -41,7 +44,7 @@ def worked(run_dir: Path, window: int = 50) -> bool:
     tail = _last(run_dir, window)
     still = _references(read_config(run_dir)).get("still")
     beat_still = still is None or float(tail["task_reward"].mean()) > still["task_reward"]
-    return held(run_dir, window) and beat_still
+    return _held(tail, window) and beat_still
 
 
 def verdict(run_dir: Path, window: int = 50) -> str:

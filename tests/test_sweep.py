@@ -315,16 +315,19 @@ def _alive(pid):
         return f.read().split(")")[-1].split()[0] != "Z"
 
 
-def test_workers_stop_when_the_sweep_process_is_killed(tmp_path):
+def _long_sweep(tmp_path, **popen_kwargs):
+    """A one-run sweep of 5,000 interactions in its own process, and its run's directory."""
     out = tmp_path / "sweep"
     args = ["--tasks", "circle-3", "--methods", "sac", "--seeds", "0", "--interactions", 5000]
     args += [*FAST_ARGS, "--no-progress", "--out", out]
     proc = subprocess.Popen(
-        [sys.executable, "-m", "sili_robots.cli", "sweep", *map(str, args)],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
+        [sys.executable, "-m", "sili_robots.cli", "sweep", *map(str, args)], **popen_kwargs
     )
-    run_dir = out / "runs" / "circle-3__sac__s0"
+    return proc, out / "runs" / "circle-3__sac__s0"
+
+
+def test_workers_stop_when_the_sweep_process_is_killed(tmp_path):
+    proc, run_dir = _long_sweep(tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         assert _wait_for(lambda: _rows(run_dir / "metrics.csv") >= 5)
         pid = json.loads((run_dir / "worker.json").read_text())["pid"]
@@ -339,16 +342,8 @@ def test_workers_stop_when_the_sweep_process_is_killed(tmp_path):
 def test_sigterm_stops_a_sweep_as_ctrl_c_does(tmp_path):
     """`timeout`, a job scheduler or `kill`: the workers stop, the tables and the report are
     written, the exit code says which signal."""
-    out = tmp_path / "sweep"
-    args = ["--tasks", "circle-3", "--methods", "sac", "--seeds", "0", "--interactions", 5000]
-    args += [*FAST_ARGS, "--no-progress", "--out", out]
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "sili_robots.cli", "sweep", *map(str, args)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    run_dir = out / "runs" / "circle-3__sac__s0"
+    proc, run_dir = _long_sweep(tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    out = run_dir.parents[1]
     try:
         assert _wait_for(lambda: _rows(run_dir / "metrics.csv") >= 5)
         pid = json.loads((run_dir / "worker.json").read_text())["pid"]

@@ -13,7 +13,6 @@ float32 the agent computes), so collecting the same run twice gives the same byt
 from __future__ import annotations
 
 import gzip
-import json
 from collections.abc import Collection
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,11 +25,10 @@ from sili_robots.errors import ConfigError
 from sili_robots.runs import (
     COMPRESSED_METRICS,
     CONFIG,
-    DAMAGED_CONFIG,
     DAMAGED_SUMMARY,
     SUMMARY,
-    RunConfig,
     read_json,
+    recorded_run,
 )
 from sili_robots.sweep.results import metrics_file, run_dirs
 from sili_robots.sweep.state import RUNS_DIR
@@ -103,9 +101,9 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
 
 def _identity(run_dir: Path) -> dict[str, Any]:
     """What makes a run the run it is: its config in today's layout, without its length."""
-    run = RunConfig.from_dict(read_json(run_dir / CONFIG, DAMAGED_CONFIG, "run")["run"]).to_dict()
+    run = recorded_run(run_dir)
     run.pop("interactions")
-    return json.loads(json.dumps(run))
+    return run
 
 
 def _length(run_dir: Path) -> int:

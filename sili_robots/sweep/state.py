@@ -25,7 +25,7 @@ from typing import Any, Literal
 
 from sili_robots.atomic import write_text
 from sili_robots.errors import ConfigError
-from sili_robots.runs import CHECKPOINT, CONFIG, DAMAGED_CONFIG, SUMMARY, RunConfig, read_json
+from sili_robots.runs import CHECKPOINT, CONFIG, SUMMARY, read_json, recorded_run
 from sili_robots.sweep.spec import PlannedRun, SweepSpec
 
 SWEEP_FILE, RUNS_DIR, RESULTS, RUNS_TABLE, LOCK = (
@@ -86,16 +86,10 @@ def _diff(a: Any, b: Any, prefix: str = "") -> list[str]:
 
 def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
     """An existing run directory must hold the same run (else resuming it would mix two)."""
-    path = run_path(sweep_dir, planned.name) / CONFIG
-    if not path.is_file():
+    path = run_path(sweep_dir, planned.name)
+    if not (path / CONFIG).is_file():
         return
-    raw = read_json(path, DAMAGED_CONFIG, "run")["run"]
-    try:  # through RunConfig, so settings added to the package since get their defaults
-        on_disk = RunConfig.from_dict(raw).to_dict()
-    except (ConfigError, TypeError, KeyError):
-        on_disk = raw
-    on_disk = json.loads(json.dumps(on_disk))
-    diffs = _diff(on_disk, json.loads(json.dumps(planned.config.to_dict())))
+    diffs = _diff(recorded_run(path), json.loads(json.dumps(planned.config.to_dict())))
     if diffs:
         raise ConfigError(
             f"run {planned.name} in {sweep_dir} was made with other settings ("
