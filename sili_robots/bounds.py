@@ -12,10 +12,10 @@ game's first (the one without a previous interaction to learn from or to compare
   boundary or within the interaction), as ``sili rollout`` reports it.
 
 Starting the games from every strategy in turn averages exactly over the first strategy, which a
-stabilizing policy then keeps (on Circle (8 Goals) a location on an axis costs about 1 more per
-interaction than a diagonal one). Defaults: 1,000 interactions (Sawyer-Reach: 200), seed 0, as
-many games as the smallest multiple of the number of strategies that is at least 10 (Circle
-(3 Goals): 12, Circle (8 Goals): 16, Circle (Continuous): 10 from drawn angles).
+stabilizing policy then keeps (on Circle (8 Goals) a location on an axis costs 1.46 more per
+interaction than a diagonal one; docs/tasks.md). Defaults: 1,000 interactions (Sawyer-Reach: 200),
+seed 0, as many games as the smallest multiple of the number of strategies that is at least 10
+(Circle (3 Goals): 12, Circle (8 Goals): 16, Circle (Continuous): 10 from drawn angles).
 
 ``sili bounds --all --write`` stores every registered version's bounds (current and earlier) in
 the packaged ``sili_robots/tasks/bounds.json``, keyed by gymnasium id; ``sili plot`` draws them

@@ -23,7 +23,8 @@ the partial observation the paper uses on this task.
 Versions (``sili_robots.tasks.registry``):
 - v0: ``change_rule="step"``, speaker at (0, -1.5). The message changes so often that, unvisited,
   it is noise, and the detour (about 1.5 each way) costs so much that the best detour-then-decode
-  play scores about -23 per interaction against -3.8 for decoding with the mapping known.
+  play scores -24.07 per interaction (``sili bounds``) against -3.85 for decoding with the
+  mapping known.
 - v1: ``change_rule="interaction"``, following the appendix: "If the ego agent has not gone near
   the speaker within the current interaction, the opponent's communication strategy changes
   with probability 0.5" (and the main text: going near the speaker keeps the strategy for the
