@@ -87,11 +87,11 @@ def main() -> None:
     p.add_argument("--configs", default="continuous,filter")
     p.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     args = p.parse_args()
-    print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
-    if args.child:
+    if args.child:  # its standard output is the JSON the parent reads, and nothing else
         config, padded, n = args.child
         print(json.dumps(measure(config, padded == "1", int(n))))
         return
+    print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
     for config in args.configs.split(","):
         if config not in CONFIGS:
             p.error(f"unknown config {config!r}; allowed: {', '.join(CONFIGS)}")

@@ -2,10 +2,17 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
+from argparse import Namespace
 from pathlib import Path
 
+import pandas as pd
+from benchmark_scripts import load_script
+from fast_settings import FAST_AGENT
+
+FAST_SET = [f"{k}={v}" for k, v in FAST_AGENT.items()]
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_learning.py"
 
 
@@ -28,3 +35,41 @@ def test_from_runs_missing_folder_exits_2(tmp_path: Path) -> None:
     assert result.returncode == 2
     assert "not a folder" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_run_one_resumes_and_extends_a_recorded_run(tmp_path: Path) -> None:
+    """A recorded run is continued with --resume alone (sili train refuses --task with it)."""
+    bench = load_script("bench_learning")
+    args = Namespace(out=str(tmp_path), interactions=2, latent=None, set=FAST_SET)
+    run = bench.run_one("circle-3", "sac", 0, args)
+    args.interactions = 3
+    assert bench.run_one("circle-3", "sac", 0, args) == run
+    assert json.loads((run / "summary.json").read_text())["interactions"] == 3
+
+
+def _rows(*rows: tuple[str, str, float, float, str]) -> pd.DataFrame:
+    cols = ["task", "method", "final_task_reward", "final_stability", "variant"]
+    return pd.DataFrame(rows, columns=cols)
+
+
+def test_targets_are_judged_per_task_and_configuration() -> None:
+    check = load_script("bench_learning").check_targets
+    same = [("c", "sili", -5.0, 1.0, "a"), ("c", "oracle", -4.5, 1.0, "o")]
+    met = check(_rows(*same, ("c", "sili", -5.0, 0.95, "a")))
+    assert [m for _, m, _ in met] == [True, True]
+    assert "2 of 2" in met[0][2]
+    # a second configuration of SILI in the folder: nothing is averaged across them
+    mixed = check(_rows(*same, ("c", "sili", -50.0, 0.0, "b")))
+    assert len(mixed) == 1 and mixed[0][1] is None and "sili" in mixed[0][2]
+    # two tasks are judged apart: the Driving rows do not join Circle's
+    two = check(_rows(*same, ("d", "sili", -0.2, 1.0, "x"), ("d", "oracle", 0.0, 1.0, "y")))
+    assert [w.split(":")[0] for w, _, _ in two] == ["c", "c", "d", "d"]
+    # Oracle's reward of 0 is no cost to take 15% of: not judged, never "met"
+    assert two[3][1] is None and "not judged" in two[3][2]
+
+
+def test_two_thirds_of_the_seeds_must_hold() -> None:
+    check = load_script("bench_learning").check_targets
+    seeds = [("c", "sili", -5.0, s, "a") for s in (1.0, 1.0, 0.2, 0.1, 1.0)]
+    (held,) = check(_rows(*seeds))
+    assert held[1] is False and "3 of 5" in held[2] and "(4 of 5)" in held[0]
