@@ -19,6 +19,7 @@ VARIANT_KEYS = (
     "config_beta",
     "beta_scheduled",
     "controller",
+    "task_args",
     "latent",
     "task_id",
 )

@@ -14,6 +14,8 @@ Every task-reward and true-stability panel also shows the task's reference bound
 bounds``: the scripted random, still, oracle, stabilizing, ... policies) as labelled horizontal
 lines, read from the packaged bounds file for the task version the runs built (the results'
 ``task_id``; runs recorded before task versions built the first version, and get its bounds).
+The bounds were measured with each version's default arguments, so runs given others (another
+controller, a margin) get none, and curves that differ only in them are drawn apart.
 
 Figures are built on ``matplotlib.figure.Figure`` (no pyplot state, no display needed); each
 curve is a ``Line2D`` labelled with its variant, and each bound a ``LineCollection`` labelled
@@ -22,6 +24,7 @@ curve is a ``Line2D`` labelled with its variant, and each bound a ``LineCollecti
 
 from __future__ import annotations
 
+import json
 from collections.abc import Collection, Sequence
 from pathlib import Path
 
@@ -107,6 +110,13 @@ def _task_ids(rows: pd.DataFrame, task: str) -> list[str]:
         return [task_spec(task).gym_id]
     except ConfigError:
         return []
+
+
+def _bound_ids(rows: pd.DataFrame, task: str) -> list[str]:
+    """The task versions whose stored bounds hold for ``rows``: those of the runs built with
+    their version's default arguments (bounds were measured with them; none for the others)."""
+    default = rows[rows["task_args"] == ""]
+    return _task_ids(default, task) if len(default) else []
 
 
 def draw_bounds(ax: Axes, metric: str, task_ids: Sequence[str]) -> None:
@@ -214,7 +224,9 @@ def with_profile(df: pd.DataFrame) -> pd.DataFrame:
         df = df.assign(beta_scheduled=False)
     if "task_id" not in df:
         df = df.assign(task_id="")
-    return df
+    if "task_args" not in df:  # tables before other task arguments were told apart
+        df = df.assign(task_args="")
+    return df.assign(task_args=df["task_args"].fillna(""))
 
 
 def variant_labels(df: pd.DataFrame, profiled: Collection[str] | None = None) -> pd.Series:
@@ -239,12 +251,22 @@ def variant_labels(df: pd.DataFrame, profiled: Collection[str] | None = None) ->
             ]
         if rows["controller"].fillna("").nunique() > 1:
             labels[idx] += rows["controller"].fillna("").map(lambda c: f" [{c or 'default'}]")
+        if rows["task_args"].nunique() > 1:  # other task arguments than the controller
+            labels[idx] += rows["task_args"].map(_arguments_label)
         if rows["latent"].nunique() > 1:
             labels[idx] += rows["latent"].map(lambda k: f" ({k})")
     versions = df["task_id"].fillna("")
     if versions.nunique() > 1:  # e.g. "SAC (v0)" beside "SAC (v1)"
         labels += versions.map(lambda t: f" ({t.rsplit('-', 1)[-1]})" if t else "")
     return labels
+
+
+def _arguments_label(task_args: str) -> str:
+    """`` [outside_margin=0.2]`` for a run given other task arguments (the controller is named
+    on its own), ``""`` for none."""
+    args = json.loads(task_args) if task_args else {}
+    args.pop("controller", None)
+    return f" [{', '.join(f'{k}={v}' for k, v in sorted(args.items()))}]" if args else ""
 
 
 def _variant_order(df: pd.DataFrame) -> list[tuple]:
@@ -323,7 +345,7 @@ def _draw_curves(
             low, high = METRIC_RANGES.get(metric, (-np.inf, np.inf))
             band = np.clip(mean - std, low, high), np.clip(mean + std, low, high)
             ax.fill_between(x, *band, color=color, alpha=0.18, lw=0)
-    task_ids = _task_ids(task_rows, str(task_rows["task"].iloc[0]))
+    task_ids = _bound_ids(task_rows, str(task_rows["task"].iloc[0]))
     for ax, (metric, ylabel) in zip(axes, metrics, strict=True):
         draw_bounds(ax, metric, task_ids)
         ax.set_ylabel(ylabel)
@@ -358,7 +380,9 @@ def learning_curves(df: pd.DataFrame, task: str, smooth: int | None = None) -> F
     _draw_curves(axes, rows, CURVE_METRICS, window)
     for ax in axes:
         ax.set_xlabel("interaction")
-    ids = ", ".join(_task_ids(rows, task))
+    ids = ", ".join(_bound_ids(rows, task))
+    if ids and (rows["task_args"] != "").any():
+        ids += " (its default task arguments)"
     fig.suptitle(
         f"{task_title(task)}: mean ± std over {_seed_note(rows)}, "
         f"smoothed over {window} interaction{'s' if window > 1 else ''}"
@@ -415,14 +439,13 @@ def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "si
     finals = final_values(rows, window)
     fig = Figure(figsize=(10, 4.0), layout="constrained")
     axes = fig.subplots(1, len(FINAL_METRICS))
-    groups = [(c or "", k) for c, k in finals[["controller", "latent"]].drop_duplicates().values]
-    for controller, latent in groups:
-        part = finals[
-            (finals["controller"].fillna("") == controller) & (finals["latent"] == latent)
-        ]
+    keys = ["controller", "task_args", "latent"]
+    groups = [tuple(g) for g in finals[keys].fillna("").drop_duplicates().values]
+    for controller, task_args, latent in groups:
+        part = finals[(finals[keys].fillna("") == (controller, task_args, latent)).all(axis=1)]
         label = METHOD_NAMES.get(method, method)
         if len(groups) > 1:
-            label += f" [{controller or 'default'}] ({latent})"
+            label += f" [{controller or 'default'}]{_arguments_label(task_args)} ({latent})"
         for ax, (metric, ylabel) in zip(axes, FINAL_METRICS, strict=True):
             stats = part.groupby("config_beta")[metric].agg(["mean", lambda s: s.std(ddof=0)])
             stats.columns = ["mean", "std"]

@@ -10,6 +10,7 @@ import pandas as pd
 from sili_robots.bounds import stored_bounds
 from sili_robots.labels import METHOD_NAMES
 from sili_robots.runs import METRICS, RunConfig, read_config
+from sili_robots.tasks.registry import other_task_arguments
 
 HOLDS = 0.9  # the stability a run needs to count as holding the opponent
 
@@ -24,8 +25,8 @@ def _stability(tail: pd.DataFrame) -> float:
 
 def _references(cfg: RunConfig) -> dict[str, dict[str, float]]:
     """The scripted references of the run's task version, stored for its default arguments
-    (none for a run given others, e.g. another controller)."""
-    return {} if cfg.env_kwargs else stored_bounds(cfg.task_id)
+    (none for a run given others, e.g. another controller; the default ones named are fine)."""
+    return {} if other_task_arguments(cfg.task_id, cfg.env_kwargs) else stored_bounds(cfg.task_id)
 
 
 def held(run_dir: Path, window: int = 50) -> bool:

@@ -14,7 +14,7 @@ from sili_robots.bounds import BOUNDS_FILE, compute_bounds, read_bounds_file, st
 from sili_robots.cli import main
 from sili_robots.plotting import learning_curves, overview
 from sili_robots.tasks import TASKS
-from sili_robots.tasks.registry import all_versions
+from sili_robots.tasks.registry import all_versions, other_task_arguments
 
 REQUIRED = ("random", "still", "oracle", "stabilizing")
 
@@ -202,3 +202,40 @@ def test_runs_of_two_versions_of_a_task_are_never_averaged_together():
     assert "SAC (v0)" in legend and "SAC (v1)" in legend
     reward = {line.get_label(): line.get_ydata() for line in fig.axes[0].get_lines()}
     assert np.allclose(reward["SAC (v1)"], -40.0)  # not pulled towards the v0 runs
+
+
+# -- runs given other task arguments ------------------------------------------------------------
+def test_other_task_arguments_are_those_the_version_does_not_build_by_default():
+    v1, v0 = "sili/SawyerReach-v1", "sili/SawyerReach-v0"
+    assert other_task_arguments(v1, {"controller": "mink"}) == {}  # the constructor's default
+    assert other_task_arguments(v1, {"start_z": 0.9}) == {}  # the version's own argument
+    assert other_task_arguments(v0, {"start_z": 0.9}) == {"start_z": 0.9}
+    assert other_task_arguments(v1, {"controller": "osc"}) == {"controller": "osc"}
+    assert other_task_arguments("my_tasks:Task", {"n": 1}) == {"n": 1}  # not registered
+
+
+def test_runs_given_another_controller_get_no_bounds_and_a_curve_of_their_own():
+    sawyer = "sili/SawyerReach-v1"
+    mink = _results("sawyer-reach", sawyer)
+    osc = _results("sawyer-reach", sawyer).assign(
+        run=lambda d: d.run + "-osc", controller="osc", task_args='{"controller": "osc"}'
+    )
+    both = learning_curves(pd.concat([mink, osc], ignore_index=True), "sawyer-reach", smooth=1)
+    ax = {a.get_gid(): a for a in both.axes}["task_reward"]
+    assert {line.get_label() for line in ax.get_lines()} == {"SAC [default]", "SAC [osc]"}
+    assert set(_bound_lines(ax)) == {f"bound: {k}" for k in stored_bounds(sawyer)}  # mink's
+    assert f"{sawyer} (its default task arguments)" in both.get_suptitle()
+    alone = learning_curves(osc, "sawyer-reach", smooth=1)
+    assert _bound_lines(alone.axes[0]) == {} and "bounds:" not in alone.get_suptitle()
+
+
+def test_runs_given_another_task_argument_are_not_averaged_with_the_default_ones():
+    v1 = "sili/Circle3-v1"
+    wide = _results("circle-3", v1).assign(
+        run=lambda d: d.run + "-wide", task_args='{"outside_margin": 0.3}', task_reward=-40.0
+    )
+    df = pd.concat([_results("circle-3", v1), wide], ignore_index=True)
+    ax = learning_curves(df, "circle-3", smooth=1).axes[0]
+    lines = {line.get_label(): line for line in ax.get_lines()}
+    assert set(lines) == {"SAC", "SAC [outside_margin=0.3]"}
+    assert (lines["SAC [outside_margin=0.3]"].get_ydata() == -40.0).all()

@@ -19,6 +19,7 @@ from sili_robots.cli import main
 from sili_robots.runs import RunConfig
 from sili_robots.sweep import LocalBackend, SweepSpec, expand, run_sweep
 from sili_robots.sweep import tensorboard as tb
+from sili_robots.sweep.results import results_table
 from sili_robots.sweep.state import sweep_lock
 from sili_robots.training import train
 
@@ -418,10 +419,22 @@ def test_driving_and_sawyer_runs_sweep_side_by_side(tmp_path):
     ]
     assert (runs["status"] == "done").all()
     assert runs.loc["sawyer-reach-osc__sac__s0", "controller"] == "osc"
+    assert runs.loc["sawyer-reach-osc__sac__s0", "task_args"] == '{"controller": "osc"}'
+    assert pd.isna(runs.loc["sawyer-reach-mink__sac__s0", "task_args"])  # the default
     table = pd.read_csv(tmp_path / "results.csv")
     mink = table[table.run == "sawyer-reach-mink__sac__s0"]["task_reward"].to_numpy()
     osc = table[table.run == "sawyer-reach-osc__sac__s0"]["task_reward"].to_numpy()
     assert not np.allclose(mink, osc)  # the controller reached the task
+
+
+def test_results_table_names_the_task_arguments_a_run_departs_in(tmp_path):
+    """A run given another margin is told apart; one given its version's own margin is not."""
+    for name, margin in (("wide", "0.3"), ("own", "0.1")):
+        args = ["train", "--task", "circle-3", "--interactions", "2", *FAST_ARGS, "--no-progress"]
+        out = tmp_path / "runs" / name
+        assert main([*args, "--env-kwarg", f"outside_margin={margin}", "--out", str(out)]) == 0
+    table = results_table(tmp_path).groupby("run")["task_args"].first()
+    assert table.to_dict() == {"own": "", "wide": '{"outside_margin": 0.3}'}
 
 
 def test_without_tensorboard_no_scalars_are_written(tmp_path, monkeypatch):

@@ -54,3 +54,11 @@ def test_a_run_with_other_task_arguments_is_not_read_against_the_defaults_refere
     line = verdict(run, window=4)
     assert "standing still" not in line and "stabilizing" not in line
     assert worked(run, window=4)  # no stored standing-still reward to fall below
+
+
+def test_a_run_given_its_versions_own_arguments_is_read_against_the_references(tmp_path):
+    run = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--interactions", "4", "--out", str(run)]
+    # 0.1 is Circle3-v1's own margin: the dynamics the references were measured on
+    assert main([*args, "--env-kwarg", "outside_margin=0.1", *FAST_ARGS, "--no-progress"]) == 0
+    assert "standing still: -50.0" in verdict(run, window=4)

@@ -2,14 +2,16 @@
 
 - ``results.csv``: tidy, one row per run per interaction: the run's identity (``run``, ``task``,
   ``task_id`` (the task version, a gymnasium id), ``method``, ``profile``, ``latent``, ``seed``,
-  ``controller``, ``config_beta`` (a schedule's last b), ``beta_scheduled``) + every ``metrics.csv``
-  column + ``true_stability`` (1 - strategy_changed) + ``finished``.
+  ``controller``, ``task_args`` (the task arguments other than its version's defaults, as
+  JSON; "" for none), ``config_beta`` (a schedule's last b), ``beta_scheduled``) + every
+  ``metrics.csv`` column + ``true_stability`` (1 - strategy_changed) + ``finished``.
 - ``runs.csv``: one row per run: status (done / failed / incomplete / not started), interactions
   logged, final task reward and true stability, wall time, error.
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pandas as pd
@@ -28,6 +30,7 @@ from sili_robots.runs import (
     recorded_task_id,
 )
 from sili_robots.sweep.state import ERROR_FILE, RESULTS, RUNS_DIR, RUNS_TABLE
+from sili_robots.tasks.registry import other_task_arguments
 
 ID_COLUMNS = (
     "run",
@@ -38,6 +41,7 @@ ID_COLUMNS = (
     "latent",
     "seed",
     "controller",
+    "task_args",
     "config_beta",
     "beta_scheduled",
 )
@@ -67,15 +71,19 @@ def _identity(run_dir: Path) -> tuple[dict, dict]:
     scheduled = isinstance(beta, dict)
     if scheduled:  # a schedule: the b it ends at
         beta = Schedule.from_dict(beta).points[-1][1]
+    task_id = recorded_task_id(cfg)
+    other = other_task_arguments(task_id, cfg.get("env_kwargs", {}))
     ident = {
         "run": run_dir.name,
         "task": cfg["task"],
-        "task_id": recorded_task_id(cfg),
+        "task_id": task_id,
         "method": cfg["method"],
         "profile": agent.get("profile", "package"),
         "latent": agent["latent"],
         "seed": int(cfg["seed"]),
         "controller": cfg.get("env_kwargs", {}).get("controller", ""),
+        # the task arguments its version does not build by default ("" for none), as JSON
+        "task_args": json.dumps(other, sort_keys=True) if other else "",
         "config_beta": float(beta),
         "beta_scheduled": scheduled,
     }

@@ -13,11 +13,14 @@ changed and why.
 
 from __future__ import annotations
 
+import importlib
+import inspect
 import warnings
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 
 from sili_robots.errors import ConfigError
 
@@ -94,6 +97,33 @@ def first_version(name: str) -> TaskSpec:
     """
     family = task_spec(name).family
     return min((s for s in all_versions() if s.family == family), key=lambda s: s.version)
+
+
+def other_task_arguments(task_id: str | None, env_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """The recorded task arguments that build other dynamics than the registered version
+    ``task_id`` does by default (its own arguments, then its constructor's defaults): what its
+    stored reference bounds were not measured with. ``controller="mink"`` on Sawyer-Reach is
+    the default, ``controller="osc"`` is not; everything is other for an unregistered task."""
+    if not env_kwargs:
+        return {}
+    try:
+        spec = task_spec(str(task_id))
+    except ConfigError:
+        return dict(env_kwargs)
+    module, cls = spec.entry_point.split(":")
+    params = inspect.signature(getattr(importlib.import_module(module), cls)).parameters
+    missing = object()
+    defaults = {k: p.default for k, p in params.items() if p.default is not p.empty}
+    defaults.update(spec.kwargs)
+    return {k: v for k, v in env_kwargs.items() if not _same(defaults.get(k, missing), v)}
+
+
+def _same(default: Any, value: Any) -> bool:
+    """A default and a value as config.json records it (tuples and arrays as lists)."""
+    try:
+        return bool(np.array_equal(np.asarray(default), np.asarray(value)))
+    except (TypeError, ValueError):
+        return default == value
 
 
 def make_task(name: str, **kwargs: Any) -> gym.Env:
