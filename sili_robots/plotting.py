@@ -216,8 +216,8 @@ def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFr
 
 
 def with_profile(df: pd.DataFrame) -> pd.DataFrame:
-    """Tables written before profiles and b schedules were recorded: the package's settings, and
-    a constant b."""
+    """Tables written before profiles, b schedules and other task arguments were recorded: the
+    package's settings, a constant b, and the task arguments the controller column names."""
     if "profile" not in df:
         df = df.assign(profile="package")
     if "beta_scheduled" not in df:
@@ -225,7 +225,14 @@ def with_profile(df: pd.DataFrame) -> pd.DataFrame:
     if "task_id" not in df:
         df = df.assign(task_id="")
     if "task_args" not in df:  # tables before other task arguments were told apart
-        df = df.assign(task_args="")
+        from sili_robots.tasks.registry import task_arguments_key
+
+        keys = df[["task_id", "controller"]].fillna("")
+        args = {
+            (t, c): task_arguments_key(t or None, {"controller": c} if c else {})
+            for t, c in keys.drop_duplicates().itertuples(index=False, name=None)
+        }
+        df = df.assign(task_args=[args[k] for k in keys.itertuples(index=False, name=None)])
     return df.assign(task_args=df["task_args"].fillna(""))
 
 
@@ -443,9 +450,11 @@ def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "si
     groups = [tuple(g) for g in finals[keys].fillna("").drop_duplicates().values]
     for controller, task_args, latent in groups:
         part = finals[(finals[keys].fillna("") == (controller, task_args, latent)).all(axis=1)]
-        label = METHOD_NAMES.get(method, method)
-        if len(groups) > 1:
-            label += f" [{controller or 'default'}]{_arguments_label(task_args)} ({latent})"
+        label = METHOD_NAMES.get(method, method)  # plus what sets the lines apart
+        if len({g[0] for g in groups}) > 1:
+            label += f" [{controller or 'default'}]"
+        label += _arguments_label(task_args) if len({g[1] for g in groups}) > 1 else ""
+        label += f" ({latent})" if len({g[2] for g in groups}) > 1 else ""
         for ax, (metric, ylabel) in zip(axes, FINAL_METRICS, strict=True):
             stats = part.groupby("config_beta")[metric].agg(["mean", lambda s: s.std(ddof=0)])
             stats.columns = ["mean", "std"]

@@ -45,6 +45,19 @@ def test_run_one_resumes_and_extends_a_recorded_run(tmp_path: Path) -> None:
     args.interactions = 3
     assert bench.run_one("circle-3", "sac", 0, args) == run
     assert json.loads((run / "summary.json").read_text())["interactions"] == 3
+    # a shorter budget on the same folder is refused before anything runs, never shortened
+    shorter = ["--task", "circle-3", "--methods", "sac", "--seeds", "0", "--out", str(tmp_path)]
+    result = run_script(*shorter, "--interactions", "2")
+    assert result.returncode == 2 and "is set to 3" in result.stderr
+    assert "Traceback" not in result.stderr
+
+
+def test_seeds_trained_on_other_kernels_are_one_configuration() -> None:
+    bench = load_script("bench_learning")
+    run = {"task": "circle-3", "seed": 0, "threads": 1, "agent": {"matmul": "aten", "hidden": 8}}
+    other = {**run, "seed": 1, "threads": 2, "agent": {"matmul": "onednn", "hidden": 8}}
+    wider = {**run, "agent": {"matmul": "aten", "hidden": 16}}
+    assert bench.variant_of(run) == bench.variant_of(other) != bench.variant_of(wider)
 
 
 def _rows(*rows: tuple[str, str, float, float, str]) -> pd.DataFrame:

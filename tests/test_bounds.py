@@ -12,7 +12,7 @@ from matplotlib.collections import LineCollection
 
 from sili_robots.bounds import BOUNDS_FILE, compute_bounds, read_bounds_file, stored_bounds
 from sili_robots.cli import main
-from sili_robots.plotting import learning_curves, overview
+from sili_robots.plotting import beta_sweep, learning_curves, overview
 from sili_robots.tasks import TASKS
 from sili_robots.tasks.registry import all_versions, other_task_arguments
 
@@ -212,6 +212,8 @@ def test_other_task_arguments_are_those_the_version_does_not_build_by_default():
     assert other_task_arguments(v0, {"start_z": 0.9}) == {"start_z": 0.9}
     assert other_task_arguments(v1, {"controller": "osc"}) == {"controller": "osc"}
     assert other_task_arguments("my_tasks:Task", {"n": 1}) == {"n": 1}  # not registered
+    assert other_task_arguments("sili/Driving-v0", {"backend": "traci"}) == {}  # same SUMO
+    assert other_task_arguments("sili/Driving-v0", {"horizon": 5}) == {"horizon": 5}
 
 
 def test_runs_given_another_controller_get_no_bounds_and_a_curve_of_their_own():
@@ -239,3 +241,34 @@ def test_runs_given_another_task_argument_are_not_averaged_with_the_default_ones
     lines = {line.get_label(): line for line in ax.get_lines()}
     assert set(lines) == {"SAC", "SAC [outside_margin=0.3]"}
     assert (lines["SAC [outside_margin=0.3]"].get_ydata() == -40.0).all()
+
+
+def test_a_table_from_before_task_arguments_were_recorded_reads_them_from_the_controller():
+    sawyer = "sili/SawyerReach-v1"
+    osc = _results("sawyer-reach", sawyer).assign(controller="osc")  # no task_args column
+    assert _bound_lines(learning_curves(osc, "sawyer-reach", smooth=1).axes[0]) == {}
+    mink = _results("sawyer-reach", sawyer).assign(controller="mink")
+    drawn = _bound_lines(learning_curves(mink, "sawyer-reach", smooth=1).axes[0])
+    assert set(drawn) == {f"bound: {k}" for k in stored_bounds(sawyer)}
+
+
+def test_the_b_sweep_draws_a_line_per_task_arguments():
+    parts = []
+    for margin, args in ((0.1, ""), (0.3, '{"outside_margin": 0.3}')):
+        for b in (0.0, 0.5):
+            parts.append(
+                _results("circle-3", "sili/Circle3-v1", method="sili").assign(
+                    run=lambda d, m=margin, b=b: d.run + f"-b{b}-m{m}",
+                    config_beta=b,
+                    beta_scheduled=False,
+                    profile="package",
+                    task_args=args,
+                    task_reward=-10.0 if args else -20.0,
+                )
+            )
+    fig = beta_sweep(pd.concat(parts, ignore_index=True), "circle-3", window=5)
+    ax = {a.get_gid(): a for a in fig.axes}["task_reward"]
+    lines = {line.get_label(): line.get_ydata() for line in ax.get_lines()}
+    lines.pop("_nolegend_", None)  # the error bars' caps
+    assert lines.keys() == {"SILI", "SILI [outside_margin=0.3]"}
+    assert list(lines["SILI [outside_margin=0.3]"]) == [-10.0, -10.0]

@@ -428,13 +428,30 @@ def test_driving_and_sawyer_runs_sweep_side_by_side(tmp_path):
 
 
 def test_results_table_names_the_task_arguments_a_run_departs_in(tmp_path):
-    """A run given another margin is told apart; one given its version's own margin is not."""
+    """A run given another margin is told apart; one given its version's own margin, or its
+    task's default controller by name, is not."""
     for name, margin in (("wide", "0.3"), ("own", "0.1")):
         args = ["train", "--task", "circle-3", "--interactions", "2", *FAST_ARGS, "--no-progress"]
         out = tmp_path / "runs" / name
         assert main([*args, "--env-kwarg", f"outside_margin={margin}", "--out", str(out)]) == 0
-    table = results_table(tmp_path).groupby("run")["task_args"].first()
-    assert table.to_dict() == {"own": "", "wide": '{"outside_margin": 0.3}'}
+    for name, controller in (("sawyer", []), ("mink", ["--controller", "mink"])):
+        args = ["train", "--task", "sawyer-reach", "--interactions", "1", *FAST_ARGS]
+        out = tmp_path / "runs" / name
+        assert main([*args, *controller, "--no-progress", "--out", str(out)]) == 0
+    table = results_table(tmp_path).groupby("run")[["task_args", "controller"]].first()
+    assert table["task_args"].to_dict() == {
+        "mink": "",  # the default controller, named
+        "own": "",
+        "sawyer": "",
+        "wide": '{"outside_margin": 0.3}',
+    }
+    # named or not, the default controller is one variant of the task
+    assert table["controller"].to_dict() == {
+        "mink": "mink",
+        "own": "",
+        "sawyer": "mink",
+        "wide": "",
+    }
 
 
 def test_without_tensorboard_no_scalars_are_written(tmp_path, monkeypatch):

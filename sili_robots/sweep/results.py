@@ -2,22 +2,23 @@
 
 - ``results.csv``: tidy, one row per run per interaction: the run's identity (``run``, ``task``,
   ``task_id`` (the task version, a gymnasium id), ``method``, ``profile``, ``latent``, ``seed``,
-  ``controller``, ``task_args`` (the task arguments other than its version's defaults, as
-  JSON; "" for none), ``config_beta`` (a schedule's last b), ``beta_scheduled``) + every
-  ``metrics.csv`` column + ``true_stability`` (1 - strategy_changed) + ``finished``.
+  ``controller`` (named or the task's default), ``task_args`` (the task arguments other than
+  its version's defaults, as JSON; "" for none), ``config_beta`` (a schedule's last b),
+  ``beta_scheduled``) + every ``metrics.csv`` column + ``true_stability`` (1 - strategy_changed)
+  + ``finished``.
 - ``runs.csv``: one row per run: status (done / failed / incomplete / not started), interactions
   logged, final task reward and true stability, wall time, error.
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import pandas as pd
 
 from sili_robots.agent.schedule import Schedule
 from sili_robots.atomic import replacing
+from sili_robots.errors import ConfigError
 from sili_robots.migrations import migrate_run
 from sili_robots.runs import (
     CONFIG,
@@ -30,7 +31,7 @@ from sili_robots.runs import (
     recorded_task_id,
 )
 from sili_robots.sweep.state import ERROR_FILE, RESULTS, RUNS_DIR, RUNS_TABLE
-from sili_robots.tasks.registry import other_task_arguments
+from sili_robots.tasks.registry import task_arguments_key, task_defaults
 
 ID_COLUMNS = (
     "run",
@@ -72,7 +73,7 @@ def _identity(run_dir: Path) -> tuple[dict, dict]:
     if scheduled:  # a schedule: the b it ends at
         beta = Schedule.from_dict(beta).points[-1][1]
     task_id = recorded_task_id(cfg)
-    other = other_task_arguments(task_id, cfg.get("env_kwargs", {}))
+    env_kwargs = cfg.get("env_kwargs", {})
     ident = {
         "run": run_dir.name,
         "task": cfg["task"],
@@ -81,13 +82,23 @@ def _identity(run_dir: Path) -> tuple[dict, dict]:
         "profile": agent.get("profile", "package"),
         "latent": agent["latent"],
         "seed": int(cfg["seed"]),
-        "controller": cfg.get("env_kwargs", {}).get("controller", ""),
+        "controller": _controller(task_id, env_kwargs),
         # the task arguments its version does not build by default ("" for none), as JSON
-        "task_args": json.dumps(other, sort_keys=True) if other else "",
+        "task_args": task_arguments_key(task_id, env_kwargs),
         "config_beta": float(beta),
         "beta_scheduled": scheduled,
     }
     return ident, cfg
+
+
+def _controller(task_id: str | None, env_kwargs: dict) -> str:
+    """The controller a run used, named or its task's default alike ("" for tasks without)."""
+    if "controller" in env_kwargs:
+        return str(env_kwargs["controller"])
+    try:
+        return str(task_defaults(str(task_id)).get("controller", ""))
+    except ConfigError:  # a task this package does not register
+        return ""
 
 
 def metrics_file(run_dir: Path) -> Path | None:

@@ -43,6 +43,9 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     #: attributes that hold the opponent's strategy between interactions; with the RNG state
     #: they are what ``game_state()`` saves so a run can resume at an interaction boundary.
     game_state_fields: ClassVar[tuple[str, ...]] = ()
+    #: constructor arguments that change how the task runs, not what it is (a simulator's
+    #: interface): results given them are compared with, and bounded like, the default ones
+    same_dynamics_arguments: ClassVar[frozenset[str]] = frozenset()
     #: the arguments the instance was built with, by name (None when some have no name), so a
     #: run given an instance can record them and rebuild the same task
     init_kwargs: dict[str, Any] | None

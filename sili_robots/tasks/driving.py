@@ -77,6 +77,7 @@ class DrivingEnv(RepeatedInteractionEnv):
     strategy_dim: ClassVar[int] = 2  # one-hot of the opponent's intended lane (right, left)
     #: all the game carries between interactions (SUMO restarts from the same saved state)
     game_state_fields: ClassVar[tuple[str, ...]] = ("target_lane",)
+    same_dynamics_arguments: ClassVar[frozenset[str]] = frozenset({"backend"})  # one SUMO
 
     def __init__(
         self,

@@ -13,8 +13,10 @@ changed and why.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import inspect
+import json
 import warnings
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -99,23 +101,49 @@ def first_version(name: str) -> TaskSpec:
     return min((s for s in all_versions() if s.family == family), key=lambda s: s.version)
 
 
+def task_defaults(task_id: str) -> dict[str, Any]:
+    """The arguments the registered version ``task_id`` is built with by default: its own, then
+    its constructor's defaults."""
+    return dict(_defaults(task_spec(task_id).gym_id))
+
+
+@functools.cache
+def _defaults(gym_id: str) -> dict[str, Any]:
+    spec = task_spec(gym_id)
+    params = inspect.signature(_task_class(spec)).parameters
+    defaults = {k: p.default for k, p in params.items() if p.default is not p.empty}
+    return {**defaults, **spec.kwargs}
+
+
+def task_arguments_key(task_id: str | None, env_kwargs: dict[str, Any]) -> str:
+    """``other_task_arguments`` as one comparable string for tables: sorted JSON, "" for none."""
+    other = other_task_arguments(task_id, env_kwargs)
+    return json.dumps(other, sort_keys=True) if other else ""
+
+
 def other_task_arguments(task_id: str | None, env_kwargs: dict[str, Any]) -> dict[str, Any]:
     """The recorded task arguments that build other dynamics than the registered version
-    ``task_id`` does by default (its own arguments, then its constructor's defaults): what its
-    stored reference bounds were not measured with. ``controller="mink"`` on Sawyer-Reach is
-    the default, ``controller="osc"`` is not; everything is other for an unregistered task."""
+    ``task_id`` does by default: what its stored reference bounds were not measured with.
+    ``controller="mink"`` on Sawyer-Reach is the default, ``controller="osc"`` is not, and
+    Driving's ``backend`` runs the same simulation; everything counts for an unregistered task."""
     if not env_kwargs:
         return {}
     try:
         spec = task_spec(str(task_id))
     except ConfigError:
         return dict(env_kwargs)
-    module, cls = spec.entry_point.split(":")
-    params = inspect.signature(getattr(importlib.import_module(module), cls)).parameters
+    defaults, same = task_defaults(spec.gym_id), _task_class(spec).same_dynamics_arguments
     missing = object()
-    defaults = {k: p.default for k, p in params.items() if p.default is not p.empty}
-    defaults.update(spec.kwargs)
-    return {k: v for k, v in env_kwargs.items() if not _same(defaults.get(k, missing), v)}
+    return {
+        k: v
+        for k, v in env_kwargs.items()
+        if k not in same and not _same(defaults.get(k, missing), v)
+    }
+
+
+def _task_class(spec: TaskSpec) -> type:
+    module, cls = spec.entry_point.split(":")
+    return getattr(importlib.import_module(module), cls)
 
 
 def _same(default: Any, value: Any) -> bool:
