@@ -2,6 +2,8 @@
 
 Random actions, interaction boundaries included (resets count). The reference is gymnasium's
 own ``Pendulum-v1`` (a similarly small classic-control env) run the same way in this process.
+A vector env's step calls include its autoresets (gymnasium's next-step mode: one call in H + 1,
+every 51st on these tasks, every 201st on Pendulum), so its rate counts them as steps.
 
     python benchmarks/bench_env_throughput.py [--steps 20000] [--num-envs 4]
 """
@@ -38,11 +40,11 @@ def vector_rate(env_id: str, steps: int, num_envs: int, mode: str) -> float:
     envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode=mode)
     envs.reset(seed=0)
     envs.action_space.seed(0)
-    batch = envs.action_space.sample()
+    batches = [envs.action_space.sample() for _ in range(250)]  # cycled, as the single env's
     n = steps // num_envs
     t = time.perf_counter()
-    for _ in range(n):
-        envs.step(batch)  # autoreset begins the next interaction
+    for i in range(n):
+        envs.step(batches[i % 250])  # autoreset begins the next interaction
     rate = n * num_envs / (time.perf_counter() - t)
     envs.close()
     return rate

@@ -20,6 +20,7 @@ finished shorter one is extended.
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import subprocess
 import sys
@@ -31,9 +32,12 @@ import numpy as np
 import pandas as pd
 
 from sili_robots.diagnostics import latent_diagnostics
+from sili_robots.migrations import migrate_run
 from sili_robots.sweep.results import metrics_file
 
 MARKS = {True: "MET    ", False: "NOT MET", None: "N/A    "}
+#: the methods the targets compare
+TARGET_METHODS = ("sili", "oracle", "lili", "sac")
 
 
 def run_one(task: str, method: str, seed: int, args: argparse.Namespace) -> Path:
@@ -66,9 +70,26 @@ def first_stable(df: pd.DataFrame, window: int, level: float = 0.9) -> float:
     return float(df["interaction"].iloc[hit[0]]) if hit.size else float("nan")
 
 
+#: recorded settings that pick kernels or bookkeeping for a machine, not the configuration
+MACHINE_SETTINGS = (
+    ("threads",),
+    ("checkpoint_every",),
+    ("agent", "matmul"),
+    ("agent", "sac", "precision"),
+)
+
+
 def variant_of(run: dict) -> str:
-    """What one configuration's seeds share: everything recorded but the seed."""
-    return json.dumps({k: v for k, v in run.items() if k != "seed"}, sort_keys=True)
+    """What one configuration's seeds share: everything recorded (as the current layout reads
+    it) but the seed and the per-machine settings."""
+    run = copy.deepcopy(migrate_run(run))
+    run.pop("seed", None)
+    for *parents, key in MACHINE_SETTINGS:
+        node = run
+        for name in parents:
+            node = node.get(name, {})
+        node.pop(key, None)
+    return json.dumps(run, sort_keys=True)
 
 
 def table(run_dirs: list[Path], window: int) -> pd.DataFrame:
@@ -101,7 +122,8 @@ def check_targets(df: pd.DataFrame) -> list[tuple[str, bool | None, str]]:
     they share one configuration: averaging several would compare nothing."""
     out: list[tuple[str, bool | None, str]] = []
     for task, runs in df.groupby("task"):
-        mixed = sorted(m for m, v in runs.groupby("method")["variant"].nunique().items() if v > 1)
+        judged = runs[runs["method"].isin(TARGET_METHODS)]
+        mixed = sorted(m for m, v in judged.groupby("method")["variant"].nunique().items() if v > 1)
         if mixed:
             out.append(
                 (
@@ -186,6 +208,15 @@ def main() -> None:
         jobs = [
             (args.task, m, int(s)) for m in args.methods.split(",") for s in args.seeds.split(",")
         ]
+        for task, method, seed in jobs:  # before any run starts: a run is never shortened
+            config = Path(args.out) / f"{task}-{method}-s{seed}" / "config.json"
+            if config.exists():
+                recorded = json.loads(config.read_text())["run"]["interactions"]
+                if recorded > args.interactions:
+                    p.error(
+                        f"--interactions {args.interactions}: {config.parent} is set to "
+                        f"{recorded}; give at least that, or another --out"
+                    )
         with ThreadPoolExecutor(args.workers) as pool:
             dirs = list(pool.map(lambda j: run_one(*j, args), jobs))
     df = table(dirs, args.window)

@@ -10,6 +10,7 @@ interactions are random (memory does not depend on their values) and no SAC upda
 batches have one fixed shape). Both variants must produce the same latents; the script checks.
 
     python benchmarks/bench_refresh_memory.py [--interactions 1500] [--configs continuous,filter]
+                                              [--matmul aten|onednn]
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import time
 
 import numpy as np
 
-from sili_robots.agent.matmul import machine_key
+from sili_robots.agent.matmul import default_matmul, machine_key
 
 CONFIGS = {
     "continuous": {"latent": "continuous", "latent_last_step": True},
@@ -37,7 +38,7 @@ def rss_mib() -> float:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
-def measure(config: str, padded: bool, interactions: int) -> dict:
+def measure(config: str, padded: bool, interactions: int, matmul: str | None = None) -> dict:
     """One variant in this process: RSS after every 250 interactions, time, final latents."""
     import torch
 
@@ -51,7 +52,8 @@ def measure(config: str, padded: bool, interactions: int) -> dict:
     if not padded:
         cache_module.pad_rows = lambda idx: idx  # the reference: chunks as they come ...
         filter_module.largest_power_of_two = lambda n: n  # ... and the filter's scale on all n
-    cfg = make_run_config("circle-3", "sili", settings=dict(CONFIGS[config]))
+    settings = dict(CONFIGS[config], **({"matmul": matmul} if matmul else {}))
+    cfg = make_run_config("circle-3", "sili", settings=settings)
     addons = build_addons(cfg.addons, cfg.agent)
     agent = SILIAgent(cfg.agent, OBS, ACT, H, strategy_dim=2, seed=0, addons=addons)
     rng = np.random.default_rng(0)
@@ -76,8 +78,9 @@ def measure(config: str, padded: bool, interactions: int) -> dict:
     }
 
 
-def run_child(config: str, padded: bool, interactions: int) -> dict:
+def run_child(config: str, padded: bool, interactions: int, matmul: str | None) -> dict:
     cmd = [sys.executable, __file__, "--child", config, str(int(padded)), str(interactions)]
+    cmd += ["--matmul", matmul] if matmul else []
     return json.loads(subprocess.run(cmd, check=True, capture_output=True, text=True).stdout)
 
 
@@ -86,17 +89,23 @@ def main() -> None:
     p.add_argument("--interactions", type=int, default=1500)
     p.add_argument("--configs", default="continuous,filter")
     p.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
+    p.add_argument(
+        "--matmul",
+        choices=("aten", "onednn"),
+        help="the latent model's products (default: the machine's choice, as a run makes it)",
+    )
     args = p.parse_args()
     if args.child:  # its standard output is the JSON the parent reads, and nothing else
         config, padded, n = args.child
-        print(json.dumps(measure(config, padded == "1", int(n))))
+        print(json.dumps(measure(config, padded == "1", int(n), args.matmul)))
         return
     print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
+    print(f"the latent model's products on {args.matmul or default_matmul()}", flush=True)
     for config in args.configs.split(","):
         if config not in CONFIGS:
             p.error(f"unknown config {config!r}; allowed: {', '.join(CONFIGS)}")
-        ref = run_child(config, False, args.interactions)
-        new = run_child(config, True, args.interactions)
+        ref = run_child(config, False, args.interactions, args.matmul)
+        new = run_child(config, True, args.interactions, args.matmul)
         print(f"{config}: resident MiB after N interactions (unpadded reference -> padded)")
         for n in ref["rss"]:
             r, a = ref["rss"][n], new["rss"][n]

@@ -2,7 +2,11 @@
 
 Same network sizes (2 x 256 actor and twin critics), same batch size and input width (a SILI
 policy on Circle: state 3 + two 10-d latents), one process, one after the other, same torch
-thread count. Also reports end-to-end interactions per second of ``sili train`` (SILI, Circle 3).
+thread count, in rounds whose order reverses every other round. stable-baselines3's time
+includes sampling its replay buffer (about 0.07 ms of its 13-17 ms), ours takes prepared
+batches. Also reports seconds per learning interaction of ``sili train`` (SILI, Circle 3): each
+setting runs twice (A B C C B A) and is set against stable-baselines3's 50 updates timed just
+before and after it, so a drift in the machine's speed lands on both sides.
 
     python benchmarks/bench_sac_speed.py [--updates 300] [--threads 1] [--rounds 3]
     python benchmarks/bench_sac_speed.py --matmul-only   # the products alone, per library
@@ -292,9 +296,13 @@ def main() -> None:
     rates: dict[str, list[float]] = {"sb3": [], **{label: [] for label in variants}}
     compile_seconds: list[float] = []
     peak: list[float] = []  # GFLOP/s of the update's widest product, in a tight loop
-    for _ in range(args.rounds):  # alternate, so a load change hits all alike
-        rates["sb3"].append(time_sb3(in_dim, act_dim, batch, args.updates))
-        for label, (precision, matmul, compiled) in variants.items():
+    order = ["sb3", *variants]
+    for r in range(args.rounds):  # alternate, reversed every other round: no arm always first
+        for label in order if r % 2 == 0 else order[::-1]:
+            if label == "sb3":
+                rates["sb3"].append(time_sb3(in_dim, act_dim, batch, args.updates))
+                continue
+            precision, matmul, compiled = variants[label]
             warmup = compile_seconds if compiled else None
             rate = time_ours(
                 in_dim, act_dim, batch, args.updates, precision, matmul, compiled, warmup
@@ -327,10 +335,11 @@ def main() -> None:
     precision, matmul = default_precision(), default_matmul()
     per = AgentConfig().model.updates_per_interaction
     latent = per * float(np.median([time_latent(matmul, 20) for _ in range(args.rounds)]))
-    sac_50 = 50 / med["float32, aten"]
+    sac_50 = 50 / med[f"float32, {matmul}"]  # on the same products as the latent model
     print(
         f"latent model, {per} updates of {gflop['latent']:.3f} GFLOP on {matmul}: "
-        f"{latent:.3f} s per interaction, {latent / sac_50:.2f}x our 50 float32 SAC updates"
+        f"{latent:.3f} s per interaction, {latent / sac_50:.2f}x our 50 float32 SAC updates "
+        f"on {matmul}"
     )
     work = 50 * gflop["ours"] + per * gflop["latent"]
     print(
@@ -342,11 +351,24 @@ def main() -> None:
     runs += [(label, p, m, {}) for label, (p, m) in VARIANTS.items() if p == "float32"]
     for arm in args.arm:  # the default kernels unless the arm sets them
         runs.append((arm, precision, matmul, parse_settings(arm.split(";"))))
-    for label, precision, matmul, extra in runs:
-        seconds = time_train(args.interactions, precision, matmul, args.threads, **extra)
+    # each run twice, in the order A B C C B A, each time between two timings of
+    # stable-baselines3's 50 updates: its own reference, taken minutes apart from no other
+    seconds: dict[str, list[float]] = {label: [] for label, *_ in runs}
+    reference: dict[str, list[float]] = {label: [] for label, *_ in runs}
+    before = 50 / time_sb3(in_dim, act_dim, batch, args.updates)
+    for label, precision, matmul, extra in [*runs, *runs[::-1]]:
+        seconds[label].append(
+            time_train(args.interactions, precision, matmul, args.threads, **extra)
+        )
+        after = 50 / time_sb3(in_dim, act_dim, batch, args.updates)
+        reference[label].append((before + after) / 2)
+        before = after
+    for label, *_ in runs:
+        took, ref = float(np.mean(seconds[label])), float(np.mean(reference[label]))
         print(
-            f"sili train, SILI on circle-3, {label:24s}: {seconds:.3f} s per learning "
-            f"interaction, {seconds / sb3_50:.2f}x stable-baselines3's 50 updates ({sb3_50:.3f} s)"
+            f"sili train, SILI on circle-3, {label:24s}: {took:.3f} s per learning "
+            f"interaction ({', '.join(f'{x:.3f}' for x in seconds[label])}), {took / ref:.2f}x "
+            f"stable-baselines3's 50 updates timed beside it ({ref:.3f} s)"
         )
 
 

@@ -27,7 +27,6 @@ FAST = {
     "updates_per_step": 0.1,
     "hidden": 32,
     "random_interactions": 3,
-    "latent_updates_per_interaction": 2,
 }
 
 
