@@ -111,6 +111,19 @@ def test_beta_and_a_set_of_b_together_exit_2(tmp_path):
     assert code == 2 and "give one of --beta and --set sili.beta, not both" in err
 
 
+def test_an_option_and_a_setting_of_the_same_thing_together_exit_2(tmp_path):
+    train = ["train", "--task", "sawyer-reach", "--out", str(tmp_path / "r")]
+    code, _, err = _main(*train, "--latent", "discrete", "--set", "latent=continuous")
+    assert code == 2 and "give one of --latent and --set latent, not both" in err
+    both = ["--controller", "mink", "--env-kwarg", 'controller="osc"']
+    code, _, err = _main(*train, *both)
+    assert code == 2 and "give one of --controller and --env-kwarg controller" in err
+    sweep = ["sweep", "--tasks", "sawyer-reach", "--methods", "sac", "--out", str(tmp_path / "s")]
+    code, _, err = _main(*sweep, *both, "--dry-run")
+    assert code == 2 and "give one of --controller and --env-kwarg controller" in err
+    assert not (tmp_path / "r").exists() and not (tmp_path / "s").exists()
+
+
 def test_a_reader_that_stops_early_ends_the_command_quietly():
     """``sili ... | head``: no traceback; exit 1, the output was cut short."""
     cmd = [sys.executable, "-m", "sili_robots.cli", "rollout", "circle-3", "--interactions", "2"]

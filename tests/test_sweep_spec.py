@@ -8,6 +8,7 @@ from agent_helpers import flat_layout
 from sili_robots.agent.config import AgentConfig
 from sili_robots.agent.matmul import default_matmul
 from sili_robots.agent.schedule import Schedule, value_at
+from sili_robots.cli import main
 from sili_robots.errors import ConfigError
 from sili_robots.sweep import SweepSpec, expand, parse_betas, parse_seeds, plan
 from sili_robots.sweep.state import check_existing, run_path
@@ -222,3 +223,17 @@ def test_a_sweep_records_the_changed_defaults_and_older_records_keep_the_earlier
     given = _spec(agent_overrides={"latent_updates_per_interaction": 7})
     assert "model.updates_per_interaction" not in given.agent_overrides
     assert expand(given)[0].config.agent.model.updates_per_interaction == 7
+
+
+def test_a_new_sweep_builds_its_tasks_with_their_arguments_before_any_run(tmp_path, capsys):
+    """A bad value stops the sweep at once (exit 2), in a dry run too, and leaves no folder."""
+    out = tmp_path / "s"
+    base = ["sweep", "--methods", "sac", "--seeds", "0", "--interactions", "2", "--out", str(out)]
+    for args, message in (
+        (["--tasks", "sawyer-reach", "--controller", "foo"], "unknown controller 'foo'"),
+        (["--tasks", "circle-3", "--env-kwarg", "horizon=0"], "horizon=0"),
+        (["--tasks", "circle-3", "--retries", "-1", "--dry-run"], "--retries must be >= 0"),
+    ):
+        for dry in ([], ["--dry-run"]):
+            assert main([*base, *args, *dry]) == 2
+            assert message in capsys.readouterr().err and not out.exists()

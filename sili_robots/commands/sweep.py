@@ -117,6 +117,9 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
             f"--latent applies to methods {', '.join(LATENT_METHODS)} only, none of which is in "
             f"the sweep ({', '.join(methods)}); the others fix latent = 'none'"
         )
+    env_kwargs = parse_env_kwargs(args.env_kwarg, "--env-kwarg")
+    if args.controller is not None and "controller" in env_kwargs:
+        raise ConfigError("give one of --controller and --env-kwarg controller=..., not both")
     schedules = schedule_args(args)
     spec = SweepSpec(
         tasks=parse_list(args.tasks),
@@ -133,7 +136,7 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
         latent=args.latent,
         profile=args.profile,
         agent_overrides=parse_settings(args.agent_set),
-        env_kwargs=parse_env_kwargs(args.env_kwarg, "--env-kwarg"),
+        env_kwargs=env_kwargs,
         checkpoint_every=args.checkpoint_every,
     )
     check_task_arguments(spec)  # new sweeps only, as --latent above
@@ -178,6 +181,7 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.sweep.state import check_existing, run_path, run_state
 
     specs, sweep_dir = _specs_and_dir(args)
+    backend = _backend(args)  # its options checked in a dry run too; nothing starts yet
     if args.dry_run:
         planned = plan(specs)
         for run_ in planned:
@@ -186,7 +190,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"{len(planned)} runs")
         return 0
     writable_dir(sweep_dir, "--resume" if args.resume else "--out")
-    backend = _backend(args)
     report = run_sweep(
         specs,
         sweep_dir,

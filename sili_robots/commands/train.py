@@ -129,7 +129,11 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     if args.beta is not None:
         settings["sili.beta"] = args.beta
     settings.update(schedules)
+    if args.latent is not None and "latent" in given:
+        raise ConfigError(f"give one of --latent and --set {given['latent']}, not both")
     env_kwargs = parse_env_kwargs(args.env_kwarg, "--env-kwarg")
+    if args.controller is not None and "controller" in env_kwargs:
+        raise ConfigError("give one of --controller and --env-kwarg controller=..., not both")
     if args.controller is not None:
         env_kwargs["controller"] = args.controller
     return make_run_config(

@@ -187,8 +187,9 @@ def task_accepts(task: str, kwarg: str) -> bool:
 
 
 def check_task_arguments(spec: SweepSpec) -> None:
-    """Every task of a new sweep takes every ``--env-kwarg`` by name (a recorded sweep resumes as
-    it ran: such runs fail one by one)."""
+    """Every task of a new sweep takes every ``--env-kwarg`` by name, and is built once with
+    them and each controller, so a bad value stops the sweep before any run instead of failing
+    every run of it (a recorded sweep resumes as it ran: such runs fail one by one)."""
     for task in spec.tasks:
         unknown = [k for k in spec.env_kwargs if not task_accepts(task, k)]
         if unknown:
@@ -196,6 +197,26 @@ def check_task_arguments(spec: SweepSpec) -> None:
                 f"task {task!r} takes no argument {', '.join(unknown)} (--env-kwarg); its "
                 f"arguments: {', '.join(task_arguments(task))}"
             )
+        controllers: list[str | None] = [None]
+        if spec.controllers is not None and task_accepts(task, "controller"):
+            controllers = list(spec.controllers)
+        for controller in controllers:
+            kwargs = dict(spec.env_kwargs, **({"controller": controller} if controller else {}))
+            if kwargs:
+                _build_once(task, kwargs)
+
+
+def _build_once(task: str, kwargs: dict[str, Any]) -> None:
+    """Construct (not reset: no simulation starts) ``task`` with ``kwargs``, or ConfigError."""
+    from sili_robots.tasks import make_task
+
+    given = ", ".join(f"{k}={v!r}" for k, v in kwargs.items())
+    try:
+        make_task(task, **kwargs).close()
+    except ConfigError as err:
+        raise ConfigError(f"task {task!r} with {given}: {err}") from None
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"task {task!r} refuses {given}: {err}") from None
 
 
 def format_beta(beta: float) -> str:
