@@ -176,6 +176,23 @@ def read_config(run_dir: Path) -> RunConfig:
     return RunConfig.from_dict(read_json(path, DAMAGED_CONFIG, "run")["run"])
 
 
+def check_history(run_dir: Path, interactions: int) -> None:
+    """Refuse to resume a run whose ``metrics.csv`` lacks rows its checkpoint has trained (the
+    file lost or cut short): the run would go on with a hole in its record."""
+    path = Path(run_dir) / METRICS
+    rows = 0
+    if path.is_file():
+        with path.open(newline="") as f:
+            rows = sum(1 for _ in csv.DictReader(f))
+    if rows < interactions:
+        state = f"holds {rows} rows" if path.is_file() else "is missing"
+        raise ConfigError(
+            f"{run_dir}: its checkpoint is at interaction {interactions} but its {METRICS} "
+            f"{state}; resuming would leave a hole in its record: restore {METRICS}, or train "
+            "it again (--overwrite)"
+        )
+
+
 class MetricsWriter:
     """Append-only CSV; on resume, rows past the checkpoint are dropped first."""
 

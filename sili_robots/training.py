@@ -22,6 +22,7 @@ from sili_robots.runs import (
     SUMMARY,
     MetricsWriter,
     RunConfig,
+    check_history,
     check_resumable,
     load_checkpoint,
     read_config,
@@ -42,11 +43,13 @@ def train(
     ``env``: the task instance to train on, as the method observes it (default: built from
     ``cfg``; a given one is left open)."""
     run_dir = Path(run_dir)
+    state = load_checkpoint(run_dir) if resume else None
+    if state is not None:
+        check_history(run_dir, int(state["interaction"]))
     torch.set_num_threads(cfg.threads)
     own_env = env is None
     env = make_run_env(cfg) if env is None else env
     agent = build_agent(cfg, env)
-    state = load_checkpoint(run_dir) if resume else None
     (run_dir / SUMMARY).unlink(missing_ok=True)  # unfinished until it writes a new one
     if state is None:
         write_config(run_dir, cfg)

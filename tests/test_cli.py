@@ -5,6 +5,9 @@ import sys
 
 import pytest
 from cli_helpers import sili as sili_in_process
+from fast_settings import FAST_ARGS
+
+from sili_robots.tasks import make_task
 
 
 def _sili(*args):
@@ -151,3 +154,27 @@ def test_a_schedule_for_a_setting_that_takes_one_number_names_those_that_take_on
     code, _, err = _main(*train, "--set", "addons.recent.fraction=0:0,10:0.5")
     assert code == 2 and "recent.fraction takes one number, not a schedule (0:0,10:0.5)" in err
     assert "take schedules: sac.lr, sac.gamma," in err and "sili.beta" in err
+
+
+def test_a_task_argument_that_names_another_task_exits_2(tmp_path):
+    """Circle's variant is what the name says: circle-3 cannot train Circle (8 Goals)."""
+    train = ["train", "--task", "circle-3", "--out", str(tmp_path / "r")]
+    for value in ('"8"', "8"):
+        code, _, err = _main(*train, "--env-kwarg", f"variant={value}")
+        assert code == 2 and "circle-3 is variant='3'" in err and "circle-8" in err
+    assert not (tmp_path / "r").exists()
+    make_task("circle-3", variant="3").close()  # its own value is no other task
+
+
+def test_resuming_a_run_whose_record_was_lost_exits_2(tmp_path):
+    run = tmp_path / "r"
+    train = ["train", "--task", "circle-3", "--interactions", "4", "--checkpoint-every", "2"]
+    assert _main(*train, *FAST_ARGS, "--no-progress", "--out", str(run))[0] == 0
+    metrics = run / "metrics.csv"
+    kept = metrics.read_text().splitlines()
+    metrics.write_text("\n".join(kept[:3]) + "\n")  # 2 of the checkpoint's 4 rows
+    code, _, err = _main("train", "--resume", str(run), "--interactions", "6", "--no-progress")
+    assert code == 2 and "checkpoint is at interaction 4 but its metrics.csv holds 2 rows" in err
+    metrics.unlink()
+    code, _, err = _main("train", "--resume", str(run), "--interactions", "6", "--no-progress")
+    assert code == 2 and "metrics.csv is missing" in err

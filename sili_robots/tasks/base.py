@@ -46,6 +46,9 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     #: constructor arguments that change how the task runs, not what it is (a simulator's
     #: interface): results given them are compared with, and bounded like, the default ones
     same_dynamics_arguments: ClassVar[frozenset[str]] = frozenset()
+    #: constructor arguments that say which task it is (Circle's ``variant``): each registered
+    #: name fixes them, so a run built by name cannot be another task under that name
+    identity_arguments: ClassVar[frozenset[str]] = frozenset()
     #: the arguments the instance was built with, by name (None when some have no name), so a
     #: run given an instance can record them and rebuild the same task
     init_kwargs: dict[str, Any] | None

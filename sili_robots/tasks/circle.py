@@ -56,6 +56,7 @@ class CircleEnv(RepeatedInteractionEnv):
     strategy_low: ClassVar[float] = -RADIUS
     strategy_high: ClassVar[float] = RADIUS
     game_state_fields: ClassVar[tuple[str, ...]] = ("location", "angle")
+    identity_arguments: ClassVar[frozenset[str]] = frozenset({"variant"})
 
     def __init__(
         self,

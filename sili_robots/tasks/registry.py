@@ -157,6 +157,14 @@ def _same(default: Any, value: Any) -> bool:
 def make_task(name: str, **kwargs: Any) -> gym.Env:
     """Build a task by CLI name or gymnasium id; ``kwargs`` go to the task's constructor."""
     spec = task_spec(name)
+    fixed = _task_class(spec).identity_arguments
+    for key in sorted(k for k in kwargs if k in fixed):
+        if not _same(spec.kwargs.get(key), kwargs[key]):
+            others = [s.name for s in TASKS.values() if s.entry_point == spec.entry_point]
+            raise ConfigError(
+                f"{spec.name} is {key}={spec.kwargs.get(key)!r}; {key}={kwargs[key]!r} would be "
+                f"another task under its name: build that one by name ({', '.join(others)})"
+            )
     with warnings.catch_warnings():
         if spec.name in EARLIER_VERSIONS:  # asked for by its version: no "out of date" warning
             warnings.filterwarnings("ignore", ".*The environment .* is out of date", Warning)
