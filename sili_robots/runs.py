@@ -12,6 +12,7 @@ import csv
 import json
 import pickle
 import platform
+import shutil
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -134,6 +135,40 @@ def versions(threads: int = 1) -> dict[str, str]:
         "gymnasium": gymnasium.__version__,
         "python": platform.python_version(),
     }
+
+
+#: written by a failed sweep run (the traceback or how its worker died); removed when it succeeds
+ERROR_FILE = "error.txt"
+#: written by a sweep worker while it trains a run: {"pid": ..., "host": ...}
+RUNNING_FILE = "worker.json"
+#: a sweep run's TensorBoard scalars
+TB_DIR = "tb"
+#: what a run writes in its directory: ``--overwrite`` removes these and nothing else
+RUN_FILES = (CONFIG, METRICS, CHECKPOINT, SUMMARY, COMPRESSED_METRICS, ERROR_FILE, RUNNING_FILE)
+RUN_DIRS = (TB_DIR,)
+
+
+def clear_run(run_dir: Path) -> None:
+    """Remove a run's own files from ``run_dir``, leaving anything else a user put there."""
+    run_dir = Path(run_dir)
+    for name in RUN_FILES:
+        (run_dir / name).unlink(missing_ok=True)
+    for name in RUN_DIRS:
+        shutil.rmtree(run_dir / name, ignore_errors=True)
+
+
+def check_new_run_dir(run_dir: Path) -> None:
+    """A new run goes into a new or empty directory, or a run's: files of something else are
+    never mixed with (or replaced by) a run's."""
+    run_dir = Path(run_dir)
+    if run_dir.is_dir() and not (run_dir / CONFIG).exists():
+        others = sorted(p.name for p in run_dir.iterdir())
+        if others:
+            shown = ", ".join(others[:5]) + (", ..." if len(others) > 5 else "")
+            raise ConfigError(
+                f"{run_dir} is not a run but holds files ({shown}); give --out a new or empty "
+                "directory"
+            )
 
 
 def make_run_dir(run_dir: Path) -> None:

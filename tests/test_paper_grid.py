@@ -162,6 +162,33 @@ def test_grid_progress_counts_only_runs_at_the_blocks_budget(
     )
 
 
+def test_grid_checks_its_folders_and_selection_before_any_run(
+    sweep_and_collection, tmp_path, capsys
+):
+    a_file = tmp_path / "file"
+    a_file.write_text("x")
+    dry = ["grid", "--dry-run", "--blocks", "b-sweep", "--tasks", "circle-3"]
+    for option in ("--sweep-dir", "--into"):
+        assert main([*dry, option, str(a_file)]) == 2
+        assert f"{option} {a_file} is a file" in capsys.readouterr().err
+    elsewhere = ["--sweep-dir", str(tmp_path / "s"), "--into", str(tmp_path / "c")]
+    assert (
+        main(["grid", "--dry-run", "--blocks", "b-sweep", "--tasks", "circle-8", *elsewhere]) == 2
+    )
+    assert "b-sweep run nothing on circle-8" in capsys.readouterr().err
+    _, collection = sweep_and_collection
+    summary = collection / "runs" / "circle-3__sili-bschedule__s0" / "summary.json"
+    intact = summary.read_text()
+    summary.write_text("{half")  # the collection is shared with other tests: put it back
+    try:
+        args = ["grid", "--dry-run", "--blocks", "sili-oracle", "--tasks", "circle-3"]
+        assert main([*args, "--sweep-dir", str(tmp_path / "s"), "--into", str(collection)]) == 2
+        assert f"{summary} is damaged" in capsys.readouterr().err
+    finally:
+        summary.write_text(intact)
+    assert not (tmp_path / "s").exists() and not (tmp_path / "c").exists()
+
+
 def test_grid_blocks_and_budgets(capsys):
     assert (
         main(

@@ -237,3 +237,14 @@ def test_a_new_sweep_builds_its_tasks_with_their_arguments_before_any_run(tmp_pa
         for dry in ([], ["--dry-run"]):
             assert main([*base, *args, *dry]) == 2
             assert message in capsys.readouterr().err and not out.exists()
+
+
+def test_a_new_sweep_never_goes_into_a_folder_of_other_files(tmp_path, capsys):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "results.csv").write_text("my own table\n")
+    args = ["sweep", "--tasks", "circle-3", "--methods", "sac", "--out", str(out)]
+    for dry in ([], ["--dry-run"]):
+        assert main([*args, *dry]) == 2
+        assert "is not a sweep or a results collection but holds files" in capsys.readouterr().err
+    assert (out / "results.csv").read_text() == "my own table\n"

@@ -474,7 +474,22 @@ def test_a_run_directory_is_replaced_only_with_overwrite(tmp_path, capsys):
     assert len(pd.read_csv(out / "metrics.csv")) == 4  # untouched
     assert main([*args, "--interactions", "2", "--seed", "2", "--overwrite"]) == 0
     assert json.loads((out / "config.json").read_text())["run"]["seed"] == 2
-    assert len(pd.read_csv(out / "metrics.csv")) == 2 and not (out / "notes.txt").exists()
+    assert len(pd.read_csv(out / "metrics.csv")) == 2
+    assert (out / "notes.txt").read_text() == "mine"  # only the run's own files are replaced
+
+
+def test_a_new_run_never_goes_into_a_folder_of_other_files(tmp_path, capsys):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "metrics.csv").write_text("my own table\n")
+    args = ["train", "--task", "circle-3", "--method", "sac", *FAST, "--interactions", "2"]
+    for extra in ([], ["--overwrite"]):
+        assert main([*args, "--out", str(out), *extra]) == 2
+        assert "is not a run but holds files (metrics.csv)" in capsys.readouterr().err
+    assert (out / "metrics.csv").read_text() == "my own table\n"
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main([*args, "--out", str(empty)]) == 0
 
 
 def test_a_checkpoint_write_cut_short_leaves_the_previous_one(tmp_path, monkeypatch):

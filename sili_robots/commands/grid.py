@@ -42,18 +42,27 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from sili_robots.commands.common import writable_dir
     from sili_robots.errors import ConfigError
     from sili_robots.paper_grid import BLOCKS, TASKS, block
     from sili_robots.sweep import LocalBackend, plan, run_sweep
     from sili_robots.sweep.collect import collect
     from sili_robots.sweep.spec import parse_list
-    from sili_robots.sweep.state import run_path
+    from sili_robots.sweep.state import check_sweep_dir, run_path
 
+    for path, option in ((args.sweep_dir, "--sweep-dir"), (args.into, "--into")):
+        check_sweep_dir(path, option)  # before any run, in a dry run too
+        writable_dir(path, option)
     blocks = [block(b) for b in parse_list(args.blocks)] if args.blocks else list(BLOCKS)
     tasks = tuple(parse_list(args.tasks)) if args.tasks else TASKS
     bad = [t for t in tasks if t not in TASKS]
     if bad:
         raise ConfigError(f"unknown grid task {bad[0]!r}; allowed: {', '.join(TASKS)}")
+    if not any(b.specs(tasks) for b in blocks):
+        raise ConfigError(
+            f"blocks {', '.join(b.name for b in blocks)} run nothing on {', '.join(tasks)}; "
+            "choose other blocks or tasks (sili grid --dry-run lists them all)"
+        )
     dirs = (args.sweep_dir, args.into)  # a run is done in either (a fresh clone has no sweep)
     failed: list[str] = []
     planned = done = planned_interactions = done_interactions = 0
@@ -97,10 +106,12 @@ def run(args: argparse.Namespace) -> int:
 
 def _finished(run_dir: Path, interactions: int) -> bool:
     """Done at the block's budget (a collection may hold a shorter run of the same name)."""
-    from sili_robots.runs import SUMMARY
+    from sili_robots.runs import DAMAGED_SUMMARY, SUMMARY, read_json
 
     summary = run_dir / SUMMARY
-    return summary.is_file() and json.loads(summary.read_text()).get("interactions") == interactions
+    if not summary.is_file():
+        return False
+    return read_json(summary, DAMAGED_SUMMARY, "interactions")["interactions"] == interactions
 
 
 def recorded(sweep_dir: Path, spec, collection: Path | None = None):

@@ -178,9 +178,11 @@ def _backend(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.sweep.runner import plan, run_sweep
-    from sili_robots.sweep.state import check_existing, run_path, run_state
+    from sili_robots.sweep.state import check_existing, check_sweep_dir, run_path, run_state
 
     specs, sweep_dir = _specs_and_dir(args)
+    if args.resume is None:
+        check_sweep_dir(sweep_dir, "--out")
     backend = _backend(args)  # its options checked in a dry run too; nothing starts yet
     if args.dry_run:
         planned = plan(specs)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import sys
 from pathlib import Path
 
@@ -27,7 +26,14 @@ from sili_robots.commands.common import (
 )
 from sili_robots.errors import ConfigError
 from sili_robots.migrations import setting_path
-from sili_robots.runs import CONFIG, RunConfig, make_run_dir, read_config
+from sili_robots.runs import (
+    CONFIG,
+    RunConfig,
+    check_new_run_dir,
+    clear_run,
+    make_run_dir,
+    read_config,
+)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -200,14 +206,15 @@ def run(args: argparse.Namespace) -> int:
         cfg = config_from_args(args)
         if args.out is None:
             raise ConfigError("--out RUN_DIR is required for a new run")
-        if (args.out / CONFIG).exists():
-            if not args.overwrite:
-                raise ConfigError(
-                    f"{args.out} already holds a run; use --resume {args.out} to "
-                    "continue it or --overwrite to replace it"
-                )
-            shutil.rmtree(args.out)
+        if (args.out / CONFIG).exists() and not args.overwrite:
+            raise ConfigError(
+                f"{args.out} already holds a run; use --resume {args.out} to "
+                "continue it or --overwrite to replace it"
+            )
+        check_new_run_dir(args.out)
         _check_env_builds(cfg)
+        if args.overwrite:
+            clear_run(args.out)  # the run's own files; anything else in the folder stays
         make_run_dir(args.out)
         run_dir = train(cfg, args.out, progress=not args.no_progress)
     summary = write_summary(run_dir)

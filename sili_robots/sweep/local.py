@@ -24,8 +24,8 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 
 from sili_robots.errors import ConfigError
+from sili_robots.runs import ERROR_FILE, RUNNING_FILE
 from sili_robots.sweep.backend import Monitor, describe_exit
-from sili_robots.sweep.state import ERROR_FILE, RUNNING_FILE
 from sili_robots.sweep.worker import THREAD_ENV, Job, Outcome, limit_threads, run_job
 
 #: imported once by the forkserver, so forked workers start with them loaded

@@ -17,8 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from sili_robots.errors import ConfigError
+from sili_robots.runs import ERROR_FILE, RUNNING_FILE
 from sili_robots.sweep.backend import Monitor
-from sili_robots.sweep.state import ERROR_FILE, RUNNING_FILE
 from sili_robots.sweep.worker import Job, Outcome, run_job
 
 

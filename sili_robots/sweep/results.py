@@ -24,13 +24,14 @@ from sili_robots.runs import (
     CONFIG,
     DAMAGED_CONFIG,
     DAMAGED_SUMMARY,
+    ERROR_FILE,
     METRIC_COLUMNS,
     METRICS,
     SUMMARY,
     read_json,
     recorded_task_id,
 )
-from sili_robots.sweep.state import ERROR_FILE, RESULTS, RUNS_DIR, RUNS_TABLE
+from sili_robots.sweep.state import RESULTS, RUNS_DIR, RUNS_TABLE
 from sili_robots.tasks.registry import task_arguments_key, task_defaults
 
 ID_COLUMNS = (

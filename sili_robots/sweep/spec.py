@@ -190,13 +190,14 @@ def check_task_arguments(spec: SweepSpec) -> None:
     """Every task of a new sweep takes every ``--env-kwarg`` by name, and is built once with
     them and each controller, so a bad value stops the sweep before any run instead of failing
     every run of it (a recorded sweep resumes as it ran: such runs fail one by one)."""
-    for task in spec.tasks:
+    for task in spec.tasks:  # names first, on every task, then values
         unknown = [k for k in spec.env_kwargs if not task_accepts(task, k)]
         if unknown:
             raise ConfigError(
                 f"task {task!r} takes no argument {', '.join(unknown)} (--env-kwarg); its "
                 f"arguments: {', '.join(task_arguments(task))}"
             )
+    for task in spec.tasks:
         controllers: list[str | None] = [None]
         if spec.controllers is not None and task_accepts(task, "controller"):
             controllers = list(spec.controllers)

@@ -25,7 +25,14 @@ from typing import Any, Literal
 
 from sili_robots.atomic import write_text
 from sili_robots.errors import ConfigError
-from sili_robots.runs import CHECKPOINT, CONFIG, SUMMARY, read_json, recorded_run
+from sili_robots.runs import (
+    CHECKPOINT,
+    CONFIG,
+    RUNNING_FILE,
+    SUMMARY,
+    read_json,
+    recorded_run,
+)
 from sili_robots.sweep.spec import PlannedRun, SweepSpec
 
 SWEEP_FILE, RUNS_DIR, RESULTS, RUNS_TABLE, LOCK = (
@@ -36,12 +43,24 @@ SWEEP_FILE, RUNS_DIR, RESULTS, RUNS_TABLE, LOCK = (
     ".lock",
 )
 DAMAGED_SWEEP = "it is not a sweep's record, so the sweep cannot resume"
-#: written by a failed run (the traceback or how its worker died); removed when it succeeds
-ERROR_FILE = "error.txt"
-#: written by a worker while it trains a run: {"pid": ..., "host": ...}
-RUNNING_FILE = "worker.json"
 
 RunState = Literal["done", "resumable", "new"]
+
+
+def check_sweep_dir(path: Path, option: str) -> None:
+    """``path`` is a sweep or a results collection, or new or empty: a sweep never writes its
+    tables and runs among files of something else (a run, a user's own tables)."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ConfigError(f"{option} {path} is a file; give a directory")
+    if path.is_dir() and not (path / SWEEP_FILE).exists() and not (path / RUNS_DIR).is_dir():
+        others = sorted(p.name for p in path.iterdir())
+        if others:
+            shown = ", ".join(others[:5]) + (", ..." if len(others) > 5 else "")
+            raise ConfigError(
+                f"{option} {path} is not a sweep or a results collection but holds files "
+                f"({shown}); give a new or empty directory"
+            )
 
 
 def run_path(sweep_dir: Path, name: str) -> Path:

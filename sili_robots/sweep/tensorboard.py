@@ -19,9 +19,8 @@ import threading
 import warnings
 from pathlib import Path
 
-from sili_robots.runs import METRIC_COLUMNS, METRICS
+from sili_robots.runs import METRIC_COLUMNS, METRICS, TB_DIR
 
-TB_DIR = "tb"
 #: metrics.csv column -> TensorBoard tag (true stability is derived: 1 - strategy_changed)
 TAGS = {
     "task_reward": "reward/task",

@@ -19,7 +19,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from sili_robots.sweep.state import ERROR_FILE, RUNNING_FILE, run_state
+from sili_robots.runs import ERROR_FILE, RUNNING_FILE
+from sili_robots.sweep.state import run_state
 
 #: one thread per worker: K workers share the machine's cores
 THREAD_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
