@@ -148,7 +148,18 @@ def read_bounds_file(path: Path = BOUNDS_FILE) -> dict[str, Any]:
     path = Path(path)
     if not path.is_file():
         return {"command": WRITE_COMMAND, "tasks": {}}
-    return json.loads(path.read_text())
+    try:
+        data = json.loads(path.read_text())
+    except ValueError as err:
+        data, problem = None, f"not JSON: {err}"
+    else:
+        problem = "no object of tasks"
+    if not isinstance(data, dict) or not isinstance(data.get("tasks"), dict):
+        raise ConfigError(
+            f"{path} is not a bounds file ({problem}); give --write a new file or one that "
+            "sili bounds wrote"
+        )
+    return data
 
 
 def write_bounds_file(results: list[dict[str, Any]], path: Path = BOUNDS_FILE) -> Path:

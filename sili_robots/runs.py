@@ -277,8 +277,8 @@ def check_resumable(run_dir: Path) -> None:
     if kept:
         raise ConfigError(
             f"{run_dir} holds a finished run without its {CHECKPOINT} (it has "
-            f"{', '.join(kept)}): it cannot be resumed or extended; train it again with --out "
-            "elsewhere"
+            f"{', '.join(kept)}): there is no checkpoint to resume, extend or evaluate it from; "
+            "train it again with --out elsewhere"
         )
 
 

@@ -178,3 +178,17 @@ def test_resuming_a_run_whose_record_was_lost_exits_2(tmp_path):
     metrics.unlink()
     code, _, err = _main("train", "--resume", str(run), "--interactions", "6", "--no-progress")
     assert code == 2 and "metrics.csv is missing" in err
+
+
+def test_files_a_command_would_write_are_checked_before_its_work(tmp_path):
+    """Not a bounds file, a folder for a file, a collection into its own source: exit 2 first."""
+    for text in ("[1, 2]", "{}", "{half"):
+        target = tmp_path / "b.json"
+        target.write_text(text)
+        code, out, err = _main("bounds", "circle-3", "--interactions", "20", "--write", str(target))
+        assert code == 2 and "is not a bounds file" in err and out == ""  # no games played
+        assert target.read_text() == text
+    code, _, err = _main("claims", str(tmp_path), "--write", str(tmp_path))
+    assert code == 2 and f"--write {tmp_path} is a directory" in err
+    code, _, err = _main("collect", "--into", str(tmp_path), str(tmp_path))
+    assert code == 2 and "is also a source" in err

@@ -523,7 +523,7 @@ def test_a_run_kept_without_its_checkpoint_is_not_trained_again(tmp_path, capsys
         assert f"{out} holds a finished run without its checkpoint.pt (it has summary.json)" in err
         assert {p.name: p.read_bytes() for p in out.iterdir()} == kept
     assert main(["eval", str(out)]) == 2
-    assert "cannot be resumed" in capsys.readouterr().err
+    assert "no checkpoint to resume, extend or evaluate it from" in capsys.readouterr().err
     (out / "summary.json").unlink()  # as if killed before its first checkpoint
     assert main(["train", "--resume", str(out), "--no-progress"]) == 0
     assert len(pd.read_csv(out / "metrics.csv")) == 3

@@ -73,13 +73,14 @@ def run(args: argparse.Namespace) -> int:
         compute_bounds,
         default_interactions,
         format_table,
+        read_bounds_file,
         write_bounds_file,
     )
     from sili_robots.tasks import task_spec
     from sili_robots.tasks.registry import all_versions
 
-    if args.write:
-        writable_file(Path(args.write), "--write")  # before minutes of games, not after
+    if args.write:  # before minutes of games, not after
+        read_bounds_file(writable_file(Path(args.write), "--write"))
     if args.all == (args.task is not None):
         raise ConfigError("give either a TASK (e.g. circle-3) or --all, not both or neither")
     specs = all_versions() if args.all else [task_spec(args.task)]

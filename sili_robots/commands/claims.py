@@ -33,6 +33,8 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.claims import claims_table, markdown
     from sili_robots.plotting import load_results
 
+    if args.write is not None:
+        _claims_block(args.write)  # a wrong file is named before the results are read
     table = markdown(claims_table(load_results(args.directory)))
     print(table, end="")
     if args.write is not None:
@@ -40,12 +42,20 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def write_block(path: Path, table: str) -> None:
-    """Replace the text between the claims markers of ``path`` with ``table``."""
+def _claims_block(path: Path) -> tuple[str, re.Pattern[str]]:
+    """The text of ``path`` and the pattern of its claims block, or ConfigError saying why not."""
+    if path.is_dir():
+        raise ConfigError(f"--write {path} is a directory; give the file with the claims block")
     if not path.is_file():
         raise ConfigError(f"--write {path}: no such file")
     text = path.read_text()
     pattern = re.compile(re.escape(START) + ".*?" + re.escape(END), re.S)
     if not pattern.search(text):
         raise ConfigError(f"--write {path}: it has no {START} ... {END} block to replace")
+    return text, pattern
+
+
+def write_block(path: Path, table: str) -> None:
+    """Replace the text between the claims markers of ``path`` with ``table``."""
+    text, pattern = _claims_block(path)
     path.write_text(pattern.sub(lambda _: f"{START}\n{table}{END}", text, count=1))

@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 
 from sili_robots.commands.common import writable_dir
+from sili_robots.errors import ConfigError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -27,7 +28,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from sili_robots.sweep.collect import collect
 
-    report = collect(args.sources, writable_dir(args.into, "--into"))
+    into = writable_dir(args.into, "--into").resolve()
+    same = [str(src) for src in args.sources if Path(src).resolve() == into]
+    if same:
+        raise ConfigError(f"--into {args.into} is also a source ({same[0]}); collect elsewhere")
+    report = collect(args.sources, args.into)
     print(
         json.dumps(
             {
