@@ -7,6 +7,7 @@ from gymnasium.utils.env_checker import check_env
 
 from sili_robots.errors import ConfigError
 from sili_robots.tasks import TASKS, make_task
+from sili_robots.tasks.circle import CircleEnv
 from sili_robots.wrappers import OracleObservation, StrategyFlag
 
 LIGHT_TASKS = [
@@ -105,6 +106,8 @@ def test_strategy_flag_is_last_element(name):
 
 def test_bad_arguments_are_named():
     with pytest.raises(ConfigError, match=r"'7'.*allowed: 3, 8, continuous, unequal"):
+        CircleEnv(variant="7")
+    with pytest.raises(ConfigError, match=r"circle-3 is variant='3'; variant='7' would be"):
         make_task("circle-3", variant="7")
     with pytest.raises(ConfigError, match="horizon must be an integer >= 1, got 0"):
         make_task("circle-3", horizon=0)
