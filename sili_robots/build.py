@@ -94,7 +94,14 @@ def task_kwargs_of(env: gym.Env) -> dict[str, Any]:
         registered = {k: _as_json(k, v) for k, v in gym.spec(spec.id).kwargs.items()}
     missing = object()
     kwargs = {k: _as_json(k, v) for k, v in given.items()}
-    return {k: v for k, v in kwargs.items() if registered.get(k, missing) != v}
+    other = {k: v for k, v in kwargs.items() if registered.get(k, missing) != v}
+    fixed = sorted(k for k in other if registered and k in type(task).identity_arguments)
+    if fixed:  # recorded under its registered name, it could never be built again
+        raise ConfigError(
+            f"{task_name_of(env)} was built with {fixed[0]}={other[fixed[0]]!r}, another task "
+            f"than its name says; build that task by its own name (sili_robots.tasks.TASKS)"
+        )
+    return other
 
 
 def _as_json(name: str, value: Any) -> Any:

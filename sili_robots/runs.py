@@ -149,20 +149,40 @@ RUN_DIRS = (TB_DIR,)
 
 
 def clear_run(run_dir: Path) -> None:
-    """Remove a run's own files from ``run_dir``, leaving anything else a user put there."""
+    """Remove a run's own files from ``run_dir``, leaving anything else a user put there; its
+    config last, so a removal cut short still leaves a folder that is a run's."""
     run_dir = Path(run_dir)
-    for name in RUN_FILES:
-        (run_dir / name).unlink(missing_ok=True)
     for name in RUN_DIRS:
         shutil.rmtree(run_dir / name, ignore_errors=True)
+    for path in run_dir.glob("*.tmp"):  # a write cut short (``atomic.replacing``)
+        path.unlink(missing_ok=True)
+    for name in sorted(RUN_FILES, key=lambda n: n == CONFIG):
+        (run_dir / name).unlink(missing_ok=True)
 
 
-def check_new_run_dir(run_dir: Path) -> None:
+def foreign_files(directory: Path, own: tuple[str, ...] = ()) -> list[str]:
+    """The names in ``directory`` that are neither ``own`` nor hidden (``.lock``, ``.gitkeep``)
+    nor a write cut short (``*.tmp``)."""
+    return sorted(
+        p.name
+        for p in Path(directory).iterdir()
+        if p.name not in own and not p.name.startswith(".") and not p.name.endswith(".tmp")
+    )
+
+
+def check_new_run_dir(run_dir: Path, overwrite: bool = False) -> None:
     """A new run goes into a new or empty directory, or a run's: files of something else are
-    never mixed with (or replaced by) a run's."""
+    never mixed with (or replaced by) a run's, and a run's files left without their config
+    (a removal cut short) are replaced only with ``overwrite``."""
     run_dir = Path(run_dir)
     if run_dir.is_dir() and not (run_dir / CONFIG).exists():
-        others = sorted(p.name for p in run_dir.iterdir())
+        left = foreign_files(run_dir)
+        if left and not overwrite and not set(left) - {*RUN_FILES, *RUN_DIRS}:
+            raise ConfigError(
+                f"{run_dir} holds a run's files ({', '.join(left)}) but no {CONFIG}, so it "
+                "cannot be resumed; --overwrite replaces them"
+            )
+        others = foreign_files(run_dir, (*RUN_FILES, *RUN_DIRS))
         if others:
             shown = ", ".join(others[:5]) + (", ..." if len(others) > 5 else "")
             raise ConfigError(
@@ -224,7 +244,7 @@ def check_history(run_dir: Path, interactions: int) -> None:
         raise ConfigError(
             f"{run_dir}: its checkpoint is at interaction {interactions} but its {METRICS} "
             f"{state}; resuming would leave a hole in its record: restore {METRICS}, or train "
-            "it again (--overwrite)"
+            "it again (sili train --overwrite; in a sweep, delete the run's folder and resume)"
         )
 
 

@@ -74,6 +74,8 @@ def test_api_refuses_what_it_cannot_use(tmp_path):
 
     with pytest.raises(ConfigError, match="does not follow the repeated-interaction contract"):
         SILI(gym.make("Pendulum-v1"))
+    with pytest.raises(ConfigError, match="circle-3 was built with variant='8', another task"):
+        SILI(gym.make("sili/Circle3-v1", variant="8"))  # could never be loaded as circle-3
     model = SILI("circle-3", method="sac", settings=FAST_AGENT)
     with pytest.raises(ConfigError, match="nothing to save yet"):
         model.save(tmp_path / "x")

@@ -161,7 +161,7 @@ def test_a_task_argument_that_names_another_task_exits_2(tmp_path):
     train = ["train", "--task", "circle-3", "--out", str(tmp_path / "r")]
     for value in ('"8"', "8"):
         code, _, err = _main(*train, "--env-kwarg", f"variant={value}")
-        assert code == 2 and "circle-3 is variant='3'" in err and "circle-8" in err
+        assert code == 2 and "circle-3 fixes variant='3'" in err and "circle-8" in err
     assert not (tmp_path / "r").exists()
     make_task("circle-3", variant="3").close()  # its own value is no other task
 

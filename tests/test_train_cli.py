@@ -482,14 +482,24 @@ def test_a_new_run_never_goes_into_a_folder_of_other_files(tmp_path, capsys):
     out = tmp_path / "mine"
     out.mkdir()
     (out / "metrics.csv").write_text("my own table\n")
+    (out / "notes.txt").write_text("mine")
     args = ["train", "--task", "circle-3", "--method", "sac", *FAST, "--interactions", "2"]
     for extra in ([], ["--overwrite"]):
         assert main([*args, "--out", str(out), *extra]) == 2
-        assert "is not a run but holds files (metrics.csv)" in capsys.readouterr().err
+        assert "is not a run but holds files (notes.txt)" in capsys.readouterr().err
     assert (out / "metrics.csv").read_text() == "my own table\n"
     empty = tmp_path / "empty"
     empty.mkdir()
+    (empty / ".gitkeep").write_text("")  # hidden files are nobody's results
     assert main([*args, "--out", str(empty)]) == 0
+    # a run's files left without their config (a removal cut short): replaced only on request
+    (empty / "config.json").unlink()
+    assert main([*args, "--out", str(empty)]) == 2
+    assert "holds a run's files (checkpoint.pt, metrics.csv, summary.json) but no config.json" in (
+        capsys.readouterr().err
+    )
+    assert main([*args, "--out", str(empty), "--overwrite", "--seed", "3"]) == 0
+    assert json.loads((empty / "config.json").read_text())["run"]["seed"] == 3
 
 
 def test_a_checkpoint_write_cut_short_leaves_the_previous_one(tmp_path, monkeypatch):

@@ -52,7 +52,8 @@ def run(args: argparse.Namespace) -> int:
 
     for path, option in ((args.sweep_dir, "--sweep-dir"), (args.into, "--into")):
         check_sweep_dir(path, option)  # before any run, in a dry run too
-        writable_dir(path, option)
+        if not args.dry_run:  # a listing reads only
+            writable_dir(path, option)
     blocks = [block(b) for b in parse_list(args.blocks)] if args.blocks else list(BLOCKS)
     tasks = tuple(parse_list(args.tasks)) if args.tasks else TASKS
     bad = [t for t in tasks if t not in TASKS]

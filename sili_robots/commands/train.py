@@ -96,7 +96,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=1,
         help="torch threads for this run (default 1; recorded, as it changes the summation order)",
     )
-    p.add_argument("--overwrite", action="store_true", help="replace an existing run directory")
+    p.add_argument(
+        "--overwrite", action="store_true", help="replace the run in --out (its own files only)"
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(run=run)
     track_typed_options(p)
@@ -211,7 +213,7 @@ def run(args: argparse.Namespace) -> int:
                 f"{args.out} already holds a run; use --resume {args.out} to "
                 "continue it or --overwrite to replace it"
             )
-        check_new_run_dir(args.out)
+        check_new_run_dir(args.out, args.overwrite)
         _check_env_builds(cfg)
         if args.overwrite:
             clear_run(args.out)  # the run's own files; anything else in the folder stays

@@ -216,8 +216,8 @@ def _build_once(task: str, kwargs: dict[str, Any]) -> None:
         make_task(task, **kwargs).close()
     except ConfigError as err:
         raise ConfigError(f"task {task!r} with {given}: {err}") from None
-    except (TypeError, ValueError) as err:
-        raise ConfigError(f"task {task!r} refuses {given}: {err}") from None
+    except Exception as err:  # e.g. a simulator missing here: named, not a traceback
+        raise ConfigError(f"task {task!r} cannot be built with {given}: {err}") from None
 
 
 def format_beta(beta: float) -> str:
@@ -272,8 +272,9 @@ def schedule_overrides(spec: SweepSpec, method: str) -> dict[str, Any]:
 
 
 def validate(spec: SweepSpec) -> None:
-    """Reject bad axes up front with the allowed values (tasks' own arguments are checked when a
-    run builds its task, so a bad one fails that run only)."""
+    """Reject bad axes up front with the allowed values (tasks' own arguments: a new sweep from
+    the CLI builds each task first, ``check_task_arguments``; through the Python API a bad one
+    fails the runs that build it)."""
     if not spec.tasks:
         raise ConfigError(f"no tasks given; allowed: {', '.join(TASKS)}")
     if not spec.methods:

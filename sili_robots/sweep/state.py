@@ -30,6 +30,7 @@ from sili_robots.runs import (
     CONFIG,
     RUNNING_FILE,
     SUMMARY,
+    foreign_files,
     read_json,
     recorded_run,
 )
@@ -54,7 +55,7 @@ def check_sweep_dir(path: Path, option: str) -> None:
     if path.exists() and not path.is_dir():
         raise ConfigError(f"{option} {path} is a file; give a directory")
     if path.is_dir() and not (path / SWEEP_FILE).exists() and not (path / RUNS_DIR).is_dir():
-        others = sorted(p.name for p in path.iterdir())
+        others = foreign_files(path)
         if others:
             shown = ", ".join(others[:5]) + (", ..." if len(others) > 5 else "")
             raise ConfigError(

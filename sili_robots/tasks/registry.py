@@ -160,10 +160,15 @@ def make_task(name: str, **kwargs: Any) -> gym.Env:
     fixed = _task_class(spec).identity_arguments
     for key in sorted(k for k in kwargs if k in fixed):
         if not _same(spec.kwargs.get(key), kwargs[key]):
-            others = [s.name for s in TASKS.values() if s.entry_point == spec.entry_point]
+            others = [
+                s.name
+                for s in all_versions()
+                if s.entry_point == spec.entry_point and s.version == spec.version and s != spec
+            ]
             raise ConfigError(
-                f"{spec.name} is {key}={spec.kwargs.get(key)!r}; {key}={kwargs[key]!r} would be "
-                f"another task under its name: build that one by name ({', '.join(others)})"
+                f"{spec.name} fixes {key}={spec.kwargs.get(key)!r} (it is what the task is), so "
+                f"{key}={kwargs[key]!r} is not allowed; drop it, or build another {key} by its "
+                f"name: {', '.join(others)}"
             )
     with warnings.catch_warnings():
         if spec.name in EARLIER_VERSIONS:  # asked for by its version: no "out of date" warning
