@@ -428,16 +428,20 @@ def test_first_finished_run_finals():
 
 
 def test_claims_write_replaces_the_readme_block(sweep_and_collection, tmp_path, capsys):
-    _, collection = sweep_and_collection
+    _, collection = sweep_and_collection  # tiny runs: they measure no claim
     readme = tmp_path / "README.md"
-    readme.write_text(f"# x\n{START}\nold\n{END}\ntail\n")
-    assert main(["claims", str(collection), "--write", str(readme)]) == 0
+    readme.write_text(f"# x\n{START}\nstale-table\n{END}\ntail\n")
+    assert main(["claims", str(collection), "--write", str(readme)]) == 2
+    assert "measures none of the claims" in capsys.readouterr().err
+    assert "stale-table" in readme.read_text()  # a table of "not measured yet" replaces nothing
+    committed = Path(__file__).resolve().parents[1] / "results" / "paper-grid"
+    assert main(["claims", str(committed), "--write", str(readme)]) == 0
     table = capsys.readouterr().out
     text = readme.read_text()
     assert text.startswith(f"# x\n{START}\n| claim |") and text.endswith(f"{END}\ntail\n")
-    assert table in text and "old" not in text
+    assert table in text and "stale-table" not in text
     readme.write_text("no block")
-    assert main(["claims", str(collection), "--write", str(readme)]) == 2
+    assert main(["claims", str(committed), "--write", str(readme)]) == 2
 
 
 def test_the_b_sweep_pools_only_constant_b_runs_of_the_sweeps_length():

@@ -35,9 +35,16 @@ def run(args: argparse.Namespace) -> int:
 
     if args.write is not None:
         _claims_block(args.write)  # a wrong file is named before the results are read
-    table = markdown(claims_table(load_results(args.directory)))
+    claims = claims_table(load_results(args.directory))
+    table = markdown(claims)
     print(table, end="")
     if args.write is not None:
+        if all(c.verdict.startswith("not measured") for c in claims):
+            raise ConfigError(
+                f"{args.directory} measures none of the claims, so --write {args.write} would "
+                "replace its table with 'not measured yet' everywhere; give the grid's results "
+                "(results/paper-grid)"
+            )
         write_block(args.write, table)
     return 0
 
