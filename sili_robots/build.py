@@ -212,7 +212,9 @@ def make_run_config(
         for path, value in addon_settings.items():
             cfg.set(path, value)
     except UnknownSetting as err:  # name every setting, the agent's and the add-ons'
-        allowed = paths(AgentConfig) + paths(AddonsConfig, "addons.")
+        allowed = [  # the method is chosen itself, never set
+            p for p in paths(AgentConfig) + paths(AddonsConfig, "addons.") if p != "method"
+        ]
         raise ConfigError(
             f"unknown setting {err.name!r}; allowed: {', '.join(allowed)} "
             f"(or the earlier flat names {', '.join(LEGACY_SETTINGS)})"

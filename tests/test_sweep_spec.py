@@ -139,7 +139,7 @@ def test_latent_kind_other_than_the_default_is_named():
         ),
         ({"methods": ["lili"], "beta_schedule": [(0, 0.5)]}, "--beta-schedule applies to"),
         ({"beta_schedule": [(300, 0.5), (250, 0.0)]}, "interactions must increase"),
-        ({"agent_overrides": {"hiddden": 3}}, "unknown setting 'hiddden'; allowed: method"),
+        ({"agent_overrides": {"hiddden": 3}}, "unknown setting 'hiddden'; allowed: latent, hidden"),
         ({"agent_overrides": {"gamma": 2}}, r"sac\.gamma must be in \[1e-09, 1\], got 2"),
         ({"latent": "fuzzy"}, "unknown latent kind 'fuzzy'"),
         ({"tasks": []}, "no tasks given"),
