@@ -26,6 +26,7 @@ from sili_robots.errors import ConfigError
 from sili_robots.migrations import LEGACY_SETTINGS, setting_path
 from sili_robots.runs import RunConfig
 from sili_robots.tasks import RepeatedInteractionEnv, make_task, task_spec
+from sili_robots.tasks.registry import identity_conflict
 from sili_robots.wrappers import OracleObservation, StrategyFlag
 
 
@@ -88,18 +89,18 @@ def task_kwargs_of(env: gym.Env) -> dict[str, Any]:
             f"cannot record the arguments {type(task).__name__} was built with (its constructor "
             "takes *args); give its arguments by name"
         )
-    registered: dict[str, Any] = {}
-    if not is_class_path(task_name_of(env)):  # rebuilt from this package's registered version
+    name, registered = task_name_of(env), {}
+    if not is_class_path(name):  # rebuilt from this package's registered version
         spec = env.spec if env.spec is not None else task.spec
         registered = {k: _as_json(k, v) for k, v in gym.spec(spec.id).kwargs.items()}
     missing = object()
     kwargs = {k: _as_json(k, v) for k, v in given.items()}
     other = {k: v for k, v in kwargs.items() if registered.get(k, missing) != v}
-    fixed = sorted(k for k in other if registered and k in type(task).identity_arguments)
-    if fixed:  # recorded under its registered name, it could never be built again
+    key = None if is_class_path(name) else identity_conflict(name, other)
+    if key is not None:  # recorded under its registered name, it could never be built again
         raise ConfigError(
-            f"{task_name_of(env)} was built with {fixed[0]}={other[fixed[0]]!r}, another task "
-            f"than its name says; build that task by its own name (sili_robots.tasks.TASKS)"
+            f"{name} was built with {key}={other[key]!r}, another task than its name says; "
+            "build that task by its own name (sili_robots.tasks.TASKS)"
         )
     return other
 

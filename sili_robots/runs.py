@@ -170,6 +170,11 @@ def foreign_files(directory: Path, own: tuple[str, ...] = ()) -> list[str]:
     )
 
 
+def listed(names: list[str], most: int = 5) -> str:
+    """``a, b, c, ...``: the first ``most`` names, for a message."""
+    return ", ".join(names[:most]) + (", ..." if len(names) > most else "")
+
+
 def check_new_run_dir(run_dir: Path, overwrite: bool = False) -> None:
     """A new run goes into a new or empty directory, or a run's: files of something else are
     never mixed with (or replaced by) a run's, and a run's files left without their config
@@ -184,10 +189,9 @@ def check_new_run_dir(run_dir: Path, overwrite: bool = False) -> None:
             )
         others = foreign_files(run_dir, (*RUN_FILES, *RUN_DIRS))
         if others:
-            shown = ", ".join(others[:5]) + (", ..." if len(others) > 5 else "")
             raise ConfigError(
-                f"{run_dir} is not a run but holds files ({shown}); give --out a new or empty "
-                "directory"
+                f"{run_dir} is not a run but holds files ({listed(others)}); give --out a new "
+                "or empty directory"
             )
 
 

@@ -225,6 +225,14 @@ def parse_env_kwargs(items: list[str], flag: str) -> dict:
     return out
 
 
+def task_kwargs_arg(args: argparse.Namespace) -> dict:
+    """``--env-kwarg`` pairs, which may not name the controller ``--controller`` gives."""
+    env_kwargs = parse_env_kwargs(args.env_kwarg, "--env-kwarg")
+    if args.controller is not None and "controller" in env_kwargs:
+        raise ConfigError("give one of --controller and --env-kwarg controller=..., not both")
+    return env_kwargs
+
+
 def add_override_args(p: argparse.ArgumentParser, scope: str) -> None:
     """``--set KEY=VALUE`` (agent settings) and ``--env-kwarg KEY=VALUE`` (task arguments)."""
     p.add_argument(

@@ -12,10 +12,10 @@ from sili_robots.commands.common import (
     add_override_args,
     add_schedule_args,
     given_options,
-    parse_env_kwargs,
     parse_settings,
     positive_int,
     schedule_args,
+    task_kwargs_arg,
     track_typed_options,
     writable_dir,
 )
@@ -117,9 +117,7 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
             f"--latent applies to methods {', '.join(LATENT_METHODS)} only, none of which is in "
             f"the sweep ({', '.join(methods)}); the others fix latent = 'none'"
         )
-    env_kwargs = parse_env_kwargs(args.env_kwarg, "--env-kwarg")
-    if args.controller is not None and "controller" in env_kwargs:
-        raise ConfigError("give one of --controller and --env-kwarg controller=..., not both")
+    env_kwargs = task_kwargs_arg(args)
     schedules = schedule_args(args)
     spec = SweepSpec(
         tasks=parse_list(args.tasks),

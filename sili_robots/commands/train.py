@@ -15,11 +15,11 @@ from sili_robots.commands.common import (
     check_schedule_overrides,
     given_options,
     non_negative_int,
-    parse_env_kwargs,
     parse_settings,
     positive_int,
     schedule_args,
     seed,
+    task_kwargs_arg,
     task_name,
     track_typed_options,
     unit_float,
@@ -139,9 +139,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     settings.update(schedules)
     if args.latent is not None and "latent" in given:
         raise ConfigError(f"give one of --latent and --set {given['latent']}, not both")
-    env_kwargs = parse_env_kwargs(args.env_kwarg, "--env-kwarg")
-    if args.controller is not None and "controller" in env_kwargs:
-        raise ConfigError("give one of --controller and --env-kwarg controller=..., not both")
+    env_kwargs = task_kwargs_arg(args)
     if args.controller is not None:
         env_kwargs["controller"] = args.controller
     return make_run_config(

@@ -198,13 +198,17 @@ def check_task_arguments(spec: SweepSpec) -> None:
                 f"arguments: {', '.join(task_arguments(task))}"
             )
     for task in spec.tasks:
-        controllers: list[str | None] = [None]
-        if spec.controllers is not None and task_accepts(task, "controller"):
-            controllers = list(spec.controllers)
-        for controller in controllers:
-            kwargs = dict(spec.env_kwargs, **({"controller": controller} if controller else {}))
+        for kwargs in task_kwargs_of_runs(spec, task):
             if kwargs:
                 _build_once(task, kwargs)
+
+
+def task_kwargs_of_runs(spec: SweepSpec, task: str) -> list[dict[str, Any]]:
+    """The task arguments ``task``'s runs are built with: the sweep's, once per controller on
+    the tasks that take one."""
+    if spec.controllers is None or not task_accepts(task, "controller"):
+        return [dict(spec.env_kwargs)]
+    return [dict(spec.env_kwargs, controller=c) for c in spec.controllers]
 
 
 def _build_once(task: str, kwargs: dict[str, Any]) -> None:
@@ -332,13 +336,9 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
     for task in spec.tasks:
         tspec = task_spec(task)
         latent = spec.latent or tspec.default_latent
-        controllers: list[str | None] = [None]
-        if spec.controllers is not None and task_accepts(tspec.name, "controller"):
-            controllers = list(spec.controllers)
-        for controller in controllers:
-            env_kwargs = dict(spec.env_kwargs)
-            if controller is not None:
-                env_kwargs["controller"] = controller
+        for env_kwargs in task_kwargs_of_runs(spec, tspec.name):
+            controller = env_kwargs.get("controller")  # only a swept one: validate() refuses
+            # a controller among the sweep's own task arguments
             for method in spec.methods:
                 profile = spec.profile or (
                     spec.sili_profiles.get(task, "package") if method == "sili" else "package"

@@ -31,6 +31,7 @@ from sili_robots.runs import (
     RUNNING_FILE,
     SUMMARY,
     foreign_files,
+    listed,
     read_json,
     recorded_run,
 )
@@ -57,10 +58,9 @@ def check_sweep_dir(path: Path, option: str) -> None:
     if path.is_dir() and not (path / SWEEP_FILE).exists() and not (path / RUNS_DIR).is_dir():
         others = foreign_files(path)
         if others:
-            shown = ", ".join(others[:5]) + (", ..." if len(others) > 5 else "")
             raise ConfigError(
                 f"{option} {path} is not a sweep or a results collection but holds files "
-                f"({shown}); give a new or empty directory"
+                f"({listed(others)}); give a new or empty directory"
             )
 
 

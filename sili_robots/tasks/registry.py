@@ -14,7 +14,6 @@ changed and why.
 from __future__ import annotations
 
 import functools
-import importlib
 import inspect
 import json
 import warnings
@@ -23,6 +22,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import load_env_creator
 
 from sili_robots.errors import ConfigError
 
@@ -142,8 +142,7 @@ def other_task_arguments(task_id: str | None, env_kwargs: dict[str, Any]) -> dic
 
 
 def _task_class(spec: TaskSpec) -> type:
-    module, cls = spec.entry_point.split(":")
-    return getattr(importlib.import_module(module), cls)
+    return load_env_creator(spec.entry_point)
 
 
 def _same(default: Any, value: Any) -> bool:
@@ -154,22 +153,33 @@ def _same(default: Any, value: Any) -> bool:
         return default == value
 
 
+def identity_conflict(name: str, kwargs: dict[str, Any]) -> str | None:
+    """The first of ``kwargs`` that would make the task ``name`` another task (its identity
+    arguments, Circle's ``variant``, are fixed by the name), or None: a run recorded under the
+    name must build again as that task (``make_task``, and a given instance when recorded)."""
+    spec = task_spec(name)
+    fixed = _task_class(spec).identity_arguments
+    return next(
+        (k for k in sorted(kwargs) if k in fixed and not _same(spec.kwargs.get(k), kwargs[k])),
+        None,
+    )
+
+
 def make_task(name: str, **kwargs: Any) -> gym.Env:
     """Build a task by CLI name or gymnasium id; ``kwargs`` go to the task's constructor."""
     spec = task_spec(name)
-    fixed = _task_class(spec).identity_arguments
-    for key in sorted(k for k in kwargs if k in fixed):
-        if not _same(spec.kwargs.get(key), kwargs[key]):
-            others = [
-                s.name
-                for s in all_versions()
-                if s.entry_point == spec.entry_point and s.version == spec.version and s != spec
-            ]
-            raise ConfigError(
-                f"{spec.name} fixes {key}={spec.kwargs.get(key)!r} (it is what the task is), so "
-                f"{key}={kwargs[key]!r} is not allowed; drop it, or build another {key} by its "
-                f"name: {', '.join(others)}"
-            )
+    key = identity_conflict(spec.gym_id, kwargs)
+    if key is not None:
+        others = [
+            s.name
+            for s in all_versions()
+            if s.entry_point == spec.entry_point and s.version == spec.version and s != spec
+        ]
+        raise ConfigError(
+            f"{spec.name} fixes {key}={spec.kwargs.get(key)!r} (it is what the task is), so "
+            f"{key}={kwargs[key]!r} is not allowed; drop it, or build another {key} by its "
+            f"name: {', '.join(others)}"
+        )
     with warnings.catch_warnings():
         if spec.name in EARLIER_VERSIONS:  # asked for by its version: no "out of date" warning
             warnings.filterwarnings("ignore", ".*The environment .* is out of date", Warning)
