@@ -80,3 +80,49 @@ def verdict(run_dir: Path, window: int = 50) -> str:
     if stab:
         refs.append(f"the scripted stabilizing policy that sees z: {stab['task_reward']:.1f}")
     return line + (f" ({', '.join(refs)})" if refs else "")
+
+
+def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
+    """The line for runs of one method that differ in their seed, e.g. "SILI worked in 1 of 2
+    seeds (held the opponent in 90% or more of its last 50 interactions and earned more than
+    standing still's -50.0): seed 1 (100%, -25.9 per interaction); not seed 0 (0%, -17.1 per
+    interaction)", and the run to look at further: the best-earning one that worked, else the
+    first seed's."""
+    if not run_dirs:
+        raise ValueError("no runs to judge")
+    runs = sorted((read_config(d).seed, Path(d)) for d in run_dirs)
+    cfg = read_config(runs[0][1])
+    still = _references(cfg).get("still")
+    judged = []  # (worked, reward, what to print, run)
+    for seed, run_dir in runs:
+        tail = _last(run_dir, window)
+        reward = float(tail["task_reward"].mean())
+        said = f"seed {seed} ({_stability(tail):.0%}, {reward:.1f} per interaction)"
+        judged.append((worked(run_dir, window), reward, said, run_dir))
+    good = [j for j in judged if j[0]]
+    rule = f"held the opponent in {HOLDS:.0%} or more of its last {window} interactions"
+    if still:
+        rule += f" and earned more than standing still's {still['task_reward']:.1f}"
+    name = METHOD_NAMES.get(cfg.method, cfg.method)
+    line = f"{name} worked in {len(good)} of {len(runs)} seeds ({rule}): "
+    parts = [", ".join(j[2] for j in good)] if good else []
+    if len(good) < len(judged):
+        parts.append("not " + ", ".join(j[2] for j in judged if not j[0]))
+    best = max(good, key=lambda j: j[1])[3] if good else runs[0][1]
+    return line + "; ".join(parts), best
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m sili_robots.verdict RUN_DIR...``: the line across seeds on stderr, the run to
+    look at further on stdout; exit status 1 when no run worked."""
+    import sys
+
+    run_dirs = [Path(a) for a in (sys.argv[1:] if argv is None else argv)]
+    line, best = across_seeds(run_dirs)
+    print(line, file=sys.stderr)
+    print(best)
+    return 0 if worked(best) else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,5 +1,6 @@
-"""The README's main command end to end (a few interactions): the verdict, the pointer to the
-longer recipe when the run did not hold, and that the recipe it names is a command that runs."""
+"""The README's main command end to end (a few interactions): two seeds' verdicts and the line
+across them, the pointer to the longer recipe when neither held, and that the recipe it names is a
+command that runs."""
 
 from __future__ import annotations
 
@@ -31,9 +32,12 @@ def test_main_job_names_a_working_recipe_when_it_does_not_hold(tmp_path):
     )
     assert done.returncode == 0, done.stderr[-2000:]
     assert "SILI ran 4 interactions, too few to tell whether it holds" in done.stderr
+    assert "SILI worked in 0 of 2 seeds (held the opponent in 90% or more" in done.stderr
     evaluation = json.loads(done.stdout[done.stdout.rindex('{\n  "run_dir"') :])
-    assert evaluation["run_dir"] == str(out) and evaluation["interactions"] == 20
-    main_cfg = read_config(out)  # the main job itself: the delayed b on the small agent
+    seeds = sorted((out / "runs").iterdir())
+    assert [read_config(r).seed for r in seeds] == [0, 1]  # two seeds, one per core
+    assert evaluation["run_dir"] == str(seeds[0]) and evaluation["interactions"] == 20
+    main_cfg = read_config(seeds[0])  # the main job itself: the delayed b on the small agent
     assert main_cfg.agent.sac.precision == "float32"  # (FAST_ARGS shrink the networks)
     assert main_cfg.agent.sili.beta.points == ((250, 0.0), (300, 0.5))
     recipe = re.search(r"(\.venv/bin/sili train .*?--out \S+)", done.stderr.replace("\n", " "))

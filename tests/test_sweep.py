@@ -23,6 +23,7 @@ from sili_robots.sweep import tensorboard as tb
 from sili_robots.sweep.results import results_table
 from sili_robots.sweep.state import sweep_lock
 from sili_robots.training import train
+from sili_robots.verdict import verdict
 
 
 def _spec(**kw):
@@ -69,6 +70,7 @@ def test_local_sweep_runs_every_run_in_its_own_process(tiny_sweep):
         run_dir = out / "runs" / name
         assert (run_dir / "summary.json").is_file()
         assert len(pd.read_csv(run_dir / "metrics.csv")) == 8
+        assert report.outcomes[name].verdict == verdict(run_dir)  # the worker's, for the display
 
 
 def test_a_sweep_run_is_the_run_sili_train_would_make(tiny_sweep, tmp_path):
@@ -297,6 +299,30 @@ def test_resume_of_a_non_sweep_and_changed_settings_exit_2(tiny_sweep, tmp_path,
     assert "it takes no --seeds (" in capsys.readouterr().err
 
 
+def test_overwrite_starts_the_sweep_anew_and_keeps_a_users_files(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    base = ["sweep", "--tasks", "circle-3", "--methods", "sac", "--out", str(out), *FAST_ARGS]
+    assert main([*base, "--seeds", "0-1", "--interactions", "2", "--no-progress"]) == 0
+    s0, s1 = out / "runs" / "circle-3__sac__s0", out / "runs" / "circle-3__sac__s1"
+    (out / "notes.txt").write_text("mine")
+    (s0 / "plot.png").write_text("mine")
+    again = [*base, "--seeds", "0", "--interactions", "3"]
+    assert main(again) == 2  # other settings on disk: refused without --overwrite
+    assert "interactions: 2 on disk, 3 now" in capsys.readouterr().err
+    assert main([*again, "--overwrite", "--dry-run"]) == 0
+    assert capsys.readouterr().out == "circle-3__sac__s0\tnew\n1 runs\n"
+    assert len(pd.read_csv(s0 / "metrics.csv")) == 2 and s1.is_dir()  # a dry run changes nothing
+    assert main([*again, "--overwrite", "--no-progress"]) == 0
+    assert len(pd.read_csv(s0 / "metrics.csv")) == 3  # trained anew, not resumed
+    assert not s1.exists()  # the replaced sweep's run, which the new one does not plan
+    assert (out / "notes.txt").read_text() == (s0 / "plot.png").read_text() == "mine"
+    recorded = json.loads((out / "sweep.json").read_text())["invocations"]
+    assert [(r["seeds"], r["interactions"]) for r in recorded] == [([0], 3)]
+    assert set(pd.read_csv(out / "runs.csv")["run"]) == {"circle-3__sac__s0"}
+    assert main(["sweep", "--resume", str(out), "--overwrite"]) == 2
+    assert "it takes no --overwrite" in capsys.readouterr().err
+
+
 def _alive(pid):
     try:
         os.kill(pid, 0)
@@ -372,7 +398,7 @@ def test_progress_display_counts_runs_and_interactions(tmp_path):
     with display:
         display.started(jobs[0])
         display.started(jobs[1])
-        display.finished(Outcome("r0", "done", wall_time_s=1.5))
+        display.finished(Outcome("r0", "done", wall_time_s=1.5, verdict="SILI held [it]"))
         display.finished(Outcome("r1", "failed", error="ConfigError: bad [thing]"))
         counts = display._counts()
         assert "2 done" in counts and "0 running" in counts and "1 failed" in counts
@@ -380,7 +406,7 @@ def test_progress_display_counts_runs_and_interactions(tmp_path):
         # finished runs count in full, a failed one only for what it logged: 10 + 10 + 2 + 0
         assert display._completed() == 22 and display._total_interactions == 32
     out = buf.getvalue()
-    assert "done r0 in 1.5 s" in out
+    assert "done r0 in 1.5 s: SILI held [it]" in out  # the run's verdict, not eaten as markup
     assert "failed r1: ConfigError: bad [thing]" in out  # error text not eaten as markup
     assert "sweep: 2 done, 1 failed, 1 not run" in out
 

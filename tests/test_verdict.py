@@ -8,7 +8,8 @@ import pandas as pd
 from fast_settings import FAST_ARGS
 
 from sili_robots.cli import main
-from sili_robots.verdict import held, verdict, worked
+from sili_robots.verdict import across_seeds, held, verdict, worked
+from sili_robots.verdict import main as verdict_main
 
 
 def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys):
@@ -62,3 +63,35 @@ def test_a_run_given_its_versions_own_arguments_is_read_against_the_references(t
     # 0.1 is Circle3-v1's own margin: the dynamics the references were measured on
     assert main([*args, "--env-kwarg", "outside_margin=0.1", *FAST_ARGS, "--no-progress"]) == 0
     assert "standing still: -50.0" in verdict(run, window=4)
+
+
+def _trained(tmp_path, seed: int, task_reward: float, changed: int):
+    """A short run whose record then reads as 50 interactions of the given outcome."""
+    run = tmp_path / f"s{seed}"
+    args = ["train", "--task", "circle-3", "--interactions", "4", "--seed", str(seed)]
+    assert main([*args, "--out", str(run), *FAST_ARGS, "--no-progress"]) == 0
+    metrics = pd.concat([pd.read_csv(run / "metrics.csv")] * 13).head(50)
+    metrics = metrics.assign(interaction=range(50), strategy_changed=changed)
+    metrics.assign(task_reward=task_reward).to_csv(run / "metrics.csv", index=False)
+    return run
+
+
+def test_the_line_across_seeds_counts_the_runs_that_worked_and_picks_the_best(tmp_path, capsys):
+    held_low = _trained(tmp_path, 2, -30.0, changed=0)
+    lost = _trained(tmp_path, 0, -10.0, changed=1)
+    held_high = _trained(tmp_path, 1, -20.0, changed=0)
+    line, best = across_seeds([held_low, lost, held_high])
+    assert line == (
+        "SILI worked in 2 of 3 seeds (held the opponent in 90% or more of its last 50 "
+        "interactions and earned more than standing still's -50.0): seed 1 (100%, -20.0 per "
+        "interaction), seed 2 (100%, -30.0 per interaction); not seed 0 (0%, -10.0 per "
+        "interaction)"
+    )
+    assert best == held_high  # the best-earning run that worked, not the best-earning one
+    capsys.readouterr()
+    assert verdict_main([str(lost), str(held_low), str(held_high)]) == 0
+    printed = capsys.readouterr()
+    assert printed.out.strip() == str(held_high) and printed.err.strip() == line
+    assert verdict_main([str(lost)]) == 1  # none worked: the first seed's run to look at
+    printed = capsys.readouterr()
+    assert printed.out.strip() == str(lost) and "SILI worked in 0 of 1 seeds" in printed.err

@@ -66,6 +66,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     add_override_args(p, scope=" for every run")
     p.add_argument("--out", type=Path, help="sweep directory (created, or continued)")
     p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the sweep in --out: its runs start anew (its own files only)",
+    )
+    p.add_argument(
         "--resume", type=Path, metavar="SWEEP_DIR", help="run the sweep recorded in SWEEP_DIR again"
     )
     p.add_argument("--backend", choices=BACKENDS, default="local")
@@ -185,6 +190,9 @@ def run(args: argparse.Namespace) -> int:
     if args.dry_run:
         planned = plan(specs)
         for run_ in planned:
+            if args.overwrite:  # replaced, so what is on disk does not matter
+                print(f"{run_.name}\tnew")
+                continue
             check_existing(sweep_dir, run_)
             print(f"{run_.name}\t{run_state(run_path(sweep_dir, run_.name))}")
         print(f"{len(planned)} runs")
@@ -196,6 +204,7 @@ def run(args: argparse.Namespace) -> int:
         backend,
         progress=not args.no_progress,
         tensorboard_scalars=False if args.no_tensorboard else None,
+        overwrite=args.overwrite,
     )
     print(
         json.dumps(

@@ -2,7 +2,8 @@
 
 Progress is counted in interactions (rows of each run's ``metrics.csv``), so runs of different
 lengths weigh what they cost and the ETA follows the recent rate across all workers. Every run
-that ends also gets one printed line, which is what a log (no terminal) keeps.
+that ends also gets one printed line, with a finished run's verdict (``sili_robots.verdict``);
+that is what a log (no terminal) keeps.
 """
 
 from __future__ import annotations
@@ -105,9 +106,8 @@ class SweepProgress:
             self.done += 1
             self._logged[outcome.name] = self._planned[outcome.name]
             resumed = " (resumed)" if outcome.resumed else ""
-            self._log(
-                f"[green]done[/] {escape(outcome.name)}{resumed} in {outcome.wall_time_s:.1f} s"
-            )
+            line = f"[green]done[/] {escape(outcome.name)}{resumed} in {outcome.wall_time_s:.1f} s"
+            self._log(line + (f": {escape(outcome.verdict)}" if outcome.verdict else ""))
         else:
             self.failed += 1
             job = self._jobs[outcome.name]

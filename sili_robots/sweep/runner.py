@@ -15,8 +15,11 @@ from sili_robots.sweep.local import LocalBackend
 from sili_robots.sweep.spec import PlannedRun, SweepSpec, expand
 from sili_robots.sweep.state import (
     RUNNING_FILE,
+    SWEEP_FILE,
     check_existing,
+    clear_sweep,
     record_invocation,
+    recorded_specs,
     run_path,
     run_state,
     sweep_lock,
@@ -54,6 +57,17 @@ def plan(specs: Sequence[SweepSpec]) -> list[PlannedRun]:
     return list(runs.values())
 
 
+def recorded_runs(sweep_dir: Path) -> list[str]:
+    """The names of the runs the sweep recorded in ``sweep_dir`` plans (none when there is no
+    readable record)."""
+    if not (Path(sweep_dir) / SWEEP_FILE).is_file():
+        return []
+    try:
+        return [r.name for r in plan(recorded_specs(sweep_dir))]
+    except ConfigError:  # a damaged record, or one this version cannot plan
+        return []
+
+
 def run_sweep(
     specs: SweepSpec | Sequence[SweepSpec],
     sweep_dir: Path,
@@ -61,8 +75,12 @@ def run_sweep(
     monitor: Monitor | None = None,
     progress: bool = True,
     tensorboard_scalars: bool | None = None,
+    overwrite: bool = False,
 ) -> SweepReport:
     """Run every planned run not yet finished; failures are reported, never raised.
+
+    With ``overwrite`` the sweep in ``sweep_dir`` (its record, tables and runs) is removed
+    first, so every run starts anew.
 
     Without a ``monitor`` a :class:`SweepProgress` prints one line per run that ends and, with
     ``progress``, draws the live display.
@@ -81,6 +99,9 @@ def run_sweep(
     elif tensorboard_scalars and not tensorboard.available():
         raise ConfigError("TensorBoard scalars need: pip install 'sili-robots[tensorboard]'")
     with sweep_lock(sweep_dir):
+        if overwrite:
+            names = [r.name for r in planned]
+            clear_sweep(sweep_dir, names + [n for n in recorded_runs(sweep_dir) if n not in names])
         for run in planned:
             check_existing(sweep_dir, run)
         for spec in specs:

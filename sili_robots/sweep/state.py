@@ -30,6 +30,7 @@ from sili_robots.runs import (
     CONFIG,
     RUNNING_FILE,
     SUMMARY,
+    clear_run,
     foreign_files,
     listed,
     read_json,
@@ -66,6 +67,21 @@ def check_sweep_dir(path: Path, option: str) -> None:
 
 def run_path(sweep_dir: Path, name: str) -> Path:
     return Path(sweep_dir) / RUNS_DIR / name
+
+
+def clear_sweep(sweep_dir: Path, names: list[str]) -> None:
+    """Remove a sweep's own files (its tables and the runs ``names``) and leave anything else a
+    user put there; its record last, so a removal cut short still leaves a folder that is a
+    sweep's."""
+    sweep_dir = Path(sweep_dir)
+    for name in names:
+        path = run_path(sweep_dir, name)
+        if path.is_dir():
+            clear_run(path)
+            with contextlib.suppress(OSError):
+                path.rmdir()  # kept when a user's file is in it
+    for name in (RESULTS, RUNS_TABLE, SWEEP_FILE):
+        (sweep_dir / name).unlink(missing_ok=True)
 
 
 def training_worker(run_dir: Path) -> int | None:

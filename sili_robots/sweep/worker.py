@@ -44,6 +44,7 @@ class Outcome:
     error: str | None = None
     wall_time_s: float = 0.0
     pid: int = 0  # the worker process that ran it (0: none did)
+    verdict: str = ""  # a finished run's one line (``sili_robots.verdict``), for people
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -96,7 +97,18 @@ def run_job(job: Job) -> Outcome:
         resumed=state == "resumable",
         wall_time_s=time.perf_counter() - t0,
         pid=os.getpid(),
+        verdict=_verdict(run_dir),
     )
+
+
+def _verdict(run_dir: Path) -> str:
+    """The run's verdict line; a run that trained is done even if its line cannot be made."""
+    from sili_robots.verdict import verdict
+
+    try:
+        return verdict(run_dir)
+    except Exception as err:
+        return f"(no verdict: {type(err).__name__}: {err})"
 
 
 @contextlib.contextmanager
