@@ -1,7 +1,8 @@
 """The ``sili`` command line: one sub-command per module in ``sili_robots.commands``.
 
 Every sub-command module exposes ``add_parser(subparsers)`` and ``run(args) -> int``. Bad input
-(``ConfigError`` or an argparse error) exits with code 2 and a one-line message, no traceback.
+(``ConfigError`` or an argparse error) exits with code 2 and a one-line message, no traceback; so
+does, with code 1, an agent too large for the machine's memory.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ import argparse
 import contextlib
 import importlib
 import os
+import re
 import select
 import signal
 import sys
@@ -93,6 +95,16 @@ def _stop_signals_as_ctrl_c() -> Iterator[None]:
             signal.signal(sig, handler)
 
 
+def _out_of_memory(err: BaseException) -> bool:
+    return isinstance(err, MemoryError) or "can't allocate memory" in str(err)
+
+
+def _allocation(err: BaseException) -> str:
+    """torch's "you tried to allocate 92000000000 bytes" as "92.0 GB were asked for"."""
+    match = re.search(r"allocate (\d+) bytes", str(err))
+    return f"{int(match.group(1)) / 1e9:.1f} GB were asked for" if match else type(err).__name__
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -110,6 +122,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"sili {args.command}: interrupted", file=sys.stderr)
         return 130
+    except (MemoryError, RuntimeError) as err:
+        if not _out_of_memory(err):
+            raise
+        print(
+            f"sili {args.command}: error: out of memory ({_allocation(err)}); the settings that "
+            "size the agent (hidden, sac.batch_interactions, sac.batch_steps, model.batch) may be "
+            "too large for this machine",
+            file=sys.stderr,
+        )
+        return 1
     except BrokenPipeError:
         if not _stdout_closed():
             raise  # another pipe (e.g. the browser's): a real failure

@@ -149,6 +149,30 @@ def test_a_broken_pipe_that_is_not_stdout_is_a_failure(monkeypatch):
         sili_in_process("rollout", "circle-3")
 
 
+def test_an_agent_too_large_for_memory_is_one_line_and_other_errors_keep_their_trace(monkeypatch):
+    """torch's own allocation failure (2**62 bytes is past any address space) becomes a line
+    naming the size and the settings that size the agent; any other RuntimeError still raises."""
+    import torch
+
+    from sili_robots.commands import train
+
+    monkeypatch.setattr(train, "run", lambda _args: torch.empty(2**62, dtype=torch.uint8))
+    done = sili_in_process("train", "--task", "circle-3")
+    assert done.returncode == 1
+    assert done.stderr == (
+        "sili train: error: out of memory (4611686018.4 GB were asked for); the settings that size "
+        "the agent (hidden, sac.batch_interactions, sac.batch_steps, model.batch) may be too large "
+        "for this machine\n"
+    )
+
+    def fails(_args):
+        raise RuntimeError("mat1 and mat2 shapes cannot be multiplied")
+
+    monkeypatch.setattr(train, "run", fails)
+    with pytest.raises(RuntimeError, match="shapes cannot be multiplied"):
+        sili_in_process("train", "--task", "circle-3")
+
+
 def test_a_schedule_for_a_setting_that_takes_one_number_names_those_that_take_one(tmp_path):
     train = ["train", "--task", "circle-3", "--out", str(tmp_path / "r")]
     code, _, err = _main(*train, "--set", "addons.recent.fraction=0:0,10:0.5")
