@@ -29,6 +29,7 @@ from sili_robots.runs import (
     save_checkpoint,
     write_config,
 )
+from sili_robots.stopping import StopBetweenInteractions
 from sili_robots.tasks.base import resume_game
 
 
@@ -72,51 +73,53 @@ def train(
     if agent.watches_steps:
         watch = lambda s, a, r, s2, _info: agent.observe_step(s, a, r, s2)  # noqa: E731
     try:
-        for j in range(start, cfg.interactions):
-            if j < cfg.agent.sac.random_interactions:
-                policy = lambda _o: agent.random_action()  # noqa: E731
-            else:
-                policy = agent.act
-            played = play_interaction(env, obs, info, policy, watch)
-            obs, info = played.next_obs, played.next_info
-            stats = agent.observe_interaction(
-                played.obs,
-                played.act,
-                played.rew,
-                obs,
-                played.strategy_id,
-                played.strategy,
-                info,
-            )
-            losses = agent.update(j, rl=j + 1 >= cfg.agent.sac.random_interactions)
-            recent.append((played.task_reward, played.strategy_changed))
-            metrics.write(
-                {
-                    "interaction": j,
-                    "task_reward": played.task_reward,
-                    "stability_reward": stats.stability_reward,
-                    "strategy_changed": int(played.strategy_changed),
-                    "strategy_id": played.strategy_id,
-                    "latent_category": stats.latent_category,
-                    "latent_changed": int(stats.latent_changed),
-                    "beta": agent.beta,
-                    "wall_time": elapsed0 + time.perf_counter() - t0,
-                    "filter_step": stats.extra.get("filter_step", -1),
-                    **losses,
-                }
-            )
-            bar.advance(np.mean([r for r, _ in recent]), 1 - np.mean([c for _, c in recent]))
-            done = j + 1
-            if done % cfg.checkpoint_every == 0 or done == cfg.interactions:
-                save_checkpoint(
-                    run_dir,
-                    {
-                        "interaction": done,
-                        "agent": agent.state_dict(),
-                        "game": env.unwrapped.game_state(),
-                        "wall_time": elapsed0 + time.perf_counter() - t0,
-                    },
+        with StopBetweenInteractions() as stop:
+            for j in range(start, cfg.interactions):
+                if j < cfg.agent.sac.random_interactions:
+                    policy = lambda _o: agent.random_action()  # noqa: E731
+                else:
+                    policy = agent.act
+                played = play_interaction(env, obs, info, policy, watch)
+                obs, info = played.next_obs, played.next_info
+                stats = agent.observe_interaction(
+                    played.obs,
+                    played.act,
+                    played.rew,
+                    obs,
+                    played.strategy_id,
+                    played.strategy,
+                    info,
                 )
+                losses = agent.update(j, rl=j + 1 >= cfg.agent.sac.random_interactions)
+                recent.append((played.task_reward, played.strategy_changed))
+                metrics.write(
+                    {
+                        "interaction": j,
+                        "task_reward": played.task_reward,
+                        "stability_reward": stats.stability_reward,
+                        "strategy_changed": int(played.strategy_changed),
+                        "strategy_id": played.strategy_id,
+                        "latent_category": stats.latent_category,
+                        "latent_changed": int(stats.latent_changed),
+                        "beta": agent.beta,
+                        "wall_time": elapsed0 + time.perf_counter() - t0,
+                        "filter_step": stats.extra.get("filter_step", -1),
+                        **losses,
+                    }
+                )
+                bar.advance(np.mean([r for r, _ in recent]), 1 - np.mean([c for _, c in recent]))
+                done = j + 1
+                if done % cfg.checkpoint_every == 0 or done == cfg.interactions or stop.requested:
+                    save_checkpoint(
+                        run_dir,
+                        {
+                            "interaction": done,
+                            "agent": agent.state_dict(),
+                            "game": env.unwrapped.game_state(),
+                            "wall_time": elapsed0 + time.perf_counter() - t0,
+                        },
+                    )
+                stop.deliver()  # a stop that came during the interaction: checkpointed
     finally:
         bar.close()
         metrics.close()

@@ -375,6 +375,9 @@ def test_sigterm_stops_a_sweep_as_ctrl_c_does(tmp_path):
     assert "sili sweep: stopped by SIGTERM" in stderr and "Traceback" not in stderr
     assert pd.read_csv(out / "runs.csv")["status"].tolist() == ["incomplete"]
     assert _wait_for(lambda: not _alive(pid), timeout=20)
+    # the worker logged and checkpointed the interaction it was in before it stopped
+    checkpointed = torch.load(run_dir / "checkpoint.pt", weights_only=False)["interaction"]
+    assert checkpointed == _rows(run_dir / "metrics.csv") >= 5
 
 
 def test_progress_display_counts_runs_and_interactions(tmp_path):

@@ -296,6 +296,44 @@ def test_resume_after_kill_reproduces_the_uninterrupted_run(tmp_path):
     pd.testing.assert_frame_equal(a, b)
 
 
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)  # a terminal's, not a background job's SIG_IGN
+
+
+@pytest.mark.parametrize(
+    ("sig", "code", "said"),
+    [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "stopped by SIGTERM")],
+)
+def test_a_stopped_run_checkpoints_its_last_interaction_first(tmp_path, sig, code, said):
+    """Ctrl-C or SIGTERM mid-interaction: the run logs and checkpoints that interaction, then
+    stops as the signal says; nothing since the last regular checkpoint is lost."""
+    args = ["--task", "circle-3", "--method", "sili", "--interactions", 80, "--seed", 1]
+    args += ["--checkpoint-every", 1000, *FAST]  # no regular checkpoint before the end
+    run = tmp_path / "stopped"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sili_robots.cli", "train", *map(str, args), "--out", str(run)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=_default_sigint,
+    )
+    deadline = time.time() + 120
+    while time.time() < deadline and not (
+        (run / "metrics.csv").exists() and len((run / "metrics.csv").read_text().splitlines()) > 5
+    ):
+        time.sleep(0.02)
+    proc.send_signal(sig)
+    stderr = proc.communicate(timeout=120)[1]
+    assert proc.returncode == code and said in stderr and "Traceback" not in stderr, stderr
+    rows = len(pd.read_csv(run / "metrics.csv"))
+    assert 5 <= rows < 80 and load_checkpoint(run)["interaction"] == rows  # none lost
+    assert _sili("train", "--resume", run, "--no-progress").returncode == 0
+    full = tmp_path / "full"
+    assert _sili("train", *args, "--out", full).returncode == 0
+    a = pd.read_csv(full / "metrics.csv").drop(columns="wall_time")
+    pd.testing.assert_frame_equal(a, pd.read_csv(run / "metrics.csv").drop(columns="wall_time"))
+
+
 def test_existing_run_is_not_overwritten_silently(tmp_path):
     out = tmp_path / "run"
     assert (

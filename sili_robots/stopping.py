@@ -1,0 +1,60 @@
+"""Stopping a training run between interactions, so that a stop loses no work.
+
+A stop signal (Ctrl-C, SIGTERM from ``timeout``, a job scheduler or a sweep, SIGHUP) that
+arrives while an interaction is played or learned from is held until the interaction is logged;
+the training loop then checkpoints and lets the signal act as it would have (its previous
+handler: ``KeyboardInterrupt``, the CLI's exit code, a sweep worker's exit). A second stop
+acts at once. Signals that are ignored stay ignored.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+from types import FrameType
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+class StopBetweenInteractions:
+    """``with StopBetweenInteractions() as stop:`` around the loop; ``stop.requested`` says a
+    stop is held (checkpoint now), ``stop.deliver()`` lets it act."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+        self._previous: dict[int, signal.Handlers | object] = {}
+
+    @property
+    def requested(self) -> bool:
+        return self.signum is not None
+
+    def __enter__(self) -> StopBetweenInteractions:
+        if threading.current_thread() is threading.main_thread():  # only it may set handlers
+            for sig in STOP_SIGNALS:
+                if signal.getsignal(sig) not in (signal.SIG_IGN, None):
+                    self._previous[sig] = signal.signal(sig, self._hold)
+        return self
+
+    def __exit__(self, exc_type: object, *_: object) -> None:
+        self._restore()
+        if exc_type is None:
+            self.deliver()  # held during the last interaction: it still stops the command
+
+    def deliver(self) -> None:
+        """Let a held stop act now, through the handler it would have met."""
+        if self.signum is None:
+            return
+        signum, self.signum = self.signum, None
+        self._restore()
+        signal.raise_signal(signum)
+
+    def _hold(self, signum: int, _frame: FrameType | None) -> None:
+        if self.signum is not None:  # asked twice: at once
+            self.deliver()
+            return
+        self.signum = signum
+
+    def _restore(self) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        self._previous = {}

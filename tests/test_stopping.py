@@ -1,0 +1,39 @@
+"""Stop signals held until an interaction is logged (the loop's side: test_train_cli.py)."""
+
+from __future__ import annotations
+
+import signal
+
+import pytest
+
+from sili_robots.stopping import StopBetweenInteractions
+
+
+@pytest.fixture
+def handlers():
+    """Ctrl-C as in a terminal, SIGHUP ignored as under nohup; both put back afterwards."""
+    previous = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGHUP)}
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    yield
+    for sig, handler in previous.items():
+        signal.signal(sig, handler)
+
+
+def test_a_stop_is_held_until_delivered_and_a_second_acts_at_once(handlers):
+    with StopBetweenInteractions() as stop:
+        assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN  # ignored stays ignored
+        signal.raise_signal(signal.SIGINT)
+        assert stop.requested  # held: no KeyboardInterrupt mid-interaction
+        with pytest.raises(KeyboardInterrupt):
+            signal.raise_signal(signal.SIGINT)  # asked twice
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    with pytest.raises(KeyboardInterrupt), StopBetweenInteractions() as stop:
+        signal.raise_signal(signal.SIGINT)
+        assert stop.requested
+        stop.deliver()  # the loop's boundary: the stop acts through the handler it met
+    with pytest.raises(KeyboardInterrupt), StopBetweenInteractions():
+        signal.raise_signal(signal.SIGINT)  # held during the last interaction: still stops
+    with StopBetweenInteractions() as stop:
+        pass
+    assert not stop.requested  # nothing asked: nothing delivered
