@@ -36,6 +36,7 @@ from matplotlib.figure import Figure
 
 from sili_robots.errors import ConfigError
 from sili_robots.labels import METHOD_NAMES, VARIANT_KEYS
+from sili_robots.sweep.state import FIGURES
 
 TASK_TITLES = {
     "circle-3": "Circle (3 Goals)",
@@ -525,7 +526,7 @@ def plot_sweep(
 ) -> list[Path]:
     """Write every figure of a sweep; returns the files written."""
     df = load_results(sweep_dir, include_unfinished)
-    out_dir = Path(out_dir) if out_dir is not None else Path(sweep_dir) / "figures"
+    out_dir = Path(out_dir) if out_dir is not None else Path(sweep_dir) / FIGURES
     written: list[Path] = []
     tasks = [t for t in TASK_TITLES if t in set(df["task"])] + sorted(
         set(df["task"]) - set(TASK_TITLES)

@@ -4,11 +4,12 @@ A stop signal (Ctrl-C, SIGTERM from ``timeout``, a job scheduler or a sweep, SIG
 arrives while an interaction is played or learned from is held until the interaction is logged;
 the training loop then checkpoints and lets the signal act as it would have (its previous
 handler: ``KeyboardInterrupt``, the CLI's exit code, a sweep worker's exit). A second stop
-acts at once. Signals that are ignored stay ignored.
+acts at once, as itself. Signals that are ignored stay ignored.
 """
 
 from __future__ import annotations
 
+import os
 import signal
 import threading
 from types import FrameType
@@ -49,10 +50,13 @@ class StopBetweenInteractions:
         signal.raise_signal(signum)
 
     def _hold(self, signum: int, _frame: FrameType | None) -> None:
-        if self.signum is not None:  # asked twice: at once
+        if self.signum is not None:  # asked twice: at once, as the second signal says
+            self.signum = signum
             self.deliver()
             return
         self.signum = signum
+        if signum == signal.SIGINT:  # a person at a terminal; os.write: no stream is re-entered
+            os.write(2, b"\nstopping after this interaction, once it is saved (again: now)\n")
 
     def _restore(self) -> None:
         for sig, handler in self._previous.items():

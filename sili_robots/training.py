@@ -109,7 +109,8 @@ def train(
                 )
                 bar.advance(np.mean([r for r, _ in recent]), 1 - np.mean([c for _, c in recent]))
                 done = j + 1
-                if done % cfg.checkpoint_every == 0 or done == cfg.interactions or stop.requested:
+                stopping = stop.requested  # read once: a stop after this acts at the next end
+                if done % cfg.checkpoint_every == 0 or done == cfg.interactions or stopping:
                     save_checkpoint(
                         run_dir,
                         {
@@ -119,7 +120,8 @@ def train(
                             "wall_time": elapsed0 + time.perf_counter() - t0,
                         },
                     )
-                stop.deliver()  # a stop that came during the interaction: checkpointed
+                if stopping:
+                    stop.deliver()  # it came during the interaction, which is checkpointed
     finally:
         bar.close()
         metrics.close()

@@ -8,8 +8,9 @@ from pathlib import Path
 import pandas as pd
 
 from sili_robots.bounds import stored_bounds
+from sili_robots.errors import ConfigError
 from sili_robots.labels import METHOD_NAMES
-from sili_robots.runs import METRICS, RunConfig, read_config
+from sili_robots.runs import CONFIG, METRICS, RunConfig, read_config
 from sili_robots.tasks.registry import other_task_arguments
 
 HOLDS = 0.9  # the stability a run needs to count as holding the opponent
@@ -89,7 +90,7 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
     interaction)", and the run to look at further: the best-earning one that worked, else the
     first seed's."""
     if not run_dirs:
-        raise ValueError("no runs to judge")
+        raise ConfigError("no runs to judge")
     runs = sorted((read_config(d).seed, Path(d)) for d in run_dirs)
     cfg = read_config(runs[0][1])
     still = _references(cfg).get("still")
@@ -112,16 +113,38 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
     return line + "; ".join(parts), best
 
 
+#: ``python -m sili_robots.verdict``'s exit status when no run worked (1 is a failure of its own)
+NONE_WORKED = 3
+
+
+def _runs_of(paths: list[Path]) -> list[Path]:
+    """Run directories as given, or the finished runs of a sweep's record."""
+    if len(paths) == 1 and not (paths[0] / CONFIG).exists():
+        from sili_robots.sweep.runner import plan
+        from sili_robots.sweep.state import recorded_specs, run_path, run_state
+
+        runs = [run_path(paths[0], r.name) for r in plan(recorded_specs(paths[0]))]
+        return [r for r in runs if run_state(r) == "done"]
+    return paths
+
+
 def main(argv: list[str] | None = None) -> int:
-    """``python -m sili_robots.verdict RUN_DIR...``: the line across seeds on stderr, the run to
-    look at further on stdout; exit status 1 when no run worked."""
+    """``python -m sili_robots.verdict SWEEP_DIR | RUN_DIR...``: the line across seeds on stderr,
+    the run to look at further on stdout; exit status NONE_WORKED when no run worked, 2 on bad
+    input."""
     import sys
 
-    run_dirs = [Path(a) for a in (sys.argv[1:] if argv is None else argv)]
-    line, best = across_seeds(run_dirs)
+    args = sys.argv[1:] if argv is None else argv
+    try:
+        if not args:
+            raise ConfigError("give a sweep directory or run directories")
+        line, best = across_seeds(_runs_of([Path(a) for a in args]))
+    except ConfigError as err:
+        print(f"python -m sili_robots.verdict: error: {err}", file=sys.stderr)
+        return 2
     print(line, file=sys.stderr)
     print(best)
-    return 0 if worked(best) else 1
+    return 0 if worked(best) else NONE_WORKED
 
 
 if __name__ == "__main__":

@@ -223,6 +223,10 @@ def test_grid_blocks_and_budgets(capsys):
             assert planned.config.agent.sac.precision == "float32", planned.name
     assert main(["grid", "--dry-run", "--tasks", "circle-9"]) == 2
     assert main(["grid", "--dry-run", "--blocks", "everything"]) == 2
+    capsys.readouterr()
+    for option, empty in (("--blocks", ""), ("--tasks", ",")):  # a slip, not "all"
+        assert main(["grid", "--dry-run", option, empty]) == 2
+        assert f"{option} {empty!r} names none; allowed: " in capsys.readouterr().err
 
 
 # ---------------------------------------------------------------- the claims' decision rules

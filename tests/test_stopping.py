@@ -37,3 +37,22 @@ def test_a_stop_is_held_until_delivered_and_a_second_acts_at_once(handlers):
     with StopBetweenInteractions() as stop:
         pass
     assert not stop.requested  # nothing asked: nothing delivered
+
+
+class Terminated(Exception):
+    pass
+
+
+def _terminated(_signum, _frame):
+    raise Terminated
+
+
+def test_a_second_stop_of_another_kind_acts_as_itself(handlers):
+    previous = signal.signal(signal.SIGTERM, _terminated)
+    try:
+        with pytest.raises(Terminated), StopBetweenInteractions():
+            signal.raise_signal(signal.SIGINT)  # Ctrl-C, then `kill`: the run is killed
+            signal.raise_signal(signal.SIGTERM)
+        assert signal.getsignal(signal.SIGTERM) is _terminated
+    finally:
+        signal.signal(signal.SIGTERM, previous)

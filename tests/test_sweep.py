@@ -4,6 +4,7 @@ resume after a SIGKILLed worker, a failing run isolated, bad input."""
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -310,17 +311,44 @@ def test_overwrite_starts_the_sweep_anew_and_keeps_a_users_files(tmp_path, capsy
     assert main(again) == 2  # other settings on disk: refused without --overwrite
     assert "interactions: 2 on disk, 3 now" in capsys.readouterr().err
     assert main([*again, "--overwrite", "--dry-run"]) == 0
-    assert capsys.readouterr().out == "circle-3__sac__s0\tnew\n1 runs\n"
+    assert capsys.readouterr().out == "circle-3__sac__s0\tnew\ncircle-3__sac__s1\tremoved\n1 runs\n"
     assert len(pd.read_csv(s0 / "metrics.csv")) == 2 and s1.is_dir()  # a dry run changes nothing
+    trainer = {"pid": os.getpid(), "host": socket.gethostname()}  # a live process on this host
+    (s1 / "worker.json").write_text(json.dumps(trainer))
+    assert main([*again, "--overwrite"]) == 2  # e.g. an orphan still saving its interaction
+    assert f"circle-3__sac__s1 in {out} is being trained by process" in capsys.readouterr().err
+    (s1 / "worker.json").unlink()
+    (out / "figures").mkdir()
+    (out / "figures" / "curves.png").write_text("the replaced sweep's")
     assert main([*again, "--overwrite", "--no-progress"]) == 0
     assert len(pd.read_csv(s0 / "metrics.csv")) == 3  # trained anew, not resumed
     assert not s1.exists()  # the replaced sweep's run, which the new one does not plan
+    assert not (out / "figures").exists()  # its figures showed the replaced sweep
     assert (out / "notes.txt").read_text() == (s0 / "plot.png").read_text() == "mine"
     recorded = json.loads((out / "sweep.json").read_text())["invocations"]
     assert [(r["seeds"], r["interactions"]) for r in recorded] == [([0], 3)]
     assert set(pd.read_csv(out / "runs.csv")["run"]) == {"circle-3__sac__s0"}
     assert main(["sweep", "--resume", str(out), "--overwrite"]) == 2
     assert "it takes no --overwrite" in capsys.readouterr().err
+    # what cannot be told safely is refused, in a dry run too: a damaged record ...
+    record = (out / "sweep.json").read_text()
+    (out / "sweep.json").write_text('{"invocations": [{"bogus": 1}]}')
+    for dry in ([], ["--dry-run"]):
+        assert main([*again, "--overwrite", *dry]) == 2
+        err = capsys.readouterr().err
+        assert "sweep.json is damaged (TypeError" in err and "cannot tell which runs" in err
+    assert main(["sweep", "--resume", str(out)]) == 2  # a clear error, not a traceback
+    assert "sweep.json is damaged (TypeError" in capsys.readouterr().err
+    # ... and a results collection, whose runs may be the only copy
+    (out / "sweep.json").write_text(record)
+    collection = tmp_path / "collection"
+    assert main(["collect", str(out), "--into", str(collection)]) == 0
+    into = ["sweep", "--tasks", "circle-3", "--methods", "sac", "--seeds", "0", *FAST_ARGS]
+    into += ["--interactions", "3", "--out", str(collection), "--overwrite"]
+    for dry in ([], ["--dry-run"]):
+        assert main([*into, *dry]) == 2
+        assert "is a results collection, not a sweep" in capsys.readouterr().err
+    assert (collection / "runs" / "circle-3__sac__s0" / "config.json").is_file()
 
 
 def _alive(pid):

@@ -8,7 +8,7 @@ import pandas as pd
 from fast_settings import FAST_ARGS
 
 from sili_robots.cli import main
-from sili_robots.verdict import across_seeds, held, verdict, worked
+from sili_robots.verdict import NONE_WORKED, across_seeds, held, verdict, worked
 from sili_robots.verdict import main as verdict_main
 
 
@@ -92,6 +92,9 @@ def test_the_line_across_seeds_counts_the_runs_that_worked_and_picks_the_best(tm
     assert verdict_main([str(lost), str(held_low), str(held_high)]) == 0
     printed = capsys.readouterr()
     assert printed.out.strip() == str(held_high) and printed.err.strip() == line
-    assert verdict_main([str(lost)]) == 1  # none worked: the first seed's run to look at
+    assert verdict_main([str(lost)]) == NONE_WORKED  # the first seed's run to look at
     printed = capsys.readouterr()
     assert printed.out.strip() == str(lost) and "SILI worked in 0 of 1 seeds" in printed.err
+    assert verdict_main([]) == 2  # no traceback, and not "none worked"
+    assert "give a sweep directory or run directories" in capsys.readouterr().err
+    assert verdict_main([str(tmp_path)]) == 2 and "no sweep.json" in capsys.readouterr().err

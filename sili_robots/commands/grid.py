@@ -54,6 +54,15 @@ def run(args: argparse.Namespace) -> int:
         check_sweep_dir(path, option)  # before any run, in a dry run too
         if not args.dry_run:  # a listing reads only
             writable_dir(path, option)
+    for option, text, allowed in (
+        ("--blocks", args.blocks, BLOCKS),
+        ("--tasks", args.tasks, TASKS),
+    ):
+        if text is not None and not parse_list(text):  # "" is a slip, not "all"
+            names = ", ".join(getattr(a, "name", a) for a in allowed)
+            raise ConfigError(
+                f"{option} {text!r} names none; allowed: {names} (leave it out for all)"
+            )
     blocks = [block(b) for b in parse_list(args.blocks)] if args.blocks else list(BLOCKS)
     tasks = tuple(parse_list(args.tasks)) if args.tasks else TASKS
     bad = [t for t in tasks if t not in TASKS]

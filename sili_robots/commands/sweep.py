@@ -180,7 +180,7 @@ def _backend(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from sili_robots.sweep.runner import plan, run_sweep
+    from sili_robots.sweep.runner import plan, replaced_runs, run_sweep
     from sili_robots.sweep.state import check_existing, check_sweep_dir, run_path, run_state
 
     specs, sweep_dir = _specs_and_dir(args)
@@ -189,12 +189,14 @@ def run(args: argparse.Namespace) -> int:
     backend = _backend(args)  # its options checked in a dry run too; nothing starts yet
     if args.dry_run:
         planned = plan(specs)
-        for run_ in planned:
-            if args.overwrite:  # replaced, so what is on disk does not matter
-                print(f"{run_.name}\tnew")
-                continue
-            check_existing(sweep_dir, run_)
-            print(f"{run_.name}\t{run_state(run_path(sweep_dir, run_.name))}")
+        if args.overwrite:  # what is on disk goes: every planned run is new
+            names = [r.name for r in planned]
+            for name in replaced_runs(sweep_dir, planned):
+                print(f"{name}\t{'new' if name in names else 'removed'}")
+        else:
+            for run_ in planned:
+                check_existing(sweep_dir, run_)
+                print(f"{run_.name}\t{run_state(run_path(sweep_dir, run_.name))}")
         print(f"{len(planned)} runs")
         return 0
     writable_dir(sweep_dir, "--resume" if args.resume else "--out")

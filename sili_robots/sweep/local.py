@@ -30,8 +30,9 @@ from sili_robots.sweep.worker import THREAD_ENV, Job, Outcome, limit_threads, ru
 
 #: imported once by the forkserver, so forked workers start with them loaded
 PRELOAD = ["sili_robots.sweep.worker", "sili_robots.training", "torch.utils.tensorboard"]
-#: after asking itself to stop (SIGTERM), a worker whose sweep is gone waits this long, then exits
-ORPHAN_GRACE_S = 10.0
+#: how long a worker asked to stop (SIGTERM) may take to finish and checkpoint its interaction
+#: before it is killed (by the sweep) or exits (an orphan whose sweep is gone)
+STOP_GRACE_S = 30.0
 
 
 def _raise_exit(signum: int, _frame: object) -> None:
@@ -50,7 +51,7 @@ def _exit_when_orphaned(alive: Connection) -> None:
         with contextlib.suppress(EOFError, OSError):
             alive.recv()
         os.kill(os.getpid(), signal.SIGTERM)  # `finally` blocks run, simulators close
-        time.sleep(ORPHAN_GRACE_S)
+        time.sleep(STOP_GRACE_S)
         os._exit(1)
 
     threading.Thread(target=watch, name="sweep-watchdog", daemon=True).start()
@@ -180,7 +181,7 @@ class LocalBackend:
             if w.process.is_alive():
                 w.process.terminate()
         for w in workers:
-            w.process.join(timeout=10)
+            w.process.join(timeout=STOP_GRACE_S)
             if w.process.is_alive():
                 w.process.kill()
                 w.process.join()

@@ -15,6 +15,7 @@ from sili_robots.sweep.local import LocalBackend
 from sili_robots.sweep.spec import PlannedRun, SweepSpec, expand
 from sili_robots.sweep.state import (
     RUNNING_FILE,
+    RUNS_DIR,
     SWEEP_FILE,
     check_existing,
     clear_sweep,
@@ -23,6 +24,7 @@ from sili_robots.sweep.state import (
     run_path,
     run_state,
     sweep_lock,
+    training_worker,
 )
 from sili_robots.sweep.worker import Job, Outcome
 
@@ -57,15 +59,34 @@ def plan(specs: Sequence[SweepSpec]) -> list[PlannedRun]:
     return list(runs.values())
 
 
-def recorded_runs(sweep_dir: Path) -> list[str]:
-    """The names of the runs the sweep recorded in ``sweep_dir`` plans (none when there is no
-    readable record)."""
-    if not (Path(sweep_dir) / SWEEP_FILE).is_file():
-        return []
-    try:
-        return [r.name for r in plan(recorded_specs(sweep_dir))]
-    except ConfigError:  # a damaged record, or one this version cannot plan
-        return []
+def replaced_runs(sweep_dir: Path, planned: Sequence[PlannedRun]) -> list[str]:
+    """The runs ``--overwrite`` removes: the planned ones and those the recorded sweep plans.
+    ConfigError when that cannot be told safely: the folder is a results collection (its runs may
+    be the only copy), the record is damaged, or a run is being trained."""
+    sweep_dir = Path(sweep_dir)
+    names = [r.name for r in planned]
+    runs_dir = sweep_dir / RUNS_DIR
+    if (sweep_dir / SWEEP_FILE).is_file():
+        try:
+            recorded = plan(recorded_specs(sweep_dir))
+        except ConfigError as err:
+            raise ConfigError(
+                f"{err}; --overwrite cannot tell which runs are the sweep's: remove {sweep_dir} "
+                "yourself or give another --out"
+            ) from None
+        names += [r.name for r in recorded if r.name not in names]
+    elif runs_dir.is_dir() and any(runs_dir.iterdir()):
+        raise ConfigError(
+            f"{sweep_dir} is a results collection, not a sweep (no {SWEEP_FILE}): --overwrite "
+            "replaces only a sweep; give another --out"
+        )
+    for name in names:
+        pid = training_worker(run_path(sweep_dir, name))
+        if pid is not None:
+            raise ConfigError(
+                f"run {name} in {sweep_dir} is being trained by process {pid}; stop it first"
+            )
+    return names
 
 
 def run_sweep(
@@ -100,8 +121,7 @@ def run_sweep(
         raise ConfigError("TensorBoard scalars need: pip install 'sili-robots[tensorboard]'")
     with sweep_lock(sweep_dir):
         if overwrite:
-            names = [r.name for r in planned]
-            clear_sweep(sweep_dir, names + [n for n in recorded_runs(sweep_dir) if n not in names])
+            clear_sweep(sweep_dir, replaced_runs(sweep_dir, planned))
         for run in planned:
             check_existing(sweep_dir, run)
         for spec in specs:

@@ -38,12 +38,13 @@ from sili_robots.runs import (
 )
 from sili_robots.sweep.spec import PlannedRun, SweepSpec
 
-SWEEP_FILE, RUNS_DIR, RESULTS, RUNS_TABLE, LOCK = (
+SWEEP_FILE, RUNS_DIR, RESULTS, RUNS_TABLE, LOCK, FIGURES = (
     "sweep.json",
     "runs",
     "results.csv",
     "runs.csv",
     ".lock",
+    "figures",
 )
 DAMAGED_SWEEP = "it is not a sweep's record, so the sweep cannot resume"
 
@@ -70,9 +71,9 @@ def run_path(sweep_dir: Path, name: str) -> Path:
 
 
 def clear_sweep(sweep_dir: Path, names: list[str]) -> None:
-    """Remove a sweep's own files (its tables and the runs ``names``) and leave anything else a
-    user put there; its record last, so a removal cut short still leaves a folder that is a
-    sweep's."""
+    """Remove a sweep's own files (the runs ``names``, its tables, ``sili plot``'s figures) and
+    leave anything else a user put there; its record last, so a removal cut short still leaves
+    a folder that is a sweep's."""
     sweep_dir = Path(sweep_dir)
     for name in names:
         path = run_path(sweep_dir, name)
@@ -80,6 +81,10 @@ def clear_sweep(sweep_dir: Path, names: list[str]) -> None:
             clear_run(path)
             with contextlib.suppress(OSError):
                 path.rmdir()  # kept when a user's file is in it
+    for figure in [*sweep_dir.glob(f"{FIGURES}/*.png"), *sweep_dir.glob(f"{FIGURES}/*.pdf")]:
+        figure.unlink()
+    with contextlib.suppress(OSError):
+        (sweep_dir / FIGURES).rmdir()
     for name in (RESULTS, RUNS_TABLE, SWEEP_FILE):
         (sweep_dir / name).unlink(missing_ok=True)
 
@@ -151,9 +156,14 @@ def recorded_specs(sweep_dir: Path) -> list[SweepSpec]:
             f"{sweep_dir} is not a sweep directory (no {SWEEP_FILE}); give a directory written "
             "by `sili sweep --out`"
         )
-    return [
-        SweepSpec.from_dict(d) for d in read_json(path, DAMAGED_SWEEP, "invocations")["invocations"]
-    ]
+    invocations = read_json(path, DAMAGED_SWEEP, "invocations")["invocations"]
+    try:
+        return [SweepSpec.from_dict(d) for d in invocations]
+    except ConfigError:
+        raise
+    except (TypeError, AttributeError, KeyError, ValueError) as err:
+        damage = f"{type(err).__name__}: {err}"
+        raise ConfigError(f"{path} is damaged ({damage}); {DAMAGED_SWEEP}") from None
 
 
 @contextlib.contextmanager

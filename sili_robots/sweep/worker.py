@@ -63,7 +63,7 @@ def run_job(job: Job) -> Outcome:
     run_dir.mkdir(parents=True, exist_ok=True)
     state = run_state(run_dir)
     if state == "done":
-        return Outcome(job.name, "done", pid=os.getpid())
+        return Outcome(job.name, "done", pid=os.getpid(), verdict=_verdict(run_dir))
     running = run_dir / RUNNING_FILE
     running.write_text(json.dumps({"pid": os.getpid(), "host": socket.gethostname()}))
     try:
