@@ -17,7 +17,7 @@ OUT=${SILI_MAIN_OUT:-runs/main-job}
     --interactions "${SILI_MAIN_INTERACTIONS:-1000}" --set hidden=64 --set sac.precision=float32 \
     --beta-schedule 250:0,300:0.5 --out "$OUT" --overwrite --no-tensorboard "$@"
 status=0
-RUN=$(.venv/bin/python -m sili_robots.verdict "$OUT") || status=$?
+RUN=$(.venv/bin/python -m sili_robots.verdict "$OUT"/runs/*/) || status=$?  # the runs --overwrite left
 if [ "$status" = 3 ]; then  # no seed worked (sili_robots.verdict.NONE_WORKED)
     echo "Whether this small agent holds well at 1,000 interactions depends on the seed (how the processor" \
         "rounds is part of it: 8 of 12 seeds held above standing still's reward). The default agent (2 x 256) in float32" \

@@ -10,7 +10,7 @@ import pandas as pd
 from sili_robots.bounds import stored_bounds
 from sili_robots.errors import ConfigError
 from sili_robots.labels import METHOD_NAMES
-from sili_robots.runs import CONFIG, METRICS, RunConfig, read_config
+from sili_robots.runs import METRICS, RunConfig, read_config
 from sili_robots.tasks.registry import other_task_arguments
 
 HOLDS = 0.9  # the stability a run needs to count as holding the opponent
@@ -117,28 +117,16 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
 NONE_WORKED = 3
 
 
-def _runs_of(paths: list[Path]) -> list[Path]:
-    """Run directories as given, or the finished runs of a sweep's record."""
-    if len(paths) == 1 and not (paths[0] / CONFIG).exists():
-        from sili_robots.sweep.runner import plan
-        from sili_robots.sweep.state import recorded_specs, run_path, run_state
-
-        runs = [run_path(paths[0], r.name) for r in plan(recorded_specs(paths[0]))]
-        return [r for r in runs if run_state(r) == "done"]
-    return paths
-
-
 def main(argv: list[str] | None = None) -> int:
-    """``python -m sili_robots.verdict SWEEP_DIR | RUN_DIR...``: the line across seeds on stderr,
-    the run to look at further on stdout; exit status NONE_WORKED when no run worked, 2 on bad
-    input."""
+    """``python -m sili_robots.verdict RUN_DIR...``: the line across seeds on stderr, the run to
+    look at further on stdout; exit status NONE_WORKED when no run worked, 2 on bad input."""
     import sys
 
     args = sys.argv[1:] if argv is None else argv
     try:
         if not args:
-            raise ConfigError("give a sweep directory or run directories")
-        line, best = across_seeds(_runs_of([Path(a) for a in args]))
+            raise ConfigError("give the run directories to judge together")
+        line, best = across_seeds([Path(a) for a in args])
     except ConfigError as err:
         print(f"python -m sili_robots.verdict: error: {err}", file=sys.stderr)
         return 2

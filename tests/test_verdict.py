@@ -96,5 +96,6 @@ def test_the_line_across_seeds_counts_the_runs_that_worked_and_picks_the_best(tm
     printed = capsys.readouterr()
     assert printed.out.strip() == str(lost) and "SILI worked in 0 of 1 seeds" in printed.err
     assert verdict_main([]) == 2  # no traceback, and not "none worked"
-    assert "give a sweep directory or run directories" in capsys.readouterr().err
-    assert verdict_main([str(tmp_path)]) == 2 and "no sweep.json" in capsys.readouterr().err
+    assert "give the run directories to judge together" in capsys.readouterr().err
+    assert verdict_main([str(tmp_path)]) == 2
+    assert "is not a run directory" in capsys.readouterr().err
