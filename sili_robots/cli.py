@@ -52,18 +52,30 @@ class OneLineErrorParser(argparse.ArgumentParser):
     """argparse with its errors on one line (its own prints the whole usage before them);
     sub-command parsers inherit the class."""
 
+    commands: dict[str, argparse.ArgumentParser]  # the top-level parser's sub-command parsers
+
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser() -> OneLineErrorParser:
     parser = OneLineErrorParser(
         prog="sili", description="Stable Influencing of Latent Intent: train, evaluate, preview."
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for module in _available_commands():
         module.add_parser(sub)
+    parser.commands = sub.choices
     return parser
+
+
+def _parse(parser: OneLineErrorParser, argv: Sequence[str] | None) -> argparse.Namespace:
+    """Arguments the sub-command does not take are its error (``sili bounds: error: ...``,
+    pointing at ``sili bounds --help``), not the top-level parser's."""
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        parser.commands[args.command].error(f"unrecognized arguments: {' '.join(extra)}")
+    return args
 
 
 class Terminated(KeyboardInterrupt):
@@ -106,8 +118,7 @@ def _allocation(err: BaseException) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    args = _parse(build_parser(), argv)
     try:
         with _stop_signals_as_ctrl_c():
             code = int(args.run(args) or 0)

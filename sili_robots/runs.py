@@ -197,6 +197,8 @@ def check_new_run_dir(run_dir: Path, overwrite: bool = False) -> None:
 
 def make_run_dir(run_dir: Path) -> None:
     """Create a run directory, or ConfigError naming it when it cannot be."""
+    if Path(run_dir).is_file():
+        raise ConfigError(f"{run_dir} is a file; give --out a directory (new, or empty)")
     try:
         Path(run_dir).mkdir(parents=True, exist_ok=True)
     except OSError as err:
@@ -227,6 +229,8 @@ def read_json(path: Path, what: str, *keys: str) -> dict[str, Any]:
 
 def read_config(run_dir: Path) -> RunConfig:
     path = Path(run_dir) / CONFIG
+    if not Path(run_dir).exists():
+        raise ConfigError(f"{run_dir} does not exist; give a run directory (`sili train --out`)")
     if not path.is_file():
         raise ConfigError(
             f"{run_dir} is not a run directory (no {CONFIG}); "

@@ -93,6 +93,14 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
         raise ConfigError("no runs to judge")
     runs = sorted((read_config(d).seed, Path(d)) for d in run_dirs)
     cfg = read_config(runs[0][1])
+    variant = (cfg.task_id, cfg.method, cfg.env_kwargs)
+    for _, run_dir in runs[1:]:
+        other = read_config(run_dir)
+        if (other.task_id, other.method, other.env_kwargs) != variant:
+            raise ConfigError(
+                f"{run_dir} ({other.method} on {other.task_id}) is not a seed of {runs[0][1]} "
+                f"({cfg.method} on {cfg.task_id}): runs judged together differ only in the seed"
+            )
     still = _references(cfg).get("still")
     judged = []  # (worked, reward, what to print, run)
     for seed, run_dir in runs:

@@ -48,6 +48,37 @@ def test_a_parse_error_is_one_line_naming_the_value_and_the_choices():
     )
 
 
+def test_bad_input_a_user_types_names_the_command_the_value_and_what_is_allowed(tmp_path):
+    (tmp_path / "a-file").write_text("")
+    for args, line in (
+        (
+            ["bounds", "driving", "--policy", "x"],  # an argument the sub-command does not take
+            "sili bounds: error: unrecognized arguments: --policy x (see sili bounds --help)",
+        ),
+        (
+            ["train", "--resume", str(tmp_path / "nowhere")],
+            f"sili train: error: {tmp_path / 'nowhere'} does not exist; give a run directory",
+        ),
+        (
+            ["train", "--task", "circle-3", "--out", str(tmp_path / "a-file")],
+            f"sili train: error: {tmp_path / 'a-file'} is a file; give --out a directory",
+        ),
+        (
+            ["train", "--task", "circle-3", "--controller", "osc", "--out", str(tmp_path / "r")],
+            "sili train: error: task 'circle-3' takes no argument controller (--controller, "
+            "--env-kwarg); its arguments: variant, horizon, outside_margin",
+        ),
+        (
+            ["rollout", "driving", "--policy", "blind", "--interactions", "1"],
+            "sili rollout: error: no 'blind' policy for sili/Driving-v0; allowed there: ",
+        ),
+    ):
+        done = sili_in_process(*args)
+        assert done.returncode == 2 and done.stderr.startswith(line), (args, done.stderr)
+        assert len(done.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "r").exists()
+
+
 def _main(*args: str) -> tuple[int, str, str]:
     res = sili_in_process(*args)
     return res.returncode, res.stdout, res.stderr

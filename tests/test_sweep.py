@@ -293,7 +293,8 @@ def test_resume_of_a_non_sweep_and_changed_settings_exit_2(tiny_sweep, tmp_path,
     out, _ = tiny_sweep
     args = ["--tasks", "circle-3", "--methods", "sac", "--seeds", "0", "--interactions", "9"]
     assert main(["sweep", *args, "--out", str(out), *FAST_ARGS]) == 2
-    assert "interactions: 8 on disk, 9 now" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "interactions: 8 on disk, 9 now" in err and f"or move that run out of {out}" in err
     assert main(["sweep", "--resume", str(out), "--interactions", "9", "--workers", "1"]) == 2
     assert "it takes no --interactions (allowed with it: --backend" in capsys.readouterr().err
     assert main(["sweep", "--resume", str(out), "--seeds", "0"]) == 2  # typed at its default

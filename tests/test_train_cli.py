@@ -325,9 +325,13 @@ def test_a_stopped_run_checkpoints_its_last_interaction_first(tmp_path, sig, cod
     proc.send_signal(sig)
     stderr = proc.communicate(timeout=120)[1]
     assert proc.returncode == code and said in stderr and "Traceback" not in stderr, stderr
+    assert f"continue the run with: sili train --resume {run}" in stderr
     rows = len(pd.read_csv(run / "metrics.csv"))
     assert 5 <= rows < 80 and load_checkpoint(run)["interaction"] == rows  # none lost
     assert _sili("train", "--resume", run, "--no-progress").returncode == 0
+    again = _sili("train", "--resume", run, "--no-progress")  # finished: says so, changes nothing
+    assert again.returncode == 0 and len(pd.read_csv(run / "metrics.csv")) == 80
+    assert f"{run} has already trained all 80 of its interactions; --interactions N" in again.stderr
     full = tmp_path / "full"
     assert _sili("train", *args, "--out", full).returncode == 0
     a = pd.read_csv(full / "metrics.csv").drop(columns="wall_time")

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 from sili_robots.agent import BETA_METHODS, LATENT_CHOICES, METHODS, PROFILES, Schedule
@@ -27,6 +29,7 @@ from sili_robots.commands.common import (
 from sili_robots.errors import ConfigError
 from sili_robots.migrations import setting_path
 from sili_robots.runs import (
+    CHECKPOINT,
     CONFIG,
     RunConfig,
     check_new_run_dir,
@@ -180,7 +183,7 @@ def _task_names() -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.runs import check_resumable
-    from sili_robots.sweep.state import training_worker
+    from sili_robots.sweep.state import run_state, training_worker
     from sili_robots.training import extend, resume, train, write_summary
     from sili_robots.verdict import verdict
 
@@ -201,7 +204,14 @@ def run(args: argparse.Namespace) -> int:
             )
         if args.interactions is not None:
             extend(args.resume, args.interactions)
-        run_dir = resume(args.resume, progress=not args.no_progress)
+        elif run_state(args.resume) == "done":
+            print(
+                f"{args.resume} has already trained all {read_config(args.resume).interactions} "
+                "of its interactions; --interactions N extends it",
+                file=sys.stderr,
+            )
+        with _resume_hint(args.resume):
+            run_dir = resume(args.resume, progress=not args.no_progress)
     else:
         cfg = config_from_args(args)
         if args.out is None:
@@ -216,17 +226,35 @@ def run(args: argparse.Namespace) -> int:
         if args.overwrite:
             clear_run(args.out)  # the run's own files; anything else in the folder stays
         make_run_dir(args.out)
-        run_dir = train(cfg, args.out, progress=not args.no_progress)
+        with _resume_hint(args.out):
+            run_dir = train(cfg, args.out, progress=not args.no_progress)
     summary = write_summary(run_dir)
     print(json.dumps({"run_dir": str(run_dir), **summary}, indent=2))
     print(verdict(run_dir), file=sys.stderr)  # for people; stdout stays one JSON document
     return 0
 
 
+@contextlib.contextmanager
+def _resume_hint(run_dir: Path) -> Iterator[None]:
+    """A run stopped (Ctrl-C, SIGTERM) after its first checkpoint says how to go on."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        if (Path(run_dir) / CHECKPOINT).is_file():
+            print(f"continue the run with: sili train --resume {run_dir}", file=sys.stderr)
+        raise
+
+
 def _check_env_builds(cfg: RunConfig) -> None:
     """Fail fast, with the task's own message, on bad task arguments (e.g. a controller)."""
     from sili_robots.build import make_run_env, task_arguments
 
+    unknown = [k for k in cfg.env_kwargs if k not in task_arguments(cfg.task)]
+    if unknown:
+        raise ConfigError(
+            f"task {cfg.task!r} takes no argument {', '.join(unknown)} (--controller, "
+            f"--env-kwarg); its arguments: {', '.join(task_arguments(cfg.task)) or 'none'}"
+        )
     try:
         env = make_run_env(cfg)
     except TypeError as err:

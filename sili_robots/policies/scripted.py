@@ -308,7 +308,8 @@ def scripted_policy(env: RepeatedInteractionEnv, kind: str) -> Policy:
         believing = BELIEVING_POLICIES.get(name, {}).get(kind)
         if believing is None:
             raise ConfigError(
-                f"no {kind!r} policy for {name}; allowed there: {', '.join(available_kinds(env))}"
+                f"no {kind!r} policy for {task.spec.id if task.spec else name}; allowed there: "
+                f"{', '.join(available_kinds(env))}"
             )
         revealed = Revealed()
         return lambda e, obs: believing(task, obs, revealed(task))

@@ -135,7 +135,8 @@ def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
         raise ConfigError(
             f"run {planned.name} in {sweep_dir} was made with other settings ("
             + "; ".join(diffs[:4])
-            + "); use another --out for a different sweep"
+            + "): a sweep never mixes two runs under one name; give a new sweep another --out, "
+            + f"or move that run out of {sweep_dir}"
         )
 
 
