@@ -299,6 +299,41 @@ def _colors(variants: list[tuple]) -> dict[tuple, object]:
     return out
 
 
+def _labelled_variants(
+    task_rows: pd.DataFrame, profiled: Collection[str] | None
+) -> list[tuple[tuple, str, pd.DataFrame]]:
+    """(variant, its label, its rows) of one task, in the figures' method order."""
+    labels = variant_labels(task_rows, profiled)
+    keyed = task_rows[list(VARIANT_KEYS)].fillna("").apply(tuple, axis=1)
+    out = []
+    for variant in _variant_order(task_rows):
+        rows = task_rows[keyed == variant]
+        out.append((variant, labels[rows.index[0]], rows))
+    return out
+
+
+def _label_palette(
+    rows_per_task: Sequence[pd.DataFrame], profiled: Collection[str]
+) -> dict[str, object]:
+    """One colour per label across a multi-task figure: a method's only label keeps the method's
+    colour; several labels of one method (two profiles, each alone on its task) get shades of
+    its colour map, never the same colour twice."""
+    labels: dict[str, list[str]] = {}
+    for task_rows in rows_per_task:
+        for variant, label, _ in _labelled_variants(task_rows, profiled):
+            if label not in labels.setdefault(variant[0], []):
+                labels[variant[0]].append(label)
+    palette: dict[str, object] = {}
+    for method, mine in labels.items():
+        if len(mine) == 1:
+            palette[mine[0]] = METHOD_COLORS.get(method, "tab:gray")
+        else:
+            cmap = colormaps[METHOD_CMAPS.get(method, "viridis")]
+            for label, x in zip(mine, np.linspace(0.4, 0.95, len(mine)), strict=True):
+                palette[label] = cmap(x)
+    return palette
+
+
 def default_smoothing(n_interactions: int) -> int:
     """About 2% of the run length (at least 1): enough to read a trend, not to hide a jump."""
     return max(1, round(n_interactions / 50))
@@ -333,16 +368,11 @@ def _draw_curves(
     profiled: Collection[str] | None = None,
     palette: dict[str, object] | None = None,
 ) -> None:
-    """``profiled`` and ``palette`` (label -> colour, filled as labels first appear) keep one
-    label and one colour per variant across the rows of a multi-task figure."""
-    labels = variant_labels(task_rows, profiled)
-    variants = _variant_order(task_rows)
-    colors = _colors(variants)
+    """``profiled`` and ``palette`` (label -> colour, ``_label_palette``) keep one label and one
+    colour per variant across the rows of a multi-task figure."""
+    colors = _colors(_variant_order(task_rows))
     palette = {} if palette is None else palette
-    keyed = task_rows[list(VARIANT_KEYS)].fillna("").apply(tuple, axis=1)
-    for variant in variants:
-        rows = task_rows[keyed == variant]
-        label = labels[rows.index[0]]
+    for variant, label, rows in _labelled_variants(task_rows, profiled):
         color = palette.setdefault(label, colors[variant])
         style = "--" if variant[0] == "oracle" else "-"
         for ax, (metric, _) in zip(axes, metrics, strict=True):
@@ -494,7 +524,8 @@ def overview(df: pd.DataFrame, smooth: int | None = None) -> Figure:
     shown = {task: curve_rows(df, task) for task in tasks}
     # a method that ran in two profiles anywhere names its profile in every row, one colour each
     both = pd.concat(shown.values()).groupby("method")["profile"].nunique() > 1
-    profiled, palette = set(both[both].index), {}
+    profiled = set(both[both].index)
+    palette = _label_palette(list(shown.values()), profiled)
     for row, task in zip(grid, tasks, strict=True):
         rows = shown[task]
         window = smooth or default_smoothing(int(rows["interaction"].max()) + 1)

@@ -191,13 +191,10 @@ def test_the_stability_band_stays_within_0_and_1():
     assert verts[:, 1].min() == pytest.approx(2 / 3 - np.sqrt(2) / 3, abs=1e-9)  # mean - std
 
 
-def test_the_overview_names_and_colours_a_profile_alike_in_every_row():
-    # SILI ran in both profiles on Circle 3 and in the package's alone on Circle 8
+def _sili_in_profiles(layout) -> pd.DataFrame:
+    """Results-table rows of SILI in the given profiles per task (one seed, 6 interactions)."""
     n, parts = 6, []
-    for task, task_id, profiles in (
-        ("circle-3", "sili/Circle3-v1", ("package", "paper")),
-        ("circle-8", "sili/Circle8-v1", ("package",)),
-    ):
+    for task, task_id, profiles in layout:
         for profile in profiles:
             parts.append(
                 pd.DataFrame(
@@ -219,7 +216,20 @@ def test_the_overview_names_and_colours_a_profile_alike_in_every_row():
                     }
                 )
             )
-    fig = overview(pd.concat(parts, ignore_index=True), smooth=1)
+    return pd.concat(parts, ignore_index=True)
+
+
+def test_the_overview_names_and_colours_a_profile_alike_in_every_row():
+    # SILI ran in both profiles on Circle 3 and in the package's alone on Circle 8
+    fig = overview(
+        _sili_in_profiles(
+            (
+                ("circle-3", "sili/Circle3-v1", ("package", "paper")),
+                ("circle-8", "sili/Circle8-v1", ("package",)),
+            )
+        ),
+        smooth=1,
+    )
     rows = [ax for ax in fig.axes if ax.get_gid() == "task_reward"]
     labels = [[line.get_label() for line in ax.get_lines()] for ax in rows]
     assert [lab for lab in labels[0] if lab.startswith("SILI")] == [
@@ -229,3 +239,18 @@ def test_the_overview_names_and_colours_a_profile_alike_in_every_row():
     assert [lab for lab in labels[1] if lab.startswith("SILI")] == ["SILI (package)"]
     colours = [_line(ax, "SILI (package)").get_color() for ax in rows]
     assert colours[0] == colours[1] != _line(rows[0], "SILI (paper)").get_color()
+
+
+def test_two_profiles_each_alone_on_its_task_get_two_colours():
+    fig = overview(
+        _sili_in_profiles(
+            (
+                ("circle-3", "sili/Circle3-v1", ("package",)),
+                ("circle-8", "sili/Circle8-v1", ("paper",)),
+            )
+        ),
+        smooth=1,
+    )
+    rows = [ax for ax in fig.axes if ax.get_gid() == "task_reward"]
+    package, paper = _line(rows[0], "SILI (package)"), _line(rows[1], "SILI (paper)")
+    assert to_rgb(package.get_color()) != to_rgb(paper.get_color())  # one legend, told apart
