@@ -25,7 +25,7 @@ curve is a ``Line2D`` labelled with its variant, and each bound a ``LineCollecti
 from __future__ import annotations
 
 import json
-from collections.abc import Collection, Sequence
+from collections.abc import Collection, Hashable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -286,17 +286,23 @@ def _variant_order(df: pd.DataFrame) -> list[tuple]:
     )
 
 
-def _colors(variants: list[tuple]) -> dict[tuple, object]:
-    out: dict[tuple, object] = {}
-    for method in dict.fromkeys(v[0] for v in variants):
-        mine = [v for v in variants if v[0] == method]
+def _shades(keys: list[tuple[str, Hashable]]) -> dict[Hashable, object]:
+    """Colours for (method, key) pairs: a method's only key gets the method's colour, several
+    get shades of its colour map, never the same colour twice."""
+    out: dict[Hashable, object] = {}
+    for method in dict.fromkeys(m for m, _ in keys):
+        mine = list(dict.fromkeys(k for m, k in keys if m == method))
         if len(mine) == 1:
             out[mine[0]] = METHOD_COLORS.get(method, "tab:gray")
         else:
             cmap = colormaps[METHOD_CMAPS.get(method, "viridis")]
-            for v, x in zip(mine, np.linspace(0.4, 0.95, len(mine)), strict=True):
-                out[v] = cmap(x)
+            for key, x in zip(mine, np.linspace(0.4, 0.95, len(mine)), strict=True):
+                out[key] = cmap(x)
     return out
+
+
+def _colors(variants: list[tuple]) -> dict[Hashable, object]:
+    return _shades([(v[0], v) for v in variants])
 
 
 def _labelled_variants(
@@ -314,24 +320,16 @@ def _labelled_variants(
 
 def _label_palette(
     rows_per_task: Sequence[pd.DataFrame], profiled: Collection[str]
-) -> dict[str, object]:
-    """One colour per label across a multi-task figure: a method's only label keeps the method's
-    colour; several labels of one method (two profiles, each alone on its task) get shades of
-    its colour map, never the same colour twice."""
-    labels: dict[str, list[str]] = {}
-    for task_rows in rows_per_task:
-        for variant, label, _ in _labelled_variants(task_rows, profiled):
-            if label not in labels.setdefault(variant[0], []):
-                labels[variant[0]].append(label)
-    palette: dict[str, object] = {}
-    for method, mine in labels.items():
-        if len(mine) == 1:
-            palette[mine[0]] = METHOD_COLORS.get(method, "tab:gray")
-        else:
-            cmap = colormaps[METHOD_CMAPS.get(method, "viridis")]
-            for label, x in zip(mine, np.linspace(0.4, 0.95, len(mine)), strict=True):
-                palette[label] = cmap(x)
-    return palette
+) -> dict[Hashable, object]:
+    """One colour per label across a multi-task figure, so that two labels of one method (two
+    profiles, each alone on its task) are told apart in the one legend."""
+    return _shades(
+        [
+            (variant[0], label)
+            for task_rows in rows_per_task
+            for variant, label, _ in _labelled_variants(task_rows, profiled)
+        ]
+    )
 
 
 def default_smoothing(n_interactions: int) -> int:
@@ -366,7 +364,7 @@ def _draw_curves(
     metrics: Sequence[tuple[str, str]],
     window: int,
     profiled: Collection[str] | None = None,
-    palette: dict[str, object] | None = None,
+    palette: dict[Hashable, object] | None = None,
 ) -> None:
     """``profiled`` and ``palette`` (label -> colour, ``_label_palette``) keep one label and one
     colour per variant across the rows of a multi-task figure."""
