@@ -158,7 +158,8 @@ def test_grid_progress_counts_only_runs_at_the_blocks_budget(
     committed = Path(__file__).resolve().parents[1] / "results" / "paper-grid"
     assert main([*args, str(committed)]) == 0
     assert capsys.readouterr().out.strip().splitlines()[-1] == (
-        "6 of 6 runs done, 12,000 of 12,000 interactions"
+        f"6 of 6 runs done, 12,000 of 12,000 interactions (in {tmp_path / 'no-sweep'} or "
+        f"{committed})"  # where it looked: a count of 0 from elsewhere says why
     )
 
 
@@ -209,7 +210,7 @@ def test_grid_blocks_and_budgets(capsys):
     )
     assert capsys.readouterr().out.strip().splitlines() == [
         "sili-oracle on driving (2500 interactions): 6 runs, 0 done",
-        "0 of 6 runs done, 0 of 15,000 interactions",
+        "0 of 6 runs done, 0 of 15,000 interactions (in /nonexistent or /nonexistent)",
     ]
     (spec,) = block("stable-smirl").specs(("circle-8",))
     assert spec.interactions == TASK_BUDGETS["circle-8"] // 2 and spec.methods == [

@@ -247,7 +247,7 @@ def test_blind_and_tracking_are_named_where_they_do_not_exist():
 
     env = make_task("driving")
     assert available_kinds(env) == ("stabilizing", "oracle", "random", "still")
-    with pytest.raises(ConfigError, match="no 'blind' policy for DrivingEnv; allowed there"):
+    with pytest.raises(ConfigError, match="no 'blind' policy for sili/Driving-v0; allowed there"):
         scripted_policy(env, "blind")
     env.close()
     square = np.array([[0.0, 0.0], [2.0, 0.0], [0.0, 2.0], [2.0, 2.0]])

@@ -221,10 +221,11 @@ def test_every_latent_kind_trains(tmp_path, latent):
             ["--task", "circle-3", "--set", "beta=0.3", "--beta-anneal", "0", "0.5", "9"],
             "give one of --set beta and --beta-anneal, not both",
         ),
-        (["--resume", "/nonexistent"], "is not a run directory"),
+        (["--resume", "/nonexistent"], "/nonexistent does not exist; give a run directory"),
         (
             ["--task", "circle-3", "--controller", "osc"],
-            "(given: controller); its arguments: variant, horizon, outside_margin, near_moves (",
+            "task 'circle-3' takes no argument controller (--controller, --env-kwarg); its "
+            "arguments: variant, horizon, outside_margin, near_moves",
         ),
     ],
 )
@@ -501,7 +502,10 @@ def test_env_kwargs_reach_the_task_and_a_bad_one_is_named(tmp_path, capsys):
     capsys.readouterr()
     assert main([*args, "--env-kwarg", "doors=3", "--out", str(tmp_path / "bad")]) == 2
     err = capsys.readouterr().err
-    assert "bad argument for task" in err and "(given: doors); its arguments: horizon" in err
+    assert "takes no argument doors (--controller, --env-kwarg); its arguments: horizon" in err
+    assert main([*args, "--env-kwarg", "horizon=[6]", "--out", str(tmp_path / "bad")]) == 2
+    err = capsys.readouterr().err  # a value the task cannot take: the task's own message
+    assert "horizon must be an integer >= 1, got [6]" in err
     assert not (tmp_path / "bad").exists()
 
 

@@ -107,7 +107,8 @@ def run(args: argparse.Namespace) -> int:
     if args.dry_run:
         print(
             f"{done} of {planned} runs done, "
-            f"{done_interactions:,} of {planned_interactions:,} interactions"
+            f"{done_interactions:,} of {planned_interactions:,} interactions "
+            f"(in {args.sweep_dir} or {args.into})"
         )
     if failed:
         print(json.dumps({"failed": failed}))

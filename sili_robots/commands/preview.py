@@ -1,8 +1,8 @@
 """``sili preview``: a meshcat preview of a task played by a scripted policy or a trained agent.
 
 Writes one self-contained HTML file (opens offline, animated with meshcat's timeline), optionally
-renders its last frame to PNG in headless Chromium (and checks the picture shows the scene), and
-optionally serves the scene live on 127.0.0.1 until Ctrl-C.
+renders its picture frame (the last; Driving's last pass) to PNG in headless Chromium (and checks
+the picture shows the scene), and optionally serves the scene live on 127.0.0.1 until Ctrl-C.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "preview",
         help="meshcat preview of a task: HTML, PNG (headless Chromium) or a live server",
         description="Record a rollout and show it in meshcat: --out writes a self-contained "
-        "HTML file, --png renders its last frame in headless Chromium, --serve starts a live "
+        "HTML file, --png renders its picture frame in headless Chromium, --serve starts a live "
         "meshcat server on 127.0.0.1 until Ctrl-C.",
     )
     p.add_argument("task", type=task_name, help="task name, e.g. circle-3")
@@ -36,7 +36,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--seed", type=seed, default=0, help="first interaction's seed (default 0)")
     p.add_argument("--out", default="preview.html", help="HTML file to write (preview.html)")
-    p.add_argument("--png", default=None, help="also render the last frame to this PNG")
+    p.add_argument(
+        "--png",
+        default=None,
+        help="also render the picture frame to this PNG: the last, or on Driving the last "
+        "interaction's moment the ego draws level with the opponent",
+    )
     p.add_argument("--serve", action="store_true", help="serve live on 127.0.0.1 until Ctrl-C")
     p.set_defaults(run=run)
 

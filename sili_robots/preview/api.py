@@ -200,10 +200,11 @@ def preview(
 ) -> PreviewResult:
     """Record ``interactions`` interactions of ``task`` and write/render/serve the preview.
 
-    ``png`` renders the last frame in headless Chromium (``out`` is written first; a temporary
-    file is used when ``out`` is None). ``serve`` starts a live meshcat server on 127.0.0.1,
-    calls ``on_url`` with its URL and blocks for ``serve_seconds`` (None: until Ctrl-C); the
-    server is stopped on every exit path.
+    ``png`` renders the scene's picture frame (the last; on Driving the last interaction's
+    moment the ego draws level with the opponent) in headless Chromium (``out`` is written
+    first; a temporary file is used when ``out`` is None). ``serve`` starts a live meshcat
+    server on 127.0.0.1, calls ``on_url`` with its URL and blocks for ``serve_seconds`` (None:
+    until Ctrl-C); the server is stopped on every exit path.
     """
     from sili_robots.preview.server import LiveServer
 
