@@ -295,8 +295,10 @@ def test_resume_of_a_non_sweep_and_changed_settings_exit_2(tiny_sweep, tmp_path,
     assert main(["sweep", *args, "--out", str(out), *FAST_ARGS]) == 2
     err = capsys.readouterr().err
     assert "interactions: 8 on disk, 9 now" in err and f"or move that run out of {out}" in err
-    assert main(["sweep", "--resume", str(out), "--interactions", "9", "--workers", "1"]) == 2
-    assert "it takes no --interactions (allowed with it: --backend" in capsys.readouterr().err
+    resume = ["sweep", "--resume", str(out), "--checkpoint-every", "9", "--workers", "1"]
+    assert main(resume) == 2
+    err = capsys.readouterr().err
+    assert "it takes no --checkpoint-every (allowed with it: --interactions, --backend" in err
     assert main(["sweep", "--resume", str(out), "--seeds", "0"]) == 2  # typed at its default
     assert "it takes no --seeds (" in capsys.readouterr().err
 
@@ -350,6 +352,41 @@ def test_overwrite_starts_the_sweep_anew_and_keeps_a_users_files(tmp_path, capsy
         assert main([*into, *dry]) == 2
         assert "is a results collection, not a sweep" in capsys.readouterr().err
     assert (collection / "runs" / "circle-3__sac__s0" / "config.json").is_file()
+
+
+def test_resume_with_interactions_extends_every_run_as_if_started_with_that_budget(
+    tmp_path, capsys
+):
+    out = tmp_path / "sweep"
+    args = ["sweep", "--tasks", "circle-3", "--methods", "sili", "--seeds", "0-1"]
+    args += ["--interactions", "4", "--checkpoint-every", "3", *FAST_ARGS, "--out", str(out)]
+    assert main([*args, "--no-progress"]) == 0
+    names = ["circle-3__sili-bschedule__s0", "circle-3__sili-bschedule__s1"]
+    capsys.readouterr()
+    for shorter, dry in (("3", ["--dry-run"]), ("2", [])):
+        assert main(["sweep", "--resume", str(out), "--interactions", shorter, *dry]) == 2
+        err = capsys.readouterr().err
+        assert "would shorten the sweep" in err and "(allowed: >= 4)" in err
+    assert main(["sweep", "--resume", str(out), "--interactions", "7", "--dry-run"]) == 0
+    assert (
+        capsys.readouterr().out
+        == "".join(f"{n}\tresumable (extended to 7)\n" for n in names) + "2 runs\n"
+    )
+    assert main(["sweep", "--resume", str(out), "--interactions", "7", "--no-progress"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert (report["done"], report["already_done"], report["failed"]) == (2, 0, {})
+    recorded = json.loads((out / "sweep.json").read_text())["invocations"]
+    assert [r["interactions"] for r in recorded] == [7]  # the record is the extended sweep
+    run = out / "runs" / names[0]
+    cfg = RunConfig.from_dict(json.loads((run / "config.json").read_text())["run"])
+    assert cfg.interactions == 7
+    train(cfg, tmp_path / "ref", progress=False)  # the same run, started with 7
+    pd.testing.assert_frame_equal(
+        _without_wall_time(pd.read_csv(run / "metrics.csv")),
+        _without_wall_time(pd.read_csv(tmp_path / "ref" / "metrics.csv")),
+    )
+    assert main(["sweep", "--resume", str(out), "--no-progress"]) == 0  # nothing left to do
+    assert json.loads(capsys.readouterr().out)["already_done"] == 2
 
 
 def _alive(pid):

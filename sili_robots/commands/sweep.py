@@ -61,7 +61,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="settings every run starts from: the package's defaults or the paper's appendix "
         "(run names get -paper; default: each task's, the paper's for sili on driving)",
     )
-    p.add_argument("--interactions", type=positive_int, default=1000)
+    p.add_argument(
+        "--interactions",
+        type=positive_int,
+        default=1000,
+        help="interactions per run (default 1000); with --resume, extend every run to this many",
+    )
     p.add_argument("--checkpoint-every", type=positive_int, default=50)
     add_override_args(p, scope=" for every run")
     p.add_argument("--out", type=Path, help="sweep directory (created, or continued)")
@@ -98,7 +103,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 #: what ``--resume SWEEP_DIR`` takes besides: how to run the recorded sweep, not what it holds
+#: (and ``--interactions``, which extends it)
 RESUME_OPTIONS = (
+    "interactions",
     "backend",
     "workers",
     "ray_address",
@@ -147,6 +154,7 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
 
 
 def _specs_and_dir(args: argparse.Namespace) -> tuple[list[SweepSpec], Path]:
+    from sili_robots.sweep.runner import extended
     from sili_robots.sweep.state import recorded_specs
 
     if args.resume is not None:
@@ -158,10 +166,17 @@ def _specs_and_dir(args: argparse.Namespace) -> tuple[list[SweepSpec], Path]:
                 f"--resume SWEEP_DIR runs the sweep as {args.resume} records it; it takes no "
                 f"{', '.join(recorded)} (allowed with it: {allowed})"
             )
+        if _extends(args):
+            specs = extended(specs, args.interactions, args.resume)
         return specs, args.resume
     if args.out is None:
         raise ConfigError("--out SWEEP_DIR is required")
     return [spec_from_args(args)], args.out
+
+
+def _extends(args: argparse.Namespace) -> bool:
+    """``--resume SWEEP_DIR --interactions N``: the recorded sweep, every run extended to N."""
+    return args.resume is not None and "interactions" in args.typed_options
 
 
 def _backend(args: argparse.Namespace):
@@ -181,7 +196,13 @@ def _backend(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.sweep.runner import plan, replaced_runs, run_sweep
-    from sili_robots.sweep.state import check_existing, check_sweep_dir, run_path, run_state
+    from sili_robots.sweep.state import (
+        check_existing,
+        check_sweep_dir,
+        run_path,
+        run_state,
+        shorter_run,
+    )
 
     specs, sweep_dir = _specs_and_dir(args)
     if args.resume is None:
@@ -195,6 +216,9 @@ def run(args: argparse.Namespace) -> int:
                 print(f"{name}\t{'new' if name in names else 'removed'}")
         else:
             for run_ in planned:
+                if _extends(args) and shorter_run(sweep_dir, run_):
+                    print(f"{run_.name}\tresumable (extended to {run_.config.interactions})")
+                    continue
                 check_existing(sweep_dir, run_)
                 print(f"{run_.name}\t{run_state(run_path(sweep_dir, run_.name))}")
         print(f"{len(planned)} runs")
@@ -207,6 +231,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         tensorboard_scalars=False if args.no_tensorboard else None,
         overwrite=args.overwrite,
+        extend=_extends(args),
     )
     print(
         json.dumps(

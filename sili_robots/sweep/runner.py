@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import contextlib
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from sili_robots.errors import ConfigError
-from sili_robots.runs import write_config
+from sili_robots.runs import SUMMARY, write_config
 from sili_robots.sweep import tensorboard
 from sili_robots.sweep.backend import Backend, Monitor
 from sili_robots.sweep.local import LocalBackend
@@ -23,8 +23,10 @@ from sili_robots.sweep.state import (
     recorded_specs,
     run_path,
     run_state,
+    shorter_run,
     sweep_lock,
     training_worker,
+    write_invocations,
 )
 from sili_robots.sweep.worker import Job, Outcome
 
@@ -89,6 +91,18 @@ def replaced_runs(sweep_dir: Path, planned: Sequence[PlannedRun]) -> list[str]:
     return names
 
 
+def extended(specs: Sequence[SweepSpec], interactions: int, sweep_dir: Path) -> list[SweepSpec]:
+    """The recorded ``specs`` with their budget raised to ``interactions`` (``--resume
+    --interactions``); ConfigError when that would shorten one."""
+    longest = max(s.interactions for s in specs)
+    if interactions < longest:
+        raise ConfigError(
+            f"--interactions {interactions} would shorten the sweep in {sweep_dir}, whose runs "
+            f"are set to up to {longest}; a sweep can only be extended (allowed: >= {longest})"
+        )
+    return [replace(s, interactions=interactions) for s in specs]
+
+
 def run_sweep(
     specs: SweepSpec | Sequence[SweepSpec],
     sweep_dir: Path,
@@ -97,11 +111,14 @@ def run_sweep(
     progress: bool = True,
     tensorboard_scalars: bool | None = None,
     overwrite: bool = False,
+    extend: bool = False,
 ) -> SweepReport:
     """Run every planned run not yet finished; failures are reported, never raised.
 
     With ``overwrite`` the sweep in ``sweep_dir`` (its record, tables and runs) is removed
-    first, so every run starts anew.
+    first, so every run starts anew. With ``extend`` (``specs``: the recorded ones, extended)
+    the record is replaced by ``specs`` and each run made before with a smaller budget goes on
+    to the new one, as a run started with it would have (``sili_robots.training.extend``).
 
     Without a ``monitor`` a :class:`SweepProgress` prints one line per run that ends and, with
     ``progress``, draws the live display.
@@ -122,6 +139,15 @@ def run_sweep(
     with sweep_lock(sweep_dir):
         if overwrite:
             clear_sweep(sweep_dir, replaced_runs(sweep_dir, planned))
+        if extend:
+            from sili_robots.training import extend as extend_run  # torch: only when needed
+
+            write_invocations(sweep_dir, specs)  # first: a cut-short extension is resumed as one
+            for run in planned:
+                if shorter_run(sweep_dir, run):
+                    path = run_path(sweep_dir, run.name)
+                    extend_run(path, run.config.interactions)
+                    (path / SUMMARY).unlink(missing_ok=True)  # it summed up the shorter run
         for run in planned:
             check_existing(sweep_dir, run)
         for spec in specs:

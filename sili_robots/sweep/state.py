@@ -20,6 +20,7 @@ import json
 import os
 import socket
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -138,6 +139,27 @@ def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
             + "): a sweep never mixes two runs under one name; give a new sweep another --out, "
             + f"or move that run out of {sweep_dir}"
         )
+
+
+def shorter_run(sweep_dir: Path, planned: PlannedRun) -> bool:
+    """Whether ``planned`` is on disk as the same run with a smaller budget (a run of the sweep
+    before ``--resume --interactions`` extended it); ConfigError when it differs otherwise."""
+    path = run_path(sweep_dir, planned.name)
+    if not (path / CONFIG).is_file():
+        return False
+    on_disk = recorded_run(path).get("interactions", planned.config.interactions)
+    if not isinstance(on_disk, int) or on_disk >= planned.config.interactions:
+        return False
+    shorter = replace(planned.config, interactions=on_disk)
+    check_existing(sweep_dir, replace(planned, config=shorter))  # the same run otherwise
+    return True
+
+
+def write_invocations(sweep_dir: Path, specs: list[SweepSpec]) -> None:
+    """Replace the sweep's record with ``specs`` (the recorded ones, extended)."""
+    entries = [json.loads(json.dumps(spec.to_dict())) for spec in specs]
+    path = Path(sweep_dir) / SWEEP_FILE
+    write_text(path, json.dumps({"invocations": entries}, indent=2), shared=True)
 
 
 def record_invocation(sweep_dir: Path, spec: SweepSpec) -> None:
