@@ -13,6 +13,7 @@ import inspect
 import json
 import os
 import sys
+from functools import cache
 from typing import Any
 
 import gymnasium as gym
@@ -137,12 +138,23 @@ def make_env(task: str, **kwargs: Any) -> gym.Env:
     return make_task(task, **kwargs)
 
 
+def _task_parameters(task: str) -> dict[str, inspect.Parameter]:
+    path = task if is_class_path(task) else task_spec(task).entry_point
+    return dict(inspect.signature(task_class(path).__init__).parameters)
+
+
 def task_arguments(task: str) -> list[str]:
     """The constructor arguments a task takes (``--env-kwarg``, ``--controller``), by name."""
-    path = task if is_class_path(task) else task_spec(task).entry_point
-    params = inspect.signature(task_class(path).__init__).parameters
     kinds = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
-    return [n for n, q in params.items() if n != "self" and q.kind in kinds]
+    return [n for n, q in _task_parameters(task).items() if n != "self" and q.kind in kinds]
+
+
+@cache
+def task_accepts(task: str, argument: str) -> bool:
+    """Whether the task's constructor takes ``argument`` (e.g. ``controller``): by name, or
+    through ``**kwargs`` (a user's task class may pass them on)."""
+    params = _task_parameters(task).values()
+    return argument in task_arguments(task) or any(q.kind == q.VAR_KEYWORD for q in params)
 
 
 def default_latent(task: str) -> str:

@@ -93,13 +93,15 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
         raise ConfigError("no runs to judge")
     runs = sorted((read_config(d).seed, Path(d)) for d in run_dirs)
     cfg = read_config(runs[0][1])
-    variant = (cfg.task_id, cfg.method, cfg.env_kwargs)
+    seeds = [seed for seed, _ in runs]
+    if len(set(seeds)) < len(seeds):
+        raise ConfigError(f"seeds {seeds}: runs judged together are one run per seed")
     for _, run_dir in runs[1:]:
-        other = read_config(run_dir)
-        if (other.task_id, other.method, other.env_kwargs) != variant:
+        differ = _settings_that_differ(cfg, read_config(run_dir))
+        if differ:
             raise ConfigError(
-                f"{run_dir} ({other.method} on {other.task_id}) is not a seed of {runs[0][1]} "
-                f"({cfg.method} on {cfg.task_id}): runs judged together differ only in the seed"
+                f"{run_dir} is not another seed of {runs[0][1]}: {', '.join(differ[:4])} differ "
+                "(runs judged together differ only in the seed)"
             )
     still = _references(cfg).get("still")
     judged = []  # (worked, reward, what to print, run)
@@ -123,6 +125,21 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
 
 #: ``python -m sili_robots.verdict``'s exit status when no run worked (1 is a failure of its own)
 NONE_WORKED = 3
+
+
+def _settings_that_differ(a: RunConfig, b: RunConfig) -> list[str]:
+    """Dotted names of the settings two runs differ in, other than those that leave what they
+    learn alike."""
+
+    def flat(d: dict, prefix: str = "") -> dict[str, object]:
+        out: dict[str, object] = {}
+        for k, v in d.items():
+            out.update(flat(v, f"{prefix}{k}.") if isinstance(v, dict) else {prefix + k: v})
+        return out
+
+    fa, fb = flat(a.to_dict()), flat(b.to_dict())
+    ignored = {"seed", "threads", "checkpoint_every"}  # neither changes what a run learns
+    return [k for k in sorted(set(fa) | set(fb)) if k not in ignored and fa.get(k) != fb.get(k)]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -22,7 +22,7 @@ from sili_robots.runs import RunConfig
 from sili_robots.sweep import LocalBackend, SweepSpec, expand, run_sweep
 from sili_robots.sweep import tensorboard as tb
 from sili_robots.sweep.results import results_table
-from sili_robots.sweep.state import sweep_lock
+from sili_robots.sweep.state import recorded_specs, sweep_lock, write_invocations
 from sili_robots.training import train
 from sili_robots.verdict import verdict
 
@@ -387,6 +387,42 @@ def test_resume_with_interactions_extends_every_run_as_if_started_with_that_budg
     )
     assert main(["sweep", "--resume", str(out), "--no-progress"]) == 0  # nothing left to do
     assert json.loads(capsys.readouterr().out)["already_done"] == 2
+
+
+def test_an_extension_checks_every_run_first_and_one_cut_short_is_finished_by_a_resume(
+    tmp_path, capsys
+):
+    out = tmp_path / "sweep"
+    args = ["sweep", "--tasks", "circle-3", "--methods", "sac", "--seeds", "0-1"]
+    assert main([*args, "--interactions", "3", *FAST_ARGS, "--out", str(out), "--no-progress"]) == 0
+    s0, s1 = (out / "runs" / f"circle-3__sac__s{i}" for i in (0, 1))
+    record = (out / "sweep.json").read_text()
+    # a run extended on its own past the sweep: refused before anything changes, with the fix
+    assert main(["train", "--resume", str(s1), "--interactions", "5", "--no-progress"]) == 0
+    capsys.readouterr()
+    assert main(["sweep", "--resume", str(out), "--interactions", "4", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert f"sili sweep --resume {out} --interactions 5" in err
+    assert (out / "sweep.json").read_text() == record and (s0 / "summary.json").is_file()
+    # a finished run kept without its checkpoint cannot go on: refused, nothing changed
+    (s0 / "checkpoint.pt").rename(tmp_path / "kept.pt")
+    assert main(["sweep", "--resume", str(out), "--interactions", "5", "--dry-run"]) == 2
+    assert "without its checkpoint.pt" in capsys.readouterr().err
+    assert (out / "sweep.json").read_text() == record
+    (tmp_path / "kept.pt").rename(s0 / "checkpoint.pt")
+    # an extension cut short after its record was written: a plain resume finishes it
+    write_invocations(out, [replace(spec, interactions=5) for spec in recorded_specs(out)])
+    assert main(["sweep", "--resume", str(out), "--dry-run"]) == 0
+    assert capsys.readouterr().out.splitlines()[:2] == [
+        "circle-3__sac__s0\tresumable (extended to 5)",
+        "circle-3__sac__s1\tdone",
+    ]
+    assert main(["sweep", "--resume", str(out), "--no-progress"]) == 0
+    assert len(pd.read_csv(s0 / "metrics.csv")) == len(pd.read_csv(s1 / "metrics.csv")) == 5
+    # a new invocation with a larger budget is another sweep, not an extension
+    capsys.readouterr()
+    assert main([*args, "--interactions", "6", *FAST_ARGS, "--out", str(out)]) == 2
+    assert "interactions: 5 on disk, 6 now" in capsys.readouterr().err
 
 
 def _alive(pid):

@@ -491,6 +491,19 @@ def test_the_progress_bar_shows_only_while_there_is_training_left():
     assert not TrainingProgress(5, 0, enabled=False).shown
 
 
+def test_a_task_class_that_passes_its_keyword_arguments_on_takes_them(tmp_path, monkeypatch):
+    (tmp_path / "passing_task.py").write_text(
+        "from sili_robots.examples.two_doors import TwoDoorsEnv\n\n\n"
+        "class PassingOn(TwoDoorsEnv):\n"
+        "    def __init__(self, **kwargs):\n"
+        "        super().__init__(**kwargs)\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    args = ["train", "--task", "passing_task:PassingOn", "--interactions", "1", *FAST]
+    assert main([*args, "--env-kwarg", "horizon=6", "--out", str(tmp_path / "run")]) == 0
+    assert load_trained(tmp_path / "run")[1].unwrapped.horizon == 6
+
+
 def test_env_kwargs_reach_the_task_and_a_bad_one_is_named(tmp_path, capsys):
     doors = "sili_robots.examples.two_doors:TwoDoorsEnv"
     out = tmp_path / "doors"

@@ -96,13 +96,14 @@ def test_the_line_across_seeds_counts_the_runs_that_worked_and_picks_the_best(tm
     printed = capsys.readouterr()
     assert printed.out.strip() == str(lost) and "SILI worked in 0 of 1 seeds" in printed.err
     other = tmp_path / "lili"
-    args = ["train", "--task", "circle-3", "--method", "lili", "--interactions", "2"]
+    args = ["train", "--task", "circle-3", "--method", "lili", "--interactions", "2", "--seed", "5"]
     assert main([*args, "--out", str(other), *FAST_ARGS, "--no-progress"]) == 0
     capsys.readouterr()
     assert verdict_main([str(lost), str(other)]) == 2  # not seeds of one variant
     err = capsys.readouterr().err
-    assert "(lili on sili/Circle3-v1)" in err and "(sili on sili/Circle3-v1)" in err
-    assert "is not a seed of" in err and "runs judged together differ only in the seed" in err
+    assert "is not another seed of" in err and "method" in err and "differ only in the seed" in err
+    assert verdict_main([str(lost), str(lost)]) == 2  # the same run twice is not two seeds
+    assert "seeds [0, 0]: runs judged together are one run per seed" in capsys.readouterr().err
     assert verdict_main([]) == 2  # no traceback, and not "none worked"
     assert "give the run directories to judge together" in capsys.readouterr().err
     assert verdict_main([str(tmp_path)]) == 2

@@ -195,6 +195,7 @@ def _backend(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
+    from sili_robots.runs import CHECKPOINT
     from sili_robots.sweep.runner import plan, replaced_runs, run_sweep
     from sili_robots.sweep.state import (
         check_existing,
@@ -216,11 +217,13 @@ def run(args: argparse.Namespace) -> int:
                 print(f"{name}\t{'new' if name in names else 'removed'}")
         else:
             for run_ in planned:
-                if _extends(args) and shorter_run(sweep_dir, run_):
-                    print(f"{run_.name}\tresumable (extended to {run_.config.interactions})")
+                path = run_path(sweep_dir, run_.name)
+                if args.resume is not None and shorter_run(sweep_dir, run_):
+                    state = "resumable" if (path / CHECKPOINT).is_file() else "new"
+                    print(f"{run_.name}\t{state} (extended to {run_.config.interactions})")
                     continue
                 check_existing(sweep_dir, run_)
-                print(f"{run_.name}\t{run_state(run_path(sweep_dir, run_.name))}")
+                print(f"{run_.name}\t{run_state(path)}")
         print(f"{len(planned)} runs")
         return 0
     writable_dir(sweep_dir, "--resume" if args.resume else "--out")
@@ -231,7 +234,7 @@ def run(args: argparse.Namespace) -> int:
         progress=not args.no_progress,
         tensorboard_scalars=False if args.no_tensorboard else None,
         overwrite=args.overwrite,
-        extend=_extends(args),
+        recorded=args.resume is not None,
     )
     print(
         json.dumps(

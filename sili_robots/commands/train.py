@@ -247,9 +247,9 @@ def _resume_hint(run_dir: Path) -> Iterator[None]:
 
 def _check_env_builds(cfg: RunConfig) -> None:
     """Fail fast, with the task's own message, on bad task arguments (e.g. a controller)."""
-    from sili_robots.build import make_run_env, task_arguments
+    from sili_robots.build import make_run_env, task_accepts, task_arguments
 
-    unknown = [k for k in cfg.env_kwargs if k not in task_arguments(cfg.task)]
+    unknown = [k for k in cfg.env_kwargs if not task_accepts(cfg.task, k)]
     if unknown:
         raise ConfigError(
             f"task {cfg.task!r} takes no argument {', '.join(unknown)} (--controller, "

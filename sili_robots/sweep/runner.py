@@ -111,14 +111,15 @@ def run_sweep(
     progress: bool = True,
     tensorboard_scalars: bool | None = None,
     overwrite: bool = False,
-    extend: bool = False,
+    recorded: bool = False,
 ) -> SweepReport:
     """Run every planned run not yet finished; failures are reported, never raised.
 
     With ``overwrite`` the sweep in ``sweep_dir`` (its record, tables and runs) is removed
-    first, so every run starts anew. With ``extend`` (``specs``: the recorded ones, extended)
-    the record is replaced by ``specs`` and each run made before with a smaller budget goes on
-    to the new one, as a run started with it would have (``sili_robots.training.extend``).
+    first, so every run starts anew. ``recorded``: ``specs`` are the sweep's record (``--resume``),
+    perhaps with a raised budget; the record is replaced by them, and each run made with a
+    smaller budget goes on to the new one as a run started with it would have
+    (``sili_robots.training.extend``), also after an extension cut short.
 
     Without a ``monitor`` a :class:`SweepProgress` prints one line per run that ends and, with
     ``progress``, draws the live display.
@@ -139,17 +140,21 @@ def run_sweep(
     with sweep_lock(sweep_dir):
         if overwrite:
             clear_sweep(sweep_dir, replaced_runs(sweep_dir, planned))
-        if extend:
+        # every run checked before anything changes; a shorter one (an extension cut short, or
+        # one asked for now) goes on to the planned budget
+        shorter = [run for run in planned if recorded and shorter_run(sweep_dir, run)]
+        for run in planned:
+            if run not in shorter:
+                check_existing(sweep_dir, run)
+        if recorded:
+            write_invocations(sweep_dir, specs)
+        if shorter:
             from sili_robots.training import extend as extend_run  # torch: only when needed
 
-            write_invocations(sweep_dir, specs)  # first: a cut-short extension is resumed as one
-            for run in planned:
-                if shorter_run(sweep_dir, run):
-                    path = run_path(sweep_dir, run.name)
-                    extend_run(path, run.config.interactions)
-                    (path / SUMMARY).unlink(missing_ok=True)  # it summed up the shorter run
-        for run in planned:
-            check_existing(sweep_dir, run)
+            for run in shorter:
+                path = run_path(sweep_dir, run.name)
+                extend_run(path, run.config.interactions)
+                (path / SUMMARY).unlink(missing_ok=True)  # it summed up the shorter run
         for spec in specs:
             record_invocation(sweep_dir, spec)
         report = SweepReport(sweep_dir, [r.name for r in planned])

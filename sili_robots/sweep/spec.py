@@ -10,13 +10,12 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
-from functools import cache
 from typing import Any
 
 from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, PROFILES, Schedule
 from sili_robots.agent.matmul import default_matmul
 from sili_robots.agent.methods import LATENT_METHODS, PRESETS
-from sili_robots.build import default_profile, make_run_config, task_arguments
+from sili_robots.build import default_profile, make_run_config, task_accepts, task_arguments
 from sili_robots.errors import ConfigError, check_choice, check_seed
 from sili_robots.migrations import setting_path
 from sili_robots.runs import RunConfig
@@ -178,12 +177,6 @@ def parse_betas(text: str) -> list[float]:
     if not out:
         raise ConfigError(f"no b values in {text!r}; give e.g. 0,0.2,0.4")
     return list(dict.fromkeys(out))
-
-
-@cache
-def task_accepts(task: str, kwarg: str) -> bool:
-    """Whether the task's constructor takes ``kwarg`` (e.g. ``controller``)."""
-    return kwarg in task_arguments(task)
 
 
 def check_task_arguments(spec: SweepSpec) -> None:

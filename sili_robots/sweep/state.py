@@ -31,6 +31,7 @@ from sili_robots.runs import (
     CONFIG,
     RUNNING_FILE,
     SUMMARY,
+    check_resumable,
     clear_run,
     foreign_files,
     listed,
@@ -131,7 +132,15 @@ def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
     path = run_path(sweep_dir, planned.name)
     if not (path / CONFIG).is_file():
         return
-    diffs = _diff(recorded_run(path), json.loads(json.dumps(planned.config.to_dict())))
+    on_disk = recorded_run(path)
+    diffs = _diff(on_disk, json.loads(json.dumps(planned.config.to_dict())))
+    longer = on_disk.get("interactions")
+    if len(diffs) == 1 and isinstance(longer, int) and longer > planned.config.interactions:
+        raise ConfigError(
+            f"run {planned.name} in {sweep_dir} was extended to {longer} interactions, past the "
+            f"sweep's {planned.config.interactions}; extend the sweep to match it: "
+            f"sili sweep --resume {sweep_dir} --interactions {longer}"
+        )
     if diffs:
         raise ConfigError(
             f"run {planned.name} in {sweep_dir} was made with other settings ("
@@ -142,8 +151,9 @@ def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
 
 
 def shorter_run(sweep_dir: Path, planned: PlannedRun) -> bool:
-    """Whether ``planned`` is on disk as the same run with a smaller budget (a run of the sweep
-    before ``--resume --interactions`` extended it); ConfigError when it differs otherwise."""
+    """Whether ``planned`` is on disk as the same run with a smaller budget, which it can go on
+    from (a run of the sweep before ``--resume --interactions`` extended it). ConfigError when
+    it differs otherwise, is kept without its checkpoint, or a live worker trains it."""
     path = run_path(sweep_dir, planned.name)
     if not (path / CONFIG).is_file():
         return False
@@ -152,6 +162,10 @@ def shorter_run(sweep_dir: Path, planned: PlannedRun) -> bool:
         return False
     shorter = replace(planned.config, interactions=on_disk)
     check_existing(sweep_dir, replace(planned, config=shorter))  # the same run otherwise
+    check_resumable(path)
+    pid = training_worker(path)
+    if pid is not None:
+        raise ConfigError(f"run {planned.name} in {sweep_dir} is being trained by process {pid}")
     return True
 
 
