@@ -156,9 +156,13 @@ def test_an_existing_run_with_other_settings_is_refused(tmp_path):
     path = run_path(tmp_path, run.name)
     path.mkdir(parents=True)
     other = run.config.to_dict()
-    other["interactions"] = 99
+    other["interactions"] = 99  # extended on its own: the sweep can be extended to match
     (path / "config.json").write_text(json.dumps({"run": other}))
-    with pytest.raises(ConfigError, match=r"interactions: 99 on disk, 5 now"):
+    with pytest.raises(ConfigError, match=r"was extended to 99 interactions, past the sweep's 5"):
+        check_existing(tmp_path, run)
+    other["checkpoint_every"] += 1  # and more: another run
+    (path / "config.json").write_text(json.dumps({"run": other}))
+    with pytest.raises(ConfigError, match=r"checkpoint_every: .*; interactions: 99 on disk, 5 now"):
         check_existing(tmp_path, run)
     (path / "config.json").write_text(json.dumps({"run": run.config.to_dict()}))
     check_existing(tmp_path, run)  # the same run: fine
