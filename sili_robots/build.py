@@ -13,6 +13,7 @@ import inspect
 import json
 import os
 import sys
+from collections.abc import Iterable
 from functools import cache
 from typing import Any
 
@@ -155,6 +156,17 @@ def task_accepts(task: str, argument: str) -> bool:
     through ``**kwargs`` (a user's task class may pass them on)."""
     params = _task_parameters(task).values()
     return argument in task_arguments(task) or any(q.kind == q.VAR_KEYWORD for q in params)
+
+
+def check_argument_names(task: str, names: Iterable[str], options: str) -> None:
+    """ConfigError naming the arguments ``task`` does not take and those it does (``options``:
+    where they were given, e.g. ``--env-kwarg``)."""
+    unknown = [k for k in names if not task_accepts(task, k)]
+    if unknown:
+        raise ConfigError(
+            f"task {task!r} takes no argument {', '.join(unknown)} ({options}); its arguments: "
+            f"{', '.join(task_arguments(task)) or 'none'}"
+        )
 
 
 def default_latent(task: str) -> str:

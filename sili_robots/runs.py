@@ -239,6 +239,17 @@ def read_config(run_dir: Path) -> RunConfig:
     return RunConfig.from_dict(read_json(path, DAMAGED_CONFIG, "run")["run"])
 
 
+def differences(a: Any, b: Any, prefix: str = "") -> list[tuple[str, Any, Any]]:
+    """(dotted key, value in ``a``, value in ``b``) for every leaf two nested dicts (two runs'
+    configs) differ in, in key order."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        out: list[tuple[str, Any, Any]] = []
+        for key in sorted(set(a) | set(b)):
+            out += differences(a.get(key), b.get(key), f"{prefix}{key}.")
+        return out
+    return [] if a == b else [(prefix[:-1], a, b)]
+
+
 def check_history(run_dir: Path, interactions: int) -> None:
     """Refuse to resume a run whose ``metrics.csv`` lacks rows its checkpoint has trained (the
     file lost or cut short): the run would go on with a hole in its record."""

@@ -10,7 +10,7 @@ import pandas as pd
 from sili_robots.bounds import stored_bounds
 from sili_robots.errors import ConfigError
 from sili_robots.labels import METHOD_NAMES
-from sili_robots.runs import METRICS, RunConfig, read_config
+from sili_robots.runs import METRICS, RunConfig, differences, read_config
 from sili_robots.tasks.registry import other_task_arguments
 
 HOLDS = 0.9  # the stability a run needs to count as holding the opponent
@@ -91,13 +91,14 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
     first seed's."""
     if not run_dirs:
         raise ConfigError("no runs to judge")
-    runs = sorted((read_config(d).seed, Path(d)) for d in run_dirs)
-    cfg = read_config(runs[0][1])
+    configs = sorted(((read_config(d), Path(d)) for d in run_dirs), key=lambda c: c[0].seed)
+    runs = [(c.seed, d) for c, d in configs]
+    cfg = configs[0][0]
     seeds = [seed for seed, _ in runs]
     if len(set(seeds)) < len(seeds):
         raise ConfigError(f"seeds {seeds}: runs judged together are one run per seed")
-    for _, run_dir in runs[1:]:
-        differ = _settings_that_differ(cfg, read_config(run_dir))
+    for other, run_dir in configs[1:]:
+        differ = _settings_that_differ(cfg, other)
         if differ:
             raise ConfigError(
                 f"{run_dir} is not another seed of {runs[0][1]}: {', '.join(differ[:4])} differ "
@@ -130,16 +131,8 @@ NONE_WORKED = 3
 def _settings_that_differ(a: RunConfig, b: RunConfig) -> list[str]:
     """Dotted names of the settings two runs differ in, other than those that leave what they
     learn alike."""
-
-    def flat(d: dict, prefix: str = "") -> dict[str, object]:
-        out: dict[str, object] = {}
-        for k, v in d.items():
-            out.update(flat(v, f"{prefix}{k}.") if isinstance(v, dict) else {prefix + k: v})
-        return out
-
-    fa, fb = flat(a.to_dict()), flat(b.to_dict())
-    ignored = {"seed", "threads", "checkpoint_every"}  # neither changes what a run learns
-    return [k for k in sorted(set(fa) | set(fb)) if k not in ignored and fa.get(k) != fb.get(k)]
+    ignored = {"seed", "threads", "checkpoint_every"}  # none changes what a run learns
+    return [k for k, _, _ in differences(a.to_dict(), b.to_dict()) if k not in ignored]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -247,14 +247,9 @@ def _resume_hint(run_dir: Path) -> Iterator[None]:
 
 def _check_env_builds(cfg: RunConfig) -> None:
     """Fail fast, with the task's own message, on bad task arguments (e.g. a controller)."""
-    from sili_robots.build import make_run_env, task_accepts, task_arguments
+    from sili_robots.build import check_argument_names, make_run_env, task_arguments
 
-    unknown = [k for k in cfg.env_kwargs if not task_accepts(cfg.task, k)]
-    if unknown:
-        raise ConfigError(
-            f"task {cfg.task!r} takes no argument {', '.join(unknown)} (--controller, "
-            f"--env-kwarg); its arguments: {', '.join(task_arguments(cfg.task)) or 'none'}"
-        )
+    check_argument_names(cfg.task, cfg.env_kwargs, "--controller, --env-kwarg")
     try:
         env = make_run_env(cfg)
     except TypeError as err:

@@ -18,6 +18,7 @@ from sili_robots.sweep.state import (
     RUNS_DIR,
     SWEEP_FILE,
     check_existing,
+    check_not_training,
     clear_sweep,
     record_invocation,
     recorded_specs,
@@ -25,7 +26,6 @@ from sili_robots.sweep.state import (
     run_state,
     shorter_run,
     sweep_lock,
-    training_worker,
     write_invocations,
 )
 from sili_robots.sweep.worker import Job, Outcome
@@ -83,11 +83,7 @@ def replaced_runs(sweep_dir: Path, planned: Sequence[PlannedRun]) -> list[str]:
             "replaces only a sweep; give another --out"
         )
     for name in names:
-        pid = training_worker(run_path(sweep_dir, name))
-        if pid is not None:
-            raise ConfigError(
-                f"run {name} in {sweep_dir} is being trained by process {pid}; stop it first"
-            )
+        check_not_training(sweep_dir, name)
     return names
 
 

@@ -15,7 +15,12 @@ from typing import Any
 from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, PROFILES, Schedule
 from sili_robots.agent.matmul import default_matmul
 from sili_robots.agent.methods import LATENT_METHODS, PRESETS
-from sili_robots.build import default_profile, make_run_config, task_accepts, task_arguments
+from sili_robots.build import (
+    check_argument_names,
+    default_profile,
+    make_run_config,
+    task_accepts,
+)
 from sili_robots.errors import ConfigError, check_choice, check_seed
 from sili_robots.migrations import setting_path
 from sili_robots.runs import RunConfig
@@ -184,12 +189,7 @@ def check_task_arguments(spec: SweepSpec) -> None:
     them and each controller, so a bad value stops the sweep before any run instead of failing
     every run of it (a recorded sweep resumes as it ran: such runs fail one by one)."""
     for task in spec.tasks:  # names first, on every task, then values
-        unknown = [k for k in spec.env_kwargs if not task_accepts(task, k)]
-        if unknown:
-            raise ConfigError(
-                f"task {task!r} takes no argument {', '.join(unknown)} (--env-kwarg); its "
-                f"arguments: {', '.join(task_arguments(task))}"
-            )
+        check_argument_names(task, spec.env_kwargs, "--env-kwarg")
     for task in spec.tasks:
         for kwargs in task_kwargs_of_runs(spec, task):
             if kwargs:

@@ -22,7 +22,7 @@ import socket
 from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 from sili_robots.atomic import write_text
 from sili_robots.errors import ConfigError
@@ -33,6 +33,7 @@ from sili_robots.runs import (
     SUMMARY,
     check_resumable,
     clear_run,
+    differences,
     foreign_files,
     listed,
     read_json,
@@ -110,6 +111,15 @@ def training_worker(run_dir: Path) -> int | None:
     return pid
 
 
+def check_not_training(sweep_dir: Path, name: str) -> None:
+    """ConfigError when a live worker trains the run ``name``: it is not to be changed now."""
+    pid = training_worker(run_path(sweep_dir, name))
+    if pid is not None:
+        raise ConfigError(
+            f"run {name} in {sweep_dir} is being trained by process {pid}; stop it first"
+        )
+
+
 def run_state(run_dir: Path) -> RunState:
     if (run_dir / SUMMARY).is_file():
         return "done"
@@ -118,22 +128,14 @@ def run_state(run_dir: Path) -> RunState:
     return "new"
 
 
-def _diff(a: Any, b: Any, prefix: str = "") -> list[str]:
-    if isinstance(a, dict) and isinstance(b, dict):
-        out: list[str] = []
-        for key in sorted(set(a) | set(b)):
-            out += _diff(a.get(key), b.get(key), f"{prefix}{key}.")
-        return out
-    return [] if a == b else [f"{prefix[:-1]}: {a!r} on disk, {b!r} now"]
-
-
 def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
     """An existing run directory must hold the same run (else resuming it would mix two)."""
     path = run_path(sweep_dir, planned.name)
     if not (path / CONFIG).is_file():
         return
     on_disk = recorded_run(path)
-    diffs = _diff(on_disk, json.loads(json.dumps(planned.config.to_dict())))
+    planned_dict = json.loads(json.dumps(planned.config.to_dict()))
+    diffs = [f"{k}: {a!r} on disk, {b!r} now" for k, a, b in differences(on_disk, planned_dict)]
     longer = on_disk.get("interactions")
     if len(diffs) == 1 and isinstance(longer, int) and longer > planned.config.interactions:
         raise ConfigError(
@@ -163,9 +165,7 @@ def shorter_run(sweep_dir: Path, planned: PlannedRun) -> bool:
     shorter = replace(planned.config, interactions=on_disk)
     check_existing(sweep_dir, replace(planned, config=shorter))  # the same run otherwise
     check_resumable(path)
-    pid = training_worker(path)
-    if pid is not None:
-        raise ConfigError(f"run {planned.name} in {sweep_dir} is being trained by process {pid}")
+    check_not_training(sweep_dir, planned.name)
     return True
 
 
