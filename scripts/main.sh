@@ -9,7 +9,17 @@
 # still's reward in 8 of 12 seeds across two instruction sets (benchmarks/RESULTS.md, "The main
 # job"). When neither seed did, it names the default agent's longer recipe on the same task.
 # SILI_MAIN_OUT: where the sweep goes (default runs/main-job; a rerun replaces it).
+# Further arguments go to `sili sweep`; the output folder is SILI_MAIN_OUT's alone, as the verdict
+# reads the runs there.
 set -euo pipefail
+for arg in "$@"; do
+    case $arg in
+    --out | --out=*)
+        echo "scripts/main.sh: error: give the output folder as SILI_MAIN_OUT=DIR, not $arg" >&2
+        exit 2
+        ;;
+    esac
+done
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 OUT=${SILI_MAIN_OUT:-runs/main-job}

@@ -536,10 +536,12 @@ def overview(df: pd.DataFrame, smooth: int | None = None) -> Figure:
 
 
 def save_figure(fig: Figure, stem: Path, formats: Sequence[str] = ("png", "pdf")) -> list[Path]:
+    """``fig`` as ``stem.png``, ``stem.pdf``, ...; the stem is kept whole (a task class path such
+    as ``pkg.mod:Env`` has dots of its own)."""
     stem.parent.mkdir(parents=True, exist_ok=True)
     paths = []
     for fmt in formats:
-        path = stem.with_suffix(f".{fmt}")
+        path = stem.parent / f"{stem.name}.{fmt}"
         fig.savefig(path, dpi=150)
         paths.append(path)
     return paths

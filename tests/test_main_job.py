@@ -51,3 +51,16 @@ def test_main_job_names_a_working_recipe_when_it_does_not_hold(tmp_path):
     assert cfg.task_id == main_cfg.task_id == "sili/Circle3-v1"  # the main job's own task
     assert cfg.agent.sili.beta.points == ((250, 0.0), (300, 0.5))  # the delayed b
     assert cfg.agent.sac.precision == "float32"  # as the grid ran it
+
+
+def test_the_main_jobs_output_folder_is_given_by_its_variable_only(tmp_path):
+    done = subprocess.run(
+        ["bash", "scripts/main.sh", "--out", str(tmp_path / "elsewhere")],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 2
+    assert "give the output folder as SILI_MAIN_OUT=DIR, not --out" in done.stderr
+    assert not (tmp_path / "elsewhere").exists()

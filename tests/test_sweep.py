@@ -18,6 +18,7 @@ from fast_settings import FAST_AGENT as FAST
 from fast_settings import FAST_ARGS
 
 from sili_robots.cli import main
+from sili_robots.evaluation import load_trained
 from sili_robots.runs import RunConfig
 from sili_robots.sweep import LocalBackend, SweepSpec, expand, run_sweep
 from sili_robots.sweep import tensorboard as tb
@@ -257,6 +258,7 @@ def test_a_second_sweep_on_the_same_directory_is_refused(tmp_path):
             "'inf' is not a finite number",
         ),
         (["--tasks", "circle-3", "--methods", "sili", "--ray-address", "x"], "needs --backend ray"),
+        (["--tasks", "no_such_module:Env", "--methods", "sac"], "cannot load task class"),
         (
             ["--tasks", "circle-3,driving", "--methods", "sac", "--env-kwarg", "outside_margin=1"],
             "task 'driving' takes no argument outside_margin (--env-kwarg); its arguments: ",
@@ -267,6 +269,35 @@ def test_bad_sweep_input_exits_2_with_the_allowed_values(tmp_path, capsys, args,
     assert main(["sweep", *args, "--out", str(tmp_path / "s")]) == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / "s" / "runs").exists()
+
+
+def test_a_sweep_trains_a_users_task_class_from_the_working_directory(
+    tmp_path, monkeypatch, capsys
+):
+    (tmp_path / "lab").mkdir()
+    (tmp_path / "lab" / "__init__.py").write_text("")
+    (tmp_path / "lab" / "doors.py").write_text(
+        "from sili_robots.examples.two_doors import TwoDoorsEnv\n\n\n"
+        "class Doors(TwoDoorsEnv):\n"
+        "    pass\n"
+    )
+    monkeypatch.chdir(tmp_path)  # where the workers import it from, as `sili train` does
+    task, out = "lab.doors:Doors", tmp_path / "sweep"
+    args = ["sweep", "--tasks", task, "--methods", "sili,oracle", "--seeds", "0"]
+    args += ["--env-kwarg", "horizon=6", "--interactions", "3", *FAST_ARGS, "--out", str(out)]
+    assert main([*args, "--no-progress"]) == 0
+    runs = sorted((out / "runs").iterdir())
+    assert [r.name for r in runs] == [f"{task}__oracle__s0", f"{task}__sili-bschedule__s0"]
+    cfg, env, _, _ = load_trained(runs[1])
+    assert (cfg.task, cfg.task_id, cfg.method) == (task, None, "sili")
+    assert type(env.unwrapped).__name__ == "Doors" and env.unwrapped.horizon == 6
+    assert main(["sweep", "--resume", str(out), "--interactions", "4", "--no-progress"]) == 0
+    assert all(len(pd.read_csv(r / "metrics.csv")) == 4 for r in runs)
+    table = pd.read_csv(out / "runs.csv")
+    assert set(table["task"]) == {task} and set(table["status"]) == {"done"}
+    capsys.readouterr()
+    assert main(["plot", str(out), "--formats", "png"]) == 0
+    assert (out / "figures" / f"{task}.png").is_file()  # the whole class path, dots and all
 
 
 def test_schedules_given_to_the_sweep_drive_its_runs(tmp_path):

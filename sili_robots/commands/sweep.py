@@ -40,7 +40,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "are skipped and interrupted ones resume when the same sweep is run again. Writes "
         "OUT/results.csv (a row per run per interaction) and OUT/runs.csv (a row per run).",
     )
-    p.add_argument("--tasks", help="comma-separated task names, e.g. circle-3,circle-8")
+    p.add_argument(
+        "--tasks",
+        help="comma-separated task names or package.module:ClassName, e.g. circle-3,circle-8",
+    )
     p.add_argument("--methods", help="comma-separated methods, or 'all'")
     p.add_argument("--seeds", default="0", help="seeds: ranges and lists, e.g. 0-4 or 0,2,7")
     p.add_argument(

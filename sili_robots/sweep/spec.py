@@ -16,8 +16,12 @@ from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, PROFILES, Sch
 from sili_robots.agent.matmul import default_matmul
 from sili_robots.agent.methods import LATENT_METHODS, PRESETS
 from sili_robots.build import (
+    canonical_task,
     check_argument_names,
+    default_latent,
     default_profile,
+    is_class_path,
+    make_env,
     make_run_config,
     task_accepts,
 )
@@ -206,11 +210,9 @@ def task_kwargs_of_runs(spec: SweepSpec, task: str) -> list[dict[str, Any]]:
 
 def _build_once(task: str, kwargs: dict[str, Any]) -> None:
     """Construct (not reset: no simulation starts) ``task`` with ``kwargs``, or ConfigError."""
-    from sili_robots.tasks import make_task
-
     given = ", ".join(f"{k}={v!r}" for k, v in kwargs.items())
     try:
-        make_task(task, **kwargs).close()
+        make_env(task, **kwargs).close()
     except ConfigError as err:
         raise ConfigError(f"task {task!r} with {given}: {err}") from None
     except Exception as err:  # e.g. a simulator missing here: named, not a traceback
@@ -278,7 +280,7 @@ def validate(spec: SweepSpec) -> None:
         raise ConfigError(f"no methods given; allowed: {', '.join(METHODS)}")
     named: dict[str, str] = {}
     for task in spec.tasks:
-        name = task_spec(task).name
+        name = canonical_task(task)  # a class path is loaded here: a bad one stops the sweep
         if name in named:
             raise ConfigError(
                 f"tasks {named[name]!r} and {task!r} are the same task ({name}); give it once"
@@ -327,9 +329,13 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
     validate(spec)
     runs: list[PlannedRun] = []
     for task in spec.tasks:
-        tspec = task_spec(task)
-        latent = spec.latent or tspec.default_latent
-        for env_kwargs in task_kwargs_of_runs(spec, tspec.name):
+        name = canonical_task(task)
+        task_default_latent = default_latent(name)
+        latent = spec.latent or task_default_latent
+        # a registered task's runs build the version recorded with the sweep; a user's class
+        # has no versions (task_id None: the run builds the class path)
+        task_id = None if is_class_path(name) else spec.task_ids.get(task, task_spec(task).gym_id)
+        for env_kwargs in task_kwargs_of_runs(spec, name):
             controller = env_kwargs.get("controller")  # only a swept one: validate() refuses
             # a controller among the sweep's own task arguments
             for method in spec.methods:
@@ -347,7 +353,7 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                         settings["sili.beta"] = spec.default_beta()
                     settings.update(schedule_overrides(spec, method))
                     base = make_run_config(
-                        tspec.name,
+                        name,
                         method,
                         latent=spec.latent if method in LATENT_METHODS else None,
                         profile=profile,
@@ -357,23 +363,23 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                     b = base.agent.sili.beta
                     label = "schedule" if isinstance(b, Schedule) else b
                     for seed in spec.seeds:
-                        name = run_name(
-                            tspec.name,
+                        run = run_name(
+                            name,
                             method,
                             seed,
                             beta=label if method in BETA_METHODS else None,
                             controller=controller,
-                            latent=None if latent == tspec.default_latent else latent,
+                            latent=None if latent == task_default_latent else latent,
                             profile=profile,
                         )
                         cfg = replace(
                             base,
-                            task_id=spec.task_ids.get(task, tspec.gym_id),
+                            task_id=task_id,
                             seed=seed,
                             interactions=spec.interactions,
                             checkpoint_every=spec.checkpoint_every,
                         )
-                        runs.append(PlannedRun(name, cfg))
+                        runs.append(PlannedRun(run, cfg))
     names = [r.name for r in runs]
     assert len(set(names)) == len(names), "run names must be unique"
     return runs
