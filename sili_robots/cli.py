@@ -71,8 +71,13 @@ def build_parser() -> OneLineErrorParser:
 
 def _parse(parser: OneLineErrorParser, argv: Sequence[str] | None) -> argparse.Namespace:
     """Arguments the sub-command does not take are its error (``sili bounds: error: ...``,
-    pointing at ``sili bounds --help``), not the top-level parser's."""
+    pointing at ``sili bounds --help``); those before its name are ``sili``'s."""
+    argv = list(sys.argv[1:] if argv is None else argv)
     args, extra = parser.parse_known_args(argv)
+    before = argv[: argv.index(args.command)] if args.command in argv else argv
+    ours = [a for a in extra if a in before]
+    if ours:
+        parser.error(f"unrecognized arguments: {' '.join(ours)}")
     if extra:
         parser.commands[args.command].error(f"unrecognized arguments: {' '.join(extra)}")
     return args

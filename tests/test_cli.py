@@ -56,6 +56,10 @@ def test_bad_input_a_user_types_names_the_command_the_value_and_what_is_allowed(
             "sili bounds: error: unrecognized arguments: --policy x (see sili bounds --help)",
         ),
         (
+            ["--policy", "bounds", "driving"],  # one before the sub-command is sili's own
+            "sili: error: unrecognized arguments: --policy (see sili --help)",
+        ),
+        (
             ["train", "--resume", str(tmp_path / "nowhere")],
             f"sili train: error: {tmp_path / 'nowhere'} does not exist; give a run directory",
         ),
