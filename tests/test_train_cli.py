@@ -631,3 +631,16 @@ def test_a_run_a_sweep_worker_is_training_is_not_resumed_beside_it(tmp_path, cap
                           capture_output=True, text=True)  # fmt: skip
     (out / "worker.json").write_text(json.dumps({"pid": int(gone.stdout), "host": host}))
     assert main(["train", "--resume", str(out), "--interactions", "3", "--no-progress"]) == 0
+
+
+def test_more_threads_than_cores_is_trained_with_a_note(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})  # one core to use
+    args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "1", *FAST]
+    assert main([*args, "--threads", "2", "--out", str(tmp_path / "two")]) == 0
+    note = "sili train: note: 2 threads, more than the CPUs this process may use (1), run slower"
+    assert note in capsys.readouterr().err
+    assert json.loads((tmp_path / "two" / "config.json").read_text())["run"]["threads"] == 2
+    assert main(["train", "--resume", str(tmp_path / "two"), "--interactions", "2"]) == 0
+    assert note in capsys.readouterr().err  # a resumed run keeps its threads, and the note
+    assert main([*args, "--out", str(tmp_path / "one")]) == 0
+    assert "note:" not in capsys.readouterr().err

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import os
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -210,6 +211,7 @@ def run(args: argparse.Namespace) -> int:
                 "of its interactions; --interactions N extends it",
                 file=sys.stderr,
             )
+        _note_threads_beyond_cores(read_config(args.resume).threads)
         with _resume_hint(args.resume):
             run_dir = resume(args.resume, progress=not args.no_progress)
     else:
@@ -226,12 +228,25 @@ def run(args: argparse.Namespace) -> int:
         if args.overwrite:
             clear_run(args.out)  # the run's own files; anything else in the folder stays
         make_run_dir(args.out)
+        _note_threads_beyond_cores(cfg.threads)
         with _resume_hint(args.out):
             run_dir = train(cfg, args.out, progress=not args.no_progress)
     summary = write_summary(run_dir)
     print(json.dumps({"run_dir": str(run_dir), **summary}, indent=2))
     print(verdict(run_dir), file=sys.stderr)  # for people; stdout stays one JSON document
     return 0
+
+
+def _note_threads_beyond_cores(threads: int) -> None:
+    """More threads than cores is allowed (a run keeps its thread count, which decides how it
+    rounds, when resumed on a smaller machine) but slows the run down; say so."""
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    if cores and threads > cores:
+        print(
+            f"sili train: note: {threads} threads, more than the CPUs this process may use "
+            f"({cores}), run slower than {cores}",
+            file=sys.stderr,
+        )
 
 
 @contextlib.contextmanager
