@@ -10,14 +10,22 @@ import pandas as pd
 from sili_robots.bounds import stored_bounds
 from sili_robots.errors import ConfigError
 from sili_robots.labels import METHOD_NAMES
-from sili_robots.runs import METRICS, RunConfig, differences, read_config
+from sili_robots.runs import METRICS, RunConfig, differences, metrics_file, read_config
 from sili_robots.tasks.registry import other_task_arguments
 
 HOLDS = 0.9  # the stability a run needs to count as holding the opponent
 
 
 def _last(run_dir: Path, window: int) -> pd.DataFrame:
-    return pd.read_csv(Path(run_dir) / METRICS).tail(window)
+    """The run's last ``window`` rows, from ``metrics.csv`` or a collection's gzipped copy."""
+    path = metrics_file(Path(run_dir))
+    if path is None:
+        raise ConfigError(f"{run_dir} has no {METRICS} (nor its gzipped copy): it logged nothing")
+    return pd.read_csv(path).tail(window)
+
+
+#: said where a task version has no stored references (a user's task, other task arguments)
+NO_REFERENCE = "no references are stored for this task and its arguments: reward not judged"
 
 
 def _stability(tail: pd.DataFrame) -> float:
@@ -80,7 +88,7 @@ def verdict(run_dir: Path, window: int = 50) -> str:
         refs.append(f"standing still: {still['task_reward']:.1f}")
     if stab:
         refs.append(f"the scripted stabilizing policy that sees z: {stab['task_reward']:.1f}")
-    return line + (f" ({', '.join(refs)})" if refs else "")
+    return line + f" ({', '.join(refs) if refs else NO_REFERENCE})"
 
 
 def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
@@ -109,12 +117,16 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
     for seed, run_dir in runs:
         tail = _last(run_dir, window)
         reward = float(tail["task_reward"].mean())
-        said = f"seed {seed} ({_stability(tail):.0%}, {reward:.1f} per interaction)"
+        said = f"seed {seed} ({_stability(tail):.0%}, {reward:.1f} per interaction"
+        said += f"; {len(tail)} interactions, too few to tell)" if len(tail) < window else ")"
         judged.append((worked(run_dir, window), reward, said, run_dir))
     good = [j for j in judged if j[0]]
     rule = f"held the opponent in {HOLDS:.0%} or more of its last {window} interactions"
-    if still:
-        rule += f" and earned more than standing still's {still['task_reward']:.1f}"
+    rule += (
+        f" and earned more than standing still's {still['task_reward']:.1f}"
+        if still
+        else f"; {NO_REFERENCE}"
+    )
     name = METHOD_NAMES.get(cfg.method, cfg.method)
     line = f"{name} worked in {len(good)} of {len(runs)} seeds ({rule}): "
     parts = [", ".join(j[2] for j in good)] if good else []
@@ -141,6 +153,13 @@ def main(argv: list[str] | None = None) -> int:
     import sys
 
     args = sys.argv[1:] if argv is None else argv
+    if any(a in ("-h", "--help") for a in args):
+        print(
+            "usage: python -m sili_robots.verdict RUN_DIR [RUN_DIR ...]\n\n"
+            "Judges seeds of one variant together: the line across them on stderr, the run to\n"
+            f"look at further on stdout; exit {NONE_WORKED} when no seed worked, 2 on bad input."
+        )
+        return 0
     try:
         if not args:
             raise ConfigError("give the run directories to judge together")

@@ -46,7 +46,9 @@ def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys
     assert held(run, window=3) and not worked(run, window=3)
 
 
-def test_a_run_with_other_task_arguments_is_not_read_against_the_defaults_references(tmp_path):
+def test_a_run_with_other_task_arguments_is_not_read_against_the_defaults_references(
+    tmp_path, capsys
+):
     run = tmp_path / "run"
     args = ["train", "--task", "circle-3", "--interactions", "4", "--out", str(run)]
     assert main([*args, "--env-kwarg", "outside_margin=0.5", *FAST_ARGS, "--no-progress"]) == 0
@@ -54,7 +56,16 @@ def test_a_run_with_other_task_arguments_is_not_read_against_the_defaults_refere
     metrics.to_csv(run / "metrics.csv", index=False)
     line = verdict(run, window=4)
     assert "standing still" not in line and "stabilizing" not in line
+    assert line.endswith(
+        "(no references are stored for this task and its arguments: reward not judged)"
+    )
     assert worked(run, window=4)  # no stored standing-still reward to fall below
+    (run / "metrics.csv").rename(run / "kept.csv")
+    metrics.to_csv(run / "metrics.csv.gz", index=False)  # as `sili collect` keeps a run
+    assert verdict(run, window=4) == line
+    (run / "metrics.csv.gz").unlink()
+    assert verdict_main([str(run)]) == 2  # one line, no traceback
+    assert "has no metrics.csv (nor its gzipped copy)" in capsys.readouterr().err
 
 
 def test_a_run_given_its_versions_own_arguments_is_read_against_the_references(tmp_path):
@@ -95,6 +106,12 @@ def test_the_line_across_seeds_counts_the_runs_that_worked_and_picks_the_best(tm
     assert verdict_main([str(lost)]) == NONE_WORKED  # the first seed's run to look at
     printed = capsys.readouterr()
     assert printed.out.strip() == str(lost) and "SILI worked in 0 of 1 seeds" in printed.err
+    short, _ = across_seeds([held_low], window=60)  # not judged on fewer than it reads
+    assert short.endswith(
+        "not seed 2 (100%, -30.0 per interaction; 50 interactions, too few to tell)"
+    )
+    assert verdict_main(["--help"]) == 0
+    assert capsys.readouterr().out.startswith("usage: python -m sili_robots.verdict RUN_DIR")
     other = tmp_path / "lili"
     args = ["train", "--task", "circle-3", "--method", "lili", "--interactions", "2", "--seed", "5"]
     assert main([*args, "--out", str(other), *FAST_ARGS, "--no-progress"]) == 0

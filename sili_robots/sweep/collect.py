@@ -27,10 +27,11 @@ from sili_robots.runs import (
     CONFIG,
     DAMAGED_SUMMARY,
     SUMMARY,
+    metrics_file,
     read_json,
     recorded_run,
 )
-from sili_robots.sweep.results import metrics_file, run_dirs
+from sili_robots.sweep.results import run_dirs
 from sili_robots.sweep.state import RUNS_DIR
 
 

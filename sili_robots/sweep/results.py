@@ -26,8 +26,8 @@ from sili_robots.runs import (
     DAMAGED_SUMMARY,
     ERROR_FILE,
     METRIC_COLUMNS,
-    METRICS,
     SUMMARY,
+    metrics_file,
     read_json,
     recorded_task_id,
 )
@@ -100,14 +100,6 @@ def _controller(task_id: str | None, env_kwargs: dict) -> str:
         return str(task_defaults(str(task_id)).get("controller", ""))
     except ConfigError:  # a task this package does not register
         return ""
-
-
-def metrics_file(run_dir: Path) -> Path | None:
-    """A run's ``metrics.csv``, or the gzipped copy a results collection keeps (None: neither)."""
-    for path in (run_dir / METRICS, run_dir / f"{METRICS}.gz"):
-        if path.is_file():
-            return path
-    return None
 
 
 def results_table(sweep_dir: Path) -> pd.DataFrame:
