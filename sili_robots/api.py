@@ -30,6 +30,7 @@ from sili_robots.agent import SILIAgent
 from sili_robots.build import (
     build_agent,
     canonical_task,
+    check_argument_names,
     make_run_config,
     make_run_env,
     observed_as,
@@ -45,6 +46,8 @@ from sili_robots.runs import (
     METRICS,
     SUMMARY,
     RunConfig,
+    check_new_run_dir,
+    clear_run,
     load_checkpoint,
     require_checkpoint,
 )
@@ -60,7 +63,9 @@ class SILI:
     ``package.module:ClassName`` of a task class, or a ``RepeatedInteractionEnv`` instance
     (a user's own task included). ``settings`` are agent settings by dotted path
     (``{"sac.lr": 1e-3, "addons.filter.eps": 0.01}``); ``run_dir`` keeps the run (default: a
-    temporary directory, removed with the model)."""
+    temporary directory, removed with the model): a new or empty directory, or with
+    ``overwrite`` a run's, whose own files the first ``learn`` replaces (as ``sili train
+    --overwrite``; ``SILI.load`` continues a run instead)."""
 
     def __init__(
         self,
@@ -74,6 +79,7 @@ class SILI:
         env_kwargs: dict[str, Any] | None = None,
         run_dir: str | Path | None = None,
         checkpoint_every: int = 50,
+        overwrite: bool = False,
     ) -> None:
         self._task_env: gym.Env | None = None
         if isinstance(env, gym.Env):
@@ -91,6 +97,7 @@ class SILI:
             env_kwargs = task_kwargs_of(env)
         else:
             task = canonical_task(env)
+            check_argument_names(task, env_kwargs or {}, "env_kwargs")
         cfg = make_run_config(
             task,
             method,
@@ -107,9 +114,21 @@ class SILI:
             _TEMPORARY[Path(run_dir).resolve()] = weakref.finalize(
                 self, _remove_temporary, Path(run_dir), os.getpid()
             )
-        self.run_dir = Path(run_dir)
+        self.run_dir, self._overwrite = Path(run_dir), overwrite
+        self._check_run_dir()
         self.cfg = cfg
         self._setup(None)
+
+    def _check_run_dir(self) -> None:
+        """A new model never trains over a run or into a folder of other files (the CLI's rule)."""
+        if (self.run_dir / CONFIG).exists() and not self._overwrite:
+            raise ConfigError(
+                f"{self.run_dir} already holds a run; SILI.load({str(self.run_dir)!r}) "
+                "continues it, overwrite=True replaces it"
+            )
+        if self.run_dir.is_file():
+            raise ConfigError(f"run_dir {self.run_dir} is a file; give a directory")
+        check_new_run_dir(self.run_dir, self._overwrite, ("run_dir", "overwrite=True"))
 
     # ------------------------------------------------------------------ building
     def _setup(self, state: dict[str, Any] | None) -> None:
@@ -134,8 +153,17 @@ class SILI:
         cfg = read_run_config(path)
         state = require_checkpoint(path)
         model = cls.__new__(cls)
-        model.cfg, model.run_dir, model._task_env = cfg, path, env
-        model._setup(state)
+        model.cfg, model.run_dir, model._task_env, model._overwrite = cfg, path, env, False
+        try:
+            model._setup(state)
+        except (RuntimeError, ValueError) as err:  # networks or stored interactions of a
+            if env is None:  # task of other sizes (observation, action, horizon)
+                raise
+            given = f"{task_name_of(env)} with {task_kwargs_of(env)}"
+            raise ConfigError(
+                f"env does not fit the run in {path}, trained on {cfg.task} with "
+                f"{cfg.env_kwargs}; env is {given} ({str(err).splitlines()[0]})"
+            ) from None
         return model
 
     # ------------------------------------------------------------------ sb3 API
@@ -148,6 +176,9 @@ class SILI:
         self.cfg.interactions = done + interactions
         env = None if self._task_env is None else observed_as(self._task_env, self.cfg)
         if done == 0:
+            self._check_run_dir()  # as when the model was made: nothing came in since
+            if self._overwrite:
+                clear_run(self.run_dir)
             train(self.cfg, self.run_dir, progress=progress_bar, env=env)
         else:
             extend(self.run_dir, self.cfg.interactions)
@@ -160,7 +191,14 @@ class SILI:
 
     def predict(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
         """The action for ``obs`` of the interaction being played on ``model.env``."""
-        return self.agent.act(np.asarray(obs, np.float32), deterministic=deterministic)
+        obs = np.asarray(obs, np.float32)
+        expected = self.env.observation_space.shape
+        if obs.shape != expected:
+            raise ConfigError(
+                f"obs has shape {obs.shape}; this model observes shape {expected} "
+                "(model.env.observation_space: play the interactions on model.env)"
+            )
+        return self.agent.act(obs, deterministic=deterministic)
 
     def save(self, path: str | Path) -> Path:
         """Copy the run (config, metrics, checkpoint, summary) to ``path``, replacing a run

@@ -185,22 +185,25 @@ def listed(names: list[str], most: int = 5) -> str:
     return ", ".join(names[:most]) + (", ..." if len(names) > most else "")
 
 
-def check_new_run_dir(run_dir: Path, overwrite: bool = False) -> None:
+def check_new_run_dir(
+    run_dir: Path, overwrite: bool = False, options: tuple[str, str] = ("--out", "--overwrite")
+) -> None:
     """A new run goes into a new or empty directory, or a run's: files of something else are
     never mixed with (or replaced by) a run's, and a run's files left without their config
-    (a removal cut short) are replaced only with ``overwrite``."""
-    run_dir = Path(run_dir)
+    (a removal cut short) are replaced only with ``overwrite``. ``options``: what the user calls
+    the directory and the overwrite (the CLI's options, the API's arguments)."""
+    run_dir, (out, replace) = Path(run_dir), options
     if run_dir.is_dir() and not (run_dir / CONFIG).exists():
         left = foreign_files(run_dir)
         if left and not overwrite and not set(left) - {*RUN_FILES, *RUN_DIRS}:
             raise ConfigError(
                 f"{run_dir} holds a run's files ({', '.join(left)}) but no {CONFIG}, so it "
-                "cannot be resumed; --overwrite replaces them"
+                f"cannot be resumed; {replace} replaces them"
             )
         others = foreign_files(run_dir, (*RUN_FILES, *RUN_DIRS))
         if others:
             raise ConfigError(
-                f"{run_dir} is not a run but holds files ({listed(others)}); give --out a new "
+                f"{run_dir} is not a run but holds files ({listed(others)}); give {out} a new "
                 "or empty directory"
             )
 

@@ -89,6 +89,35 @@ def test_api_refuses_what_it_cannot_use(tmp_path):
             model.evaluate(bad)
     with pytest.raises(ConfigError, match=r"method 'lili' fixes sili\.beta"):
         SILI("circle-3", method="lili", settings={"beta": 0.7})
+    with pytest.raises(ConfigError, match=r"obs has shape \(2,\); this model observes shape"):
+        model.predict([0.0, 0.0])
+    with pytest.raises(ConfigError, match=r"takes no argument farr \(env_kwargs\); its arg"):
+        SILI(TWO_DOORS, env_kwargs={"farr": 2})
+
+
+def test_a_new_model_never_trains_over_a_run_or_into_a_folder_of_other_files(tmp_path):
+    run, notes = tmp_path / "run", tmp_path / "notes"
+    SILI(TWO_DOORS, method="sac", settings=FAST_AGENT, run_dir=run).learn(3)
+    with pytest.raises(ConfigError, match=r"already holds a run; SILI.load\(.*\) continues it"):
+        SILI("circle-3", settings=FAST_AGENT, run_dir=run)
+    notes.mkdir()
+    (notes / "paper.tex").write_text("mine")
+    with pytest.raises(ConfigError, match=r"holds files \(paper\.tex\); give run_dir a new"):
+        SILI("circle-3", settings=FAST_AGENT, run_dir=notes)
+    assert len((run / "metrics.csv").read_text().splitlines()) == 1 + 3  # untouched
+    model = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run, overwrite=True)
+    assert len((run / "metrics.csv").read_text().splitlines()) == 1 + 3  # until it learns
+    model.learn(2)
+    assert json.loads((run / "config.json").read_text())["run"]["task"] == "circle-3"
+    assert len((run / "metrics.csv").read_text().splitlines()) == 1 + 2
+
+
+def test_loading_a_run_with_a_task_instance_of_other_sizes_names_both(tmp_path):
+    run = tmp_path / "doors"
+    SILI(TwoDoorsEnv(horizon=8), method="sili", settings=FAST_AGENT, run_dir=run).learn(2)
+    assert SILI.load(run, env=TwoDoorsEnv(horizon=8)).predict([0.5, 0.0]).shape == (1,)
+    with pytest.raises(ConfigError, match=r"env does not fit the run in .*'horizon': 8\}; env is"):
+        SILI.load(run, env=TwoDoorsEnv(horizon=5))  # 5 steps where 8 are stored
 
 
 def test_a_task_given_by_any_name_is_recorded_by_its_name(tmp_path):
