@@ -169,6 +169,25 @@ def check_argument_names(task: str, names: Iterable[str], options: str) -> None:
         )
 
 
+def check_task_builds(task: str, kwargs: dict[str, Any]) -> None:
+    """Construct (not reset: no simulation starts) ``task`` with ``kwargs``, or ConfigError with
+    the task's own message, so bad task input stops a command before any run starts."""
+    given = ", ".join(f"{k}={v!r}" for k, v in kwargs.items()) or "its default arguments"
+    try:
+        make_env(task, **kwargs).close()
+    except ConfigError as err:
+        raise ConfigError(f"task {task!r} with {given}: {err}") from None
+    except TypeError as err:  # e.g. a required argument not given
+        raise ConfigError(
+            f"task {task!r} cannot be built with {given} ({err}); its arguments: "
+            f"{', '.join(task_arguments(task)) or 'none'}"
+        ) from None
+    except Exception as err:  # e.g. a simulator missing here: named, not a traceback
+        raise ConfigError(
+            f"task {task!r} cannot be built with {given}: {type(err).__name__}: {err}"
+        ) from None
+
+
 def default_latent(task: str) -> str:
     """The latent kind the paper uses on a task (discrete for a user's task)."""
     return "discrete" if is_class_path(task) else task_spec(task).default_latent

@@ -279,7 +279,10 @@ def test_a_sweep_trains_a_users_task_class_from_the_working_directory(
     (tmp_path / "lab" / "doors.py").write_text(
         "from sili_robots.examples.two_doors import TwoDoorsEnv\n\n\n"
         "class Doors(TwoDoorsEnv):\n"
-        "    pass\n"
+        "    pass\n\n\n"
+        "class Unbuilt(TwoDoorsEnv):\n"
+        "    def __init__(self, horizon=20):\n"
+        "        raise RuntimeError('no simulator here')\n"
     )
     monkeypatch.chdir(tmp_path)  # where the workers import it from, as `sili train` does
     task, out = "lab.doors:Doors", tmp_path / "sweep"
@@ -298,6 +301,12 @@ def test_a_sweep_trains_a_users_task_class_from_the_working_directory(
     capsys.readouterr()
     assert main(["plot", str(out), "--formats", "png"]) == 0
     assert (out / "figures" / f"{task}.png").is_file()  # the whole class path, dots and all
+    unbuilt = ["sweep", "--tasks", "lab.doors:Unbuilt", "--methods", "sac", "--interactions", "2"]
+    assert main([*unbuilt, "--out", str(tmp_path / "unbuilt"), "--dry-run"]) == 2  # before any run
+    assert (
+        "task 'lab.doors:Unbuilt' cannot be built with its default arguments: RuntimeError: "
+        "no simulator here" in capsys.readouterr().err
+    )
 
 
 def test_schedules_given_to_the_sweep_drive_its_runs(tmp_path):

@@ -504,6 +504,23 @@ def test_a_task_class_that_passes_its_keyword_arguments_on_takes_them(tmp_path, 
     assert load_trained(tmp_path / "run")[1].unwrapped.horizon == 6
 
 
+def test_a_task_that_cannot_be_built_is_named_with_its_error(tmp_path, capsys, monkeypatch):
+    (tmp_path / "unbuilt_task.py").write_text(
+        "from sili_robots.examples.two_doors import TwoDoorsEnv\n\n\n"
+        "class Unbuilt(TwoDoorsEnv):\n"
+        "    def __init__(self, horizon=20):\n"
+        "        raise RuntimeError(f'no simulator for horizon {horizon}')\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    args = ["train", "--task", "unbuilt_task:Unbuilt", "--interactions", "1", *FAST]
+    assert main([*args, "--env-kwarg", "horizon=6", "--out", str(tmp_path / "run")]) == 2
+    assert (  # whatever the constructor raises is named, no traceback, no run folder
+        "task 'unbuilt_task:Unbuilt' cannot be built with horizon=6: RuntimeError: no "
+        "simulator for horizon 6" in capsys.readouterr().err
+    )
+    assert not (tmp_path / "run").exists()
+
+
 def test_env_kwargs_reach_the_task_and_a_bad_one_is_named(tmp_path, capsys):
     doors = "sili_robots.examples.two_doors:TwoDoorsEnv"
     out = tmp_path / "doors"

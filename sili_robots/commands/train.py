@@ -262,15 +262,7 @@ def _resume_hint(run_dir: Path) -> Iterator[None]:
 
 def _check_env_builds(cfg: RunConfig) -> None:
     """Fail fast, with the task's own message, on bad task arguments (e.g. a controller)."""
-    from sili_robots.build import check_argument_names, make_run_env, task_arguments
+    from sili_robots.build import check_argument_names, check_task_builds
 
     check_argument_names(cfg.task, cfg.env_kwargs, "--controller, --env-kwarg")
-    try:
-        env = make_run_env(cfg)
-    except TypeError as err:
-        given = ", ".join(cfg.env_kwargs) or "none"
-        raise ConfigError(
-            f"bad argument for task {cfg.task!r} (given: {given}); its arguments: "
-            f"{', '.join(task_arguments(cfg.task))} ({str(err).split(' was raised')[0]})"
-        ) from None
-    env.close()
+    check_task_builds(cfg.task, cfg.env_kwargs)

@@ -18,10 +18,10 @@ from sili_robots.agent.methods import LATENT_METHODS, PRESETS
 from sili_robots.build import (
     canonical_task,
     check_argument_names,
+    check_task_builds,
     default_latent,
     default_profile,
     is_class_path,
-    make_env,
     make_run_config,
     task_accepts,
 )
@@ -190,14 +190,15 @@ def parse_betas(text: str) -> list[float]:
 
 def check_task_arguments(spec: SweepSpec) -> None:
     """Every task of a new sweep takes every ``--env-kwarg`` by name, and is built once with
-    them and each controller, so a bad value stops the sweep before any run instead of failing
-    every run of it (a recorded sweep resumes as it ran: such runs fail one by one)."""
+    them and each controller (a user's task class always), so a bad value stops the sweep
+    before any run instead of failing every run of it (a recorded sweep resumes as it ran: such
+    runs fail one by one)."""
     for task in spec.tasks:  # names first, on every task, then values
         check_argument_names(task, spec.env_kwargs, "--env-kwarg")
     for task in spec.tasks:
         for kwargs in task_kwargs_of_runs(spec, task):
-            if kwargs:
-                _build_once(task, kwargs)
+            if kwargs or is_class_path(task):  # a registered task builds with its defaults
+                check_task_builds(task, kwargs)
 
 
 def task_kwargs_of_runs(spec: SweepSpec, task: str) -> list[dict[str, Any]]:
@@ -206,17 +207,6 @@ def task_kwargs_of_runs(spec: SweepSpec, task: str) -> list[dict[str, Any]]:
     if spec.controllers is None or not task_accepts(task, "controller"):
         return [dict(spec.env_kwargs)]
     return [dict(spec.env_kwargs, controller=c) for c in spec.controllers]
-
-
-def _build_once(task: str, kwargs: dict[str, Any]) -> None:
-    """Construct (not reset: no simulation starts) ``task`` with ``kwargs``, or ConfigError."""
-    given = ", ".join(f"{k}={v!r}" for k, v in kwargs.items())
-    try:
-        make_env(task, **kwargs).close()
-    except ConfigError as err:
-        raise ConfigError(f"task {task!r} with {given}: {err}") from None
-    except Exception as err:  # e.g. a simulator missing here: named, not a traceback
-        raise ConfigError(f"task {task!r} cannot be built with {given}: {err}") from None
 
 
 def format_beta(beta: float) -> str:
