@@ -491,27 +491,37 @@ def test_the_progress_bar_shows_only_while_there_is_training_left():
     assert not TrainingProgress(5, 0, enabled=False).shown
 
 
-def test_a_task_class_that_passes_its_keyword_arguments_on_takes_them(tmp_path, monkeypatch):
-    (tmp_path / "passing_task.py").write_text(
-        "from sili_robots.examples.two_doors import TwoDoorsEnv\n\n\n"
-        "class PassingOn(TwoDoorsEnv):\n"
-        "    def __init__(self, **kwargs):\n"
-        "        super().__init__(**kwargs)\n"
+def _doors_module(tmp_path, monkeypatch, module: str, subclass: str) -> None:
+    """``module`` (importable) holding ``subclass``: a TwoDoorsEnv subclass's source."""
+    (tmp_path / f"{module}.py").write_text(
+        f"from sili_robots.examples.two_doors import TwoDoorsEnv\n\n\n{subclass}"
     )
     monkeypatch.syspath_prepend(str(tmp_path))
+
+
+def test_a_task_class_that_passes_its_keyword_arguments_on_takes_them(tmp_path, monkeypatch):
+    _doors_module(
+        tmp_path,
+        monkeypatch,
+        "passing_task",
+        "class PassingOn(TwoDoorsEnv):\n"
+        "    def __init__(self, **kwargs):\n"
+        "        super().__init__(**kwargs)\n",
+    )
     args = ["train", "--task", "passing_task:PassingOn", "--interactions", "1", *FAST]
     assert main([*args, "--env-kwarg", "horizon=6", "--out", str(tmp_path / "run")]) == 0
     assert load_trained(tmp_path / "run")[1].unwrapped.horizon == 6
 
 
 def test_a_task_that_cannot_be_built_is_named_with_its_error(tmp_path, capsys, monkeypatch):
-    (tmp_path / "unbuilt_task.py").write_text(
-        "from sili_robots.examples.two_doors import TwoDoorsEnv\n\n\n"
+    _doors_module(
+        tmp_path,
+        monkeypatch,
+        "unbuilt_task",
         "class Unbuilt(TwoDoorsEnv):\n"
         "    def __init__(self, horizon=20):\n"
-        "        raise RuntimeError(f'no simulator for horizon {horizon}')\n"
+        "        raise RuntimeError(f'no simulator for horizon {horizon}')\n",
     )
-    monkeypatch.syspath_prepend(str(tmp_path))
     args = ["train", "--task", "unbuilt_task:Unbuilt", "--interactions", "1", *FAST]
     assert main([*args, "--env-kwarg", "horizon=6", "--out", str(tmp_path / "run")]) == 2
     assert (  # whatever the constructor raises is named, no traceback, no run folder
