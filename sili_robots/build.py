@@ -66,7 +66,12 @@ def canonical_task(task: str) -> str:
     if is_class_path(task):
         task_class(task)
         return task
-    return task_spec(task).name
+    try:
+        return task_spec(task).name
+    except ConfigError as err:
+        raise ConfigError(
+            f"{err}; or a task class of your own as package.module:ClassName"
+        ) from None
 
 
 def task_name_of(env: gym.Env) -> str:

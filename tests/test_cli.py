@@ -76,11 +76,36 @@ def test_bad_input_a_user_types_names_the_command_the_value_and_what_is_allowed(
             ["rollout", "driving", "--policy", "blind", "--interactions", "1"],
             "sili rollout: error: no 'blind' policy for sili/Driving-v0; allowed there: ",
         ),
+        (
+            ["rollout", DOORS, "--policy", "oracle", "--interactions", "1"],
+            "sili rollout: error: no 'oracle' policy for TwoDoorsEnv; allowed there: random, still",
+        ),
+        (
+            ["bounds", DOORS],  # references are stored for the registered tasks
+            f"sili bounds: error: argument task: {DOORS!r} is a task class; sili bounds plays the "
+            "registered tasks' scripted policies; on a task class, sili rollout TASK --policy",
+        ),
+        (
+            ["preview", DOORS],
+            f"sili preview: error: argument task: {DOORS!r} is a task class; sili preview draws",
+        ),
+        (
+            ["train", "--task", "examples/two_doors.py:TwoDoorsEnv"],  # a path, not a module
+            "sili train: error: argument --task: unknown task 'examples/two_doors.py:TwoDoorsEnv'"
+            "; allowed: circle-3, ",
+        ),
     ):
         done = sili_in_process(*args)
         assert done.returncode == 2 and done.stderr.startswith(line), (args, done.stderr)
         assert len(done.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "r").exists()
+    done = sili_in_process("train", "--task", "x/y:Z")
+    assert "; or a task class of your own as package.module:ClassName" in done.stderr
+    done = sili_in_process("rollout", DOORS, "--policy", "still", "--interactions", "3")
+    assert done.returncode == 0 and "mean task reward per interaction: " in done.stdout
+
+
+DOORS = "sili_robots.examples.two_doors:TwoDoorsEnv"
 
 
 def _main(*args: str) -> tuple[int, str, str]:

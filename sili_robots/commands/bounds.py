@@ -8,10 +8,11 @@ task version's bounds in the packaged file ``sili plot`` draws from.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 from pathlib import Path
 
-from sili_robots.commands.common import seed, writable_file
+from sili_robots.commands.common import registered_task, seed, writable_file
 from sili_robots.errors import ConfigError
 
 
@@ -33,7 +34,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "reward per interaction and true stability (fraction of interactions 2..N whose true "
         "strategy stayed), over every interaction but each game's first.",
     )
-    p.add_argument("task", nargs="?", help="task name or gymnasium id, e.g. circle-3")
+    p.add_argument(
+        "task",
+        nargs="?",
+        type=functools.partial(
+            registered_task,
+            command="bounds",
+            why="plays the registered tasks' scripted policies; on a task class, sili rollout "
+            "TASK --policy random (or still) plays the two that need no knowledge of it",
+        ),
+        help="task name or gymnasium id, e.g. circle-3",
+    )
     p.add_argument(
         "--all", action="store_true", help="every registered task version (current and earlier)"
     )

@@ -11,9 +11,10 @@ from pathlib import Path
 from typing import Any
 
 from sili_robots.agent.schedule import Schedule
-from sili_robots.build import canonical_task
+from sili_robots.build import canonical_task, is_class_path
 from sili_robots.errors import MAX_SEED, ConfigError, check_seed
 from sili_robots.migrations import setting_path
+from sili_robots.tasks import task_spec
 
 
 def _int_at_least(text: str, minimum: int) -> int:
@@ -205,6 +206,17 @@ def task_name(text: str) -> str:
     """A registered task's CLI name, or a user's ``package.module:ClassName`` (checked)."""
     try:
         return canonical_task(text)
+    except ConfigError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
+def registered_task(text: str, command: str, why: str) -> str:
+    """A registered task's CLI name for a command that only registered tasks have data for
+    (``why``); a user's task class is told so, not called unknown."""
+    if is_class_path(text):
+        raise argparse.ArgumentTypeError(f"{text!r} is a task class; sili {command} {why}")
+    try:
+        return task_spec(text).name
     except ConfigError as err:
         raise argparse.ArgumentTypeError(str(err)) from None
 

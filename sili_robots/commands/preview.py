@@ -8,10 +8,11 @@ the picture shows the scene), and optionally serves the scene live on 127.0.0.1 
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 from pathlib import Path
 
-from sili_robots.commands.common import positive_int, seed, task_name, writable_file
+from sili_robots.commands.common import positive_int, registered_task, seed, writable_file
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -22,7 +23,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "HTML file, --png renders its picture frame in headless Chromium, --serve starts a live "
         "meshcat server on 127.0.0.1 until Ctrl-C.",
     )
-    p.add_argument("task", type=task_name, help="task name, e.g. circle-3")
+    p.add_argument(
+        "task",
+        type=functools.partial(
+            registered_task, command="preview", why="draws the registered tasks' scenes"
+        ),
+        help="task name, e.g. circle-3",
+    )
     who = p.add_mutually_exclusive_group()
     who.add_argument(
         "--policy",

@@ -6,15 +6,19 @@ import argparse
 
 import numpy as np
 
+from sili_robots.build import make_env
 from sili_robots.commands.common import positive_int, seed, task_name
 from sili_robots.policies import SCRIPTED_KINDS, scripted_policy
 from sili_robots.rollout import run_interactions
-from sili_robots.tasks import make_task
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("rollout", help="play a scripted policy on a task")
-    p.add_argument("task", type=task_name, help="task name, e.g. circle-3")
+    p.add_argument(
+        "task",
+        type=task_name,
+        help="task name, e.g. circle-3, or package.module:ClassName (random and still policies)",
+    )
     p.add_argument("--policy", default="stabilizing", choices=SCRIPTED_KINDS)
     p.add_argument(
         "--interactions", type=positive_int, default=20, help="interactions to play (default 20)"
@@ -24,7 +28,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    env = make_task(args.task)
+    env = make_env(args.task)
     try:
         summary = run_interactions(
             env, scripted_policy(env, args.policy), args.interactions, seed=args.seed

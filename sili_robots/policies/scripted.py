@@ -289,9 +289,11 @@ BELIEVING_POLICIES: dict[str, dict[str, Believing]] = {
 
 
 def available_kinds(env: RepeatedInteractionEnv) -> tuple[str, ...]:
-    """The scripted kinds that exist for ``env``'s task, in ``SCRIPTED_KINDS`` order."""
-    own = BELIEVING_POLICIES.get(type(env.unwrapped).__name__, {})
-    return tuple(k for k in SCRIPTED_KINDS if k not in ("blind", "tracking") or k in own)
+    """The scripted kinds that exist for ``env``'s task, in ``SCRIPTED_KINDS`` order (random
+    and still on any task: they need no knowledge of it)."""
+    name = type(env.unwrapped).__name__
+    own = {"random", "still", *SCRIPTED_POLICIES.get(name, {}), *BELIEVING_POLICIES.get(name, {})}
+    return tuple(k for k in SCRIPTED_KINDS if k in own)
 
 
 def scripted_policy(env: RepeatedInteractionEnv, kind: str) -> Policy:
@@ -300,21 +302,18 @@ def scripted_policy(env: RepeatedInteractionEnv, kind: str) -> Policy:
         raise ConfigError(f"unknown scripted policy {kind!r}; allowed: {', '.join(SCRIPTED_KINDS)}")
     task = env.unwrapped
     name = type(task).__name__
+    if kind not in available_kinds(env):
+        raise ConfigError(
+            f"no {kind!r} policy for {task.spec.id if task.spec else name}; allowed there: "
+            f"{', '.join(available_kinds(env))}"
+        )
     if kind == "random":
         return lambda e, obs: task.action_space.sample()
     if kind == "still":
         return lambda e, obs: _still(task, obs)
     if kind in ("blind", "tracking"):
-        believing = BELIEVING_POLICIES.get(name, {}).get(kind)
-        if believing is None:
-            raise ConfigError(
-                f"no {kind!r} policy for {task.spec.id if task.spec else name}; allowed there: "
-                f"{', '.join(available_kinds(env))}"
-            )
+        believing = BELIEVING_POLICIES[name][kind]
         revealed = Revealed()
         return lambda e, obs: believing(task, obs, revealed(task))
-    table = SCRIPTED_POLICIES.get(name)
-    if table is None:
-        raise ConfigError(f"no scripted policies for {name}")
-    fn = table[kind]
+    fn = SCRIPTED_POLICIES[name][kind]
     return lambda e, obs: fn(task, obs)
