@@ -1,6 +1,8 @@
 """How results are named and grouped for people: the figures, `sili runs` and the verdict share
 them (a module of its own so none pulls in another's libraries)."""
 
+import re
+
 #: how the paper writes each method
 METHOD_NAMES = {
     "sili": "SILI",
@@ -23,3 +25,10 @@ VARIANT_KEYS = (
     "latent",
     "task_id",
 )
+
+
+def file_stem(task: str) -> str:
+    """``task`` as a file or folder name: a registered task's name as it is (``circle-3``), a
+    user's class path with dashes for its dots and colon (``mylab-tasks-MyEnv``), which shells,
+    make and LaTeX take as they are."""
+    return re.sub(r"[^A-Za-z0-9_-]+", "-", task)

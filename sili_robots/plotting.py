@@ -35,7 +35,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from sili_robots.errors import ConfigError
-from sili_robots.labels import METHOD_NAMES, VARIANT_KEYS
+from sili_robots.labels import METHOD_NAMES, VARIANT_KEYS, file_stem
 from sili_robots.sweep.state import FIGURES
 
 TASK_TITLES = {
@@ -536,8 +536,7 @@ def overview(df: pd.DataFrame, smooth: int | None = None) -> Figure:
 
 
 def save_figure(fig: Figure, stem: Path, formats: Sequence[str] = ("png", "pdf")) -> list[Path]:
-    """``fig`` as ``stem.png``, ``stem.pdf``, ...; the stem is kept whole (a task class path such
-    as ``pkg.mod:Env`` has dots of its own)."""
+    """``fig`` as ``stem.png``, ``stem.pdf``, ... (the stem kept whole, dots and all)."""
     stem.parent.mkdir(parents=True, exist_ok=True)
     paths = []
     for fmt in formats:
@@ -563,8 +562,11 @@ def plot_sweep(
         set(df["task"]) - set(TASK_TITLES)
     )
     for task in tasks:
-        written += save_figure(learning_curves(df, task, smooth), out_dir / task, formats)
+        stem = out_dir / file_stem(task)
+        written += save_figure(learning_curves(df, task, smooth), stem, formats)
         if b_sweep_rows(df, task)["config_beta"].nunique() > 1:
-            written += save_figure(beta_sweep(df, task, window), out_dir / f"{task}_beta", formats)
+            written += save_figure(
+                beta_sweep(df, task, window), stem.with_name(f"{stem.name}_beta"), formats
+            )
     written += save_figure(overview(df, smooth), out_dir / "overview", formats)
     return written

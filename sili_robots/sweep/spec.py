@@ -26,6 +26,7 @@ from sili_robots.build import (
     task_accepts,
 )
 from sili_robots.errors import ConfigError, check_choice, check_seed
+from sili_robots.labels import file_stem
 from sili_robots.migrations import setting_path
 from sili_robots.runs import RunConfig
 from sili_robots.tasks import TASKS, TaskSpec, task_spec
@@ -225,8 +226,8 @@ def run_name(
 ) -> str:
     """``task[-controller]__method[-profile][-latent][-bB]__sSEED``, e.g.
     ``circle-3__sili-b0.5__s0`` (``-bschedule`` when b follows a schedule; ``-paper`` in the
-    paper profile)."""
-    head = task if controller is None else f"{task}-{controller}"
+    paper profile; a task class ``mylab.tasks:MyEnv`` as ``mylab-tasks-MyEnv``)."""
+    head = file_stem(task) if controller is None else f"{file_stem(task)}-{controller}"
     mid = method if profile == "package" else f"{method}-{profile}"
     if latent is not None:
         mid += f"-{latent}"
