@@ -83,7 +83,8 @@ def test_collect_refuses_a_different_run_of_the_same_name(sweep_and_collection, 
     cfg["run"]["seed"] = 7
     cfg_path.write_text(json.dumps(cfg))
     assert main(["collect", str(sweep), "--into", str(other)]) == 2
-    assert "holds a different run named circle-3__sili-bschedule__s0" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "holds a different run named circle-3__sili-bschedule__s0 (seed: 7 there, 0 here;" in err
     assert main(["collect", str(tmp_path / "nothing"), "--into", str(other)]) == 2
 
 

@@ -27,6 +27,7 @@ from sili_robots.runs import (
     CONFIG,
     DAMAGED_SUMMARY,
     SUMMARY,
+    differences,
     metrics_file,
     read_json,
     recorded_run,
@@ -112,8 +113,10 @@ def _length(run_dir: Path) -> int:
 
 
 def _check_same_run(name: str, there: Path, ident: dict, run_dir: Path, mine: dict) -> None:
-    if ident != mine:
+    diffs = [f"{k}: {a!r} there, {b!r} here" for k, a, b in differences(ident, mine)]
+    if diffs:
+        more = f" and {len(diffs) - 3} more" if len(diffs) > 3 else ""
         raise ConfigError(
-            f"{there} holds a different run named {name} (its config.json differs from "
-            f"{run_dir}'s beyond its length); remove one of them first"
+            f"{there} holds a different run named {name} ({'; '.join(diffs[:3])}{more}; "
+            f"here: {run_dir}); remove one of them first"
         )
