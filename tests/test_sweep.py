@@ -113,8 +113,10 @@ def test_results_table_has_a_row_per_run_per_interaction(tiny_sweep):
 def test_rerunning_a_finished_sweep_skips_every_run(tiny_sweep, capsys):
     out, _ = tiny_sweep
     before = {p: p.stat().st_mtime_ns for p in out.glob("runs/*/metrics.csv")}
+    capsys.readouterr()
     report = run_sweep(_spec(), out, LocalBackend(workers=2), progress=False)
     assert sorted(report.skipped) == sorted(report.planned) and not report.outcomes and report.ok
+    assert "sweep: 4 done (4 of them earlier), 0 failed, 0 not run" in capsys.readouterr().err
     assert {p: p.stat().st_mtime_ns for p in out.glob("runs/*/metrics.csv")} == before
     assert main(["sweep", "--resume", str(out), "--dry-run"]) == 0
     listed = capsys.readouterr().out
@@ -162,6 +164,9 @@ def test_failing_run_is_reported_and_the_others_complete(tmp_path):
     assert runs.loc["circle-3__sac__s0", "status"] == "done"
     assert runs.loc["sawyer-reach-bogus__sac__s0", "status"] == "failed"
     assert "unknown controller 'bogus'" in runs.loc["sawyer-reach-bogus__sac__s0", "error"]
+    res = _sili("sweep", "--resume", out, "--dry-run")
+    assert "sawyer-reach-bogus__sac__s0\tnew (failed before, see its error.txt)" in res.stdout
+    assert "circle-3__sac__s0\tdone\n" in res.stdout
     res = _sili("sweep", "--resume", out, "--workers", 1, "--no-progress")
     assert res.returncode == 1, res.stderr
     assert json.loads(res.stdout)["failed"] == report.failed
@@ -554,7 +559,7 @@ def test_progress_display_counts_runs_and_interactions(tmp_path):
     out = buf.getvalue()
     assert "done r0 in 1.5 s: SILI held [it]" in out  # the run's verdict, not eaten as markup
     assert "failed r1: ConfigError: bad [thing]" in out  # error text not eaten as markup
-    assert "sweep: 2 done, 1 failed, 1 not run" in out
+    assert "sweep: 2 done (1 of them earlier), 1 failed, 1 not run" in out
 
 
 @pytest.mark.slow

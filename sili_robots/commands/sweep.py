@@ -198,7 +198,7 @@ def _backend(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from sili_robots.runs import CHECKPOINT
+    from sili_robots.runs import CHECKPOINT, ERROR_FILE
     from sili_robots.sweep.runner import plan, replaced_runs, run_sweep
     from sili_robots.sweep.state import (
         check_existing,
@@ -226,7 +226,9 @@ def run(args: argparse.Namespace) -> int:
                     print(f"{run_.name}\t{state} (extended to {run_.config.interactions})")
                     continue
                 check_existing(sweep_dir, run_)
-                print(f"{run_.name}\t{run_state(path)}")
+                failed = (path / ERROR_FILE).is_file()  # the run's last attempt failed
+                said = f" (failed before, see its {ERROR_FILE})" if failed else ""
+                print(f"{run_.name}\t{run_state(path)}{said}")
         print(f"{len(planned)} runs")
         return 0
     writable_dir(sweep_dir, "--resume" if args.resume else "--out")

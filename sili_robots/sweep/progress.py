@@ -52,7 +52,7 @@ class SweepProgress:
     ) -> None:
         self.console = console or Console(stderr=True)
         self.total_runs = len(jobs) + already_done
-        self.done = already_done
+        self.done = self.already_done = already_done
         self.failed = 0
         self.running: dict[str, Job] = {}
         self._jobs = {job.name: job for job in jobs}
@@ -174,7 +174,8 @@ class SweepProgress:
             self._live.stop()
         stopped = f" ({len(self.running)} stopped midway, resumable)" if self.running else ""
         not_run = self.total_runs - self.done - self.failed
+        earlier = f" ({self.already_done} of them earlier)" if self.already_done else ""
         self._log(
-            f"sweep: {self.done} done, {self.failed} failed, {not_run} not run{stopped}, "
+            f"sweep: {self.done} done{earlier}, {self.failed} failed, {not_run} not run{stopped}, "
             f"{time.perf_counter() - self._t0:.1f} s"
         )
