@@ -50,6 +50,7 @@ def test_a_parse_error_is_one_line_naming_the_value_and_the_choices():
 
 def test_bad_input_a_user_types_names_the_command_the_value_and_what_is_allowed(tmp_path):
     (tmp_path / "a-file").write_text("")
+    (tmp_path / "notes.html").write_text("<html>mine</html>")
     for args, line in (
         (
             ["bounds", "driving", "--policy", "x"],  # an argument the sub-command does not take
@@ -86,6 +87,22 @@ def test_bad_input_a_user_types_names_the_command_the_value_and_what_is_allowed(
             "registered tasks' scripted policies; on a task class, sili rollout TASK --policy",
         ),
         (
+            ["preview", "circle-3", "--out", str(tmp_path / "notes.html")],  # not a preview's
+            f"sili preview: error: --out {tmp_path / 'notes.html'} exists and is not a preview;",
+        ),
+        (
+            ["preview", "circle-3", "--out", str(tmp_path / "a-file")],
+            f"sili preview: error: --out {tmp_path / 'a-file'}: give a file name ending in .html",
+        ),
+        (
+            ["preview", "circle-3", "--png", str(tmp_path / "p.jpg")],
+            f"sili preview: error: --png {tmp_path / 'p.jpg'}: give a file name ending in .png",
+        ),
+        (
+            ["eval", ""],  # an unset variable, say: not the current directory
+            "sili eval: error: argument run_dir: an empty path; give a directory or file name",
+        ),
+        (
             ["preview", DOORS],
             f"sili preview: error: argument task: {DOORS!r} is a task class; sili preview draws",
         ),
@@ -99,6 +116,7 @@ def test_bad_input_a_user_types_names_the_command_the_value_and_what_is_allowed(
         assert done.returncode == 2 and done.stderr.startswith(line), (args, done.stderr)
         assert len(done.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "r").exists()
+    assert (tmp_path / "notes.html").read_text() == "<html>mine</html>"
     done = sili_in_process("train", "--task", "x/y:Z")
     assert "; or a task class of your own as package.module:ClassName" in done.stderr
     done = sili_in_process("rollout", DOORS, "--policy", "still", "--interactions", "3")

@@ -86,6 +86,16 @@ def test_collect_refuses_a_different_run_of_the_same_name(sweep_and_collection, 
     err = capsys.readouterr().err
     assert "holds a different run named circle-3__sili-bschedule__s0 (seed: 7 there, 0 here;" in err
     assert main(["collect", str(tmp_path / "nothing"), "--into", str(other)]) == 2
+    run = sweep / "runs" / "circle-3__sac__s0"
+    before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+    for into, said in (
+        (sweep, f"--into {sweep} is a sweep; collect into a results collection"),  # its runs
+        (run, f"--into {run} is not a sweep or a results collection but holds files"),
+    ):
+        assert main(["collect", str(collection), "--into", str(into)]) == 2
+        assert said in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()} == before
+    assert not (run / "runs").exists()
 
 
 def test_collect_takes_a_run_extended_or_trained_again_and_refuses_before_copying(

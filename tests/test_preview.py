@@ -14,6 +14,7 @@ from sili_robots.cli import main
 from sili_robots.errors import ConfigError
 from sili_robots.policies import scripted_policy
 from sili_robots.preview import Preview, find_chromium, make_env_and_policy, preview
+from sili_robots.preview.html import PREVIEW_MARK
 from sili_robots.preview.scenes import scene_for
 from sili_robots.rollout import run_interactions
 from sili_robots.tasks import make_task
@@ -168,3 +169,8 @@ def test_cli_writes_html(tmp_path):
     assert out.returncode == 0, out.stderr
     assert "frames=102" in out.stdout and "self-contained" in out.stdout
     assert (tmp_path / "c.html").stat().st_size > 500_000
+    html = (tmp_path / "c.html").read_text()
+    assert html.rstrip().endswith("</html>") and PREVIEW_MARK in html[-65536:]
+    again = ["preview", "circle-3", "--interactions", "1", "--out", str(tmp_path / "c.html")]
+    assert main(again) == 0  # a preview replaces its own page (only)
+    assert (tmp_path / "c.html").read_text() != html

@@ -6,6 +6,7 @@ import argparse
 import re
 from pathlib import Path
 
+from sili_robots.commands.common import path_arg
 from sili_robots.errors import ConfigError
 
 #: the README block ``--write`` replaces
@@ -19,10 +20,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Decides each claim of the paper (rules in sili_robots/claims.py) from the "
         "finished runs in DIR (`sili grid` / `sili collect`) and prints a markdown table.",
     )
-    p.add_argument("directory", type=Path, metavar="DIR")
+    p.add_argument("directory", type=path_arg, metavar="DIR")
     p.add_argument(
         "--write",
-        type=Path,
+        type=path_arg,
         metavar="FILE",
         help=f"also replace the table between {START} and {END} in FILE (e.g. README.md)",
     )

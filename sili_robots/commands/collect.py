@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from sili_robots.commands.common import writable_dir
+from sili_robots.commands.common import path_arg, writable_dir
 from sili_robots.errors import ConfigError
 
 
@@ -20,14 +20,23 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "skipped; a run already collected is left as is unless its source's summary.json differs "
         "(an extended or retrained run of the same config), which replaces it.",
     )
-    p.add_argument("sources", type=Path, nargs="+", metavar="SOURCE")
-    p.add_argument("--into", type=Path, required=True, metavar="DIR", help="collection directory")
+    p.add_argument("sources", type=path_arg, nargs="+", metavar="SOURCE")
+    p.add_argument(
+        "--into", type=path_arg, required=True, metavar="DIR", help="collection directory"
+    )
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.sweep.collect import collect
+    from sili_robots.sweep.state import SWEEP_FILE, check_sweep_dir
 
+    check_sweep_dir(args.into, "--into")  # a run's folder or a user's is refused
+    if (args.into / SWEEP_FILE).exists():  # its runs would be replaced by their small copies
+        raise ConfigError(
+            f"--into {args.into} is a sweep; collect into a results collection or a new or empty "
+            "directory"
+        )
     into = writable_dir(args.into, "--into").resolve()
     same = [str(src) for src in args.sources if Path(src).resolve() == into]
     if same:

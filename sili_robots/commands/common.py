@@ -65,6 +65,14 @@ def _check_can_create(path: Path, option: str, given: Path, what: str) -> None:
         ) from None
 
 
+def path_arg(text: str) -> Path:
+    """A path option's value; an empty one (``--out ""``, a variable left unset) is refused
+    rather than read as the current directory."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("an empty path; give a directory or file name")
+    return Path(text)
+
+
 def writable_dir(path: Path, option: str) -> Path:
     """``path`` if it is, or can be made, a directory to write in; else ``ConfigError``."""
     _check_can_create(path, option, path, "a directory")

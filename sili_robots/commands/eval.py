@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
-from sili_robots.commands.common import positive_int
+from sili_robots.commands.common import path_arg, positive_int
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("eval", help="evaluate a trained run without exploration")
-    p.add_argument("run_dir", type=Path)
+    p.add_argument("run_dir", type=path_arg)
     p.add_argument(
         "--interactions", type=positive_int, default=100, help="interactions to play (default 100)"
     )

@@ -7,7 +7,7 @@ import json
 import os
 from pathlib import Path
 
-from sili_robots.commands.common import positive_int
+from sili_robots.commands.common import path_arg, positive_int
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -26,13 +26,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tasks", help=f"comma-separated tasks (default: all of {', '.join(TASKS)})")
     p.add_argument(
         "--sweep-dir",
-        type=Path,
+        type=path_arg,
         default=Path("sweeps/paper-grid"),
         help="working sweep directory with checkpoints (default: sweeps/paper-grid)",
     )
     p.add_argument(
         "--into",
-        type=Path,
+        type=path_arg,
         default=Path("results/paper-grid"),
         help="results collection (default: results/paper-grid)",
     )

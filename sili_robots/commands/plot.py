@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-from sili_robots.commands.common import positive_int, writable_dir
+from sili_robots.commands.common import path_arg, positive_int, writable_dir
 from sili_robots.errors import ConfigError
 
 FORMATS = ("png", "pdf", "svg")
@@ -20,8 +19,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "± std across seeds), TASK_beta.png/pdf where SILI ran with several b, and "
         "overview.png/pdf.",
     )
-    p.add_argument("sweep_dir", type=Path, metavar="SWEEP_DIR")
-    p.add_argument("--out", type=Path, help="figure directory (default: SWEEP_DIR/figures)")
+    p.add_argument("sweep_dir", type=path_arg, metavar="SWEEP_DIR")
+    p.add_argument("--out", type=path_arg, help="figure directory (default: SWEEP_DIR/figures)")
     p.add_argument(
         "--smooth",
         type=positive_int,

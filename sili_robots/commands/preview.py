@@ -12,7 +12,14 @@ import functools
 import sys
 from pathlib import Path
 
-from sili_robots.commands.common import positive_int, registered_task, seed, writable_file
+from sili_robots.commands.common import (
+    path_arg,
+    positive_int,
+    registered_task,
+    seed,
+    writable_file,
+)
+from sili_robots.errors import ConfigError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -42,9 +49,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--interactions", type=positive_int, default=3, help="interactions to record (default 3)"
     )
     p.add_argument("--seed", type=seed, default=0, help="first interaction's seed (default 0)")
-    p.add_argument("--out", default="preview.html", help="HTML file to write (preview.html)")
+    p.add_argument(
+        "--out", type=path_arg, default="preview.html", help="HTML file to write (preview.html)"
+    )
     p.add_argument(
         "--png",
+        type=path_arg,
         default=None,
         help="also render the picture frame to this PNG: the last, or on Driving the last "
         "interaction's moment the ego draws level with the opponent",
@@ -61,9 +71,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"meshcat server: {url}  (Ctrl-C to stop)", flush=True)
 
     if args.out is not None:
-        writable_file(Path(args.out), "--out")
+        _check_output(writable_file(Path(args.out), "--out"), (".html", ".htm"), "--out")
     if args.png is not None:
-        writable_file(Path(args.png), "--png")
+        _check_output(writable_file(Path(args.png), "--png"), (".png",), "--png")
     try:
         result = preview(
             args.task,
@@ -93,3 +103,21 @@ def run(args: argparse.Namespace) -> int:
         print(f"picture check: ok ({len(result.rendered.markers)} scene elements seen)")
     print(f"time: {secs}")
     return 0
+
+
+def _check_output(path: Path, suffixes: tuple[str, ...], option: str) -> None:
+    """An output a preview may write: a name ending in ``suffixes`` (Chromium opens a page by
+    its suffix), and an existing HTML file only if a preview wrote it: a run's or a user's file
+    is never replaced."""
+    from sili_robots.preview.html import PREVIEW_MARK
+
+    if path.suffix.lower() not in suffixes:
+        raise ConfigError(f"{option} {path}: give a file name ending in {' or '.join(suffixes)}")
+    if ".html" in suffixes and path.is_file() and PREVIEW_MARK not in _tail(path):
+        raise ConfigError(f"{option} {path} exists and is not a preview; give another file name")
+
+
+def _tail(path: Path, size: int = 1 << 16) -> str:
+    with path.open("rb") as f:
+        f.seek(max(path.stat().st_size - size, 0))
+        return f.read().decode("utf-8", "replace")

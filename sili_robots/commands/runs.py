@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
+from sili_robots.commands.common import path_arg
 from sili_robots.errors import ConfigError
 
 
@@ -16,7 +16,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "seeds, interactions per run, mean final task reward and true stability, CPU time; "
         "then the totals.",
     )
-    p.add_argument("directory", type=Path, metavar="DIR")
+    p.add_argument("directory", type=path_arg, metavar="DIR")
     p.add_argument("--csv", action="store_true", help="the per-variant table as CSV")
     p.set_defaults(run=run)
 

@@ -13,6 +13,7 @@ from sili_robots.commands.common import (
     add_schedule_args,
     given_options,
     parse_settings,
+    path_arg,
     positive_int,
     schedule_args,
     task_kwargs_arg,
@@ -72,14 +73,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--checkpoint-every", type=positive_int, default=50)
     add_override_args(p, scope=" for every run")
-    p.add_argument("--out", type=Path, help="sweep directory (created, or continued)")
+    p.add_argument("--out", type=path_arg, help="sweep directory (created, or continued)")
     p.add_argument(
         "--overwrite",
         action="store_true",
         help="replace the sweep in --out: its runs start anew (its own files only)",
     )
     p.add_argument(
-        "--resume", type=Path, metavar="SWEEP_DIR", help="run the sweep recorded in SWEEP_DIR again"
+        "--resume",
+        type=path_arg,
+        metavar="SWEEP_DIR",
+        help="run the sweep recorded in SWEEP_DIR again",
     )
     p.add_argument("--backend", choices=BACKENDS, default="local")
     p.add_argument(

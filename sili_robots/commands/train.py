@@ -19,6 +19,7 @@ from sili_robots.commands.common import (
     given_options,
     non_negative_int,
     parse_settings,
+    path_arg,
     positive_int,
     schedule_args,
     seed,
@@ -67,10 +68,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--seed", type=seed, default=0, help="the run's seed, 0 .. 2**32 - 1 (default 0)"
     )
-    p.add_argument("--out", type=Path, help="run directory to create")
+    p.add_argument("--out", type=path_arg, help="run directory to create")
     p.add_argument(
         "--resume",
-        type=Path,
+        type=path_arg,
         metavar="RUN_DIR",
         help="continue a killed run (or, with --interactions, extend a finished one)",
     )

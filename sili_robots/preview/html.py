@@ -87,6 +87,8 @@ class Overlay:
     extra: dict[str, Any] = field(default_factory=dict)  # exposed as window.previewInfo
 
 
+#: the line every page written here ends its script with (``sili preview`` replaces only such)
+PREVIEW_MARK = "window.previewReady = true;"
 TEMPLATE = """<!DOCTYPE html>
 <html>
 <head>
