@@ -21,7 +21,10 @@ def _last(run_dir: Path, window: int) -> pd.DataFrame:
     path = metrics_file(Path(run_dir))
     if path is None:
         raise ConfigError(f"{run_dir} has no {METRICS} (nor its gzipped copy): it logged nothing")
-    return pd.read_csv(path).tail(window)
+    rows = pd.read_csv(path)
+    if rows.empty:
+        raise ConfigError(f"{run_dir} has logged no interaction yet")
+    return rows.tail(window)
 
 
 #: said where a task version has no stored references (a user's task, other task arguments)
@@ -102,9 +105,6 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
     configs = sorted(((read_config(d), Path(d)) for d in run_dirs), key=lambda c: c[0].seed)
     runs = [(c.seed, d) for c, d in configs]
     cfg = configs[0][0]
-    seeds = [seed for seed, _ in runs]
-    if len(set(seeds)) < len(seeds):
-        raise ConfigError(f"seeds {seeds}: runs judged together are one run per seed")
     for other, run_dir in configs[1:]:
         differ = _settings_that_differ(cfg, other)
         if differ:
@@ -112,6 +112,9 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
                 f"{run_dir} is not another seed of {runs[0][1]}: {', '.join(differ[:4])} differ "
                 "(runs judged together differ only in the seed)"
             )
+    seeds = [seed for seed, _ in runs]
+    if len(set(seeds)) < len(seeds):
+        raise ConfigError(f"seeds {seeds}: runs judged together are one run per seed")
     still = _references(cfg).get("still")
     judged = []  # (worked, reward, what to print, run)
     for seed, run_dir in runs:

@@ -249,6 +249,7 @@ def test_a_second_sweep_on_the_same_directory_is_refused(tmp_path):
         (["--tasks", "circle-9", "--methods", "sili"], "unknown task 'circle-9'"),
         (["--tasks", "circle-3", "--methods", "sili,ppo"], "unknown method 'ppo'"),
         (["--tasks", "circle-3", "--methods", "sili", "--seeds", "4-2"], "seed range '4-2'"),
+        (["--tasks", "circle-3", "--methods", "sili", "--seeds", "0-99999999"], "than 10,000 runs"),
         (["--tasks", "circle-3", "--methods", "sili", "--beta", "2"], "outside the allowed"),
         (["--tasks", "circle-3", "--methods", "sac", "--beta", "0.5"], "--beta applies to"),
         (["--tasks", "circle-3", "--methods", "sili", "--controller", "osc"], "--controller"),

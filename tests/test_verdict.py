@@ -66,6 +66,9 @@ def test_a_run_with_other_task_arguments_is_not_read_against_the_defaults_refere
     (run / "metrics.csv.gz").unlink()
     assert verdict_main([str(run)]) == 2  # one line, no traceback
     assert "has no metrics.csv (nor its gzipped copy)" in capsys.readouterr().err
+    metrics.head(0).to_csv(run / "metrics.csv", index=False)  # stopped before its first
+    assert verdict_main([str(run)]) == 2
+    assert "has logged no interaction yet" in capsys.readouterr().err
 
 
 def test_a_run_given_its_versions_own_arguments_is_read_against_the_references(tmp_path):
@@ -113,10 +116,10 @@ def test_the_line_across_seeds_counts_the_runs_that_worked_and_picks_the_best(tm
     assert verdict_main(["--help"]) == 0
     assert capsys.readouterr().out.startswith("usage: python -m sili_robots.verdict RUN_DIR")
     other = tmp_path / "lili"
-    args = ["train", "--task", "circle-3", "--method", "lili", "--interactions", "2", "--seed", "5"]
+    args = ["train", "--task", "circle-3", "--method", "lili", "--interactions", "2", "--seed", "0"]
     assert main([*args, "--out", str(other), *FAST_ARGS, "--no-progress"]) == 0
     capsys.readouterr()
-    assert verdict_main([str(lost), str(other)]) == 2  # not seeds of one variant
+    assert verdict_main([str(lost), str(other)]) == 2  # another variant (of the same seed)
     err = capsys.readouterr().err
     assert "is not another seed of" in err and "method" in err and "differ only in the seed" in err
     assert verdict_main([str(lost), str(lost)]) == 2  # the same run twice is not two seeds

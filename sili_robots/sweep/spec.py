@@ -146,6 +146,10 @@ class PlannedRun:
     config: RunConfig
 
 
+#: the most seeds one sweep takes (far beyond any study; more is a slip such as 0-99999999)
+MAX_SEEDS = 10_000
+
+
 def parse_seeds(text: str) -> list[int]:
     """``"0-4"``, ``"0,2,7"`` or a mix (``"0-2,5"``) -> sorted unique seeds."""
     seeds: set[int] = set()
@@ -161,6 +165,10 @@ def parse_seeds(text: str) -> list[int]:
             raise ConfigError(f"seed range {part!r} is empty; write LOW-HIGH with LOW <= HIGH")
         for end in (a, b):
             check_seed(end)
+        if b - a + 1 + len(seeds) > MAX_SEEDS:  # before a set of billions fills the memory
+            raise ConfigError(
+                f"seeds {text!r} are more than {MAX_SEEDS:,} runs per variant; give fewer"
+            )
         seeds.update(range(a, b + 1))
     if not seeds:
         raise ConfigError(f"no seeds in {text!r}; give e.g. 0-4 or 0,2,7")
