@@ -103,6 +103,14 @@ def test_bad_input_a_user_types_names_the_command_the_value_and_what_is_allowed(
             "sili eval: error: argument run_dir: an empty path; give a directory or file name",
         ),
         (
+            ["bounds", "circle-3", "--write", ""],  # before its games, not a table and no file
+            "sili bounds: error: argument --write: an empty path; give a directory or file name",
+        ),
+        (
+            ["train", "--task", "circle-3", "--beta-schedule", "", "--out", str(tmp_path / "r")],
+            "sili train: error: --beta-schedule '': '' is not INTERACTION:VALUE",
+        ),
+        (
             ["preview", DOORS],
             f"sili preview: error: argument task: {DOORS!r} is a task class; sili preview draws",
         ),

@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
+from cli_helpers import sili as sili_in_process
 from fast_settings import FAST_AGENT as FAST
 from fast_settings import FAST_ARGS
 
@@ -263,18 +264,27 @@ def test_a_second_sweep_on_the_same_directory_is_refused(tmp_path):
             ["--tasks", "circle-3", "--methods", "sac", "--target-entropy-schedule", "0:inf"],
             "'inf' is not a finite number",
         ),
-        (["--tasks", "circle-3", "--methods", "sili", "--ray-address", "x"], "needs --backend ray"),
+        (["--tasks", "circle-3", "--methods", "sac", "--ray-address", "auto"], "needs --backend"),
         (["--tasks", "no_such_module:Env", "--methods", "sac"], "cannot load task class"),
+        (["--tasks", "", "--methods", "sac"], "no tasks given; allowed: circle-3"),
+        (["--tasks", "circle-3", "--methods", "all,sac"], "'all' stands alone"),
+        (["--tasks", "sawyer-reach", "--methods", "sac", "--controller", ","], "no controllers"),
+        (["--tasks", "circle-3", "--methods", "sili", "--beta-schedule", ""], "'' is not INTER"),
+        (["--tasks", "circle-3", "--methods", "sac", "--retries", "x"], "'x' is not an integer"),
+        (
+            ["--tasks", "circle-3", "--methods", "sac", "--backend", "ray", "--ray-address", "x"],
+            "'x' is not a Ray address; give auto, local, HOST:PORT or ray://HOST:PORT",
+        ),
         (
             ["--tasks", "circle-3,driving", "--methods", "sac", "--env-kwarg", "outside_margin=1"],
             "task 'driving' takes no argument outside_margin (--env-kwarg); its arguments: ",
         ),
     ],
 )
-def test_bad_sweep_input_exits_2_with_the_allowed_values(tmp_path, capsys, args, message):
-    assert main(["sweep", *args, "--out", str(tmp_path / "s")]) == 2
-    assert message in capsys.readouterr().err
-    assert not (tmp_path / "s" / "runs").exists()
+def test_bad_sweep_input_exits_2_with_the_allowed_values(tmp_path, args, message):
+    done = sili_in_process("sweep", *args, "--out", tmp_path / "s")  # argparse's errors too
+    assert done.returncode == 2 and message in done.stderr, done.stderr
+    assert not (tmp_path / "s").exists()
 
 
 def test_a_sweep_trains_a_users_task_class_from_the_working_directory(

@@ -12,7 +12,7 @@ import functools
 import json
 from pathlib import Path
 
-from sili_robots.commands.common import registered_task, seed, writable_file
+from sili_robots.commands.common import path_arg, registered_task, seed, writable_file
 from sili_robots.errors import ConfigError
 
 
@@ -70,6 +70,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--write",
         nargs="?",
+        type=path_arg,
         const=str(BOUNDS_FILE),
         metavar="FILE",
         help="also store the bounds (keyed by gymnasium id) in FILE, default the packaged "

@@ -12,9 +12,11 @@ from sili_robots.commands.common import (
     add_override_args,
     add_schedule_args,
     given_options,
+    non_negative_int,
     parse_settings,
     path_arg,
     positive_int,
+    ray_address,
     schedule_args,
     task_kwargs_arg,
     track_typed_options,
@@ -93,12 +95,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--ray-address",
+        type=ray_address,
         metavar="ADDRESS",
         help="Ray cluster to join (e.g. auto, HOST:6379, ray://HOST:10001); default: a local one",
     )
     p.add_argument(
         "--retries",
-        type=int,
+        type=non_negative_int,
         default=0,
         help="re-run a run whose worker died this many times (it resumes from its checkpoint)",
     )
@@ -127,9 +130,11 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
     from sili_robots.agent import METHODS
     from sili_robots.agent.methods import LATENT_METHODS
 
-    if not args.tasks or not args.methods:
+    if args.tasks is None or args.methods is None:
         raise ConfigError("--tasks and --methods are required (or --resume SWEEP_DIR)")
     methods = list(METHODS) if args.methods.strip() == "all" else parse_list(args.methods)
+    if "all" in methods:
+        raise ConfigError(f"--methods {args.methods!r}: 'all' stands alone (every method)")
     if args.latent is not None and not set(methods) & set(LATENT_METHODS):
         # checked for new sweeps only: a recorded one that gave it resumes as it ran
         raise ConfigError(
@@ -149,7 +154,7 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
             for field, (path, _) in SWEEP_SCHEDULES.items()
             if path in schedules
         },
-        controllers=parse_list(args.controller) if args.controller is not None else None,
+        controllers=_controllers(args.controller),
         latent=args.latent,
         profile=args.profile,
         agent_overrides=parse_settings(args.agent_set),
@@ -158,6 +163,15 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
     )
     check_task_arguments(spec)  # new sweeps only, as --latent above
     return spec
+
+
+def _controllers(text: str | None) -> list[str] | None:
+    if text is None:
+        return None
+    controllers = parse_list(text)
+    if not controllers:
+        raise ConfigError(f"no controllers in --controller {text!r}; give e.g. mink,osc")
+    return controllers
 
 
 def _specs_and_dir(args: argparse.Namespace) -> tuple[list[SweepSpec], Path]:

@@ -56,7 +56,7 @@ class RayBackend:
             kwargs.update(num_cpus=self.workers or os.cpu_count() or 1, include_dashboard=False)
         try:
             ray.init(**kwargs)
-        except ConnectionError as err:
+        except (ConnectionError, ValueError) as err:  # unreachable, or not an address
             raise ConfigError(f"cannot connect to Ray at {self.address!r}: {err}") from None
         return True
 
