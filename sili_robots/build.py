@@ -41,15 +41,24 @@ def task_class(path: str) -> type[RepeatedInteractionEnv]:
         obj: Any = importlib.import_module(module_name)
         for part in class_name.split("."):
             obj = getattr(obj, part)
-    except (ImportError, AttributeError, ValueError) as err:
-        where = (
-            "a class defined in a script loads only in that script: put it in a module, "
-            "or pass the task instance (SILI.load(path, env=...))"
-            if module_name == "__main__"
-            else "give a registered task or package.module:ClassName of a "
-            "RepeatedInteractionEnv subclass importable from the current directory"
+    except Exception as err:  # a module that is missing, fails to compile or raises on import
+        not_found = isinstance(err, AttributeError) or (
+            isinstance(err, ModuleNotFoundError) and f"{module_name}.".startswith(f"{err.name}.")
         )
-        raise ConfigError(f"cannot load task class {path!r} ({err}); {where}") from None
+        if module_name == "__main__":
+            where = (
+                "a class defined in a script loads only in that script: put it in a module, "
+                "or pass the task instance (SILI.load(path, env=...))"
+            )
+        elif not_found:
+            where = (
+                "give a registered task or package.module:ClassName of a "
+                "RepeatedInteractionEnv subclass importable from the current directory"
+            )
+        else:  # the module was found, and failed
+            where = f"importing {module_name} failed: fix it, or install what it imports"
+        why = str(err) if isinstance(err, ImportError) else f"{type(err).__name__}: {err}"
+        raise ConfigError(f"cannot load task class {path!r} ({why}); {where}") from None
     if not (isinstance(obj, type) and issubclass(obj, RepeatedInteractionEnv)):
         raise ConfigError(f"{path!r} is not a RepeatedInteractionEnv subclass")
     return obj
@@ -175,11 +184,17 @@ def check_argument_names(task: str, names: Iterable[str], options: str) -> None:
 
 
 def check_task_builds(task: str, kwargs: dict[str, Any]) -> None:
-    """Construct (not reset: no simulation starts) ``task`` with ``kwargs``, or ConfigError with
-    the task's own message, so bad task input stops a command before any run starts."""
+    """Construct (not reset: no simulation starts) ``task`` with ``kwargs``, so bad task input
+    stops a command before any run starts."""
+    built_task(task, kwargs).close()
+
+
+def built_task(task: str, kwargs: dict[str, Any]) -> gym.Env:
+    """``make_env(task, **kwargs)``, or ConfigError with the task's own message (whatever its
+    constructor raises: a bad value, a simulator missing here) instead of a traceback."""
     given = ", ".join(f"{k}={v!r}" for k, v in kwargs.items()) or "its default arguments"
     try:
-        make_env(task, **kwargs).close()
+        return make_env(task, **kwargs)
     except ConfigError as err:
         raise ConfigError(f"task {task!r} with {given}: {err}") from None
     except TypeError as err:  # e.g. a required argument not given

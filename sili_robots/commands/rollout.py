@@ -6,7 +6,7 @@ import argparse
 
 import numpy as np
 
-from sili_robots.build import make_env
+from sili_robots.build import built_task
 from sili_robots.commands.common import positive_int, seed, task_name
 from sili_robots.policies import SCRIPTED_KINDS, scripted_policy
 from sili_robots.rollout import run_interactions
@@ -28,7 +28,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    env = make_env(args.task)
+    env = built_task(args.task, {})
     try:
         summary = run_interactions(
             env, scripted_policy(env, args.policy), args.interactions, seed=args.seed
