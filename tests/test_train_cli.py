@@ -14,7 +14,6 @@ import pandas as pd
 import pytest
 import torch
 from cli_helpers import sili as _sili
-from cli_helpers import sili as sili_in_process
 from fast_settings import FAST_ARGS
 
 from sili_robots import training
@@ -531,10 +530,10 @@ def test_a_task_that_cannot_be_built_is_named_with_its_error(tmp_path, capsys, m
     )
     assert not (tmp_path / "run").exists()
     (tmp_path / "half_written.py").write_text("class Half(:\n")  # found, but does not compile
-    done = sili_in_process("rollout", "half_written:Half", "--policy", "random")
+    done = _sili("rollout", "half_written:Half", "--policy", "random")
     assert done.returncode == 2 and "(SyntaxError: invalid syntax" in done.stderr
     assert "importing half_written failed: fix it, or install what it imports" in done.stderr
-    done = sili_in_process("rollout", "unbuilt_task:Unbuilt", "--policy", "still")
+    done = _sili("rollout", "unbuilt_task:Unbuilt", "--policy", "still")
     assert done.returncode == 2 and "RuntimeError: no simulator for horizon 20" in done.stderr
 
 
