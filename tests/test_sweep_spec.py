@@ -158,7 +158,7 @@ def test_an_existing_run_with_other_settings_is_refused(tmp_path):
     other = run.config.to_dict()
     other["interactions"] = 99  # extended on its own: the sweep can be extended to match
     (path / "config.json").write_text(json.dumps({"run": other}))
-    with pytest.raises(ConfigError, match=r"was extended to 99 interactions, past the sweep's 5"):
+    with pytest.raises(ConfigError, match=r"has 99 interactions, more than the 5 asked for now"):
         check_existing(tmp_path, run)
     other["checkpoint_every"] += 1  # and more: another run
     (path / "config.json").write_text(json.dumps({"run": other}))

@@ -139,9 +139,9 @@ def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
     longer = on_disk.get("interactions")
     if len(diffs) == 1 and isinstance(longer, int) and longer > planned.config.interactions:
         raise ConfigError(
-            f"run {planned.name} in {sweep_dir} was extended to {longer} interactions, past the "
-            f"sweep's {planned.config.interactions}; extend the sweep to match it: "
-            f"sili sweep --resume {sweep_dir} --interactions {longer}"
+            f"run {planned.name} in {sweep_dir} has {longer} interactions, more than the "
+            f"{planned.config.interactions} asked for now (a run is never shortened); ask for "
+            f"{longer}: sili sweep --resume {sweep_dir} --interactions {longer}"
         )
     if diffs:
         raise ConfigError(
