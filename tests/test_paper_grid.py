@@ -149,12 +149,16 @@ def test_runs_counts_runs_and_interactions(sweep_and_collection, capsys):
     assert sorted(table.profile) == ["package", "paper"] and table.done.tolist() == [1, 1]
 
 
-def test_plot_reads_a_collection_without_writing_into_it(sweep_and_collection, tmp_path):
+def test_plot_reads_a_collection_without_writing_into_it(sweep_and_collection, tmp_path, capsys):
     _, collection = sweep_and_collection
     df = load_results(collection)
     assert set(df.run) == {"circle-3__sili-bschedule__s0", "circle-3__sili-paper-b0.5__s0"}
-    assert main(["plot", str(collection), "--out", str(tmp_path / "fig"), "--formats", "png"]) == 0
+    capsys.readouterr()
+    args = ["plot", str(collection), "--out", str(tmp_path / "fig"), "--formats", "png,png"]
+    assert main(args) == 0
     assert (tmp_path / "fig" / "circle-3.png").is_file()
+    written = capsys.readouterr().out.split()
+    assert len(written) == len(set(written)) == 2  # the task's figure and the overview, once
     assert not (collection / "results.csv").exists()
 
 
