@@ -194,9 +194,10 @@ def _clusters(points: list[tuple[float, str]], gap: float) -> list[list[tuple[fl
 def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFrame:
     """The tidy table of a sweep (rebuilt from its run directories and written to results.csv)
     or of a results collection (``sili collect``: read only, nothing written)."""
-    from sili_robots.sweep.results import results_table, run_dirs, write_tables
+    from sili_robots.sweep.results import check_exists, results_table, run_dirs, write_tables
     from sili_robots.sweep.state import SWEEP_FILE
 
+    check_exists(sweep_dir)
     if (Path(sweep_dir) / SWEEP_FILE).is_file():
         df, _ = write_tables(sweep_dir)
     elif run_dirs(sweep_dir):

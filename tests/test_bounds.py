@@ -8,6 +8,7 @@ import sys
 import numpy as np
 import pandas as pd
 import pytest
+from cli_helpers import sili as sili_in_process
 from matplotlib.collections import LineCollection
 
 from sili_robots.bounds import BOUNDS_FILE, compute_bounds, read_bounds_file, stored_bounds
@@ -73,10 +74,10 @@ def test_bounds_work_for_driving_in_its_own_process():
         ([], "give either a TASK (e.g. circle-3) or --all"),
     ],
 )
-def test_bad_input_exits_2_with_one_line(args, message, capsys):
-    assert main(["bounds", *args]) == 2
-    err = capsys.readouterr().err
-    assert err.startswith("sili bounds: error: ") and message in err
+def test_bad_input_exits_2_with_one_line(args, message):
+    done = sili_in_process("bounds", *args)  # argparse's errors too
+    err = done.stderr
+    assert done.returncode == 2 and err.startswith("sili bounds: error: ") and message in err
     assert len(err.strip().splitlines()) == 1
 
 

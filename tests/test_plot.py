@@ -156,6 +156,11 @@ def test_unfinished_runs_are_left_out_unless_asked(sweep_dir, tmp_path):
 def test_plot_of_a_non_sweep_exits_2(tmp_path, capsys):
     assert main(["plot", str(tmp_path)]) == 2
     assert "holds no runs" in capsys.readouterr().err
+    for command in (["plot"], ["runs"], ["collect", "--into", str(tmp_path / "c")]):
+        assert main([*command[:1], str(tmp_path / "nothing"), *command[1:]]) == 2
+        assert f"{tmp_path / 'nothing'} does not exist; give a directory written by" in (
+            capsys.readouterr().err
+        )
     assert main(["plot", str(tmp_path), "--formats", "gif"]) == 2
     assert "unknown figure format" in capsys.readouterr().err
 

@@ -4,6 +4,7 @@ import json
 
 import pytest
 from agent_helpers import flat_layout
+from cli_helpers import sili as sili_in_process
 
 from sili_robots.agent.config import AgentConfig
 from sili_robots.agent.matmul import default_matmul
@@ -229,18 +230,18 @@ def test_a_sweep_records_the_changed_defaults_and_older_records_keep_the_earlier
     assert expand(given)[0].config.agent.model.updates_per_interaction == 7
 
 
-def test_a_new_sweep_builds_its_tasks_with_their_arguments_before_any_run(tmp_path, capsys):
+def test_a_new_sweep_builds_its_tasks_with_their_arguments_before_any_run(tmp_path):
     """A bad value stops the sweep at once (exit 2), in a dry run too, and leaves no folder."""
     out = tmp_path / "s"
     base = ["sweep", "--methods", "sac", "--seeds", "0", "--interactions", "2", "--out", str(out)]
     for args, message in (
         (["--tasks", "sawyer-reach", "--controller", "foo"], "unknown controller 'foo'"),
         (["--tasks", "circle-3", "--env-kwarg", "horizon=0"], "horizon=0"),
-        (["--tasks", "circle-3", "--retries", "-1", "--dry-run"], "--retries must be >= 0"),
+        (["--tasks", "circle-3", "--retries", "-1"], "argument --retries: -1 is not allowed"),
     ):
         for dry in ([], ["--dry-run"]):
-            assert main([*base, *args, *dry]) == 2
-            assert message in capsys.readouterr().err and not out.exists()
+            done = sili_in_process(*base, *args, *dry)  # argparse's errors too
+            assert done.returncode == 2 and message in done.stderr and not out.exists()
 
 
 def test_a_new_sweep_never_goes_into_a_folder_of_other_files(tmp_path, capsys):

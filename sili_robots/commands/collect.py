@@ -31,16 +31,16 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.sweep.collect import collect
     from sili_robots.sweep.state import SWEEP_FILE, check_sweep_dir
 
+    same = [str(src) for src in args.sources if Path(src).resolve() == args.into.resolve()]
+    if same:
+        raise ConfigError(f"--into {args.into} is also a source ({same[0]}); collect elsewhere")
     check_sweep_dir(args.into, "--into")  # a run's folder or a user's is refused
     if (args.into / SWEEP_FILE).exists():  # its runs would be replaced by their small copies
         raise ConfigError(
             f"--into {args.into} is a sweep; collect into a results collection or a new or empty "
             "directory"
         )
-    into = writable_dir(args.into, "--into").resolve()
-    same = [str(src) for src in args.sources if Path(src).resolve() == into]
-    if same:
-        raise ConfigError(f"--into {args.into} is also a source ({same[0]}); collect elsewhere")
+    writable_dir(args.into, "--into")
     report = collect(args.sources, args.into)
     print(
         json.dumps(

@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 
 from sili_robots.commands.common import path_arg
-from sili_robots.errors import ConfigError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -23,10 +22,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.sweep.inventory import inventory, totals_line
-    from sili_robots.sweep.results import run_dirs
+    from sili_robots.sweep.results import runs_of
 
-    if not run_dirs(args.directory):
-        raise ConfigError(f"{args.directory} holds no runs (no runs/*/config.json)")
+    runs_of(args.directory)  # or why there are none
     table = inventory(args.directory)
     print(table.to_csv(index=False) if args.csv else table.to_string(index=False))
     if not args.csv:

@@ -201,8 +201,6 @@ def _extends(args: argparse.Namespace) -> bool:
 
 
 def _backend(args: argparse.Namespace):
-    if args.retries < 0:
-        raise ConfigError(f"--retries must be >= 0, got {args.retries}")
     if args.backend == "ray":
         from sili_robots.sweep.ray_backend import RayBackend, import_ray
 

@@ -32,7 +32,7 @@ from sili_robots.runs import (
     read_json,
     recorded_run,
 )
-from sili_robots.sweep.results import run_dirs
+from sili_robots.sweep.results import runs_of
 from sili_robots.sweep.state import RUNS_DIR
 
 
@@ -63,9 +63,7 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
     report = CollectReport()
     chosen: dict[str, tuple[Path, dict, int]] = {}  # name -> source run, identity, length
     for source in sources:
-        if not run_dirs(source):
-            raise ConfigError(f"{source} holds no runs (no runs/*/config.json)")
-        for run_dir in run_dirs(source):
+        for run_dir in runs_of(source):
             name = run_dir.name
             if names is not None and name not in names:
                 continue

@@ -66,6 +66,24 @@ def run_dirs(sweep_dir: Path) -> list[Path]:
     return sorted(p for p in root.glob("*") if (p / CONFIG).is_file())
 
 
+#: what a results directory is, for messages
+RESULTS_DIR_KIND = "give a directory written by `sili sweep --out` or `sili collect`"
+
+
+def check_exists(directory: Path) -> None:
+    if not Path(directory).exists():
+        raise ConfigError(f"{directory} does not exist; {RESULTS_DIR_KIND}")
+
+
+def runs_of(directory: Path) -> list[Path]:
+    """``run_dirs`` of a sweep or a collection, or ConfigError saying why there are none."""
+    check_exists(directory)
+    runs = run_dirs(directory)
+    if not runs:
+        raise ConfigError(f"{directory} holds no runs (no runs/*/config.json); {RESULTS_DIR_KIND}")
+    return runs
+
+
 def _identity(run_dir: Path) -> tuple[dict, dict]:
     cfg = migrate_run(read_json(run_dir / CONFIG, DAMAGED_CONFIG, "run")["run"])
     agent = cfg["agent"]
