@@ -166,13 +166,14 @@ def test_sweep_refuses_bad_seeds_a_task_twice_and_a_latent_no_method_takes(tmp_p
     "args",
     [
         ["sweep", "--tasks", "circle-3", "--methods", "oracle", "--interactions", "1", "--out"],
+        ["sweep", "--tasks", "circle-3", "--methods", "oracle", "--dry-run", "--out"],
         ["collect", "SRC", "--into"],
         ["bounds", "circle-3", "--interactions", "300", "--write"],
         ["preview", "circle-3", "--out"],
         ["preview", "circle-3", "--out", "p.html", "--png"],
         ["plot", "SRC", "--out"],
     ],
-    ids=["sweep", "collect", "bounds", "preview-html", "preview-png", "plot"],
+    ids=["sweep", "sweep-dry-run", "collect", "bounds", "preview-html", "preview-png", "plot"],
 )
 def test_an_output_path_that_cannot_be_written_exits_2_before_any_work(tmp_path, args):
     (tmp_path / "file").write_text("")

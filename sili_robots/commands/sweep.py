@@ -228,6 +228,7 @@ def run(args: argparse.Namespace) -> int:
     if args.resume is None:
         check_sweep_dir(sweep_dir, "--out")
     backend = _backend(args)  # its options checked in a dry run too; nothing starts yet
+    writable_dir(sweep_dir, "--resume" if args.resume else "--out")  # creates nothing
     if args.dry_run:
         planned = plan(specs)
         if args.overwrite:  # what is on disk goes: every planned run is new
@@ -247,7 +248,6 @@ def run(args: argparse.Namespace) -> int:
                 print(f"{run_.name}\t{run_state(path)}{said}")
         print(f"{len(planned)} runs")
         return 0
-    writable_dir(sweep_dir, "--resume" if args.resume else "--out")
     report = run_sweep(
         specs,
         sweep_dir,
