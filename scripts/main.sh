@@ -14,7 +14,7 @@
 set -euo pipefail
 for arg in "$@"; do
     case $arg in
-    --out | --out=*)
+    --ou*)  # --out, or an abbreviation argparse would take for it
         echo "scripts/main.sh: error: give the output folder as SILI_MAIN_OUT=DIR, not $arg" >&2
         exit 2
         ;;

@@ -121,14 +121,10 @@ class SILI:
 
     def _check_run_dir(self) -> None:
         """A new model never trains over a run or into a folder of other files (the CLI's rule)."""
-        if (self.run_dir / CONFIG).exists() and not self._overwrite:
-            raise ConfigError(
-                f"{self.run_dir} already holds a run; SILI.load({str(self.run_dir)!r}) "
-                "continues it, overwrite=True replaces it"
-            )
-        if self.run_dir.is_file():
-            raise ConfigError(f"run_dir {self.run_dir} is a file; give a directory")
-        check_new_run_dir(self.run_dir, self._overwrite, ("run_dir", "overwrite=True"))
+        load = f"SILI.load({str(self.run_dir)!r})"
+        check_new_run_dir(
+            self.run_dir, self._overwrite, out="run_dir", replace="overwrite=True", resume=load
+        )
 
     # ------------------------------------------------------------------ building
     def _setup(self, state: dict[str, Any] | None) -> None:
@@ -170,13 +166,14 @@ class SILI:
     def learn(self, interactions: int, progress_bar: bool = False) -> SILI:
         """Train for ``interactions`` more interactions (checkpointed in ``run_dir``)."""
         _check_count(interactions)
+        done = self.cfg.interactions
+        if done == 0:  # as when the model was made (nothing came in since), before any change
+            self._check_run_dir()
         if self._task_env is None:
             self.env.close()  # training builds its own (libsumo holds one simulation)
-        done = self.cfg.interactions
         self.cfg.interactions = done + interactions
         env = None if self._task_env is None else observed_as(self._task_env, self.cfg)
         if done == 0:
-            self._check_run_dir()  # as when the model was made: nothing came in since
             if self._overwrite:
                 clear_run(self.run_dir)
             train(self.cfg, self.run_dir, progress=progress_bar, env=env)

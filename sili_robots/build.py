@@ -39,29 +39,38 @@ def task_class(path: str) -> type[RepeatedInteractionEnv]:
         sys.path.append(os.getcwd())
     try:
         obj: Any = importlib.import_module(module_name)
-        for part in class_name.split("."):
-            obj = getattr(obj, part)
     except Exception as err:  # a module that is missing, fails to compile or raises on import
-        not_found = isinstance(err, AttributeError) or (
+        found = not (
             isinstance(err, ModuleNotFoundError) and f"{module_name}.".startswith(f"{err.name}.")
         )
-        if module_name == "__main__":
-            where = (
-                "a class defined in a script loads only in that script: put it in a module, "
-                "or pass the task instance (SILI.load(path, env=...))"
-            )
-        elif not_found:
-            where = (
-                "give a registered task or package.module:ClassName of a "
-                "RepeatedInteractionEnv subclass importable from the current directory"
-            )
-        else:  # the module was found, and failed
-            where = f"importing {module_name} failed: fix it, or install what it imports"
-        why = str(err) if isinstance(err, ImportError) else f"{type(err).__name__}: {err}"
-        raise ConfigError(f"cannot load task class {path!r} ({why}); {where}") from None
+        raise ConfigError(_unloadable(path, module_name, err, found)) from None
+    try:
+        for part in class_name.split("."):
+            obj = getattr(obj, part)
+    except AttributeError as err:
+        raise ConfigError(_unloadable(path, module_name, err, found=False)) from None
     if not (isinstance(obj, type) and issubclass(obj, RepeatedInteractionEnv)):
         raise ConfigError(f"{path!r} is not a RepeatedInteractionEnv subclass")
     return obj
+
+
+def _unloadable(path: str, module_name: str, err: Exception, found: bool) -> str:
+    """Why ``path`` did not load, and what to do: a module or class not found is given anew, a
+    module found that failed (``found``) is fixed."""
+    if module_name == "__main__":
+        where = (
+            "a class defined in a script loads only in that script: put it in a module, "
+            "or pass the task instance (SILI.load(path, env=...))"
+        )
+    elif not found:
+        where = (
+            "give a registered task or package.module:ClassName of a "
+            "RepeatedInteractionEnv subclass importable from the current directory"
+        )
+    else:
+        where = f"importing {module_name} failed: fix it, or install what it imports"
+    why = str(err) if isinstance(err, ImportError) else f"{type(err).__name__}: {err}"
+    return f"cannot load task class {path!r} ({why}); {where}"
 
 
 def is_class_path(task: str) -> bool:

@@ -186,13 +186,25 @@ def listed(names: list[str], most: int = 5) -> str:
 
 
 def check_new_run_dir(
-    run_dir: Path, overwrite: bool = False, options: tuple[str, str] = ("--out", "--overwrite")
+    run_dir: Path,
+    overwrite: bool = False,
+    *,
+    out: str = "--out",
+    replace: str = "--overwrite",
+    resume: str = "--resume",
 ) -> None:
-    """A new run goes into a new or empty directory, or a run's: files of something else are
-    never mixed with (or replaced by) a run's, and a run's files left without their config
-    (a removal cut short) are replaced only with ``overwrite``. ``options``: what the user calls
-    the directory and the overwrite (the CLI's options, the API's arguments)."""
-    run_dir, (out, replace) = Path(run_dir), options
+    """A new run goes into a new or empty directory, or with ``overwrite`` a run's: a run is
+    never trained over unasked, files of something else are never mixed with (or replaced by) a
+    run's, and a run's files left without their config (a removal cut short) are replaced only
+    with ``overwrite``. ``out``, ``replace``, ``resume``: what the caller calls the directory,
+    the overwrite and the way to continue a run (the CLI's options, the API's arguments)."""
+    run_dir = Path(run_dir)
+    if run_dir.is_file():
+        raise ConfigError(f"{run_dir} is a file; give {out} a directory (new, or empty)")
+    if (run_dir / CONFIG).exists() and not overwrite:
+        raise ConfigError(
+            f"{run_dir} already holds a run; {resume} continues it, {replace} replaces it"
+        )
     if run_dir.is_dir() and not (run_dir / CONFIG).exists():
         left = foreign_files(run_dir)
         if left and not overwrite and not set(left) - {*RUN_FILES, *RUN_DIRS}:

@@ -105,6 +105,13 @@ def test_a_new_model_never_trains_over_a_run_or_into_a_folder_of_other_files(tmp
     with pytest.raises(ConfigError, match=r"holds files \(paper\.tex\); give run_dir a new"):
         SILI("circle-3", settings=FAST_AGENT, run_dir=notes)
     assert len((run / "metrics.csv").read_text().splitlines()) == 1 + 3  # untouched
+    late = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=tmp_path / "late")
+    shutil.copytree(run, tmp_path / "late")  # a run came in after the model was made
+    before = {p.name: p.read_bytes() for p in (tmp_path / "late").iterdir()}
+    for _ in range(2):  # refused, and again: the model is as it was
+        with pytest.raises(ConfigError, match="already holds a run"):
+            late.learn(2)
+    assert {p.name: p.read_bytes() for p in (tmp_path / "late").iterdir()} == before
     model = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run, overwrite=True)
     assert len((run / "metrics.csv").read_text().splitlines()) == 1 + 3  # until it learns
     model.learn(2)

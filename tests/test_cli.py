@@ -153,7 +153,10 @@ def test_sweep_refuses_bad_seeds_a_task_twice_and_a_latent_no_method_takes(tmp_p
     code, _, err = _main(*sweep, "oracle", "--tasks", "circle-3", "--seeds", "-1")
     assert code == 2 and "seed -1 is not allowed" in err
     code, _, err = _main(*sweep, "oracle", "--tasks", "sili/Circle3-v1,circle-3")
-    assert code == 2 and "'sili/Circle3-v1' and 'circle-3' are the same task (circle-3)" in err
+    assert code == 2 and "'sili/Circle3-v1' and 'circle-3' are the same task or share" in err
+    doors = "sili_robots.examples.two_doors:TwoDoorsEnv,sili_robots.examples:two_doors.TwoDoorsEnv"
+    code, _, err = _main(*sweep, "sac", "--tasks", doors)  # one class written two ways
+    assert code == 2 and "share the file name 'sili_robots-examples-two_doors-TwoDoorsEnv'" in err
     code, _, err = _main(*sweep, "sac", "--tasks", "circle-3", "--latent", "continuous")
     assert code == 2 and "--latent applies to methods sili, lili, stable only" in err
     mixed = ["sac,lili", "--tasks", "circle-3", "--latent", "continuous"]

@@ -54,13 +54,14 @@ def test_main_job_names_a_working_recipe_when_it_does_not_hold(tmp_path):
 
 
 def test_the_main_jobs_output_folder_is_given_by_its_variable_only(tmp_path):
-    done = subprocess.run(
-        ["bash", "scripts/main.sh", "--out", str(tmp_path / "elsewhere")],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
-    assert done.returncode == 2
-    assert "give the output folder as SILI_MAIN_OUT=DIR, not --out" in done.stderr
+    for option in (["--out", str(tmp_path / "elsewhere")], [f"--ou={tmp_path / 'elsewhere'}"]):
+        done = subprocess.run(
+            ["bash", "scripts/main.sh", *option],
+            cwd=ROOT,
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert done.returncode == 2
+        assert f"give the output folder as SILI_MAIN_OUT=DIR, not {option[0]}" in done.stderr
     assert not (tmp_path / "elsewhere").exists()

@@ -290,9 +290,9 @@ def test_bad_sweep_input_exits_2_with_the_allowed_values(tmp_path, args, message
 def test_a_sweep_trains_a_users_task_class_from_the_working_directory(
     tmp_path, monkeypatch, capsys
 ):
-    (tmp_path / "lab").mkdir()
-    (tmp_path / "lab" / "__init__.py").write_text("")
-    (tmp_path / "lab" / "doors.py").write_text(
+    (tmp_path / "sweep_lab").mkdir()
+    (tmp_path / "sweep_lab" / "__init__.py").write_text("")
+    (tmp_path / "sweep_lab" / "doors.py").write_text(
         "from sili_robots.examples.two_doors import TwoDoorsEnv\n\n\n"
         "class Doors(TwoDoorsEnv):\n"
         "    pass\n\n\n"
@@ -301,12 +301,13 @@ def test_a_sweep_trains_a_users_task_class_from_the_working_directory(
         "        raise RuntimeError('no simulator here')\n"
     )
     monkeypatch.chdir(tmp_path)  # where the workers import it from, as `sili train` does
-    task, out = "lab.doors:Doors", tmp_path / "sweep"
+    monkeypatch.syspath_prepend(str(tmp_path))  # here too, and undone after the test
+    task, out = "sweep_lab.doors:Doors", tmp_path / "sweep"
     args = ["sweep", "--tasks", task, "--methods", "sili,oracle", "--seeds", "0"]
     args += ["--env-kwarg", "horizon=6", "--interactions", "3", *FAST_ARGS, "--out", str(out)]
     assert main([*args, "--no-progress"]) == 0
     runs = sorted((out / "runs").iterdir())
-    names = ["lab-doors-Doors__oracle__s0", "lab-doors-Doors__sili-bschedule__s0"]
+    names = ["sweep_lab-doors-Doors__oracle__s0", "sweep_lab-doors-Doors__sili-bschedule__s0"]
     assert [r.name for r in runs] == names  # file names any shell, make or LaTeX takes
     cfg, env, _, _ = load_trained(runs[1])
     assert (cfg.task, cfg.task_id, cfg.method) == (task, None, "sili")
@@ -317,12 +318,12 @@ def test_a_sweep_trains_a_users_task_class_from_the_working_directory(
     assert set(table["task"]) == {task} and set(table["status"]) == {"done"}
     capsys.readouterr()
     assert main(["plot", str(out), "--formats", "png"]) == 0
-    assert (out / "figures" / "lab-doors-Doors.png").is_file()
-    unbuilt = ["sweep", "--tasks", "lab.doors:Unbuilt", "--methods", "sac", "--interactions", "2"]
+    assert (out / "figures" / "sweep_lab-doors-Doors.png").is_file()
+    unbuilt = ["sweep", "--tasks", "sweep_lab.doors:Unbuilt", "--methods", "sac"]
     assert main([*unbuilt, "--out", str(tmp_path / "unbuilt"), "--dry-run"]) == 2  # before any run
     assert (
-        "task 'lab.doors:Unbuilt' cannot be built with its default arguments: RuntimeError: "
-        "no simulator here" in capsys.readouterr().err
+        "task 'sweep_lab.doors:Unbuilt' cannot be built with its default arguments: "
+        "RuntimeError: no simulator here" in capsys.readouterr().err
     )
 
 

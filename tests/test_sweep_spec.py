@@ -23,6 +23,9 @@ def _spec(**kw):
 def test_parse_seeds_ranges_lists_and_errors():
     assert parse_seeds("0-4") == [0, 1, 2, 3, 4]
     assert parse_seeds("0-2,7,1") == [0, 1, 2, 7]
+    assert len(parse_seeds("0-5000,0-5000")) == 5001  # overlaps count once under the cap
+    with pytest.raises(ConfigError, match="more than 10,000 runs per variant"):
+        parse_seeds("0-5000,6000-12000")
     assert parse_seeds("3") == [3]
     with pytest.raises(ConfigError, match="'x'"):
         parse_seeds("0,x")

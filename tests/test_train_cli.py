@@ -533,6 +533,9 @@ def test_a_task_that_cannot_be_built_is_named_with_its_error(tmp_path, capsys, m
     done = _sili("rollout", "half_written:Half", "--policy", "random")
     assert done.returncode == 2 and "(SyntaxError: invalid syntax" in done.stderr
     assert "importing half_written failed: fix it, or install what it imports" in done.stderr
+    (tmp_path / "bad_attr.py").write_text("import os\n\nX = os.no_such_attribute\n")
+    done = _sili("rollout", "bad_attr:X", "--policy", "random")  # raised while importing
+    assert done.returncode == 2 and "importing bad_attr failed: fix it" in done.stderr
     done = _sili("rollout", "unbuilt_task:Unbuilt", "--policy", "still")
     assert done.returncode == 2 and "RuntimeError: no simulator for horizon 20" in done.stderr
 
@@ -562,7 +565,8 @@ def test_a_run_directory_is_replaced_only_with_overwrite(tmp_path, capsys):
     (out / "notes.txt").write_text("mine")
     capsys.readouterr()
     assert main([*args, "--interactions", "2", "--seed", "2"]) == 2
-    assert f"{out} already holds a run; use --resume" in capsys.readouterr().err
+    said = f"{out} already holds a run; --resume {out} continues it, --overwrite replaces it"
+    assert said in capsys.readouterr().err
     assert len(pd.read_csv(out / "metrics.csv")) == 4  # untouched
     assert main([*args, "--interactions", "2", "--seed", "2", "--overwrite"]) == 0
     assert json.loads((out / "config.json").read_text())["run"]["seed"] == 2
@@ -670,7 +674,7 @@ def test_more_threads_than_cores_is_trained_with_a_note(tmp_path, capsys, monkey
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0})  # one core to use
     args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "1", *FAST]
     assert main([*args, "--threads", "2", "--out", str(tmp_path / "two")]) == 0
-    note = "sili train: note: 2 threads, more than the CPUs this process may use (1), run slower"
+    note = "sili train: note: --threads 2 is more than the 1 CPU(s) this process may use: the"
     assert note in capsys.readouterr().err
     assert json.loads((tmp_path / "two" / "config.json").read_text())["run"]["threads"] == 2
     assert main(["train", "--resume", str(tmp_path / "two"), "--interactions", "2"]) == 0

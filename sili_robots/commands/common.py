@@ -65,19 +65,6 @@ def _check_can_create(path: Path, option: str, given: Path, what: str) -> None:
         ) from None
 
 
-RAY_ADDRESS = re.compile(r"auto|local|(ray://)?[A-Za-z0-9.\-]+:\d{1,5}")
-
-
-def ray_address(text: str) -> str:
-    """A Ray cluster address, checked before anything is written (Ray names a bad one only
-    when the sweep connects)."""
-    if not RAY_ADDRESS.fullmatch(text.strip()):
-        raise argparse.ArgumentTypeError(
-            f"{text!r} is not a Ray address; give auto, local, HOST:PORT or ray://HOST:PORT"
-        )
-    return text.strip()
-
-
 def path_arg(text: str) -> Path:
     """A path option's value; an empty one (``--out ""``, a variable left unset) is refused
     rather than read as the current directory."""

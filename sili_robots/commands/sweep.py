@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 from pathlib import Path
 
 from sili_robots.agent import LATENT_CHOICES, PROFILES
@@ -16,7 +17,6 @@ from sili_robots.commands.common import (
     parse_settings,
     path_arg,
     positive_int,
-    ray_address,
     schedule_args,
     task_kwargs_arg,
     track_typed_options,
@@ -124,6 +124,20 @@ RESUME_OPTIONS = (
     "no_progress",
     "dry_run",
 )
+
+
+#: what ray.init takes as an address: auto, local, HOST:PORT, ray://HOST:PORT ([IPv6]:PORT)
+RAY_ADDRESS = re.compile(r"auto|local|(ray://)?([A-Za-z0-9.\-]+|\[[0-9A-Fa-f:.]+\]):\d{1,5}")
+
+
+def ray_address(text: str) -> str:
+    """A Ray cluster address, checked before anything is written (Ray names a bad one only
+    when the sweep connects)."""
+    if not RAY_ADDRESS.fullmatch(text.strip()):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a Ray address; give auto, local, HOST:PORT or ray://HOST:PORT"
+        )
+    return text.strip()
 
 
 def spec_from_args(args: argparse.Namespace) -> SweepSpec:

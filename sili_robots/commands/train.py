@@ -32,7 +32,6 @@ from sili_robots.errors import ConfigError
 from sili_robots.migrations import setting_path
 from sili_robots.runs import (
     CHECKPOINT,
-    CONFIG,
     RunConfig,
     check_new_run_dir,
     clear_run,
@@ -219,12 +218,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = config_from_args(args)
         if args.out is None:
             raise ConfigError("--out RUN_DIR is required for a new run")
-        if (args.out / CONFIG).exists() and not args.overwrite:
-            raise ConfigError(
-                f"{args.out} already holds a run; use --resume {args.out} to "
-                "continue it or --overwrite to replace it"
-            )
-        check_new_run_dir(args.out, args.overwrite)
+        check_new_run_dir(args.out, args.overwrite, resume=f"--resume {args.out}")
         _check_env_builds(cfg)
         if args.overwrite:
             clear_run(args.out)  # the run's own files; anything else in the folder stays
@@ -244,8 +238,8 @@ def _note_threads_beyond_cores(threads: int) -> None:
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     if cores and threads > cores:
         print(
-            f"sili train: note: {threads} threads, more than the CPUs this process may use "
-            f"({cores}), run slower than {cores}",
+            f"sili train: note: --threads {threads} is more than the {cores} CPU(s) this "
+            f"process may use: the run is slower than with --threads {cores}",
             file=sys.stderr,
         )
 
@@ -266,4 +260,4 @@ def _check_env_builds(cfg: RunConfig) -> None:
     from sili_robots.build import check_argument_names, check_task_builds
 
     check_argument_names(cfg.task, cfg.env_kwargs, "--controller, --env-kwarg")
-    check_task_builds(cfg.task, cfg.env_kwargs)
+    check_task_builds(cfg.task_id or cfg.task, cfg.env_kwargs)  # the version it trains

@@ -150,7 +150,7 @@ window.previewInfo = {info};
     if (captions.length) caption.textContent = captions[frame];
     viewer.set_dirty();
   }};
-  window.previewReady = true;
+  {mark}
 }})();
 </script>
 </body>
@@ -167,6 +167,7 @@ def scene_html(recorder: SceneRecorder, overlay: Overlay) -> str:
         for c, label in overlay.legend
     )
     return TEMPLATE.format(
+        mark=PREVIEW_MARK,
         title=html_lib.escape(overlay.title),
         legend=legend,
         viewer_js=VIEWER_JS.read_text(encoding="utf-8").replace("</script", "<\\/script"),

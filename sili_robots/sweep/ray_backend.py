@@ -56,8 +56,11 @@ class RayBackend:
             kwargs.update(num_cpus=self.workers or os.cpu_count() or 1, include_dashboard=False)
         try:
             ray.init(**kwargs)
-        except (ConnectionError, ValueError) as err:  # unreachable, or not an address
+        except ConnectionError as err:
             raise ConfigError(f"cannot connect to Ray at {self.address!r}: {err}") from None
+        except ValueError as err:  # e.g. an address ray.init cannot read
+            where = f"at {self.address!r}" if self.address else "(a local instance)"
+            raise ConfigError(f"cannot start Ray {where}: {err}") from None
         return True
 
     def run(self, jobs: Sequence[Job], monitor: Monitor) -> list[Outcome]:

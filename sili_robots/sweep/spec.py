@@ -165,7 +165,8 @@ def parse_seeds(text: str) -> list[int]:
             raise ConfigError(f"seed range {part!r} is empty; write LOW-HIGH with LOW <= HIGH")
         for end in (a, b):
             check_seed(end)
-        if b - a + 1 + len(seeds) > MAX_SEEDS:  # before a set of billions fills the memory
+        if b - a + 1 > MAX_SEEDS or len(seeds.union(range(a, b + 1))) > MAX_SEEDS:
+            # the range's size first, before a set of billions fills the memory
             raise ConfigError(
                 f"seeds {text!r} are more than {MAX_SEEDS:,} runs per variant; give fewer"
             )
@@ -277,14 +278,16 @@ def validate(spec: SweepSpec) -> None:
         raise ConfigError(f"no tasks given; allowed: {', '.join(TASKS)}")
     if not spec.methods:
         raise ConfigError(f"no methods given; allowed: {', '.join(METHODS)}")
-    named: dict[str, str] = {}
+    named: dict[str, str] = {}  # file name of its runs and figures -> task
     for task in spec.tasks:
         name = canonical_task(task)  # a class path is loaded here: a bad one stops the sweep
-        if name in named:
+        stem = file_stem(name)
+        if stem in named:
             raise ConfigError(
-                f"tasks {named[name]!r} and {task!r} are the same task ({name}); give it once"
+                f"tasks {named[stem]!r} and {task!r} are the same task or share the file name "
+                f"{stem!r} of their runs; give one of them"
             )
-        named[name] = task
+        named[stem] = task
     for method in spec.methods:
         check_choice("method", method, METHODS)
     if spec.profile is not None:
