@@ -65,7 +65,8 @@ def _unloadable(path: str, module_name: str, err: Exception, found: bool) -> str
     elif not found:
         where = (
             "give a registered task or package.module:ClassName of a "
-            "RepeatedInteractionEnv subclass importable from the current directory"
+            "RepeatedInteractionEnv subclass importable from the current directory (a run of "
+            "one is resumed, evaluated and loaded from a folder its module imports from)"
         )
     else:
         where = f"importing {module_name} failed: fix it, or install what it imports"

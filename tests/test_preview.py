@@ -147,6 +147,13 @@ def test_cli_rejects_bad_input_with_exit_2(tmp_path, capsys):
     assert main(["preview", "circle-3", "--checkpoint", str(tmp_path / "nope")]) == 2
     err = capsys.readouterr().err
     assert "is not a run directory" in err and "Traceback" not in err
+    doors = "sili_robots.examples.two_doors:TwoDoorsEnv"
+    train = ["train", "--task", doors, "--method", "sac", "--interactions", "1"]
+    train += ["--set", "hidden=8"]
+    assert main([*train, "--out", str(tmp_path / "doors"), "--no-progress"]) == 0
+    capsys.readouterr()
+    assert main(["preview", "circle-3", "--checkpoint", str(tmp_path / "doors")]) == 2
+    assert f"was trained on {doors!r}, which has no scene" in capsys.readouterr().err
 
 
 def test_cli_writes_html(tmp_path):

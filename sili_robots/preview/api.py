@@ -145,9 +145,18 @@ def make_env_and_policy(
     policy_from_run = _policy_from_run()
     run_dir = Path(checkpoint)
     if not run_dir.is_dir():
-        raise ConfigError(f"checkpoint {str(checkpoint)!r} is not a run directory")
+        raise ConfigError(
+            f"checkpoint {str(checkpoint)!r} is not a run directory; give one written by "
+            "`sili train --out` or a sweep's runs/NAME"
+        )
     run_task, kwargs, make_policy = policy_from_run(run_dir)
-    trained_on = task_spec(run_task).name
+    try:
+        trained_on = task_spec(run_task).name
+    except ConfigError:  # a user's task class: no scene to draw it in
+        raise ConfigError(
+            f"checkpoint {str(checkpoint)!r} was trained on {run_task!r}, which has no scene: "
+            "previews draw the registered tasks"
+        ) from None
     if trained_on != name:
         raise ConfigError(
             f"checkpoint {str(checkpoint)!r} was trained on {trained_on!r}, not {name!r} "
