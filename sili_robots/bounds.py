@@ -91,11 +91,14 @@ def compute_bounds(
     interactions: int | None = None,
     seed: int = DEFAULT_SEED,
     games: int | None = None,
+    env_kwargs: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """``{"task", "task_id", "interactions", "games", "seed", "bounds": {kind: {task_reward,
-    stability}}}`` for one task version (a CLI name or a gymnasium id)."""
+    """``{"task", "task_id", "task_args", "interactions", "games", "seed", "bounds": {kind:
+    {task_reward, stability}}}`` for one task version (a CLI name or a gymnasium id), built
+    with ``env_kwargs`` (e.g. another controller: the references of an ablation)."""
     spec = task_spec(task)
-    env = make_task(spec.gym_id)
+    env_kwargs = dict(env_kwargs or {})
+    env = make_task(spec.gym_id, **env_kwargs)
     try:
         choices = env.unwrapped.strategy_choices()
         asked = default_interactions(task) if interactions is None else interactions
@@ -121,6 +124,7 @@ def compute_bounds(
     return {
         "task": spec.name,
         "task_id": spec.gym_id,
+        **({"task_args": env_kwargs} if env_kwargs else {}),
         "interactions": n,
         "games": g,
         "seed": int(seed),
@@ -130,8 +134,9 @@ def compute_bounds(
 
 def format_table(result: dict[str, Any]) -> str:
     """The bounds of one task as an aligned text table."""
+    args = "".join(f", {k}={v!r}" for k, v in result.get("task_args", {}).items())
     lines = [
-        f"{result['task']} ({result['task_id']}): {result['interactions']} interactions in "
+        f"{result['task']} ({result['task_id']}{args}): {result['interactions']} interactions in "
         f"{result['games']} games from seed {result['seed']} (each game's first not counted)",
         f"  {'policy':<12} {'task reward':>12} {'stability':>10}  what it is",
     ]

@@ -120,10 +120,11 @@ def _bound_ids(rows: pd.DataFrame, task: str) -> list[str]:
     return _task_ids(default, task) if len(default) else []
 
 
-def draw_bounds(ax: Axes, metric: str, task_ids: Sequence[str]) -> None:
+def draw_bounds(ax: Axes, metric: str, task_ids: Sequence[str], note: str = "") -> None:
     """The stored bounds of ``task_ids`` as labelled horizontal lines across ``ax`` (a panel of
     ``BOUND_METRICS``), all kept in view; bounds close together share one label at the right
-    edge, each kind with its value."""
+    edge, each kind with its value and ``note`` (e.g. that they hold for the default task
+    arguments only, on a panel that also has runs given others)."""
     from matplotlib.collections import LineCollection
     from matplotlib.transforms import blended_transform_factory
 
@@ -151,7 +152,7 @@ def draw_bounds(ax: Axes, metric: str, task_ids: Sequence[str]) -> None:
             lines.set_gid("bound")
             ax.add_collection(lines, autolim=False)
             ax.update_datalim([(ax.dataLim.x0 if ax.dataLim.width else 0.0, y)], updatex=False)
-            drawn.append((y, f"{kind}{suffix}"))
+            drawn.append((y, f"{kind}{suffix}{note}"))
     if not drawn:
         return
     ax.autoscale_view()
@@ -383,8 +384,9 @@ def _draw_curves(
             band = np.clip(mean - std, low, high), np.clip(mean + std, low, high)
             ax.fill_between(x, *band, color=color, alpha=0.18, lw=0)
     task_ids = _bound_ids(task_rows, str(task_rows["task"].iloc[0]))
+    mixed = (task_rows["task_args"] != "").any()  # the bounds hold for some curves only
     for ax, (metric, ylabel) in zip(axes, metrics, strict=True):
-        draw_bounds(ax, metric, task_ids)
+        draw_bounds(ax, metric, task_ids, " [default task args]" if mixed else "")
         ax.set_ylabel(ylabel)
         ax.set_gid(metric)
         ax.grid(alpha=0.3)

@@ -228,6 +228,11 @@ def test_runs_given_another_controller_get_no_bounds_and_a_curve_of_their_own():
     assert {line.get_label() for line in ax.get_lines()} == {"SAC [default]", "SAC [osc]"}
     assert set(_bound_lines(ax)) == {f"bound: {k}" for k in stored_bounds(sawyer)}  # mink's
     assert f"{sawyer} (its default task arguments)" in both.get_suptitle()
+    said = [t.get_text() for t in ax.texts if t.get_gid() == "bound_label"]
+    assert said and all("[default task args]" in t for t in said)  # on the panel, as overview
+    assert all(
+        "[default" not in t.get_text() for t in learning_curves(mink, "sawyer-reach").axes[0].texts
+    )
     alone = learning_curves(osc, "sawyer-reach", smooth=1)
     assert _bound_lines(alone.axes[0]) == {} and "bounds:" not in alone.get_suptitle()
 
@@ -273,3 +278,22 @@ def test_the_b_sweep_draws_a_line_per_task_arguments():
     lines.pop("_nolegend_", None)  # the error bars' caps
     assert lines.keys() == {"SILI", "SILI [outside_margin=0.3]"}
     assert list(lines["SILI [outside_margin=0.3]"]) == [-10.0, -10.0]
+
+
+def test_bounds_of_another_controller_are_its_own_and_never_stored(tmp_path):
+    """A controller ablation's references: measured with the controller asked for."""
+    small = ["sawyer-reach", "--interactions", "4", "--games", "2", "--json"]
+    mink, osc = (sili_in_process("bounds", *small, "--controller", c) for c in ("mink", "osc"))
+    assert mink.returncode == osc.returncode == 0, osc.stderr
+    mink, osc = json.loads(mink.stdout), json.loads(osc.stdout)
+    assert osc["task_args"] == {"controller": "osc"}  # said with the numbers
+    # OSC's target leads by at most 5 cm, so its greedy chase is slower than mink's
+    assert osc["bounds"]["oracle"]["task_reward"] < mink["bounds"]["oracle"]["task_reward"] - 1
+    for args, said in (
+        (["--all", "--controller", "osc"], "apply to one TASK, not to --all"),
+        (["sawyer-reach", "--controller", "osc", "--write", str(tmp_path / "b.json")], "--write"),
+        (["circle-3", "--controller", "osc"], "task 'circle-3' takes no argument controller"),
+    ):
+        done = sili_in_process("bounds", *args)
+        assert done.returncode == 2 and said in done.stderr, done.stderr
+    assert not (tmp_path / "b.json").exists()

@@ -129,6 +129,12 @@ def test_bad_input_a_user_types_names_the_command_the_value_and_what_is_allowed(
     assert "; or a task class of your own as package.module:ClassName" in done.stderr
     done = sili_in_process("rollout", DOORS, "--policy", "still", "--interactions", "3")
     assert done.returncode == 0 and "mean task reward per interaction: " in done.stdout
+    done = sili_in_process(
+        "rollout", "circle-3", "--env-kwarg", "horizon=10", "--interactions", "2"
+    )
+    assert done.returncode == 0 and "task=circle-3 horizon=10 policy=stabilizing" in done.stdout
+    done = sili_in_process("rollout", "circle-3", "--controller", "osc")
+    assert done.returncode == 2 and "task 'circle-3' takes no argument controller" in done.stderr
 
 
 DOORS = "sili_robots.examples.two_doors:TwoDoorsEnv"

@@ -154,6 +154,25 @@ def test_cli_rejects_bad_input_with_exit_2(tmp_path, capsys):
     capsys.readouterr()
     assert main(["preview", "circle-3", "--checkpoint", str(tmp_path / "doors")]) == 2
     assert f"was trained on {doors!r}, which has no scene" in capsys.readouterr().err
+    mine = [
+        "preview",
+        "circle-3",
+        "--checkpoint",
+        str(tmp_path / "doors"),
+        "--env-kwarg",
+        "horizon=9",
+    ]
+    assert main(mine) == 2
+    assert "a trained run is previewed on its own task arguments" in capsys.readouterr().err
+
+
+def test_a_scripted_preview_plays_the_controller_asked_for():
+    name, env, _, label = make_env_and_policy("sawyer-reach", env_kwargs={"controller": "osc"})
+    try:
+        assert name == "sawyer-reach" and env.unwrapped.controller_name == "osc"
+        assert label == "scripted stabilizing, controller=osc"  # on the picture's title
+    finally:
+        env.close()
 
 
 def test_cli_writes_html(tmp_path):

@@ -12,7 +12,14 @@ import functools
 import json
 from pathlib import Path
 
-from sili_robots.commands.common import path_arg, registered_task, seed, writable_file
+from sili_robots.commands.common import (
+    add_task_args,
+    path_arg,
+    registered_task,
+    seed,
+    task_arguments_given,
+    writable_file,
+)
 from sili_robots.errors import ConfigError
 
 
@@ -48,6 +55,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--all", action="store_true", help="every registered task version (current and earlier)"
     )
+    add_task_args(p)  # e.g. the references of a controller ablation
     slow = ", ".join(f"{t}: {n}" for t, n in TASK_INTERACTIONS.items())
     p.add_argument(
         "--interactions",
@@ -96,21 +104,46 @@ def run(args: argparse.Namespace) -> int:
     if args.all == (args.task is not None):
         raise ConfigError("give either a TASK (e.g. circle-3) or --all, not both or neither")
     specs = all_versions() if args.all else [task_spec(args.task)]
+    env_kwargs = _task_arguments(args, specs)
     for spec in specs:  # the counts checked before anything runs
         check_counts(args.interactions or default_interactions(spec.name), args.games)
     if args.write:
         _check_packaged_counts(args, [default_interactions(s.name) for s in specs])
     results = []
     for spec in specs:
-        result = compute_bounds(spec.gym_id, args.interactions, args.seed, args.games)
+        result = compute_bounds(spec.gym_id, args.interactions, args.seed, args.games, env_kwargs)
         results.append(result)
         if args.json:
-            print(json.dumps({k: result[k] for k in ("task", "task_id", "bounds")}))
+            keys = ("task", "task_id", "task_args", "bounds")
+            print(json.dumps({k: result[k] for k in keys if k in result}))
         else:
             print(format_table(result), flush=True)
     if args.write:
         print(f"wrote {write_bounds_file(results, Path(args.write))}")
     return 0
+
+
+def _task_arguments(args: argparse.Namespace, specs: list) -> dict:
+    """``--controller`` and ``--env-kwarg`` for one task, checked by building it once; refused
+    with ``--all`` (tasks take different arguments) and with ``--write`` when they build other
+    dynamics than the version's default (a bounds file keeps each version at its defaults)."""
+    from sili_robots.build import check_argument_names, check_task_builds
+    from sili_robots.tasks.registry import other_task_arguments
+
+    env_kwargs = task_arguments_given(args)
+    if not env_kwargs:
+        return env_kwargs
+    if args.all:
+        raise ConfigError("--controller and --env-kwarg apply to one TASK, not to --all")
+    (spec,) = specs
+    check_argument_names(spec.name, env_kwargs, "--controller, --env-kwarg")
+    if args.write and other_task_arguments(spec.gym_id, env_kwargs):
+        raise ConfigError(
+            "--write stores each task version at its default arguments; print the bounds with "
+            "other ones without it"
+        )
+    check_task_builds(spec.gym_id, env_kwargs)
+    return env_kwargs
 
 
 def _check_packaged_counts(args: argparse.Namespace, defaults: list[int]) -> None:

@@ -253,6 +253,15 @@ def task_kwargs_arg(args: argparse.Namespace) -> dict:
     return env_kwargs
 
 
+def task_arguments_given(args: argparse.Namespace) -> dict:
+    """The task arguments of a command that builds one task: ``--env-kwarg`` pairs and the
+    ``--controller``."""
+    env_kwargs = task_kwargs_arg(args)
+    if args.controller is not None:
+        env_kwargs["controller"] = args.controller
+    return env_kwargs
+
+
 def add_override_args(p: argparse.ArgumentParser, scope: str) -> None:
     """``--set KEY=VALUE`` (agent settings) and ``--env-kwarg KEY=VALUE`` (task arguments)."""
     p.add_argument(
@@ -264,6 +273,10 @@ def add_override_args(p: argparse.ArgumentParser, scope: str) -> None:
         help=f"override an agent setting{scope} (JSON value), repeatable, "
         "e.g. --set updates_per_step=0.5",
     )
+    add_env_kwarg_arg(p, scope)
+
+
+def add_env_kwarg_arg(p: argparse.ArgumentParser, scope: str = "") -> None:
     p.add_argument(
         "--env-kwarg",
         action="append",
@@ -271,6 +284,17 @@ def add_override_args(p: argparse.ArgumentParser, scope: str) -> None:
         metavar="KEY=VALUE",
         help=f"extra task constructor argument{scope} (JSON value), repeatable",
     )
+
+
+def add_task_args(p: argparse.ArgumentParser) -> None:
+    """``--controller`` and ``--env-kwarg``: the task arguments of a command that plays a task
+    (``task_kwargs_arg`` reads them)."""
+    p.add_argument("--controller", help=f"controller of a robot task ({CONTROLLERS_HELP})")
+    add_env_kwarg_arg(p)
+
+
+#: the controllers, for help texts (written out: importing them at start-up loads MuJoCo)
+CONTROLLERS_HELP = "sawyer-reach: mink, the default; osc; joint_velocity"
 
 
 def track_typed_options(p: argparse.ArgumentParser) -> None:

@@ -13,10 +13,12 @@ import sys
 from pathlib import Path
 
 from sili_robots.commands.common import (
+    add_task_args,
     path_arg,
     positive_int,
     registered_task,
     seed,
+    task_arguments_given,
     writable_file,
 )
 from sili_robots.errors import ConfigError
@@ -60,6 +62,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "interaction's moment the ego draws level with the opponent",
     )
     p.add_argument("--serve", action="store_true", help="serve live on 127.0.0.1 until Ctrl-C")
+    add_task_args(p)  # for the scripted and random policies (a trained run has its own)
     p.set_defaults(run=run)
 
 
@@ -70,6 +73,12 @@ def run(args: argparse.Namespace) -> int:
     def announce(url: str) -> None:
         print(f"meshcat server: {url}  (Ctrl-C to stop)", flush=True)
 
+    env_kwargs = task_arguments_given(args)
+    if env_kwargs:
+        from sili_robots.build import check_argument_names, check_task_builds
+
+        check_argument_names(args.task, env_kwargs, "--controller, --env-kwarg")
+        check_task_builds(args.task, env_kwargs)
     if args.out is not None:
         _check_output(writable_file(Path(args.out), "--out"), (".html", ".htm"), "--out")
     if args.png is not None:
@@ -85,6 +94,7 @@ def run(args: argparse.Namespace) -> int:
             png=args.png,
             serve=args.serve,
             on_url=announce,
+            env_kwargs=env_kwargs,
         )
     except (BrowserError, ServerError) as err:
         print(f"sili preview: error: {err}", file=sys.stderr)

@@ -6,8 +6,14 @@ import argparse
 
 import numpy as np
 
-from sili_robots.build import built_task
-from sili_robots.commands.common import positive_int, seed, task_name
+from sili_robots.build import built_task, check_argument_names
+from sili_robots.commands.common import (
+    add_task_args,
+    positive_int,
+    seed,
+    task_arguments_given,
+    task_name,
+)
 from sili_robots.policies import SCRIPTED_KINDS, scripted_policy
 from sili_robots.rollout import run_interactions
 
@@ -24,11 +30,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--interactions", type=positive_int, default=20, help="interactions to play (default 20)"
     )
     p.add_argument("--seed", type=seed, default=0, help="first interaction's seed (default 0)")
+    add_task_args(p)
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    env = built_task(args.task, {})
+    env_kwargs = task_arguments_given(args)
+    check_argument_names(args.task, env_kwargs, "--controller, --env-kwarg")
+    env = built_task(args.task, env_kwargs)
     try:
         summary = run_interactions(
             env, scripted_policy(env, args.policy), args.interactions, seed=args.seed
@@ -37,7 +46,8 @@ def run(args: argparse.Namespace) -> int:
         env.close()
     rewards = np.array([s.task_reward for s in summary])
     stable = np.array([not s.strategy_changed for s in summary[1:]])
-    print(f"task={args.task} policy={args.policy} interactions={args.interactions}")
+    given = "".join(f" {k}={v!r}" for k, v in env_kwargs.items())
+    print(f"task={args.task}{given} policy={args.policy} interactions={args.interactions}")
     print(f"mean task reward per interaction: {rewards.mean():.3f}")
     if stable.size:
         print(f"fraction of interactions with the true strategy unchanged: {stable.mean():.3f}")

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from sili_robots.agent import LATENT_CHOICES, PROFILES
 from sili_robots.commands.common import (
+    CONTROLLERS_HELP,
     add_override_args,
     add_schedule_args,
     given_options,
@@ -58,7 +59,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--controller",
         metavar="C1,C2,...",
-        help="controllers to sweep on the tasks that take one (e.g. sawyer-reach: mink,osc)",
+        help=f"controllers to sweep on the tasks that take one ({CONTROLLERS_HELP})",
     )
     p.add_argument("--latent", choices=LATENT_CHOICES, help="latent kind (default: each task's)")
     p.add_argument(

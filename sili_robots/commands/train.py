@@ -13,6 +13,7 @@ from pathlib import Path
 from sili_robots.agent import BETA_METHODS, LATENT_CHOICES, METHODS, PROFILES, Schedule
 from sili_robots.build import make_run_config
 from sili_robots.commands.common import (
+    CONTROLLERS_HELP,
     add_override_args,
     add_schedule_args,
     check_schedule_overrides,
@@ -23,7 +24,7 @@ from sili_robots.commands.common import (
     positive_int,
     schedule_args,
     seed,
-    task_kwargs_arg,
+    task_arguments_given,
     task_name,
     track_typed_options,
     unit_float,
@@ -86,7 +87,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="b = START for DELAY interactions (default 0), then linear to END over LENGTH",
     )
     add_schedule_args(p, scope="")
-    p.add_argument("--controller", help="controller for robot tasks (e.g. sawyer-reach: mink)")
+    p.add_argument("--controller", help=f"controller of a robot task ({CONTROLLERS_HELP})")
     add_override_args(p, scope="")
     p.add_argument(
         "--checkpoint-every",
@@ -143,9 +144,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     settings.update(schedules)
     if args.latent is not None and "latent" in given:
         raise ConfigError(f"give one of --latent and --set {given['latent']}, not both")
-    env_kwargs = task_kwargs_arg(args)
-    if args.controller is not None:
-        env_kwargs["controller"] = args.controller
+    env_kwargs = task_arguments_given(args)
     return make_run_config(
         args.task,
         args.method,

@@ -126,18 +126,25 @@ class Preview:
 
 
 def make_env_and_policy(
-    task: str, policy: str = "scripted", checkpoint: str | Path | None = None
+    task: str,
+    policy: str = "scripted",
+    checkpoint: str | Path | None = None,
+    env_kwargs: dict[str, Any] | None = None,
 ) -> tuple[str, gym.Env, Callable, str]:
-    """(task name, env to step, policy, policy label) for a scripted policy or a trained run."""
+    """(task name, env to step, policy, policy label) for a scripted policy or a trained run;
+    ``env_kwargs`` build the task for a scripted policy (a trained run's are its own)."""
     from sili_robots.policies import scripted_policy
     from sili_robots.tasks import make_task, task_spec
 
     name = task_spec(task).name
+    if checkpoint is not None and env_kwargs:
+        raise ConfigError("a trained run is previewed on its own task arguments; give none")
     if checkpoint is None:
         check_choice("preview policy", policy, POLICIES)
-        env = make_task(name)
+        env = make_task(name, **(env_kwargs or {}))
         try:
             label = "random actions" if policy == "random" else f"scripted {SCRIPTED_KIND[policy]}"
+            label += "".join(f", {k}={v}" for k, v in (env_kwargs or {}).items())
             return name, env, scripted_policy(env, SCRIPTED_KIND[policy]), label
         except BaseException:
             env.close()
@@ -206,6 +213,7 @@ def preview(
     serve: bool = False,
     serve_seconds: float | None = None,
     on_url: Callable[[str], None] | None = None,
+    env_kwargs: dict[str, Any] | None = None,
 ) -> PreviewResult:
     """Record ``interactions`` interactions of ``task`` and write/render/serve the preview.
 
@@ -219,7 +227,7 @@ def preview(
 
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
-    name, env, pol, label = make_env_and_policy(task, policy, checkpoint)
+    name, env, pol, label = make_env_and_policy(task, policy, checkpoint, env_kwargs)
     server = LiveServer() if serve else None
     try:
         if server is not None:
