@@ -137,7 +137,8 @@ def format_table(result: dict[str, Any]) -> str:
     args = "".join(f", {k}={v!r}" for k, v in result.get("task_args", {}).items())
     lines = [
         f"{result['task']} ({result['task_id']}{args}): {result['interactions']} interactions in "
-        f"{result['games']} games from seed {result['seed']} (each game's first not counted)",
+        f"{result['games']} game{'s' if result['games'] > 1 else ''} from seed {result['seed']} "
+        "(each game's first not counted)",
         f"  {'policy':<12} {'task reward':>12} {'stability':>10}  what it is",
     ]
     for kind, b in result["bounds"].items():

@@ -398,7 +398,7 @@ def _seed_note(rows: pd.DataFrame) -> str:
     keys = list(VARIANT_KEYS)
     seeds = rows.groupby(keys, dropna=False)["seed"].nunique()
     lo, hi = int(seeds.min()), int(seeds.max())
-    note = f"{lo} seeds" if lo == hi else f"{lo}-{hi} seeds"
+    note = f"{lo} seed{'s' if lo > 1 else ''}" if lo == hi else f"{lo}-{hi} seeds"
     ends = rows.groupby([*keys, "run"], dropna=False)["interaction"].max()
     if (ends.groupby(level=keys, dropna=False).nunique() > 1).any():
         note += " (fewer where a run ended early)"
@@ -504,7 +504,8 @@ def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "si
     last = min(window, int(rows.groupby("run").size().min()))
     fig.suptitle(
         f"{task_title(task)}: effect of b on {METHOD_NAMES.get(method, method)} "
-        f"(mean of the last {last} interactions; mean ± std over {seed_text} seeds)"
+        f"(mean of the last {last} interactions; mean ± std over {seed_text} "
+        f"seed{'s' if seeds.max() > 1 else ''})"
     )
     if len(groups) > 1:
         fig.legend(*axes[0].get_legend_handles_labels(), loc="outside right upper")

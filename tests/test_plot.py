@@ -151,14 +151,22 @@ def test_unfinished_runs_are_left_out_unless_asked(sweep_dir, tmp_path):
     pd.read_csv(metrics).head(3).to_csv(metrics, index=False)  # it stopped at 3
     partial = learning_curves(load_results(copy, include_unfinished=True), "circle-3")
     assert "2 seeds (fewer where a run ended early)" in partial.get_suptitle()
+    one = load_results(copy).query("seed == 0")
+    assert "mean ± std over 1 seed, smoothed" in learning_curves(one, "circle-3").get_suptitle()
 
 
 def test_plot_of_a_non_sweep_exits_2(tmp_path, capsys):
     assert main(["plot", str(tmp_path)]) == 2
     assert "holds no runs" in capsys.readouterr().err
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "config.json").write_text("{}")
     for command in (["plot"], ["runs"], ["collect", "--into", str(tmp_path / "c")]):
         assert main([*command[:1], str(tmp_path / "nothing"), *command[1:]]) == 2
         assert f"{tmp_path / 'nothing'} does not exist; give a directory written by" in (
+            capsys.readouterr().err
+        )
+        assert main([*command[:1], str(tmp_path / "run"), *command[1:]]) == 2
+        assert f"{tmp_path / 'run'} is a run, not a sweep or a collection" in (
             capsys.readouterr().err
         )
     assert main(["plot", str(tmp_path), "--formats", "gif"]) == 2

@@ -274,7 +274,7 @@ def test_trained_agent_preview_from_a_checkpoint(tmp_path):
         str(png),
     )
     assert out.returncode == 0, out.stderr
-    assert "policy=trained agent (run)" in out.stdout and "picture check: ok" in out.stdout
+    assert "policy=trained SILI, seed 0 (run)" in out.stdout and "picture check: ok" in out.stdout
     assert "frames=102" in out.stdout  # interactions counted from the preview's start
     out = sili("preview", "speaker-listener", "--checkpoint", str(run))
     assert out.returncode == 2 and "was trained on 'circle-3', not 'speaker-listener'" in out.stderr

@@ -175,7 +175,13 @@ def make_env_and_policy(
     except BaseException:
         env.close()
         raise
-    return name, stepped, pol, f"trained agent ({run_dir.name})"
+    from sili_robots.labels import METHOD_NAMES
+    from sili_robots.runs import read_config
+
+    cfg = read_config(run_dir)  # the title says what was trained, then where
+    given = "".join(f", {k}={v}" for k, v in cfg.env_kwargs.items())
+    method = METHOD_NAMES.get(cfg.method, cfg.method)
+    return name, stepped, pol, f"trained {method}, seed {cfg.seed}{given} ({run_dir.name})"
 
 
 def _policy_from_run() -> Callable:

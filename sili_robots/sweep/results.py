@@ -71,8 +71,14 @@ RESULTS_DIR_KIND = "give a directory written by `sili sweep --out` or `sili coll
 
 
 def check_exists(directory: Path) -> None:
+    """A results directory that can be read: it exists and is not a single run's."""
     if not Path(directory).exists():
         raise ConfigError(f"{directory} does not exist; {RESULTS_DIR_KIND}")
+    if (Path(directory) / CONFIG).is_file():
+        raise ConfigError(
+            f"{directory} is a run, not a sweep or a collection; give the folder that holds its "
+            f"runs/ (one run alone: sili eval {directory})"
+        )
 
 
 def runs_of(directory: Path) -> list[Path]:
