@@ -193,15 +193,19 @@ def check_argument_names(task: str, names: Iterable[str], options: str) -> None:
         )
 
 
-def check_task_builds(task: str, kwargs: dict[str, Any]) -> None:
+def check_task_builds(task: str, kwargs: dict[str, Any], options: str | None = None) -> None:
     """Construct (not reset: no simulation starts) ``task`` with ``kwargs``, so bad task input
     stops a command before any run starts."""
-    built_task(task, kwargs).close()
+    built_task(task, kwargs, options).close()
 
 
-def built_task(task: str, kwargs: dict[str, Any]) -> gym.Env:
+def built_task(task: str, kwargs: dict[str, Any], options: str | None = None) -> gym.Env:
     """``make_env(task, **kwargs)``, or ConfigError with the task's own message (whatever its
-    constructor raises: a bad value, a simulator missing here) instead of a traceback."""
+    constructor raises: a bad value, a simulator missing here) instead of a traceback; with
+    ``options`` (where the arguments were given) an argument the task does not take is named
+    first (``check_argument_names``)."""
+    if options is not None:
+        check_argument_names(task, kwargs, options)
     given = ", ".join(f"{k}={v!r}" for k, v in kwargs.items()) or "its default arguments"
     try:
         return make_env(task, **kwargs)

@@ -35,14 +35,6 @@ DAMAGED_SUMMARY = (
 COMPRESSED_METRICS = f"{METRICS}.gz"  # a run kept small (``sili collect``)
 
 
-def metrics_file(run_dir: Path) -> Path | None:
-    """A run's ``metrics.csv``, or the gzipped copy a results collection keeps (None: neither)."""
-    for path in (run_dir / METRICS, run_dir / COMPRESSED_METRICS):
-        if path.is_file():
-            return path
-    return None
-
-
 METRIC_COLUMNS = (
     "interaction",
     "task_reward",
@@ -59,6 +51,14 @@ METRIC_COLUMNS = (
     "wall_time",
     "filter_step",
 )
+
+
+def metrics_file(run_dir: Path) -> Path | None:
+    """A run's ``metrics.csv``, or the gzipped copy a results collection keeps (None: neither)."""
+    for path in (run_dir / METRICS, run_dir / COMPRESSED_METRICS):
+        if path.is_file():
+            return path
+    return None
 
 
 @dataclass

@@ -54,8 +54,10 @@ def _held(tail: pd.DataFrame, window: int) -> bool:
 def worked(run_dir: Path, window: int = 50) -> bool:
     """Held the opponent and earned more per interaction than standing still: a run can hold by
     parking away from the goal, which shows stability but not the method's trade-off."""
-    tail = _last(run_dir, window)
-    still = _references(read_config(run_dir)).get("still")
+    return _worked(_last(run_dir, window), _references(read_config(run_dir)).get("still"), window)
+
+
+def _worked(tail: pd.DataFrame, still: dict[str, float] | None, window: int) -> bool:
     beat_still = still is None or float(tail["task_reward"].mean()) > still["task_reward"]
     return _held(tail, window) and beat_still
 
@@ -122,7 +124,7 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
         reward = float(tail["task_reward"].mean())
         said = f"seed {seed} ({_stability(tail):.0%}, {reward:.1f} per interaction"
         said += f"; {len(tail)} interactions, too few to tell)" if len(tail) < window else ")"
-        judged.append((worked(run_dir, window), reward, said, run_dir))
+        judged.append((_worked(tail, still, window), reward, said, run_dir))
     good = [j for j in judged if j[0]]
     rule = f"held the opponent in {HOLDS:.0%} or more of its last {window} interactions"
     rule += (

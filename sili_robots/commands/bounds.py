@@ -127,7 +127,7 @@ def _task_arguments(args: argparse.Namespace, specs: list) -> dict:
     """``--controller`` and ``--env-kwarg`` for one task, checked by building it once; refused
     with ``--all`` (tasks take different arguments) and with ``--write`` when they build other
     dynamics than the version's default (a bounds file keeps each version at its defaults)."""
-    from sili_robots.build import check_argument_names, check_task_builds
+    from sili_robots.build import check_task_builds
     from sili_robots.tasks.registry import other_task_arguments
 
     env_kwargs = task_arguments_given(args)
@@ -136,13 +136,12 @@ def _task_arguments(args: argparse.Namespace, specs: list) -> dict:
     if args.all:
         raise ConfigError("--controller and --env-kwarg apply to one TASK, not to --all")
     (spec,) = specs
-    check_argument_names(spec.name, env_kwargs, "--controller, --env-kwarg")
+    check_task_builds(spec.name, env_kwargs, "--controller, --env-kwarg")
     if args.write and other_task_arguments(spec.gym_id, env_kwargs):
         raise ConfigError(
             "--write stores each task version at its default arguments; print the bounds with "
             "other ones without it"
         )
-    check_task_builds(spec.gym_id, env_kwargs)
     return env_kwargs
 
 

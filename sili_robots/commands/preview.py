@@ -75,10 +75,9 @@ def run(args: argparse.Namespace) -> int:
 
     env_kwargs = task_arguments_given(args)
     if env_kwargs:
-        from sili_robots.build import check_argument_names, check_task_builds
+        from sili_robots.build import check_task_builds
 
-        check_argument_names(args.task, env_kwargs, "--controller, --env-kwarg")
-        check_task_builds(args.task, env_kwargs)
+        check_task_builds(args.task, env_kwargs, "--controller, --env-kwarg")
     if args.out is not None:
         _check_output(writable_file(Path(args.out), "--out"), (".html", ".htm"), "--out")
     if args.png is not None:

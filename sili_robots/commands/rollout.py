@@ -6,7 +6,7 @@ import argparse
 
 import numpy as np
 
-from sili_robots.build import built_task, check_argument_names
+from sili_robots.build import built_task
 from sili_robots.commands.common import (
     add_task_args,
     positive_int,
@@ -36,8 +36,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     env_kwargs = task_arguments_given(args)
-    check_argument_names(args.task, env_kwargs, "--controller, --env-kwarg")
-    env = built_task(args.task, env_kwargs)
+    env = built_task(args.task, env_kwargs, "--controller, --env-kwarg")
     try:
         summary = run_interactions(
             env, scripted_policy(env, args.policy), args.interactions, seed=args.seed

@@ -256,7 +256,7 @@ def _resume_hint(run_dir: Path) -> Iterator[None]:
 
 def _check_env_builds(cfg: RunConfig) -> None:
     """Fail fast, with the task's own message, on bad task arguments (e.g. a controller)."""
-    from sili_robots.build import check_argument_names, check_task_builds
+    from sili_robots.build import check_task_builds
 
-    check_argument_names(cfg.task, cfg.env_kwargs, "--controller, --env-kwarg")
-    check_task_builds(cfg.task_id or cfg.task, cfg.env_kwargs)  # the version it trains
+    # a new run's task_id is its name's version, so the name builds the version it trains
+    check_task_builds(cfg.task, cfg.env_kwargs, "--controller, --env-kwarg")
