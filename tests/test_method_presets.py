@@ -41,6 +41,10 @@ def test_latent_option_is_refused_for_methods_without_a_latent():
     for method in ("sili", "lili", "stable"):  # the methods defined by a latent need one
         with pytest.raises(ConfigError, match=f"method '{method}' learns a latent .* 'none'"):
             method_config(method, latent="none")
+    with pytest.raises(ConfigError, match=r"method 'lili' learns a latent .* choose discrete"):
+        method_config("lili", latent="partial")  # asked for: refused, never swapped silently
+    assert method_config("lili", task_latent="partial").latent == "discrete"  # task's default
+    assert method_config("sili", task_latent="partial").latent == "partial"
 
 
 def test_paper_profile_writes_the_papers_values(tmp_path):

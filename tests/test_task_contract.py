@@ -3,9 +3,11 @@
 import gymnasium as gym
 import numpy as np
 import pytest
+from gymnasium import spaces
 from gymnasium.utils.env_checker import check_env
 
 from sili_robots.errors import ConfigError
+from sili_robots.examples.two_doors import TwoDoorsEnv
 from sili_robots.tasks import TASKS, make_task
 from sili_robots.tasks.circle import CircleEnv
 from sili_robots.wrappers import OracleObservation, StrategyFlag
@@ -121,6 +123,28 @@ def test_bad_arguments_are_named():
         env.step(np.zeros(3))
     with pytest.raises(ConfigError, match="finite"):
         env.step(np.array([np.nan, 0.0]))
+
+
+def test_an_action_space_other_than_minus_one_to_one_is_refused():
+    """Agents act through tanh in [-1, 1]: a task with other bounds would be mis-scaled."""
+
+    class Wide(TwoDoorsEnv):
+        def _make_action_space(self):
+            return spaces.Box(-2.0, 2.0, (1,), np.float32)
+
+    class Choices(TwoDoorsEnv):
+        def _make_action_space(self):
+            return spaces.Discrete(3)
+
+    with pytest.raises(
+        ConfigError, match=r"bounded by -1 and 1 .*got low \[-2.0\] and high \[2.0\]"
+    ):
+        Wide()
+    with pytest.raises(
+        ConfigError, match=r"must be a gymnasium Box in \[-1, 1\], got Discrete\(3\)"
+    ):
+        Choices()
+    assert TwoDoorsEnv().action_space == spaces.Box(-1.0, 1.0, (1,), np.float32)
 
 
 def test_vector_env_steps():

@@ -190,7 +190,8 @@ class LatentModel(nn.Module):
         return out.unflatten(-1, (self.latent_dim, self.out_dim))
 
     def decode(self, obs: torch.Tensor, act: torch.Tensor, z: torch.Tensor) -> torch.Tensor:
-        """Predicted [s' - s, r] from s, a and z (z broadcast over the time axis)."""
+        """Predicted [s' - s, r] from s, a and z (z broadcast over the time axis); a continuous
+        decoder's come standardised as in ``loss`` (filter_math.continuous_predictions: units)."""
         z = z.unsqueeze(-2).expand(*obs.shape[:-1], z.shape[-1])
         if self.kind == "discrete":
             return (z.unsqueeze(-1) * self._heads(obs, act)).sum(-2)

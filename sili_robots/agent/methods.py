@@ -114,12 +114,16 @@ def method_config(
             )
     if latent is not None:
         given["latent"] = latent
+    if method == "lili" and given.get("latent") == "partial":
+        raise ConfigError(
+            "method 'lili' learns a latent strategy, and 'partial' learns none (its flag only "
+            "feeds R_stable, which LILI's b = 0 never pays): choose discrete, continuous or true"
+        )
     fixed = PRESETS[method].fixed
     if "latent" not in fixed and "latent" not in given:
         kind = task_latent or "discrete"
-        given["latent"] = kind
-    if method == "lili" and given.get("latent") == "partial":
-        given["latent"] = "discrete"  # LILI always learns a latent; b = 0 leaves the flag unused
+        # LILI always learns a latent: on a task whose default is partial, the discrete one
+        given["latent"] = "discrete" if method == "lili" and kind == "partial" else kind
     if "latent" not in fixed and given.get("latent") == "none":
         raise ConfigError(
             f"method {method!r} learns a latent strategy (its policy and, with b > 0, its reward "

@@ -68,7 +68,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         self._started = False
         self._last_strategy_id: StrategyId | None = None
         self._changed_since_last_step = False
-        self.action_space = self._make_action_space()
+        self.action_space = _checked_action_space(self._make_action_space())
         base = self._base_observation_space()
         low, high = base.low.astype(np.float32), base.high.astype(np.float32)
         self.observation_space = spaces.Box(low, high)
@@ -76,7 +76,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     # ----------------------------------------------------------------- subclass hooks
     @abstractmethod
     def _make_action_space(self) -> spaces.Box:
-        """The ego's action space."""
+        """The ego's action space: a Box in [-1, 1] (scale it in ``_apply_action``)."""
 
     @abstractmethod
     def _base_observation_space(self) -> spaces.Box:
@@ -267,6 +267,23 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     def time_fraction(self) -> float:
         """Elapsed fraction of the interaction, part of every task's observation."""
         return self.t / self.horizon
+
+
+def _checked_action_space(space: Any) -> spaces.Box:
+    """``space`` if it is a Box in [-1, 1]: every agent acts through a tanh policy (and uniform
+    random actions) in [-1, 1], so other bounds would be silently mis-scaled or clipped."""
+    if not isinstance(space, spaces.Box):
+        raise ConfigError(
+            f"the action space must be a gymnasium Box in [-1, 1], got {space!r}: return "
+            f"spaces.Box(-1.0, 1.0, (n,), np.float32) from _make_action_space"
+        )
+    if not (np.all(space.low == -1.0) and np.all(space.high == 1.0)):
+        raise ConfigError(
+            f"the action space must be bounded by -1 and 1 (agents act through tanh), got low "
+            f"{space.low.tolist()} and high {space.high.tolist()}: return spaces.Box(-1.0, 1.0, "
+            f"{space.shape}, np.float32) and scale the action to your units in _apply_action"
+        )
+    return space
 
 
 def _copy(value: Any) -> Any:
