@@ -115,6 +115,7 @@ class SILI:
                 self, _remove_temporary, Path(run_dir), os.getpid()
             )
         self.run_dir, self._overwrite = Path(run_dir), overwrite
+        self._saved: set[Path] = set()  # where this model saved: replaced by a later save
         self._check_run_dir()
         self.cfg = cfg
         self._setup(None)
@@ -150,6 +151,7 @@ class SILI:
         state = require_checkpoint(path)
         model = cls.__new__(cls)
         model.cfg, model.run_dir, model._task_env, model._overwrite = cfg, path, env, False
+        model._saved = set()
         try:
             model._setup(state)
         except (RuntimeError, ValueError) as err:  # networks or stored interactions of a
@@ -197,21 +199,31 @@ class SILI:
             )
         return self.agent.act(obs, deterministic=deterministic)
 
-    def save(self, path: str | Path) -> Path:
-        """Copy the run (config, metrics, checkpoint, summary) to ``path``, replacing a run
-        saved there before, as stable-baselines3's ``save`` replaces its file."""
+    def save(self, path: str | Path, overwrite: bool = False) -> Path:
+        """Copy the run (config, metrics, checkpoint, summary) to ``path``: a new or empty
+        directory, or one this model saved to before (replaced, as stable-baselines3's ``save``
+        replaces its file); another run there is replaced only with ``overwrite``."""
         path = Path(path)
         self._check_trained("save")
         if path.exists() and not path.is_dir():
             raise ConfigError(f"cannot save to {path}: it is a file; give a directory")
-        _keep_temporary(path)
         if path.resolve() != self.run_dir.resolve():
+            replace = overwrite or path.resolve() in self._saved
+            check_new_run_dir(
+                path,
+                replace,
+                out="save a path",
+                replace="save(path, overwrite=True)",
+                resume=f"SILI.load({str(path)!r})",
+            )
+            if replace:  # nothing of the replaced run stays to mix with this one
+                clear_run(path)
             path.mkdir(parents=True, exist_ok=True)
             for name in (CONFIG, METRICS, CHECKPOINT, SUMMARY, COMPRESSED_METRICS):
                 if (self.run_dir / name).is_file():
                     shutil.copy2(self.run_dir / name, path / name)
-                else:  # nothing of the replaced run stays to mix with this one
-                    (path / name).unlink(missing_ok=True)
+        _keep_temporary(path)
+        self._saved.add(path.resolve())
         return path
 
     def evaluate(self, interactions: int = 100) -> dict[str, float]:

@@ -17,8 +17,9 @@ import signal
 import sys
 import threading
 from collections.abc import Iterator, Sequence
-from typing import NoReturn
+from typing import Any, NoReturn
 
+from sili_robots import __version__
 from sili_robots.errors import ConfigError
 
 #: sub-commands, in the order ``sili --help`` lists them
@@ -48,11 +49,24 @@ def _available_commands() -> list:
     return modules
 
 
+class UsageArgsFormatter(argparse.HelpFormatter):
+    """argparse's help, except that an option with ``usage_args`` shows them as its arguments
+    (``--beta-anneal START END LENGTH [DELAY]``, not argparse's repeated form of nargs="+")."""
+
+    def _format_args(self, action: argparse.Action, default_metavar: str) -> str:
+        usage = getattr(action, "usage_args", None)
+        return usage or super()._format_args(action, default_metavar)
+
+
 class OneLineErrorParser(argparse.ArgumentParser):
     """argparse with its errors on one line (its own prints the whole usage before them);
     sub-command parsers inherit the class."""
 
     commands: dict[str, argparse.ArgumentParser]  # the top-level parser's sub-command parsers
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("formatter_class", UsageArgsFormatter)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
@@ -62,6 +76,7 @@ def build_parser() -> OneLineErrorParser:
     parser = OneLineErrorParser(
         prog="sili", description="Stable Influencing of Latent Intent: train, evaluate, preview."
     )
+    parser.add_argument("--version", action="version", version=f"sili {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for module in _available_commands():
         module.add_parser(sub)

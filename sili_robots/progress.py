@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
 
 class TrainingProgress:
     """Thin wrapper so the training loop does not care whether a bar is shown (none when there
-    is nothing left to train: a finished run resumed)."""
+    is nothing left to train: a finished run resumed). On stderr: stdout carries results (the
+    JSON summary of ``sili train``), which a redirect must receive alone."""
 
     def __init__(self, total: int, completed: int, enabled: bool = True, label: str = "") -> None:
         self._progress = None
@@ -19,6 +21,7 @@ class TrainingProgress:
                 TextColumn("reward {task.fields[reward]:>8.2f}"),
                 TextColumn("stable {task.fields[stable]:.2f}"),
                 TimeRemainingColumn(),
+                console=Console(stderr=True),
             )
             self._task = self._progress.add_task(
                 label, total=total, completed=completed, reward=float("nan"), stable=float("nan")

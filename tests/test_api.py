@@ -186,15 +186,24 @@ def test_evaluate_plays_on_the_models_own_simulation_and_close_frees_it():
     assert not run_dir.exists()  # a temporary run goes with its model
 
 
-def test_save_replaces_a_run_and_refuses_a_file(tmp_path):
+def test_save_replaces_its_own_saves_and_another_run_only_with_overwrite(tmp_path):
     model = SILI("circle-3", method="sac", settings=FAST_AGENT).learn(1)
     target = tmp_path / "saved"
     target.mkdir()
     (target / "metrics.csv.gz").write_text("")  # of an earlier run
-    model.save(target)
+    with pytest.raises(ConfigError, match=r"holds a run's files .* save\(path, overwrite=True\)"):
+        model.save(target)
+    model.save(target, overwrite=True)
     saved = sorted(p.name for p in target.iterdir())
     assert saved == sorted(p.name for p in model.run_dir.iterdir())  # no metrics.csv.gz
-    assert SILI.load(target).cfg.interactions == 1
+    model.learn(1).save(target)  # its own earlier save: replaced, as stable-baselines3's
+    assert SILI.load(target).cfg.interactions == 2
+    other = SILI("circle-3", method="sac", seed=1, settings=FAST_AGENT).learn(1)
+    with pytest.raises(ConfigError, match=r"already holds a run; SILI.load\(.*\) continues it"):
+        other.save(target)  # another model's run is never replaced unasked
+    assert SILI.load(target).cfg.interactions == 2
+    other.save(target, overwrite=True)
+    assert SILI.load(target).cfg.seed == 1
     (tmp_path / "file").write_text("")
     with pytest.raises(ConfigError, match=r"cannot save to .*file: it is a file; give a directory"):
         model.save(tmp_path / "file")

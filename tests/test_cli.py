@@ -25,6 +25,15 @@ def test_rollout_prints_result():
     assert "unchanged: 1.000" in out.stdout
 
 
+def test_version_and_an_options_own_arguments_in_its_usage():
+    import sili_robots
+
+    assert sili_in_process("--version").stdout.strip() == f"sili {sili_robots.__version__}"
+    usage = sili_in_process("train", "--help").stdout
+    assert "--beta-anneal START END LENGTH [DELAY]\n" in usage  # one segment, not nargs' "..."
+    assert "[DELAY] [START" not in usage
+
+
 def test_unknown_task_exits_2_with_choices():
     out = _sili("rollout", "circle-4")
     assert out.returncode == 2

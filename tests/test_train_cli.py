@@ -167,6 +167,21 @@ def test_every_latent_kind_trains(tmp_path, latent):
         (["--task", "circle-3", "--beta-anneal", "2", "0", "10"], "outside the allowed range"),
         (["--task", "circle-3", "--beta-anneal", "0", "0.5"], "START END LENGTH [DELAY]"),
         (["--task", "circle-3", "--beta-anneal", "0", "0.5", "9", "-1"], "need an integer >= 0"),
+        (
+            [
+                "--task",
+                "circle-3",
+                "--beta-anneal",
+                "0",
+                "0.5",
+                "9",
+                "--beta-anneal",
+                "0",
+                "1",
+                "9",
+            ],
+            "--beta-anneal given 2 times; give it once",  # never only the last segment kept
+        ),
         (["--task", "circle-3", "--beta-schedule", "0:0,300:1.5"], "outside the allowed range"),
         (["--task", "circle-3", "--beta-schedule", "300:0.5,250:0"], "must increase"),
         (["--task", "circle-3", "--beta-schedule", "300"], "'300' is not INTERACTION:VALUE"),
@@ -489,6 +504,15 @@ def test_the_progress_bar_shows_only_while_there_is_training_left():
         assert bar.shown is shown
         bar.close()
     assert not TrainingProgress(5, 0, enabled=False).shown
+
+
+def test_the_progress_bar_goes_to_stderr_so_stdout_is_the_summary_alone(tmp_path):
+    done = _sili(
+        "train", "--task", "circle-3", "--interactions", 2, *FAST_ARGS, "--out", tmp_path / "r"
+    )
+    assert done.returncode == 0
+    assert json.loads(done.stdout)["interactions"] == 2  # a redirect gets parseable JSON
+    assert "circle-3 sili seed 0" in done.stderr and "2/2" in done.stderr
 
 
 def _doors_module(tmp_path, monkeypatch, module: str, subclass: str) -> None:

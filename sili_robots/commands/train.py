@@ -80,12 +80,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=unit_float,
         help="stability weight b in [0, 1], fixed (default: the method's schedule)",
     )
-    p.add_argument(
+    anneal = p.add_argument(
         "--beta-anneal",
         nargs="+",
-        metavar="START END LENGTH [DELAY]",
-        help="b = START for DELAY interactions (default 0), then linear to END over LENGTH",
+        action="append",  # given twice: refused (beta_anneal), not the last kept
+        help="b = START for DELAY interactions (default 0), then linear to END over LENGTH "
+        "(one segment; several: --beta-schedule)",
     )
+    anneal.usage_args = "START END LENGTH [DELAY]"  # type: ignore[attr-defined]
     add_schedule_args(p, scope="")
     p.add_argument("--controller", help=f"controller of a robot task ({CONTROLLERS_HELP})")
     add_override_args(p, scope="")
@@ -159,8 +161,14 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     )
 
 
-def beta_anneal(words: list[str]) -> Schedule:
-    """``--beta-anneal START END LENGTH [DELAY]`` as a schedule of b."""
+def beta_anneal(given: list[list[str]]) -> Schedule:
+    """``--beta-anneal START END LENGTH [DELAY]`` (given once) as a schedule of b."""
+    if len(given) > 1:
+        raise ConfigError(
+            f"--beta-anneal given {len(given)} times; give it once (START END LENGTH [DELAY]), "
+            "or several segments as --beta-schedule I:B,I:B,..."
+        )
+    (words,) = given
     if len(words) not in (3, 4):
         raise ConfigError(f"--beta-anneal takes START END LENGTH [DELAY], got {' '.join(words)}")
     start, end, length, *delay = words
