@@ -168,9 +168,13 @@ def read_bounds_file(path: Path = BOUNDS_FILE) -> dict[str, Any]:
     return data
 
 
-def write_bounds_file(results: list[dict[str, Any]], path: Path = BOUNDS_FILE) -> Path:
-    """Add (or replace) ``results`` in the bounds file, keyed by gymnasium id."""
+def write_bounds_file(
+    results: list[dict[str, Any]], path: Path = BOUNDS_FILE, command: str = WRITE_COMMAND
+) -> Path:
+    """Add (or replace) ``results`` in the bounds file, keyed by gymnasium id; ``command``: the
+    last command that wrote it."""
     data = read_bounds_file(path)
+    data["command"] = command
     for result in results:
         data["tasks"][result["task_id"]] = result
     data["tasks"] = dict(sorted(data["tasks"].items()))

@@ -53,6 +53,14 @@ METRIC_COLUMNS = (
 )
 
 
+def kept_fraction(rows: Any) -> float | None:
+    """True stability of metrics ``rows``: the fraction of interactions whose true strategy
+    stayed, the game's first (interaction 0) left out, as ``sili bounds`` counts: it has no
+    strategy before it to keep. None when no row is left."""
+    changed = rows.loc[rows["interaction"] > 0, "strategy_changed"]
+    return 1.0 - float(changed.mean()) if len(changed) else None
+
+
 def metrics_file(run_dir: Path) -> Path | None:
     """A run's ``metrics.csv``, or the gzipped copy a results collection keeps (None: neither)."""
     for path in (run_dir / METRICS, run_dir / COMPRESSED_METRICS):
@@ -128,16 +136,23 @@ def recorded_task_id(run: dict[str, Any]) -> str | None:
         return None
 
 
+#: the simulators and solvers behind the tasks' dynamics (recorded where installed)
+SIMULATOR_PACKAGES = ("mujoco", "robosuite", "mink", "qpsolvers", "daqp", "libsumo")
+
+
 def versions(threads: int = 1) -> dict[str, str]:
     """The software and the processor a run used: seeded runs repeat exactly only on the same
-    kernels, which torch picks by CPU, instruction-set cap and thread count (``machine``)."""
+    kernels, which torch picks by CPU, instruction-set cap and thread count (``machine``), and
+    the same simulators."""
+    from importlib.metadata import PackageNotFoundError, version
+
     import gymnasium
     import numpy
 
     import sili_robots
     from sili_robots.agent.matmul import machine_key
 
-    return {
+    found = {
         "machine": machine_key(threads),
         "sili_robots": sili_robots.__version__,
         "torch": torch.__version__,
@@ -145,6 +160,10 @@ def versions(threads: int = 1) -> dict[str, str]:
         "gymnasium": gymnasium.__version__,
         "python": platform.python_version(),
     }
+    for name in SIMULATOR_PACKAGES:
+        with contextlib.suppress(PackageNotFoundError):
+            found[name] = version(name)
+    return found
 
 
 #: written by a failed sweep run (the traceback or how its worker died); removed when it succeeds

@@ -24,6 +24,7 @@ from sili_robots.runs import (
     RunConfig,
     check_history,
     check_resumable,
+    kept_fraction,
     load_checkpoint,
     read_config,
     save_checkpoint,
@@ -91,7 +92,7 @@ def train(
                     info,
                 )
                 losses = agent.update(j, rl=j + 1 >= cfg.agent.sac.random_interactions)
-                recent.append((played.task_reward, played.strategy_changed))
+                recent.append((played.task_reward, played.strategy_changed if j else None))
                 metrics.write(
                     {
                         "interaction": j,
@@ -107,7 +108,8 @@ def train(
                         **losses,
                     }
                 )
-                bar.advance(np.mean([r for r, _ in recent]), 1 - np.mean([c for _, c in recent]))
+                kept = [not c for _, c in recent if c is not None]  # 0 has nothing to keep
+                bar.advance(np.mean([r for r, _ in recent]), np.mean(kept) if kept else np.nan)
                 done = j + 1
                 stopping = stop.requested  # read once: a stop after this acts at the next end
                 if done % cfg.checkpoint_every == 0 or done == cfg.interactions or stopping:
@@ -140,7 +142,7 @@ def write_summary(run_dir: Path, window: int = 100) -> dict[str, Any]:
     summary = {
         "interactions": len(df),
         "final_task_reward": float(tail["task_reward"].mean()),
-        "final_stability": float(1.0 - tail["strategy_changed"].mean()),
+        "final_stability": kept_fraction(tail),
         "window": len(tail),  # the interactions averaged: fewer in a short run
         "wall_time_s": float(df["wall_time"].iloc[-1]) if len(df) else 0.0,
         **latent_diagnostics(df, window),

@@ -4,13 +4,21 @@ to what standing still and the scripted references earn on the same task version
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
 from sili_robots.bounds import stored_bounds
 from sili_robots.errors import ConfigError
 from sili_robots.labels import METHOD_NAMES
-from sili_robots.runs import METRICS, RunConfig, differences, metrics_file, read_config
+from sili_robots.runs import (
+    METRICS,
+    RunConfig,
+    differences,
+    kept_fraction,
+    metrics_file,
+    read_config,
+)
 from sili_robots.tasks.registry import other_task_arguments
 
 HOLDS = 0.9  # the stability a run needs to count as holding the opponent
@@ -31,10 +39,6 @@ def _last(run_dir: Path, window: int) -> pd.DataFrame:
 NO_REFERENCE = "no references are stored for this task and its arguments: reward not judged"
 
 
-def _stability(tail: pd.DataFrame) -> float:
-    return 1.0 - float(tail["strategy_changed"].mean())
-
-
 def _references(cfg: RunConfig) -> dict[str, dict[str, float]]:
     """The scripted references of the run's task version, stored for its default arguments
     (none for a run given others, e.g. another controller; the default ones named are fine)."""
@@ -48,7 +52,8 @@ def held(run_dir: Path, window: int = 50) -> bool:
 
 
 def _held(tail: pd.DataFrame, window: int) -> bool:
-    return len(tail) == window and _stability(tail) >= HOLDS
+    stability = kept_fraction(tail)
+    return len(tail) == window and stability is not None and stability >= HOLDS
 
 
 def worked(run_dir: Path, window: int = 50) -> bool:
@@ -68,19 +73,20 @@ def verdict(run_dir: Path, window: int = 50) -> str:
     stabilizing policy that sees z: -4.0)"."""
     cfg = read_config(run_dir)
     tail = _last(run_dir, window)
-    stability = _stability(tail)
+    stability = kept_fraction(tail)
     reward = float(tail["task_reward"].mean())
     bounds = _references(cfg)
     still, stab = bounds.get("still"), bounds.get("stabilizing")
     name = METHOD_NAMES.get(cfg.method, cfg.method)
-    kept = f"kept its strategy in {stability:.0%} of its last {len(tail)} interactions"
-    if len(tail) < window:  # its first interactions say little: z^1 is kept by any policy
+    if len(tail) < window or stability is None:  # its first interactions say little
         line = f"{name} ran {len(tail)} interactions, too few to tell whether it holds the opponent"
-        line += f" (the verdict reads the last {window}): the opponent kept its strategy in "
-        line += f"{stability:.0%} of them"
-        if still:
-            line += f" (standing still: {still['stability']:.0%})"
+        line += f" (the verdict reads the last {window})"
+        if stability is not None:  # the game's first interaction has no strategy to keep
+            line += f": the opponent kept its strategy in {stability:.0%} of those after the first"
+            if still:
+                line += f" (standing still: {still['stability']:.0%})"
     else:
+        kept = f"kept its strategy in {stability:.0%} of its last {len(tail)} interactions"
         if stability < HOLDS:
             kept += f", {HOLDS:.0%} needed"
         if still:
@@ -110,8 +116,10 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
     for other, run_dir in configs[1:]:
         differ = _settings_that_differ(cfg, other)
         if differ:
+            named = [f"{k} ({a!r} vs {b!r})" for k, a, b in differ[:4]]
+            more = f" and {len(differ) - 4} more" if len(differ) > 4 else ""
             raise ConfigError(
-                f"{run_dir} is not another seed of {runs[0][1]}: {', '.join(differ[:4])} differ "
+                f"{run_dir} is not another seed of {runs[0][1]}: {', '.join(named)}{more} differ "
                 "(runs judged together differ only in the seed)"
             )
     seeds = [seed for seed, _ in runs]
@@ -122,7 +130,9 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
     for seed, run_dir in runs:
         tail = _last(run_dir, window)
         reward = float(tail["task_reward"].mean())
-        said = f"seed {seed} ({_stability(tail):.0%}, {reward:.1f} per interaction"
+        stability = kept_fraction(tail)
+        said = f"seed {seed} ({'-' if stability is None else f'{stability:.0%}'}, "
+        said += f"{reward:.1f} per interaction"
         said += f"; {len(tail)} interactions, too few to tell)" if len(tail) < window else ")"
         judged.append((_worked(tail, still, window), reward, said, run_dir))
     good = [j for j in judged if j[0]]
@@ -145,11 +155,12 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
 NONE_WORKED = 3
 
 
-def _settings_that_differ(a: RunConfig, b: RunConfig) -> list[str]:
-    """Dotted names of the settings two runs differ in, other than those that leave what they
-    learn alike."""
+def _settings_that_differ(a: RunConfig, b: RunConfig) -> list[tuple[str, Any, Any]]:
+    """(dotted name, value in ``a``, in ``b``) of the settings two runs differ in, other than
+    those that leave what they learn alike; the top-level ones (task, method) first."""
     ignored = {"seed", "threads", "checkpoint_every"}  # none changes what a run learns
-    return [k for k, _, _ in differences(a.to_dict(), b.to_dict()) if k not in ignored]
+    found = [d for d in differences(a.to_dict(), b.to_dict()) if d[0] not in ignored]
+    return sorted(found, key=lambda d: d[0].count("."))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -24,6 +24,7 @@ def test_json_output_has_the_four_bounds_and_matches_the_policies(capsys):
     assert main(["bounds", "circle-3", "--interactions", "6", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["task"] == "circle-3" and out["task_id"] == "sili/Circle3-v1"
+    assert (out["interactions"], out["seed"]) == (6, 0) and out["games"] >= 1  # self-describing
     bounds = out["bounds"]
     assert set(REQUIRED) <= set(bounds) and set(bounds) <= {*REQUIRED, "blind", "tracking"}
     for b in bounds.values():
@@ -114,6 +115,7 @@ def test_write_adds_to_a_bounds_file(tmp_path, capsys):
     assert main(["bounds", "sili/Circle3-v0", "--interactions", "4", "--write", str(path)]) == 0
     data = json.loads(path.read_text())
     assert set(data["tasks"]) == {"sili/Circle3-v0", "sili/Circle3-v1"}
+    assert data["command"] == f"sili bounds circle-3-v0 --interactions 4 --write {path}"
     assert f"wrote {path}" in capsys.readouterr().out
     assert BOUNDS_FILE.is_file()
     packaged = BOUNDS_FILE.read_bytes()

@@ -30,11 +30,11 @@ def sweep_dir(tmp_path_factory):
 
 
 def _moving_average(x: np.ndarray, w: int) -> np.ndarray:
-    """Trailing mean over the last w values (fewer at the start), written independently."""
-    c = np.cumsum(np.insert(x.astype(float), 0, 0.0))
-    idx = np.arange(1, len(x) + 1)
-    lo = np.maximum(idx - w, 0)
-    return (c[idx] - c[lo]) / (idx - lo)
+    """Trailing mean over the last w values that are there (fewer at the start; NaN where none
+    is), written independently."""
+    x = x.astype(float)
+    out = [x[max(i - w + 1, 0) : i + 1] for i in range(len(x))]
+    return np.array([np.nanmean(v) if np.isfinite(v).any() else np.nan for v in out])
 
 
 def _expected_curve(table, task, method, beta, column, w):
@@ -66,7 +66,8 @@ def _band(ax, line):
 
 def test_learning_curves_plot_the_table_mean_and_std_across_seeds(sweep_dir):
     table = pd.read_csv(sweep_dir / "results.csv")
-    table["stable"] = 1 - table["strategy_changed"]  # true stability, derived here independently
+    # true stability, derived here independently: none for the game's first interaction
+    table["stable"] = (1 - table["strategy_changed"]).where(table["interaction"] > 0)
     fig = learning_curves(load_results(sweep_dir), "circle-3", smooth=3)
     axes = {ax.get_gid(): ax for ax in fig.axes}
     assert set(axes) == {"task_reward", "true_stability", "stability_reward"}
@@ -79,13 +80,14 @@ def test_learning_curves_plot_the_table_mean_and_std_across_seeds(sweep_dir):
             mean, std = _expected_curve(table, "circle-3", method, beta, column, 3)
             line = _line(ax, label)
             xy = line.get_xydata()
-            np.testing.assert_array_equal(xy[:, 0], np.arange(8))
-            np.testing.assert_allclose(xy[:, 1], mean, rtol=1e-9, atol=1e-12)
+            first = 1 if metric == "true_stability" else 0  # interaction 0 kept nothing
+            np.testing.assert_array_equal(xy[:, 0], np.arange(first, 8))
+            np.testing.assert_allclose(xy[:, 1], mean[first:], rtol=1e-9, atol=1e-12)
             # the band of this variant spans mean - std .. mean + std at every interaction,
             # clipped to [0, 1] for true stability, a fraction
             low, high = (0.0, 1.0) if metric == "true_stability" else (-np.inf, np.inf)
             verts = np.concatenate([p.vertices for p in _band(ax, line).get_paths()])
-            for x in range(8):
+            for x in range(first, 8):
                 at_x = verts[np.isclose(verts[:, 0], x), 1]
                 assert at_x.min() == pytest.approx(max(mean[x] - std[x], low), abs=1e-9)
                 assert at_x.max() == pytest.approx(min(mean[x] + std[x], high), abs=1e-9)

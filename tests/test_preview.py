@@ -53,6 +53,8 @@ def test_recording_has_every_step_of_every_interaction():
     env.close()
     recorded = np.array([f["ego"] for f in rec.frames if f["t"] > 0])
     np.testing.assert_allclose(recorded, np.array(seen), atol=1e-6)
+    # the stabilizing policy steps out past v1's 1.1: outside by the version's rule
+    assert "ended outside the circle → opponent stays" in prev.scene.caption(rec, rec.horizon)
 
 
 def test_html_is_self_contained_and_animates_the_recorded_rollout():
@@ -163,7 +165,9 @@ def test_cli_rejects_bad_input_with_exit_2(tmp_path, capsys):
         "horizon=9",
     ]
     assert main(mine) == 2
-    assert "a trained run is previewed on its own task arguments" in capsys.readouterr().err
+    assert "previewed on its own task arguments (its config.json's), got horizon=9: drop" in (
+        capsys.readouterr().err
+    )
 
 
 def test_a_scripted_preview_plays_the_controller_asked_for():

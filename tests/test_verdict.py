@@ -23,11 +23,13 @@ def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys
         "SILI ran 4 interactions, too few to tell whether it holds the opponent (the verdict "
         "reads the last 50): the opponent kept its strategy in "
     )
-    assert "of them (standing still: 0%) and earned" in last and "standing still: -50.0" in last
+    assert "of those after the first (standing still: 0%) and earned" in last
+    assert "standing still: -50.0" in last
     assert "the scripted stabilizing policy that sees z: -4.0" in last
     metrics = pd.read_csv(run / "metrics.csv")
     metrics["strategy_changed"] = 0
     metrics["task_reward"] = -7.25
+    metrics["interaction"] += 10  # as the last 4 of a longer game: each one counts
     metrics.to_csv(run / "metrics.csv", index=False)
     assert not held(run) and not worked(run)  # 4 kept of the 50 a verdict reads
     line = verdict(run, window=4)
@@ -44,6 +46,28 @@ def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys
     metrics["task_reward"] = -55.3  # held by parking away from the goal: below standing still
     metrics.to_csv(run / "metrics.csv", index=False)
     assert held(run, window=3) and not worked(run, window=3)
+
+
+def test_true_stability_leaves_out_the_games_first_interaction_everywhere(tmp_path):
+    """Interaction 0 has no strategy before it to keep: counted as kept, a 3-interaction run
+    that lost the opponent once would report 67% where ``sili bounds`` counts 50%."""
+    from sili_robots.runs import kept_fraction
+    from sili_robots.sweep.results import results_table
+    from sili_robots.training import write_summary
+
+    run = tmp_path / "sweep" / "runs" / "r"
+    args = ["train", "--task", "circle-3", "--interactions", "3", "--out", str(run)]
+    assert main([*args, *FAST_ARGS, "--no-progress"]) == 0
+    metrics = pd.read_csv(run / "metrics.csv").assign(strategy_changed=[0, 1, 0])
+    metrics.to_csv(run / "metrics.csv", index=False)
+    assert write_summary(run)["final_stability"] == 0.5
+    assert kept_fraction(metrics.head(1)) is None  # nothing to judge
+    assert "3 interactions, too few to tell" in verdict(run) and "50% of those after" in verdict(
+        run
+    )
+    table = results_table(tmp_path / "sweep")
+    assert table["true_stability"].isna().tolist() == [True, False, False]  # plots start at 1
+    assert table["true_stability"].iloc[1:].tolist() == [0.0, 1.0]
 
 
 def test_a_run_with_other_task_arguments_is_not_read_against_the_defaults_references(
@@ -121,7 +145,15 @@ def test_the_line_across_seeds_counts_the_runs_that_worked_and_picks_the_best(tm
     capsys.readouterr()
     assert verdict_main([str(lost), str(other)]) == 2  # another variant (of the same seed)
     err = capsys.readouterr().err
-    assert "is not another seed of" in err and "method" in err and "differ only in the seed" in err
+    assert "is not another seed of" in err and "differ only in the seed" in err
+    assert "interactions (" in err and ", method ('sili' vs 'lili')" in err  # top-level first
+    driving = tmp_path / "driving"
+    args = ["train", "--task", "driving", "--method", "sac", "--interactions", "1"]
+    assert main([*args, "--out", str(driving), *FAST_ARGS, "--no-progress"]) == 0
+    capsys.readouterr()
+    assert verdict_main([str(lost), str(driving)]) == 2
+    err = capsys.readouterr().err
+    assert "task ('circle-3' vs 'driving')" in err and " more differ (runs judged" in err
     assert verdict_main([str(lost), str(lost)]) == 2  # the same run twice is not two seeds
     assert "seeds [0, 0]: runs judged together are one run per seed" in capsys.readouterr().err
     assert verdict_main([]) == 2  # no traceback, and not "none worked"

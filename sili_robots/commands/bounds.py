@@ -114,13 +114,31 @@ def run(args: argparse.Namespace) -> int:
         result = compute_bounds(spec.gym_id, args.interactions, args.seed, args.games, env_kwargs)
         results.append(result)
         if args.json:
-            keys = ("task", "task_id", "task_args", "bounds")
+            keys = ("task", "task_id", "task_args", "interactions", "games", "seed", "bounds")
             print(json.dumps({k: result[k] for k in keys if k in result}))
         else:
             print(format_table(result), flush=True)
     if args.write:
-        print(f"wrote {write_bounds_file(results, Path(args.write))}")
+        print(f"wrote {write_bounds_file(results, Path(args.write), _command(args))}")
     return 0
+
+
+def _command(args: argparse.Namespace) -> str:
+    """The command that wrote a bounds file, as its record (each task's counts are also in its
+    entry); the packaged file's, at the default counts, is ``WRITE_COMMAND``."""
+    import shlex
+
+    from sili_robots.bounds import BOUNDS_FILE, DEFAULT_SEED, WRITE_COMMAND
+
+    if Path(args.write).resolve() == BOUNDS_FILE:
+        return WRITE_COMMAND
+    words = ["sili", "bounds", "--all" if args.all else args.task]
+    for option, value in (("interactions", args.interactions), ("games", args.games)):
+        if value is not None:
+            words += [f"--{option}", str(value)]
+    if args.seed != DEFAULT_SEED:
+        words += ["--seed", str(args.seed)]
+    return shlex.join([*words, "--write", str(args.write)])
 
 
 def _task_arguments(args: argparse.Namespace, specs: list) -> dict:

@@ -202,12 +202,13 @@ def parse_settings(items: list[str]) -> dict[str, Any]:
     """``--set KEY=VALUE`` pairs: JSON values, ``I:V,I:V`` as a schedule, else a string."""
     out = parse_env_kwargs(items, "--set")
     for key, value in out.items():
-        if isinstance(value, str) and SCHEDULE_TEXT.fullmatch(value):
-            out[key] = parse_schedule(value, f"--set {key}")
+        if isinstance(value, str) and SCHEDULE_START.match(value):
+            out[key] = parse_schedule(value, f"--set {key}")  # a bad point named
     return out
 
 
-SCHEDULE_TEXT = re.compile(r"\s*\d+\s*:[^,]+(,\s*\d+\s*:[^,]+)*")
+#: a value that starts as a schedule (``I:V``) is read as one
+SCHEDULE_START = re.compile(r"\s*\d+\s*:")
 
 
 def task_name(text: str) -> str:

@@ -32,7 +32,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=100,
         help="final values (b sweep) = mean over each run's last WINDOW interactions (default 100)",
     )
-    p.add_argument("--formats", default="png,pdf", help=f"comma-separated, of {', '.join(FORMATS)}")
+    p.add_argument(
+        "--formats",
+        default="png,pdf",
+        help=f"comma-separated, of {', '.join(FORMATS)} (default png,pdf)",
+    )
     p.add_argument(
         "--include-unfinished", action="store_true", help="also plot runs that have not finished"
     )

@@ -74,7 +74,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=1000,
         help="interactions per run (default 1000); with --resume, extend every run to this many",
     )
-    p.add_argument("--checkpoint-every", type=positive_int, default=50)
+    p.add_argument(
+        "--checkpoint-every",
+        type=positive_int,
+        default=50,
+        help="interactions between each run's checkpoints, where --resume continues (default 50)",
+    )
     add_override_args(p, scope=" for every run")
     p.add_argument("--out", type=path_arg, help="sweep directory (created, or continued)")
     p.add_argument(

@@ -138,7 +138,11 @@ def make_env_and_policy(
 
     name = task_spec(task).name
     if checkpoint is not None and env_kwargs:
-        raise ConfigError("a trained run is previewed on its own task arguments; give none")
+        given = ", ".join(f"{k}={v!r}" for k, v in env_kwargs.items())
+        raise ConfigError(
+            f"a trained run is previewed on its own task arguments (its config.json's), got "
+            f"{given}: drop them, or preview a scripted policy on them"
+        )
     if checkpoint is None:
         check_choice("preview policy", policy, POLICIES)
         env = make_task(name, **(env_kwargs or {}))

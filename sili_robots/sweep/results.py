@@ -4,8 +4,8 @@
   ``task_id`` (the task version, a gymnasium id), ``method``, ``profile``, ``latent``, ``seed``,
   ``controller`` (named or the task's default), ``task_args`` (the task arguments other than
   its version's defaults, as JSON; "" for none), ``config_beta`` (a schedule's last b),
-  ``beta_scheduled``) + every ``metrics.csv`` column + ``true_stability`` (1 - strategy_changed)
-  + ``finished``.
+  ``beta_scheduled``) + every ``metrics.csv`` column + ``true_stability`` (1 -
+  strategy_changed; empty for interaction 0, which has no strategy before it) + ``finished``.
 - ``runs.csv``: one row per run: status (done / failed / incomplete / not started), interactions
   logged, final task reward and true stability, wall time, error.
 """
@@ -139,7 +139,8 @@ def results_table(sweep_dir: Path) -> pd.DataFrame:
         ident, _ = _identity(run_dir)
         for key, value in ident.items():
             df[key] = value
-        df["true_stability"] = 1.0 - df["strategy_changed"]
+        # the game's first interaction has no strategy before it to keep (runs.kept_fraction)
+        df["true_stability"] = (1.0 - df["strategy_changed"]).where(df["interaction"] > 0)
         df["finished"] = (run_dir / SUMMARY).is_file()
         frames.append(df)
     if not frames:

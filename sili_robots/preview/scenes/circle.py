@@ -192,7 +192,7 @@ class CircleScene(TaskScene):
         tail = f"return so far {fr['interaction_return']:.2f}"
         if t == h:
             nxt = rec.frames[frame + 1] if frame + 1 < len(rec) else None
-            side = "inside" if fr["inside"] else "on/outside"
+            side = "inside" if fr["inside"] else "outside"  # by the version's rule (v1: >= 1.1)
             if nxt is None:
                 moved = ""
             elif np.allclose(nxt["opponent"], fr["opponent"]):
