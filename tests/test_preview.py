@@ -55,6 +55,9 @@ def test_recording_has_every_step_of_every_interaction():
     np.testing.assert_allclose(recorded, np.array(seen), atol=1e-6)
     # the stabilizing policy steps out past v1's 1.1: outside by the version's rule
     assert "ended outside the circle → opponent stays" in prev.scene.caption(rec, rec.horizon)
+    assert prev.scene.title(rec) == "circle-3 · scripted stabilizing · 2 interactions, H = 50"
+    one = _record("circle-3", interactions=1)
+    assert one.scene.title(one.recording).endswith("· 1 interaction, H = 50")
 
 
 def test_html_is_self_contained_and_animates_the_recorded_rollout():

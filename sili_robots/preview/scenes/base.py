@@ -98,7 +98,8 @@ class TaskScene(ABC):
         return np.zeros(3)
 
     def title(self, rec: Recording) -> str:
-        return f"{rec.task} · {rec.policy} · {rec.interactions} interaction(s), H = {rec.horizon}"
+        n, s = rec.interactions, "s" if rec.interactions > 1 else ""
+        return f"{rec.task} · {rec.policy} · {n} interaction{s}, H = {rec.horizon}"
 
 
 # ---------------------------------------------------------------------- animation helpers
