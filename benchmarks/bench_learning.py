@@ -33,6 +33,7 @@ import pandas as pd
 
 from sili_robots.diagnostics import latent_diagnostics
 from sili_robots.migrations import migrate_run
+from sili_robots.runs import kept_fraction
 from sili_robots.sweep.results import metrics_file
 
 MARKS = {True: "MET    ", False: "NOT MET", None: "N/A    "}
@@ -65,7 +66,8 @@ def run_one(task: str, method: str, seed: int, args: argparse.Namespace) -> Path
 
 
 def first_stable(df: pd.DataFrame, window: int, level: float = 0.9) -> float:
-    stable = 1.0 - df["strategy_changed"].rolling(window).mean()
+    kept = (1.0 - df["strategy_changed"]).where(df["interaction"] > 0)  # 0 keeps nothing
+    stable = kept.rolling(window).mean()
     hit = np.flatnonzero(stable.to_numpy() >= level)
     return float(df["interaction"].iloc[hit[0]]) if hit.size else float("nan")
 
@@ -106,7 +108,7 @@ def table(run_dirs: list[Path], window: int) -> pd.DataFrame:
                 "seed": cfg["seed"],
                 "interactions": len(df),
                 "final_task_reward": df["task_reward"].tail(window).mean(),
-                "final_stability": 1.0 - df["strategy_changed"].tail(window).mean(),
+                "final_stability": kept_fraction(df.tail(window)),
                 "first_stable_0.9": first_stable(df, window),
                 "latent_purity": latent_diagnostics(df, window).get("latent_purity", float("nan")),
                 "wall_min": summary["wall_time_s"] / 60,

@@ -67,6 +67,7 @@ from sili_robots.agent.latent import transitions
 from sili_robots.diagnostics import change_masks, foresight_by_exit
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import load_trained
+from sili_robots.runs import kept_fraction
 from sili_robots.tasks.circle import ARENA, STEP, CircleEnv
 
 PHASE_STEPS = 10
@@ -289,7 +290,7 @@ def overview(
 ) -> None:
     """The location-free part of the breakdown (Circle (Continuous) has no fixed locations)."""
     ended = final_radii(agent)[-window:]
-    stability = 1 - metrics["strategy_changed"].tail(window).mean()
+    stability = kept_fraction(metrics.tail(window))
     print(
         f"{run.name}: distance summed: total {d['total']:.2f} = approach {d['approach']:.2f}"
         f" + middle {d['middle']:.2f} + exit {d['exit']:.2f}; alpha {agent.sac.alpha:.4f}; "

@@ -34,6 +34,7 @@ from sili_robots.agent.agent import SILIAgent
 from sili_robots.diagnostics import category_strategies
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import load_trained
+from sili_robots.runs import kept_fraction
 from sili_robots.tasks.driving import DrivingEnv
 
 LANES = {0.0: "right", 1.0: "centre", 2.0: "left"}
@@ -77,7 +78,7 @@ def breakdown(run: Path, window: int) -> None:
     cats = m["latent_category"].value_counts().to_dict()
     print(
         f"{run.name}: last {window}: collisions {hit.mean():.2f}, true stability "
-        f"{1 - m['strategy_changed'].mean():.2f}, alpha {m['alpha'].iloc[-1]:.4f}\n"
+        f"{kept_fraction(m):.2f}, alpha {m['alpha'].iloc[-1]:.4f}\n"
         f"  collision decision steps {steps}; latent categories {cats}, changed in "
         f"{m['latent_changed'].mean():.2f}"
     )
@@ -96,7 +97,7 @@ def phases(run: Path, size: int) -> pd.DataFrame:
             "left at red line": _side(agent.buffer.obs[:n, RED_LINE_STEP, 1]) == "left",
             "opponent merged right": m["strategy_id"].map(LANES).to_numpy() == "right",
             "collisions": (agent.buffer.rew[:n] < 0).any(axis=1),
-            "true stability": 1.0 - m["strategy_changed"].to_numpy(),
+            "true stability": (1.0 - m["strategy_changed"]).where(m["interaction"] > 0).to_numpy(),
             "alpha": m["alpha"].to_numpy(),
             "b": m["beta"].to_numpy(),
         }

@@ -60,7 +60,7 @@ def trajectories(agent: SILIAgent, task: SawyerReachEnv, m: pd.DataFrame) -> pd.
             "interaction": np.arange(n),
             "goal": goal,
             "above plane": ee[:, -1, 2] > task.plane_z,
-            "stable": 1 - m["strategy_changed"].to_numpy(),
+            "stable": (1 - m["strategy_changed"]).where(m["interaction"] > 0).to_numpy(),
             "to true goal": closest[np.arange(n), goal],
             "to any goal": closest.min(axis=1),
             "went for true": closest.argmin(axis=1) == goal,

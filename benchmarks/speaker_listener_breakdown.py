@@ -51,7 +51,9 @@ def main() -> None:
     torch.set_num_threads(1)
     for run in args.runs:
         visited, m, task, cfg = visits(run)
-        m = m.iloc[: len(visited)].assign(visited=visited, stable=1 - m["strategy_changed"])
+        m = m.iloc[: len(visited)].assign(
+            visited=visited, stable=(1 - m["strategy_changed"]).where(m["interaction"] > 0)
+        )
         print(f"{run.name} ({cfg.task_id}, speaker at {tuple(task.speaker)}):")
         print("  interactions   visited  true stability  reward visited / not  alpha  b")
         for start, g in m.groupby(m["interaction"] // args.block * args.block):

@@ -115,7 +115,7 @@ class SILI:
                 self, _remove_temporary, Path(run_dir), os.getpid()
             )
         self.run_dir, self._overwrite = Path(run_dir), overwrite
-        self._saved: set[Path] = set()  # where this model saved: replaced by a later save
+        self._saved: dict[Path, tuple] = {}  # where this model saved, and what it left there
         self._check_run_dir()
         self.cfg = cfg
         self._setup(None)
@@ -151,7 +151,7 @@ class SILI:
         state = require_checkpoint(path)
         model = cls.__new__(cls)
         model.cfg, model.run_dir, model._task_env, model._overwrite = cfg, path, env, False
-        model._saved = set()
+        model._saved = {}
         try:
             model._setup(state)
         except (RuntimeError, ValueError) as err:  # networks or stored interactions of a
@@ -208,7 +208,8 @@ class SILI:
         if path.exists() and not path.is_dir():
             raise ConfigError(f"cannot save to {path}: it is a file; give a directory")
         if path.resolve() != self.run_dir.resolve():
-            replace = overwrite or path.resolve() in self._saved
+            # its own earlier save, as it left it (not since replaced or trained on by another)
+            replace = overwrite or self._saved.get(path.resolve()) == _stamp(path)
             check_new_run_dir(
                 path,
                 replace,
@@ -223,7 +224,7 @@ class SILI:
                 if (self.run_dir / name).is_file():
                     shutil.copy2(self.run_dir / name, path / name)
         _keep_temporary(path)
-        self._saved.add(path.resolve())
+        self._saved[path.resolve()] = _stamp(path)
         return path
 
     def evaluate(self, interactions: int = 100) -> dict[str, float]:
@@ -267,6 +268,13 @@ def _keep_temporary(path: Path) -> None:
     finalizer = _TEMPORARY.pop(Path(path).resolve(), None)
     if finalizer is not None:
         finalizer.detach()
+
+
+def _stamp(run_dir: Path) -> tuple:
+    """What identifies the files a save left in ``run_dir``: any rewrite changes an inode or a
+    change time (which, unlike a modification time, a copy cannot carry over)."""
+    stats = [(run_dir / name).stat() for name in (CONFIG, CHECKPOINT) if (run_dir / name).exists()]
+    return tuple((s.st_ino, s.st_ctime_ns) for s in stats)
 
 
 def _check_count(interactions: Any) -> None:

@@ -22,6 +22,7 @@ class TrainingProgress:
                 TextColumn("stable {task.fields[stable]:.2f}"),
                 TimeRemainingColumn(),
                 console=Console(stderr=True),
+                redirect_stdout=False,  # a user's prints stay on stdout
             )
             self._task = self._progress.add_task(
                 label, total=total, completed=completed, reward=float("nan"), stable=float("nan")

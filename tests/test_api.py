@@ -204,6 +204,11 @@ def test_save_replaces_its_own_saves_and_another_run_only_with_overwrite(tmp_pat
     assert SILI.load(target).cfg.interactions == 2
     other.save(target, overwrite=True)
     assert SILI.load(target).cfg.seed == 1
+    with pytest.raises(ConfigError, match="already holds a run"):
+        model.save(target)  # no longer what this model left there
+    SILI.load(target).learn(1)  # trained on where it lies: not the other's save any more
+    with pytest.raises(ConfigError, match="already holds a run"):
+        other.save(target)
     (tmp_path / "file").write_text("")
     with pytest.raises(ConfigError, match=r"cannot save to .*file: it is a file; give a directory"):
         model.save(tmp_path / "file")

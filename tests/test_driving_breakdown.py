@@ -26,7 +26,8 @@ def test_phases_of_a_real_run(tmp_path: Path) -> None:
     np.testing.assert_allclose(
         table["collisions"], (metrics.task_reward < 0).groupby(blocks).mean()
     )
-    stable = 1.0 - metrics.strategy_changed.groupby(blocks).mean()
+    kept = (1.0 - metrics.strategy_changed).where(metrics.interaction > 0)  # 0 keeps nothing
+    stable = kept.groupby(blocks).mean()
     np.testing.assert_allclose(table["true stability"], stable)
     np.testing.assert_allclose(table["b"], [0.0, 0.375, 0.5])
     assert table["left at red line"].between(0, 1).all()

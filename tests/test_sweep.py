@@ -138,7 +138,8 @@ def test_tensorboard_scalars_mirror_the_metrics(tiny_sweep):
     assert [e.step for e in task] == list(range(8))
     np.testing.assert_allclose([e.value for e in task], metrics["task_reward"], rtol=1e-6)
     stable = acc.Scalars("stability/true")
-    np.testing.assert_allclose([e.value for e in stable], 1 - metrics["strategy_changed"])
+    assert [e.step for e in stable] == list(range(1, 8))  # interaction 0 keeps nothing
+    np.testing.assert_allclose([e.value for e in stable], 1 - metrics["strategy_changed"][1:])
     assert [e.step for e in acc.Scalars("loss/critic")] == list(
         metrics.index[metrics["critic_loss"].notna()]
     )
@@ -679,4 +680,4 @@ def test_tensorboard_tail_skips_rows_a_resume_drops_and_waits_for_whole_lines(tm
         (1, -2.0),
         (2, -3.0),
     ]
-    assert [e.value for e in acc.Scalars("stability/true")] == [1.0, 0.0, 1.0]
+    assert [e.value for e in acc.Scalars("stability/true")] == [0.0, 1.0]  # from interaction 1

@@ -111,6 +111,13 @@ def test_latent_kind_other_than_the_default_is_named():
     assert (
         expand(_spec(tasks=["speaker-listener"]))[0].name == "speaker-listener__sili-bschedule__s0"
     )
+    # LILI always learns a latent: a sweep's partial gives it the discrete one, as it always ran
+    # (sili train --method lili --latent partial is refused instead)
+    sili, lili = expand(
+        _spec(tasks=["speaker-listener"], methods=["sili", "lili"], latent="partial")
+    )
+    assert (sili.config.agent.latent, lili.config.agent.latent) == ("partial", "discrete")
+    assert lili.name == "speaker-listener__lili__s0"
 
 
 @pytest.mark.parametrize(

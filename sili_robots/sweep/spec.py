@@ -328,6 +328,14 @@ def validate(spec: SweepSpec) -> None:
         )
 
 
+def _latent_of(latent: str | None, method: str) -> str | None:
+    """The sweep's latent kind as ``method`` takes it: none for the methods without a latent;
+    LILI, which always learns one, discrete where the sweep says partial (as it always ran)."""
+    if method not in LATENT_METHODS:
+        return None
+    return "discrete" if method == "lili" and latent == "partial" else latent
+
+
 def expand(spec: SweepSpec) -> list[PlannedRun]:
     """Every run of the sweep, in a stable order (task, controller, method, b, seed)."""
     validate(spec)
@@ -359,7 +367,7 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                     base = make_run_config(
                         name,
                         method,
-                        latent=spec.latent if method in LATENT_METHODS else None,
+                        latent=_latent_of(spec.latent, method),
                         profile=profile,
                         settings=settings,
                         env_kwargs=env_kwargs,
