@@ -65,7 +65,7 @@ import torch
 from sili_robots.agent import SILIAgent
 from sili_robots.agent.latent import transitions
 from sili_robots.diagnostics import change_masks, foresight_by_exit
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.evaluation import load_trained
 from sili_robots.runs import kept_fraction
 from sili_robots.tasks.circle import ARENA, STEP, CircleEnv
@@ -370,4 +370,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

@@ -32,7 +32,7 @@ import torch
 
 from sili_robots.agent.agent import SILIAgent
 from sili_robots.diagnostics import category_strategies
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.evaluation import load_trained
 from sili_robots.runs import kept_fraction
 from sili_robots.tasks.driving import DrivingEnv
@@ -127,4 +127,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

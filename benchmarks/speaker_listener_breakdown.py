@@ -26,7 +26,7 @@ import pandas as pd
 import torch
 
 from sili_robots.bounds import stored_bounds
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.evaluation import load_trained
 from sili_robots.tasks.speaker_listener import VISIT_RADIUS, SpeakerListenerEnv
 
@@ -78,4 +78,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

@@ -135,7 +135,9 @@ def _reward_and_stability(rows: pd.DataFrame) -> str:
 
 def _missing(have: dict[str, pd.DataFrame], want: dict[str, int]) -> str | None:
     parts = [f"{m} {len(have[m])}/{n}" for m, n in want.items() if len(have[m]) != n]
-    return None if not parts else "not measured yet (runs: " + ", ".join(parts) + ")"
+    if not parts:
+        return None
+    return f"not measured yet (runs at the grid's budget: {', '.join(parts)})"
 
 
 def decide(finals: pd.DataFrame, df: pd.DataFrame) -> list[Claim]:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import numbers
+import sys
+from collections.abc import Callable
 
 
 class ConfigError(ValueError):
@@ -20,6 +22,16 @@ def check_seed(seed: object) -> int:
     if not 0 <= int(seed) <= MAX_SEED:
         raise ConfigError(f"seed {int(seed)} is not allowed: give an integer in [0, {MAX_SEED}]")
     return int(seed)
+
+
+def one_line_errors(main: Callable[[], object], prog: str) -> None:
+    """Run a script's ``main``: bad input (``ConfigError``) is one line on stderr and exit 2, as
+    the CLI does, not a traceback."""
+    try:
+        main()
+    except ConfigError as err:
+        print(f"{prog}: error: {err}", file=sys.stderr)
+        raise SystemExit(2) from None
 
 
 def check_choice(name: str, value: object, allowed: list[str] | tuple[str, ...]) -> None:

@@ -13,7 +13,7 @@ Sawyer-Reach 1,500. Stable and SMiRL, which the paper uses as ablations, get hal
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from sili_robots.sweep.spec import SweepSpec
 
@@ -52,7 +52,16 @@ class Block:
     def budget(self, task: str) -> int:
         if self.interactions is not None:
             return self.interactions
-        return round(TASK_BUDGETS[task] * self.fraction)
+        return max(1, round(TASK_BUDGETS[task] * self.fraction))
+
+    def scaled(self, factor: float) -> Block:
+        """The block at ``factor`` of its budgets (a rehearsal: ``sili grid --fraction``)."""
+        interactions = None if self.interactions is None else self.interactions * factor
+        return replace(
+            self,
+            fraction=self.fraction * factor,
+            interactions=None if interactions is None else max(1, round(interactions)),
+        )
 
     def specs(self, tasks: tuple[str, ...] | None = None) -> list[SweepSpec]:
         """One sweep invocation per task of the block (those in ``tasks`` when given)."""

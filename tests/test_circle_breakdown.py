@@ -113,3 +113,22 @@ def test_slip_cost_plays_the_held_and_the_moved_on_opponent(run: Path) -> None:
         assert -1 <= step < 50
         if step == -1:
             assert reward == pytest.approx(plain[case][-1][0])
+
+
+def test_a_run_without_its_checkpoint_is_one_line_not_a_traceback() -> None:
+    """The grid's committed runs keep no checkpoint; the script says so and exits 2."""
+    import subprocess
+    import sys
+
+    from benchmark_scripts import BENCHMARKS
+
+    run = BENCHMARKS.parent / "results" / "paper-grid" / "runs" / "circle-3__sili-bschedule__s2"
+    done = subprocess.run(
+        [sys.executable, str(BENCHMARKS / "circle_reward_breakdown.py"), str(run)],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert done.stderr.startswith("circle_reward_breakdown.py: error: ") and "checkpoint.pt" in (
+        done.stderr
+    )

@@ -111,7 +111,10 @@ def test_collect_takes_a_run_extended_or_trained_again_and_refuses_before_copyin
     cfg = json.loads((run / "config.json").read_text())
     cfg["versions"]["sili_robots"] = "0.0.1"  # trained again by another version
     (run / "config.json").write_text(json.dumps(cfg))
+    capsys.readouterr()
     assert main(["collect", str(source), "--into", str(into)]) == 0
+    report = json.loads(capsys.readouterr().out)  # the longer run replaced its copy: said so
+    assert report["replaced"] == [name] and name not in report["added"]
     metrics = gzip.decompress((into / "runs" / name / "metrics.csv.gz").read_bytes())
     assert len(metrics.decode().strip().splitlines()) == 1 + 8
     assert json.loads((into / "runs" / name / "summary.json").read_text())["interactions"] == 8
@@ -325,7 +328,7 @@ def test_a_run_short_of_its_budget_or_outside_the_grid_does_not_count():
                        name="circle-3__sili-continuous-bschedule__s0"))  # fmt: skip
     parts.append(_rows("circle-3", "sili/Circle3-v1", "sili", 5, _const(2000, -5), _const(2000, 1)))
     first = claims_table(pd.concat(parts, ignore_index=True))[0]
-    assert first.verdict == "not measured yet (runs: SILI 0/3, Oracle 0/3)"
+    assert first.verdict == "not measured yet (runs at the grid's budget: SILI 0/3, Oracle 0/3)"
 
 
 def test_above_baselines_compares_smirl_over_its_own_interactions():
@@ -397,7 +400,10 @@ def test_the_default_profile_is_decided_against_the_paper_profile(paper_reward, 
     assert set(rows) == {"circle-3", "driving"}
     assert rows["circle-3"].verdict == verdict
     assert rows["circle-3"].measured.startswith("score package 0.95 (reward -6.00")
-    assert rows["driving"].verdict == "not measured yet (runs: package 0/5, paper 0/5)"
+    assert (
+        rows["driving"].verdict
+        == "not measured yet (runs at the grid's budget: package 0/5, paper 0/5)"
+    )
 
 
 def test_the_default_on_driving_is_decided_on_five_seeds_of_each_profile():
@@ -430,7 +436,7 @@ def test_the_default_on_driving_is_decided_on_five_seeds_of_each_profile():
     (row,) = [
         c for c in four if c.claim == "package default over paper profile" and c.task == "driving"
     ]
-    assert row.verdict == "not measured yet (runs: paper 4/5)"
+    assert row.verdict == "not measured yet (runs at the grid's budget: paper 4/5)"
 
 
 def test_first_finished_run_finals():
@@ -452,7 +458,8 @@ def test_claims_write_replaces_the_readme_block(sweep_and_collection, tmp_path, 
     readme = tmp_path / "README.md"
     readme.write_text(f"# x\n{START}\nstale-table\n{END}\ntail\n")
     assert main(["claims", str(collection), "--write", str(readme)]) == 2
-    assert "measures none of the claims" in capsys.readouterr().err
+    printed = capsys.readouterr()
+    assert "measures none of the claims" in printed.err and printed.out == ""  # no table
     assert "stale-table" in readme.read_text()  # a table of "not measured yet" replaces nothing
     committed = Path(__file__).resolve().parents[1] / "results" / "paper-grid"
     assert main(["claims", str(committed), "--write", str(readme)]) == 0
@@ -564,3 +571,19 @@ def test_a_damaged_summary_or_config_is_named_not_a_traceback(
     (run / "config.json").write_text("{")
     assert main(["sweep", "--resume", str(source), "--dry-run"]) == 2
     assert f"{run / 'config.json'} is damaged" in capsys.readouterr().err
+
+
+def test_a_rehearsal_at_a_fraction_of_the_budgets_goes_into_folders_of_its_own(
+    tmp_path, monkeypatch, capsys
+):
+    assert block("stable-smirl").scaled(0.01).budget("driving") == 12  # 2,500 x 0.5 x 0.01
+    assert block("b-sweep").scaled(0.01).budget("circle-3") == 10  # its own 1,000
+    assert block("sili-oracle").scaled(1e-6).budget("circle-3") == 1  # never 0
+    monkeypatch.chdir(Path(__file__).resolve().parents[1])  # where the defaults are the grid's
+    assert main(["grid", "--fraction", "0.01", "--dry-run"]) == 2
+    assert "goes into a --sweep-dir and --into of its own" in capsys.readouterr().err
+    assert main(["grid", "--fraction", "0", "--dry-run", "--sweep-dir", str(tmp_path)]) == 2
+    assert "--fraction 0 trains nothing" in capsys.readouterr().err
+    own = ["--sweep-dir", str(tmp_path / "s"), "--into", str(tmp_path / "r")]
+    assert main(["grid", "--fraction", "0.01", "--dry-run", "--blocks", "b-sweep", *own]) == 0
+    assert "b-sweep on circle-3 (10 interactions): 30 runs, 0 done" in capsys.readouterr().out

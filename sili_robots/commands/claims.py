@@ -18,7 +18,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "claims",
         help="the paper's claims, decided from the grid's results (a markdown table)",
         description="Decides each claim of the paper (rules in sili_robots/claims.py) from the "
-        "finished runs in DIR (`sili grid` / `sili collect`) and prints a markdown table.",
+        "grid's runs in DIR (`sili grid` / `sili collect`), those finished at the grid's budget "
+        "(paper_grid.py), and prints a markdown table.",
     )
     p.add_argument("directory", type=path_arg, metavar="DIR")
     p.add_argument(
@@ -38,14 +39,14 @@ def run(args: argparse.Namespace) -> int:
         _claims_block(args.write)  # a wrong file is named before the results are read
     claims = claims_table(load_results(args.directory))
     table = markdown(claims)
+    if args.write is not None and all(c.verdict.startswith("not measured") for c in claims):
+        raise ConfigError(  # before the table: a failed command prints none
+            f"{args.directory} measures none of the claims, so --write {args.write} would "
+            "replace its table with 'not measured yet' everywhere; give the grid's results "
+            "(results/paper-grid)"
+        )
     print(table, end="")
     if args.write is not None:
-        if all(c.verdict.startswith("not measured") for c in claims):
-            raise ConfigError(
-                f"{args.directory} measures none of the claims, so --write {args.write} would "
-                "replace its table with 'not measured yet' everywhere; give the grid's results "
-                "(results/paper-grid)"
-            )
         write_block(args.write, table)
     return 0
 

@@ -46,6 +46,7 @@ def run(args: argparse.Namespace) -> int:
         json.dumps(
             {
                 "added": report.added,
+                "replaced": report.replaced,
                 "unchanged": len(report.unchanged),
                 "unfinished": report.unfinished,
             }

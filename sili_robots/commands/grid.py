@@ -7,7 +7,10 @@ import json
 import os
 from pathlib import Path
 
-from sili_robots.commands.common import path_arg, positive_int
+from sili_robots.commands.common import float_in, path_arg, positive_int
+
+#: where the grid at its budgets trains and collects
+SWEEP_DIR, COLLECTION = Path("sweeps/paper-grid"), Path("results/paper-grid")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -27,14 +30,21 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--sweep-dir",
         type=path_arg,
-        default=Path("sweeps/paper-grid"),
+        default=SWEEP_DIR,
         help="working sweep directory with checkpoints (default: sweeps/paper-grid)",
     )
     p.add_argument(
         "--into",
         type=path_arg,
-        default=Path("results/paper-grid"),
+        default=COLLECTION,
         help="results collection (default: results/paper-grid)",
+    )
+    p.add_argument(
+        "--fraction",
+        type=lambda text: float_in(text, 0.0, 1.0),
+        default=1.0,
+        help="every budget times this, in (0, 1] (e.g. 0.01: a rehearsal of the whole grid in "
+        "minutes), into a --sweep-dir and --into of its own; the claims judge full budgets only",
     )
     p.add_argument("--workers", type=positive_int, help="parallel runs (default: the CPU count)")
     p.add_argument("--dry-run", action="store_true", help="list the invocations and runs only")
@@ -50,6 +60,14 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.sweep.spec import parse_list
     from sili_robots.sweep.state import check_sweep_dir, run_path
 
+    if args.fraction == 0.0:
+        raise ConfigError("--fraction 0 trains nothing; give a fraction in (0, 1]")
+    if args.fraction < 1.0 and {SWEEP_DIR, COLLECTION} & set(_relative(args)):
+        raise ConfigError(
+            f"--fraction {args.fraction:g} goes into a --sweep-dir and --into of its own: "
+            f"{SWEEP_DIR} and {COLLECTION} hold the grid at its full budgets, in runs of the "
+            "same names"
+        )
     for path, option in ((args.sweep_dir, "--sweep-dir"), (args.into, "--into")):
         check_sweep_dir(path, option)  # before any run, in a dry run too
         if not args.dry_run:  # a listing reads only
@@ -64,6 +82,8 @@ def run(args: argparse.Namespace) -> int:
                 f"{option} {text!r} names none; allowed: {names} (leave it out for all)"
             )
     blocks = [block(b) for b in parse_list(args.blocks)] if args.blocks else list(BLOCKS)
+    if args.fraction < 1.0:
+        blocks = [b.scaled(args.fraction) for b in blocks]
     tasks = tuple(parse_list(args.tasks)) if args.tasks else TASKS
     bad = [t for t in tasks if t not in TASKS]
     if bad:
@@ -113,6 +133,11 @@ def run(args: argparse.Namespace) -> int:
     if failed:
         print(json.dumps({"failed": failed}))
     return 1 if failed else 0
+
+
+def _relative(args: argparse.Namespace) -> list[Path]:
+    """The sweep directory and the collection given, as paths relative to here."""
+    return [Path(os.path.relpath(p.resolve())) for p in (args.sweep_dir, args.into)]
 
 
 def _finished(run_dir: Path, interactions: int) -> bool:

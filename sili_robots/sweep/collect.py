@@ -41,6 +41,7 @@ class CollectReport:
     """Run names by what ``collect`` did with them."""
 
     added: list[str] = field(default_factory=list)
+    replaced: list[str] = field(default_factory=list)  # a shorter (or damaged) copy before
     unchanged: list[str] = field(default_factory=list)
     unfinished: list[str] = field(default_factory=list)
 
@@ -87,6 +88,7 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
         ):
             report.unchanged.append(name)
             continue
+        was_there = (target / CONFIG).is_file()
         metrics = metrics_file(run_dir)
         target.mkdir(parents=True, exist_ok=True)
         gz = metrics.name == COMPRESSED_METRICS
@@ -95,7 +97,7 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
         write_bytes(target / COMPRESSED_METRICS, data)
         write_bytes(target / CONFIG, (run_dir / CONFIG).read_bytes())
         write_bytes(target / SUMMARY, (run_dir / SUMMARY).read_bytes())
-        report.added.append(name)
+        (report.replaced if was_there else report.added).append(name)
     return report
 
 
