@@ -557,20 +557,28 @@ def plot_sweep(
     window: int = 100,
     formats: Sequence[str] = ("png", "pdf"),
     include_unfinished: bool = False,
+    tasks: Sequence[str] | None = None,
 ) -> list[Path]:
-    """Write every figure of a sweep; returns the files written."""
+    """Write every figure of a sweep, or only those of ``tasks`` (no overview then); returns
+    the files written."""
     df = load_results(sweep_dir, include_unfinished)
     out_dir = Path(out_dir) if out_dir is not None else Path(sweep_dir) / FIGURES
     written: list[Path] = []
-    tasks = [t for t in TASK_TITLES if t in set(df["task"])] + sorted(
+    present = [t for t in TASK_TITLES if t in set(df["task"])] + sorted(
         set(df["task"]) - set(TASK_TITLES)
     )
-    for task in tasks:
+    missing = [t for t in tasks or () if t not in present]
+    if missing:
+        raise ConfigError(
+            f"task {missing[0]!r} has no runs in {sweep_dir}; its tasks: {', '.join(present)}"
+        )
+    for task in tasks or present:
         stem = out_dir / file_stem(task)
         written += save_figure(learning_curves(df, task, smooth), stem, formats)
         if b_sweep_rows(df, task)["config_beta"].nunique() > 1:
             written += save_figure(
                 beta_sweep(df, task, window), stem.with_name(f"{stem.name}_beta"), formats
             )
-    written += save_figure(overview(df, smooth), out_dir / "overview", formats)
+    if not tasks:
+        written += save_figure(overview(df, smooth), out_dir / "overview", formats)
     return written

@@ -586,4 +586,6 @@ def test_a_rehearsal_at_a_fraction_of_the_budgets_goes_into_folders_of_its_own(
     assert "--fraction 0 trains nothing" in capsys.readouterr().err
     own = ["--sweep-dir", str(tmp_path / "s"), "--into", str(tmp_path / "r")]
     assert main(["grid", "--fraction", "0.01", "--dry-run", "--blocks", "b-sweep", *own]) == 0
-    assert "b-sweep on circle-3 (10 interactions): 30 runs, 0 done" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "b-sweep on circle-3 (10 interactions): 30 runs, 0 done" in out
+    assert "neither exists here; run from the repository root, or give them" in out

@@ -138,6 +138,18 @@ def test_plot_command_writes_png_and_pdf(sweep_dir, tmp_path, capsys):
         assert pdf.startswith(b"%PDF") and len(pdf) > 5_000
 
 
+def test_plot_tasks_draws_only_their_figures(sweep_dir, tmp_path, capsys):
+    out = tmp_path / "figs"
+    args = ["plot", str(sweep_dir), "--out", str(out), "--formats", "png"]
+    assert main([*args, "--tasks", "speaker-listener"]) == 0
+    assert capsys.readouterr().out.split() == [str(out / "speaker-listener.png")]  # no overview
+    assert main([*args, "--tasks", "driving"]) == 2
+    err = capsys.readouterr().err
+    assert "task 'driving' has no runs in" in err and "its tasks: circle-3, speaker-listener" in err
+    assert main([*args, "--tasks", ","]) == 2
+    assert "--tasks ',' names none" in capsys.readouterr().err
+
+
 def test_unfinished_runs_are_left_out_unless_asked(sweep_dir, tmp_path):
     copy = tmp_path / "sweep"
     shutil.copytree(sweep_dir, copy)

@@ -125,10 +125,12 @@ def run(args: argparse.Namespace) -> int:
             added = collect([args.sweep_dir], args.into).added
             print(json.dumps({"block": b.name, "task": spec.tasks[0], "collected": added}))
     if args.dry_run:
+        where = f"in {args.sweep_dir} or {args.into}"
+        if not any(d.exists() for d in dirs):  # e.g. run from outside the repository
+            where += ": neither exists here; run from the repository root, or give them"
         print(
             f"{done} of {planned} runs done, "
-            f"{done_interactions:,} of {planned_interactions:,} interactions "
-            f"(in {args.sweep_dir} or {args.into})"
+            f"{done_interactions:,} of {planned_interactions:,} interactions ({where})"
         )
     if failed:
         print(json.dumps({"failed": failed}))

@@ -40,10 +40,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--include-unfinished", action="store_true", help="also plot runs that have not finished"
     )
+    p.add_argument(
+        "--tasks",
+        help="comma-separated tasks whose figures to draw, e.g. circle-3 (default: every task's, "
+        "and the overview)",
+    )
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from sili_robots.build import canonical_task
     from sili_robots.plotting import plot_sweep
 
     formats = list(dict.fromkeys(f.strip() for f in args.formats.split(",") if f.strip()))
@@ -52,6 +58,11 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError(
             f"unknown figure format {bad or args.formats!r}; allowed: {', '.join(FORMATS)}"
         )
+    tasks = None
+    if args.tasks is not None:
+        tasks = [canonical_task(t.strip()) for t in args.tasks.split(",") if t.strip()]
+        if not tasks:  # "" is a slip, not "all"
+            raise ConfigError(f"--tasks {args.tasks!r} names none; leave it out for every task")
     if args.out is not None:
         writable_dir(args.out, "--out")
     for path in plot_sweep(
@@ -61,6 +72,7 @@ def run(args: argparse.Namespace) -> int:
         window=args.window,
         formats=formats,
         include_unfinished=args.include_unfinished,
+        tasks=tasks,
     ):
         print(path)
     return 0
