@@ -27,6 +27,7 @@ import torch
 from sili_robots.addons.filter_math import first_departure
 from sili_robots.addons.latent_filter import LatentFilter
 from sili_robots.agent import SILIAgent
+from sili_robots.errors import one_line_errors
 from sili_robots.evaluation import load_trained
 from sili_robots.tasks.circle import CircleEnv
 
@@ -104,4 +105,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

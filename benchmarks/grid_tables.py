@@ -17,6 +17,7 @@ from pathlib import Path
 import pandas as pd
 
 from sili_robots.claims import run_finals
+from sili_robots.errors import one_line_errors
 from sili_robots.paper_grid import TASKS
 from sili_robots.plotting import load_results
 
@@ -89,4 +90,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

@@ -581,11 +581,29 @@ def test_a_rehearsal_at_a_fraction_of_the_budgets_goes_into_folders_of_its_own(
     assert block("sili-oracle").scaled(1e-6).budget("circle-3") == 1  # never 0
     monkeypatch.chdir(Path(__file__).resolve().parents[1])  # where the defaults are the grid's
     assert main(["grid", "--fraction", "0.01", "--dry-run"]) == 2
-    assert "goes into a --sweep-dir and --into of its own" in capsys.readouterr().err
+    assert "goes into a --sweep-dir of its own, not sweeps/paper-grid" in capsys.readouterr().err
     assert main(["grid", "--fraction", "0", "--dry-run", "--sweep-dir", str(tmp_path)]) == 2
     assert "--fraction 0 trains nothing" in capsys.readouterr().err
     own = ["--sweep-dir", str(tmp_path / "s"), "--into", str(tmp_path / "r")]
     assert main(["grid", "--fraction", "0.01", "--dry-run", "--blocks", "b-sweep", *own]) == 0
     out = capsys.readouterr().out
     assert "b-sweep on circle-3 (10 interactions): 30 runs, 0 done" in out
-    assert "neither exists here; run from the repository root, or give them" in out
+    assert "neither exists here" not in out  # the folders given are new: nothing to hint
+    assert main(["grid", "--dry-run", "--blocks", "b-sweep"]) == 0  # the defaults, from here
+    monkeypatch.chdir(tmp_path)
+    assert main(["grid", "--dry-run", "--blocks", "b-sweep"]) == 0  # the defaults, not here
+    assert "neither exists here; run from the repository root" in capsys.readouterr().out
+    repository = Path(__file__).resolve().parents[1]  # the grid's own folders, from elsewhere
+    grid_own = ["--sweep-dir", str(repository / "sweeps" / "paper-grid"), "--into", str(tmp_path)]
+    assert main(["grid", "--fraction", "0.01", "--dry-run", *grid_own]) == 2
+    assert "goes into a --sweep-dir of its own, not " in capsys.readouterr().err
+    # a rehearsal folder holding runs at another budget: refused before anything trains
+    held = tmp_path / "s" / "runs" / "circle-3__sili-b0__s0"
+    held.mkdir(parents=True)
+    (held / "config.json").write_text(json.dumps({"run": {"interactions": 5}}))
+    assert main(["grid", "--fraction", "0.01", "--blocks", "b-sweep", *own]) == 2
+    assert (
+        "holds circle-3__sili-b0__s0 at 5 interactions where this grid (--fraction 0.01) plans 10"
+        in capsys.readouterr().err
+    )
+    assert sorted(p.name for p in (tmp_path / "s" / "runs").iterdir()) == [held.name]

@@ -62,12 +62,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.fraction == 0.0:
         raise ConfigError("--fraction 0 trains nothing; give a fraction in (0, 1]")
-    if args.fraction < 1.0 and {SWEEP_DIR, COLLECTION} & set(_relative(args)):
-        raise ConfigError(
-            f"--fraction {args.fraction:g} goes into a --sweep-dir and --into of its own: "
-            f"{SWEEP_DIR} and {COLLECTION} hold the grid at its full budgets, in runs of the "
-            "same names"
-        )
+    if args.fraction < 1.0:
+        _check_own_folders(args)
     for path, option in ((args.sweep_dir, "--sweep-dir"), (args.into, "--into")):
         check_sweep_dir(path, option)  # before any run, in a dry run too
         if not args.dry_run:  # a listing reads only
@@ -96,37 +92,46 @@ def run(args: argparse.Namespace) -> int:
     dirs = (args.sweep_dir, args.into)  # a run is done in either (a fresh clone has no sweep)
     failed: list[str] = []
     planned = done = planned_interactions = done_interactions = 0
-    for b in blocks:
-        for spec in [recorded(args.sweep_dir, s, args.into) for s in b.specs(tasks)]:
-            label = f"{b.name} on {spec.tasks[0]} ({spec.interactions} interactions)"
-            runs = plan([spec])
-            if args.dry_run:
-                n_done = sum(
-                    any(_finished(run_path(d, r.name), spec.interactions) for d in dirs)
-                    for r in runs
-                )
-                print(f"{label}: {len(runs)} runs, {n_done} done")
-                planned, done = planned + len(runs), done + n_done
-                planned_interactions += len(runs) * spec.interactions
-                done_interactions += n_done * spec.interactions
-                continue
-            collected = [
-                r.name for r in runs if _finished(run_path(args.into, r.name), spec.interactions)
-            ]
-            if len(collected) == len(runs):  # nothing to train (its settings may have moved on)
-                print(f"grid: {label}: all {len(runs)} runs collected", flush=True)
-                continue
-            print(f"grid: {label}", flush=True)
-            if collected:  # back into the sweep, so it does not train them again
-                collect([args.into], args.sweep_dir, names=collected)
-            backend = LocalBackend(args.workers or os.cpu_count() or 1)
-            report = run_sweep(spec, args.sweep_dir, backend, progress=False)
-            failed += list(report.failed)
-            added = collect([args.sweep_dir], args.into).added
-            print(json.dumps({"block": b.name, "task": spec.tasks[0], "collected": added}))
+    steps = [(b, s) for b in blocks for s in b.specs(tasks)]
+    steps = [(b, recorded(args.sweep_dir, s, args.into)) for b, s in steps]
+    if not args.dry_run:  # before any run: a sweep never mixes two budgets under one name
+        to_train = [plan([s]) for _, s in steps]
+        to_train = [
+            runs
+            for runs in to_train
+            if not all(_finished(run_path(args.into, r.name), r.config.interactions) for r in runs)
+        ]
+        _check_budgets(args, [r for runs in to_train for r in runs])
+    for b, spec in steps:
+        label = f"{b.name} on {spec.tasks[0]} ({spec.interactions} interactions)"
+        runs = plan([spec])
+        if args.dry_run:
+            n_done = sum(
+                any(_finished(run_path(d, r.name), spec.interactions) for d in dirs) for r in runs
+            )
+            print(f"{label}: {len(runs)} runs, {n_done} done")
+            planned, done = planned + len(runs), done + n_done
+            planned_interactions += len(runs) * spec.interactions
+            done_interactions += n_done * spec.interactions
+            continue
+        collected = [
+            r.name for r in runs if _finished(run_path(args.into, r.name), spec.interactions)
+        ]
+        if len(collected) == len(runs):  # nothing to train (its settings may have moved on)
+            print(f"grid: {label}: all {len(runs)} runs collected", flush=True)
+            continue
+        print(f"grid: {label}", flush=True)
+        if collected:  # back into the sweep, so it does not train them again
+            collect([args.into], args.sweep_dir, names=collected)
+        backend = LocalBackend(args.workers or os.cpu_count() or 1)
+        report = run_sweep(spec, args.sweep_dir, backend, progress=False)
+        failed += list(report.failed)
+        got = collect([args.sweep_dir], args.into)
+        line = {"block": b.name, "task": spec.tasks[0], "collected": got.added}
+        print(json.dumps({**line, "replaced": got.replaced} if got.replaced else line))
     if args.dry_run:
         where = f"in {args.sweep_dir} or {args.into}"
-        if not any(d.exists() for d in dirs):  # e.g. run from outside the repository
+        if not any(d.exists() for d in dirs) and dirs == (SWEEP_DIR, COLLECTION):
             where += ": neither exists here; run from the repository root, or give them"
         print(
             f"{done} of {planned} runs done, "
@@ -137,9 +142,44 @@ def run(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
-def _relative(args: argparse.Namespace) -> list[Path]:
-    """The sweep directory and the collection given, as paths relative to here."""
-    return [Path(os.path.relpath(p.resolve())) for p in (args.sweep_dir, args.into)]
+def _check_own_folders(args: argparse.Namespace) -> None:
+    """A rehearsal (``--fraction``) never goes into the grid's own folders, here or in the
+    repository this package is installed from: their runs have the same names."""
+    from sili_robots.errors import ConfigError
+
+    repository = Path(__file__).resolve().parents[2]
+    grid = {
+        p.resolve()
+        for base in (Path.cwd(), repository)
+        for p in (base / SWEEP_DIR, base / COLLECTION)
+    }
+    for path, option in ((args.sweep_dir, "--sweep-dir"), (args.into, "--into")):
+        if path.resolve() in grid:
+            raise ConfigError(
+                f"--fraction {args.fraction:g} goes into a {option} of its own, not {path}: "
+                f"{SWEEP_DIR} and {COLLECTION} hold the grid at its full budgets, in runs of "
+                "the same names"
+            )
+
+
+def _check_budgets(args: argparse.Namespace, runs: list) -> None:
+    """ConfigError when the sweep directory holds a planned run at another budget (e.g. a
+    rehearsal at another ``--fraction``), before anything trains."""
+    from sili_robots.errors import ConfigError
+    from sili_robots.runs import CONFIG
+    from sili_robots.sweep.state import run_path
+
+    for r in runs:
+        path = run_path(args.sweep_dir, r.name) / CONFIG
+        if not path.is_file():
+            continue
+        held = json.loads(path.read_text()).get("run", {}).get("interactions")
+        if held is not None and held != r.config.interactions:
+            raise ConfigError(
+                f"{args.sweep_dir} holds {r.name} at {held} interactions where this grid "
+                f"(--fraction {args.fraction:g}) plans {r.config.interactions}: give the "
+                "--fraction it ran with, or a --sweep-dir and --into of its own"
+            )
 
 
 def _finished(run_dir: Path, interactions: int) -> bool:

@@ -49,7 +49,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sili_robots.build import canonical_task
+    from sili_robots.build import canonical_task, is_class_path
     from sili_robots.plotting import plot_sweep
 
     formats = list(dict.fromkeys(f.strip() for f in args.formats.split(",") if f.strip()))
@@ -60,7 +60,8 @@ def run(args: argparse.Namespace) -> int:
         )
     tasks = None
     if args.tasks is not None:
-        tasks = [canonical_task(t.strip()) for t in args.tasks.split(",") if t.strip()]
+        given = [t.strip() for t in args.tasks.split(",") if t.strip()]
+        tasks = list(dict.fromkeys(t if is_class_path(t) else canonical_task(t) for t in given))
         if not tasks:  # "" is a slip, not "all"
             raise ConfigError(f"--tasks {args.tasks!r} names none; leave it out for every task")
     if args.out is not None:
