@@ -681,3 +681,17 @@ def test_tensorboard_tail_skips_rows_a_resume_drops_and_waits_for_whole_lines(tm
         (2, -3.0),
     ]
     assert [e.value for e in acc.Scalars("stability/true")] == [0.0, 1.0]  # from interaction 1
+
+
+def test_in_a_log_the_closing_line_starts_a_line_of_its_own(tmp_path):
+    """Redirected, rich's live display ends without a newline: the closing line was glued on."""
+    import io
+
+    from rich.console import Console
+
+    from sili_robots.sweep.progress import SweepProgress
+
+    buf = io.StringIO()
+    with SweepProgress([], {"old": 10}, already_done=1, console=Console(file=buf, width=100)):
+        pass
+    assert "\nsweep: 1 done (1 of them earlier)" in buf.getvalue()

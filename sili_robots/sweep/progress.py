@@ -172,6 +172,8 @@ class SweepProgress:
         if self._live is not None:
             self._refresh(force=True)
             self._live.stop()
+            if not self.console.is_interactive:  # a log: end the display's last line (as
+                self.console.line()  # rich's Progress.stop does), before the closing one
         stopped = f" ({len(self.running)} stopped midway, resumable)" if self.running else ""
         not_run = self.total_runs - self.done - self.failed
         earlier = f" ({self.already_done} of them earlier)" if self.already_done else ""
