@@ -33,7 +33,7 @@ import pandas as pd
 
 from sili_robots.diagnostics import latent_diagnostics
 from sili_robots.migrations import migrate_run
-from sili_robots.runs import kept_fraction
+from sili_robots.runs import kept, kept_fraction
 from sili_robots.sweep.results import metrics_file
 
 MARKS = {True: "MET    ", False: "NOT MET", None: "N/A    "}
@@ -66,8 +66,7 @@ def run_one(task: str, method: str, seed: int, args: argparse.Namespace) -> Path
 
 
 def first_stable(df: pd.DataFrame, window: int, level: float = 0.9) -> float:
-    kept = (1.0 - df["strategy_changed"]).where(df["interaction"] > 0)  # 0 keeps nothing
-    stable = kept.rolling(window).mean()
+    stable = kept(df).rolling(window).mean()
     hit = np.flatnonzero(stable.to_numpy() >= level)
     return float(df["interaction"].iloc[hit[0]]) if hit.size else float("nan")
 

@@ -34,7 +34,7 @@ from sili_robots.agent.agent import SILIAgent
 from sili_robots.diagnostics import category_strategies
 from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.evaluation import load_trained
-from sili_robots.runs import kept_fraction
+from sili_robots.runs import kept, kept_fraction
 from sili_robots.tasks.driving import DrivingEnv
 
 LANES = {0.0: "right", 1.0: "centre", 2.0: "left"}
@@ -97,7 +97,7 @@ def phases(run: Path, size: int) -> pd.DataFrame:
             "left at red line": _side(agent.buffer.obs[:n, RED_LINE_STEP, 1]) == "left",
             "opponent merged right": m["strategy_id"].map(LANES).to_numpy() == "right",
             "collisions": (agent.buffer.rew[:n] < 0).any(axis=1),
-            "true stability": (1.0 - m["strategy_changed"]).where(m["interaction"] > 0).to_numpy(),
+            "true stability": kept(m).to_numpy(),
             "alpha": m["alpha"].to_numpy(),
             "b": m["beta"].to_numpy(),
         }

@@ -31,6 +31,7 @@ from sili_robots.agent.agent import SILIAgent
 from sili_robots.diagnostics import category_strategies
 from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.evaluation import load_trained
+from sili_robots.runs import kept
 from sili_robots.tasks.sawyer_reach import SawyerReachEnv
 from sili_robots.tasks.sawyer_scene import GOALS
 
@@ -60,7 +61,7 @@ def trajectories(agent: SILIAgent, task: SawyerReachEnv, m: pd.DataFrame) -> pd.
             "interaction": np.arange(n),
             "goal": goal,
             "above plane": ee[:, -1, 2] > task.plane_z,
-            "stable": (1 - m["strategy_changed"]).where(m["interaction"] > 0).to_numpy(),
+            "stable": kept(m).to_numpy(),
             "to true goal": closest[np.arange(n), goal],
             "to any goal": closest.min(axis=1),
             "went for true": closest.argmin(axis=1) == goal,

@@ -28,6 +28,7 @@ import torch
 from sili_robots.bounds import stored_bounds
 from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.evaluation import load_trained
+from sili_robots.runs import kept
 from sili_robots.tasks.speaker_listener import VISIT_RADIUS, SpeakerListenerEnv
 
 
@@ -51,9 +52,7 @@ def main() -> None:
     torch.set_num_threads(1)
     for run in args.runs:
         visited, m, task, cfg = visits(run)
-        m = m.iloc[: len(visited)].assign(
-            visited=visited, stable=(1 - m["strategy_changed"]).where(m["interaction"] > 0)
-        )
+        m = m.iloc[: len(visited)].assign(visited=visited, stable=kept(m))
         print(f"{run.name} ({cfg.task_id}, speaker at {tuple(task.speaker)}):")
         print("  interactions   visited  true stability  reward visited / not  alpha  b")
         for start, g in m.groupby(m["interaction"] // args.block * args.block):

@@ -53,12 +53,17 @@ METRIC_COLUMNS = (
 )
 
 
+def kept(rows: Any) -> Any:
+    """Per interaction of metrics ``rows`` (a DataFrame): 1 where the true strategy stayed, 0
+    where it changed, NaN for the game's first (interaction 0), which has no strategy before it
+    to keep (as ``sili bounds`` counts)."""
+    return (1.0 - rows["strategy_changed"]).where(rows["interaction"] > 0)
+
+
 def kept_fraction(rows: Any) -> float | None:
-    """True stability of metrics ``rows``: the fraction of interactions whose true strategy
-    stayed, the game's first (interaction 0) left out, as ``sili bounds`` counts: it has no
-    strategy before it to keep. None when no row is left."""
-    changed = rows.loc[rows["interaction"] > 0, "strategy_changed"]
-    return 1.0 - float(changed.mean()) if len(changed) else None
+    """True stability of metrics ``rows``: the mean of ``kept``; None when no row is left."""
+    stayed = kept(rows).dropna()
+    return float(stayed.mean()) if len(stayed) else None
 
 
 def metrics_file(run_dir: Path) -> Path | None:

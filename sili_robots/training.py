@@ -108,8 +108,8 @@ def train(
                         **losses,
                     }
                 )
-                kept = [not c for _, c in recent if c is not None]  # 0 has nothing to keep
-                bar.advance(np.mean([r for r, _ in recent]), np.mean(kept) if kept else np.nan)
+                stayed = [not c for _, c in recent if c is not None]  # 0 has nothing to keep
+                bar.advance(np.mean([r for r, _ in recent]), np.mean(stayed) if stayed else np.nan)
                 done = j + 1
                 stopping = stop.requested  # read once: a stop after this acts at the next end
                 if done % cfg.checkpoint_every == 0 or done == cfg.interactions or stopping:

@@ -564,11 +564,14 @@ def test_a_task_that_cannot_be_built_is_named_with_its_error(tmp_path, capsys, m
     assert done.returncode == 2 and "importing bad_attr failed: fix it" in done.stderr
     done = _sili("rollout", "unbuilt_task:Unbuilt", "--policy", "still")
     assert done.returncode == 2 and "RuntimeError: no simulator for horizon 20" in done.stderr
-    (tmp_path / "wide_task.py").write_text(
-        "import numpy as np\nfrom gymnasium import spaces\n"
-        "from sili_robots.examples.two_doors import TwoDoorsEnv\n\n\nclass Wide(TwoDoorsEnv):\n"
+    _doors_module(
+        tmp_path,
+        monkeypatch,
+        "wide_task",
+        "class Wide(TwoDoorsEnv):\n"
         "    def _make_action_space(self):\n"
-        "        return spaces.Box(-2.0, 2.0, (1,), np.float32)\n"
+        "        from gymnasium import spaces\n\n"
+        "        return spaces.Box(-2.0, 2.0, (1,))\n",
     )
     assert main([*args[:2], "wide_task:Wide", *args[3:], "--out", str(tmp_path / "run")]) == 2
     assert "must be bounded by -1 and 1 (agents act through tanh)" in capsys.readouterr().err

@@ -95,13 +95,11 @@ def run(args: argparse.Namespace) -> int:
     steps = [(b, s) for b in blocks for s in b.specs(tasks)]
     steps = [(b, recorded(args.sweep_dir, s, args.into)) for b, s in steps]
     if not args.dry_run:  # before any run: a sweep never mixes two budgets under one name
-        to_train = [plan([s]) for _, s in steps]
-        to_train = [
-            runs
-            for runs in to_train
-            if not all(_finished(run_path(args.into, r.name), r.config.interactions) for r in runs)
-        ]
-        _check_budgets(args, [r for runs in to_train for r in runs])
+        runs = [r for _, s in steps for r in plan([s])]
+        _check_budgets(
+            args,
+            [r for r in runs if not _finished(run_path(args.into, r.name), r.config.interactions)],
+        )
     for b, spec in steps:
         label = f"{b.name} on {spec.tasks[0]} ({spec.interactions} interactions)"
         runs = plan([spec])
@@ -166,14 +164,14 @@ def _check_budgets(args: argparse.Namespace, runs: list) -> None:
     """ConfigError when the sweep directory holds a planned run at another budget (e.g. a
     rehearsal at another ``--fraction``), before anything trains."""
     from sili_robots.errors import ConfigError
-    from sili_robots.runs import CONFIG
+    from sili_robots.runs import CONFIG, recorded_run
     from sili_robots.sweep.state import run_path
 
     for r in runs:
-        path = run_path(args.sweep_dir, r.name) / CONFIG
-        if not path.is_file():
+        path = run_path(args.sweep_dir, r.name)
+        if not (path / CONFIG).is_file():
             continue
-        held = json.loads(path.read_text()).get("run", {}).get("interactions")
+        held = recorded_run(path).get("interactions")
         if held is not None and held != r.config.interactions:
             raise ConfigError(
                 f"{args.sweep_dir} holds {r.name} at {held} interactions where this grid "

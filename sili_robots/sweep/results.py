@@ -27,6 +27,7 @@ from sili_robots.runs import (
     ERROR_FILE,
     METRIC_COLUMNS,
     SUMMARY,
+    kept,
     metrics_file,
     read_json,
     recorded_task_id,
@@ -139,8 +140,7 @@ def results_table(sweep_dir: Path) -> pd.DataFrame:
         ident, _ = _identity(run_dir)
         for key, value in ident.items():
             df[key] = value
-        # the game's first interaction has no strategy before it to keep (runs.kept_fraction)
-        df["true_stability"] = (1.0 - df["strategy_changed"]).where(df["interaction"] > 0)
+        df["true_stability"] = kept(df)
         df["finished"] = (run_dir / SUMMARY).is_file()
         frames.append(df)
     if not frames:

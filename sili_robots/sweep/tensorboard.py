@@ -49,7 +49,7 @@ def _scalars(row: dict[str, str]) -> dict[str, float]:
             value = float(text)
             if math.isfinite(value):
                 out[tag] = value
-    if "stability/strategy_changed" in out and row.get("interaction") not in ("0", 0):
+    if "stability/strategy_changed" in out and row.get("interaction") != "0":
         out[TRUE_STABILITY_TAG] = 1.0 - out["stability/strategy_changed"]  # 0 keeps nothing
     return out
 
