@@ -233,8 +233,13 @@ def test_reset_can_start_the_game_from_a_chosen_strategy():
     cont = make_task("circle-continuous").unwrapped
     cont.reset(seed=0, options={"strategy": 5 * math.pi / 2})
     assert cont.angle == pytest.approx(math.pi / 2)
+    for _ in range(5):
+        env.step(np.zeros(2))
+    before = (env.interaction, env.location, env.t, env.np_random.bit_generator.state)
     with pytest.raises(ConfigError, match=r"unknown strategy 8; allowed: 0, 1, 2, 3"):
-        env.reset(options={"strategy": 8})
+        env.reset(seed=1, options={"strategy": 8})
+    # refused before anything moved: the same interaction goes on with the same opponent
+    assert (env.interaction, env.location, env.t, env.np_random.bit_generator.state) == before
     with pytest.raises(ConfigError, match=r"allowed: \['restart', 'restore', 'strategy'\]"):
         env.reset(options={"strateg": 1})
     sl = make_task("speaker-listener").unwrapped

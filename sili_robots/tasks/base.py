@@ -126,7 +126,11 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         strategy override this."""
         raise ConfigError(f"{type(self).__name__} cannot start from a chosen strategy")
 
-    def _start_from(self, strategy: Any) -> None:
+    def _check_start(self, strategy: Any) -> None:
+        """Refuse a chosen first strategy this task cannot start from, before ``reset`` changes
+        anything, so a refused reset leaves the game as it was."""
+        if type(self)._set_strategy is RepeatedInteractionEnv._set_strategy:
+            raise ConfigError(f"{type(self).__name__} cannot start from a chosen strategy")
         choices = self.strategy_choices()
         if isinstance(strategy, bool) or not isinstance(strategy, (int, float, np.number)):
             ok = False
@@ -137,13 +141,11 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         if not ok:
             allowed = "any finite number" if choices is None else ", ".join(map(str, choices))
             raise ConfigError(f"unknown strategy {strategy!r}; allowed: {allowed}")
-        self._set_strategy(strategy)
 
     # ----------------------------------------------------------------- gymnasium API
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
-        super().reset(seed=seed)
         options = dict(options or {})
         unknown = set(options) - {"restart", "restore", "strategy"}
         if unknown:
@@ -151,6 +153,9 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
                 f"unknown reset options {sorted(unknown)}; "
                 "allowed: ['restart', 'restore', 'strategy']"
             )
+        if "strategy" in options:
+            self._check_start(options["strategy"])
+        super().reset(seed=seed)
         if options.get("restore") is not None:
             return self.restore_game_state(options["restore"])
         restart = (
@@ -163,7 +168,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
             self.interaction = 0
             self._initial_strategy()  # drawn even when chosen: the generator moves on the same
             if "strategy" in options:
-                self._start_from(options["strategy"])
+                self._set_strategy(options["strategy"])
             self._last_strategy_id = None
             self._started = True
         else:

@@ -3,8 +3,9 @@
 Geometry (documented choice; the paper gives none): circle of radius 1 centred at the origin,
 ego starts at the centre (Unequal: at (0, -0.5)), action is a velocity in [-1, 1]^2 scaled by
 0.1 per step, positions clipped to [-2, 2]^2, H = 50. Every location is 1 away from the centre
-(10 steps), so reaching it and then stepping just outside the circle (a stabilizing "detour" of a
-few hundredths) fits comfortably within H but costs a little reward.
+(10 steps), so reaching it and then stepping out of the circle (a stabilizing "detour": v0 a few
+hundredths, v1 at least one step, 0.15-0.17 per interaction) fits comfortably within H but costs
+a little reward.
 
 Strategy dynamics T^z: if the ego ends the interaction inside the circle the opponent jumps
 counter-clockwise to the next location; ending outside keeps it. "Outside" means at least
@@ -136,7 +137,10 @@ class CircleEnv(RepeatedInteractionEnv):
             self.location = int(strategy)
 
     def ends_inside(self, position: np.ndarray) -> bool:
-        """The strategy rule's test: closer to the centre than ``RADIUS + outside_margin``."""
+        """The strategy rule's test: closer to the centre than ``RADIUS + outside_margin``.
+
+        Computed in floating point: one step of exactly 0.1 straight out from a location can land
+        at 1.0999999999999999, inside; the scripted policies step 0.02 further."""
         return float(np.linalg.norm(position)) < RADIUS + self.outside_margin
 
     def next_locations(self, location: int, inside: bool) -> list[int]:

@@ -35,7 +35,8 @@ libsumo allows one simulation per process: the first reset of a second Driving e
 while another one in the process is running raises ``SimulationSlotError`` (a ``ConfigError``
 and a ``RuntimeError``); ``close()`` stops SUMO and releases the process's simulation so a later
 environment can start. Use subprocesses (gymnasium ``AsyncVectorEnv``) for parallel
-environments; ``backend="traci"`` runs SUMO as a socket server instead (no limit, ~10x slower).
+environments; ``backend="traci"`` runs SUMO as a socket server instead (no limit; ~15x slower on
+a Zen 4, ``benchmarks/RESULTS.md``).
 """
 
 from __future__ import annotations

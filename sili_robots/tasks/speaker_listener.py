@@ -2,7 +2,7 @@
 
 Layout (documented choice): listener starts at the origin; three goal landmarks at radius 1 and
 angles 90, 210 and 330 degrees; a stationary speaker at ``speaker``; visiting it means coming
-within ``visit_radius`` (0.3) of it. Action: velocity in [-1, 1]^2 scaled by 0.1 per step;
+within ``VISIT_RADIUS`` (0.3) of it. Action: velocity in [-1, 1]^2 scaled by 0.1 per step;
 positions clipped to [-2, 2]^2; H = 50.
 
 Each interaction draws a new true goal uniformly. The speaker's strategy is its *mapping* of goals
@@ -13,9 +13,10 @@ with probability ``CHANGE_PROBABILITY`` = 0.5, under one of two rules (``change_
 - ``"interaction"``: at the end of an interaction in which the ego has not gone near the speaker
   the mapping changes (with probability 0.5); a visit keeps it for the next interaction. At most
   one change per interaction, seen at its first step.
-- ``"step"``: the mapping is *locked* while the ego has visited the speaker in the current
-  interaction or in the previous one; while unlocked, before every step and at the interaction
-  boundary it changes with probability 0.5 (about 25 changes in an unvisited interaction).
+- ``"step"``: within an interaction the mapping is *locked* while the ego has visited the
+  speaker in it or in the previous one; while unlocked it changes with probability 0.5 before
+  every step (about 25 changes in an unvisited interaction). At the boundary after an
+  interaction it changes with probability 0.5 unless that interaction visited the speaker.
 
 Either way the flag "changed since the last step" (``sili_robots.wrappers.StrategyFlag``) is
 the partial observation the paper uses on this task.
