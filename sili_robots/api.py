@@ -53,7 +53,7 @@ from sili_robots.runs import (
 )
 from sili_robots.runs import read_config as read_run_config
 from sili_robots.tasks import RepeatedInteractionEnv
-from sili_robots.training import extend, resume, train
+from sili_robots.training import resume, train
 
 
 class SILI:
@@ -180,9 +180,8 @@ class SILI:
                 clear_run(self.run_dir)
             train(self.cfg, self.run_dir, progress=progress_bar, env=env)
         else:
-            extend(self.run_dir, self.cfg.interactions)
             if env is None:
-                resume(self.run_dir, progress=progress_bar)
+                resume(self.run_dir, progress_bar, self.cfg.interactions)
             else:
                 train(self.cfg, self.run_dir, resume=True, progress=progress_bar, env=env)
         self._setup(load_checkpoint(self.run_dir))

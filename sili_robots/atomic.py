@@ -1,5 +1,6 @@
 """Files replaced whole: a reader, or a kill during the write, sees the old file or the new one,
-never part of one."""
+never part of one; the new one is on disk before it replaces the old, so a crash of the machine
+does not leave an empty file either."""
 
 from __future__ import annotations
 
@@ -21,9 +22,21 @@ def replacing(path: Path, shared: bool = False) -> Iterator[Path]:
     tmp = path.with_name(f"{path.name}{tag}.tmp")
     try:
         yield tmp
+        sync(tmp)
         os.replace(tmp, path)
+        with contextlib.suppress(OSError):  # the rename itself (not every filesystem can)
+            sync(path.parent)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def sync(path: Path) -> None:
+    """Flush ``path`` (a file or a directory) from the operating system's cache to the disk."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def write_text(path: Path, text: str, shared: bool = False) -> None:

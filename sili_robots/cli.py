@@ -107,7 +107,13 @@ class Terminated(KeyboardInterrupt):
         self.signum = signum
 
 
+#: the stop signal a command received; libraries that catch KeyboardInterrupt and raise their
+#: own (Ray's waits) lose which signal it was, the command's exit status still tells it
+_received: list[int] = []
+
+
 def _terminate(signum: int, frame: object) -> None:
+    _received.append(signum)
     raise Terminated(signum)
 
 
@@ -115,6 +121,7 @@ def _terminate(signum: int, frame: object) -> None:
 def _stop_signals_as_ctrl_c() -> Iterator[None]:
     """While a command runs; a signal already ignored (``nohup``'s SIGHUP) stays ignored."""
     handled = []
+    _received.clear()
     if threading.current_thread() is threading.main_thread():
         handled = [
             s for s in (signal.SIGTERM, signal.SIGHUP) if signal.getsignal(s) == signal.SIG_DFL
@@ -145,14 +152,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ConfigError as err:
         print(f"sili {args.command}: error: {err}", file=sys.stderr)
         return 2
-    except Terminated as stop:
-        print(
-            f"sili {args.command}: stopped by {signal.Signals(stop.signum).name}", file=sys.stderr
-        )
-        return 128 + stop.signum
-    except KeyboardInterrupt:
-        print(f"sili {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as stop:
+        # a SIGTERM or SIGHUP may reach here as a library's own KeyboardInterrupt (Ray's waits)
+        signum = stop.signum if isinstance(stop, Terminated) else next(iter(_received), None)
+        if signum is None:
+            print(f"sili {args.command}: interrupted", file=sys.stderr)
+            return 130
+        print(f"sili {args.command}: stopped by {signal.Signals(signum).name}", file=sys.stderr)
+        return 128 + signum
     except (MemoryError, RuntimeError) as err:
         if not _out_of_memory(err):
             raise

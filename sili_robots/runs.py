@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import json
+import os
 import pickle
 import platform
 import shutil
@@ -263,6 +264,32 @@ def write_config(run_dir: Path, cfg: RunConfig) -> None:
     write_text(run_dir / CONFIG, json.dumps(payload, indent=2, sort_keys=True))
 
 
+def record_continuation(run_dir: Path, threads: int, interaction: int) -> None:
+    """Note in ``config.json`` that a run went on at ``interaction`` with other software or on
+    another kind of processor than it last ran on: seeded runs repeat only on the same, so its
+    results are then a mix (``continued``: where, and with what)."""
+    path = Path(run_dir) / CONFIG
+    record = read_json(path, DAMAGED_CONFIG, "run")
+    now = versions(threads)
+    last = (record.get("continued") or [record])[-1].get("versions")
+    if now != last:
+        record.setdefault("continued", []).append(
+            {"from_interaction": interaction, "versions": now}
+        )
+        write_text(path, json.dumps(record, indent=2, sort_keys=True))
+
+
+def set_target(run_dir: Path, interactions: int) -> None:
+    """Record a new target length in ``config.json`` (the run in today's layout); the versions
+    and processor stay those it began with."""
+    path = Path(run_dir) / CONFIG
+    record = read_json(path, DAMAGED_CONFIG, "run")
+    cfg = read_config(run_dir)
+    cfg.interactions = interactions
+    record["run"] = cfg.to_dict()
+    write_text(path, json.dumps(record, indent=2, sort_keys=True))
+
+
 def read_json(path: Path, what: str, *keys: str) -> dict[str, Any]:
     """A JSON object a run or sweep wrote, with ``keys``; ConfigError naming the file when it is
     damaged (``what``: what it should be, and what to do)."""
@@ -339,6 +366,11 @@ class MetricsWriter:
     def write(self, row: dict[str, Any]) -> None:
         self._writer.writerow({k: row.get(k, "") for k in METRIC_COLUMNS})
         self._file.flush()
+
+    def sync(self) -> None:
+        """On disk, before a checkpoint that counts these rows is: after a crash of the machine
+        the history still holds every interaction the checkpoint has trained."""
+        os.fsync(self._file.fileno())
 
     def close(self) -> None:
         self._file.close()

@@ -46,8 +46,12 @@ class StopBetweenInteractions:
         if self.signum is None:
             return
         signum, self.signum = self.signum, None
+        handler = self._previous.get(signum)
         self._restore()
-        signal.raise_signal(signum)
+        if callable(handler):  # called as the signal would: a raised one may not reach it
+            handler(signum, None)  # (Ray's workers do not route SIGINT to Python)
+        else:
+            signal.raise_signal(signum)
 
     def _hold(self, signum: int, _frame: FrameType | None) -> None:
         if self.signum is not None:  # asked twice: at once, as the second signal says

@@ -27,7 +27,9 @@ from sili_robots.runs import (
     kept_fraction,
     load_checkpoint,
     read_config,
+    record_continuation,
     save_checkpoint,
+    set_target,
     write_config,
 )
 from sili_robots.stopping import StopBetweenInteractions
@@ -48,6 +50,7 @@ def train(
     state = load_checkpoint(run_dir) if resume else None
     if state is not None:
         check_history(run_dir, int(state["interaction"]))
+        extend(run_dir, cfg.interactions)  # only once the run is known to resume
     torch.set_num_threads(cfg.threads)
     own_env = env is None
     env = make_run_env(cfg) if env is None else env
@@ -62,6 +65,7 @@ def train(
         agent.load_state_dict(state["agent"])
         obs, info = resume_game(env, state["game"])
         start = int(state["interaction"])
+        record_continuation(run_dir, cfg.threads, start)
         metrics = MetricsWriter(run_dir, keep_rows=start)
     recent: deque[tuple[float, bool]] = deque(maxlen=100)
     elapsed0 = float(state["wall_time"]) if state else 0.0
@@ -113,6 +117,7 @@ def train(
                 done = j + 1
                 stopping = stop.requested  # read once: a stop after this acts at the next end
                 if done % cfg.checkpoint_every == 0 or done == cfg.interactions or stopping:
+                    metrics.sync()
                     save_checkpoint(
                         run_dir,
                         {
@@ -151,21 +156,34 @@ def write_summary(run_dir: Path, window: int = 100) -> dict[str, Any]:
     return summary
 
 
+def check_extension(run_dir: Path, interactions: int) -> None:
+    """Refuse a target below the run's: a run can only be extended."""
+    recorded = read_config(run_dir).interactions
+    if interactions < recorded:
+        raise ConfigError(
+            f"--interactions {interactions} would shorten {run_dir}, which is set to "
+            f"{recorded}; a run can only be extended (allowed: >= {recorded})"
+        )
+
+
 def extend(run_dir: Path, interactions: int) -> None:
     """Raise a run's target to ``interactions``; resuming it then continues from its last
     checkpoint exactly as a run started with that target would have (nothing else in the run
-    depends on the target)."""
-    cfg = read_config(run_dir)
-    if interactions < cfg.interactions:
-        raise ConfigError(
-            f"--interactions {interactions} would shorten {run_dir}, which is set to "
-            f"{cfg.interactions}; a run can only be extended (allowed: >= {cfg.interactions})"
-        )
-    if interactions != cfg.interactions:
-        cfg.interactions = interactions
-        write_config(Path(run_dir), cfg)
+    depends on the target). The run is unfinished from here on (its summary goes first, so a
+    stop before it trains leaves it resumable, not done and short); the rest of its record
+    (versions, machine) stays as written when it began."""
+    check_extension(run_dir, interactions)
+    if interactions != read_config(run_dir).interactions:
+        (Path(run_dir) / SUMMARY).unlink(missing_ok=True)
+        set_target(run_dir, interactions)
 
 
-def resume(run_dir: Path, progress: bool = True) -> Path:
+def resume(run_dir: Path, progress: bool = True, interactions: int | None = None) -> Path:
+    """Continue a run from its last checkpoint, extended to ``interactions`` when given (the
+    run changes only once its checkpoint and history are known to resume)."""
     check_resumable(run_dir)
-    return train(read_config(run_dir), run_dir, resume=True, progress=progress)
+    cfg = read_config(run_dir)
+    if interactions is not None:
+        check_extension(run_dir, interactions)
+        cfg.interactions = interactions
+    return train(cfg, run_dir, resume=True, progress=progress)

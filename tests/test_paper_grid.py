@@ -142,6 +142,36 @@ def test_collect_takes_a_run_extended_or_trained_again_and_refuses_before_copyin
     assert not (tmp_path / "two" / "runs").exists()
 
 
+def test_a_run_collected_back_into_a_sweep_replaces_a_shorter_training_there(
+    sweep_and_collection, tmp_path
+):
+    """`sili grid` copies collected runs back into its sweep: a shorter training left in a run's
+    folder must not stay beside the copy, where its rows would be read first."""
+    from sili_robots.runs import metrics_file
+    from sili_robots.sweep.collect import collect
+    from sili_robots.sweep.state import run_state
+
+    sweep, collection = sweep_and_collection
+    name = "circle-3__sili-bschedule__s0"
+    into = tmp_path / "sweep"
+    shutil.copytree(sweep, into)
+    run = into / "runs" / name
+    lines = (run / "metrics.csv").read_text().splitlines(keepends=True)
+    assert (run / "checkpoint.pt").is_file() and len(lines) == 1 + 6
+    assert collect([collection], into, names=[name]).unchanged == [name]  # the same run, done
+    assert (run / "checkpoint.pt").is_file()  # kept: the run can be extended from it
+    (run / "summary.json").unlink()
+    (run / "metrics.csv").write_text("".join(lines[:5]))  # stopped after 4 of the 6
+    assert collect([collection], into, names=[name]).replaced == [name]
+    assert not (run / "metrics.csv").exists() and not (run / "checkpoint.pt").exists()
+    assert metrics_file(run).name == "metrics.csv.gz" and run_state(run) == "done"
+    # a training there past the collected length (an extension under way) is left alone
+    (run / "summary.json").unlink()
+    (run / "metrics.csv").write_text("".join(lines + lines[1:3]))
+    assert collect([collection], into, names=[name]).unchanged == [name]
+    assert len((run / "metrics.csv").read_text().splitlines()) == 1 + 8
+
+
 def test_runs_counts_runs_and_interactions(sweep_and_collection, capsys):
     sweep, collection = sweep_and_collection
     assert main(["runs", str(sweep)]) == 0

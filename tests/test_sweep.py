@@ -380,6 +380,8 @@ def test_overwrite_starts_the_sweep_anew_and_keeps_a_users_files(tmp_path, capsy
     (s1 / "worker.json").write_text(json.dumps(trainer))
     assert main([*again, "--overwrite"]) == 2  # e.g. an orphan still saving its interaction
     assert f"circle-3__sac__s1 in {out} is being trained by process" in capsys.readouterr().err
+    assert main(["sweep", "--resume", str(out), "--no-progress"]) == 2  # nor resumed beside it
+    assert f"circle-3__sac__s1 in {out} is being trained by process" in capsys.readouterr().err
     (s1 / "worker.json").unlink()
     (out / "figures").mkdir()
     (out / "figures" / "curves.png").write_text("the replaced sweep's")

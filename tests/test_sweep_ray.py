@@ -11,6 +11,7 @@ import time
 
 import pandas as pd
 import pytest
+import torch
 from fast_settings import FAST_AGENT as FAST
 
 from sili_robots.runs import RunConfig
@@ -139,3 +140,35 @@ def test_ray_retries_a_killed_worker_from_its_checkpoint(ray_cluster, tmp_path):
         _strip(pd.read_csv(tmp_path / "ref" / "metrics.csv")),
         _strip(pd.read_csv(run_dir / "metrics.csv")),
     )
+
+
+def test_a_stopped_ray_sweep_checkpoints_the_interaction_each_run_is_in(ray_cluster, tmp_path):
+    """SIGTERM (or Ctrl-C) stops a Ray sweep as it stops a local one: each running task finishes
+    and checkpoints its interaction, so resuming loses nothing."""
+    out = tmp_path / "sweep"
+    args = ["sweep", "--backend", "ray", "--ray-address", ray_cluster, "--tasks", "circle-3"]
+    args += ["--methods", "sac", "--seeds", "0", "--interactions", "5000", "--out", str(out)]
+    args += ["--no-progress", *[x for k, v in FAST.items() for x in ("--set", f"{k}={v}")]]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sili_robots.cli", *args], stderr=subprocess.PIPE, text=True
+    )
+    run_dir = out / "runs" / "circle-3__sac__s0"
+
+    def rows():
+        metrics = run_dir / "metrics.csv"
+        return len(metrics.read_text().splitlines()) - 1 if metrics.exists() else 0
+
+    try:
+        deadline = time.monotonic() + 240
+        while rows() < 5 and time.monotonic() < deadline:
+            time.sleep(0.1)
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 128 + signal.SIGTERM, stderr
+    assert "1 stopped midway, resumable" in stderr
+    checkpoint = torch.load(run_dir / "checkpoint.pt", weights_only=False)
+    assert checkpoint["interaction"] == rows() >= 5  # logged and saved, nothing lost
+    assert not (run_dir / "worker.json").exists()

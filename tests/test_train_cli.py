@@ -269,6 +269,9 @@ def test_a_damaged_checkpoint_or_config_exits_2_naming_the_file(tmp_path):
     ckpt.write_bytes(ckpt.read_bytes()[:1000])  # cut short, as by a full disk
     res = _sili("train", "--resume", run, "--interactions", 3)
     assert res.returncode == 2 and f"{ckpt} is damaged" in res.stderr, res.stderr
+    # refused before the run changed: still a finished run of 2
+    assert json.loads((run / "config.json").read_text())["run"]["interactions"] == 2
+    assert run_state(run) == "done"
     (run / "config.json").write_text("{not json")
     res = _sili("eval", run, "--interactions", 1)
     assert res.returncode == 2 and f"{run / 'config.json'} is damaged" in res.stderr
@@ -691,9 +694,39 @@ def test_a_run_being_extended_is_unfinished_until_it_ends(tmp_path, monkeypatch)
     monkeypatch.undo()
     resume(out, progress=False)
     assert json.loads((out / "summary.json").read_text())["interactions"] == 5
+    # stopped after the extension was recorded but before it trained: resumable, not done
+    monkeypatch.setattr(training, "make_run_env", killed)
+    with pytest.raises(KeyboardInterrupt):
+        resume(out, progress=False, interactions=6)
+    assert json.loads((out / "config.json").read_text())["run"]["interactions"] == 6
+    assert run_state(out) == "resumable"
+    # as earlier versions left it (the target raised, the shorter summary kept): not done
+    (out / "summary.json").write_text(json.dumps({"interactions": 5}))
+    assert run_state(out) == "resumable"
 
 
-def test_a_run_a_sweep_worker_is_training_is_not_resumed_beside_it(tmp_path, capsys):
+def test_extending_a_run_keeps_the_record_of_how_it_began(tmp_path):
+    out = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "2", *FAST]
+    assert main([*args, "--out", str(out)]) == 0
+    record = json.loads((out / "config.json").read_text())
+    record["versions"]["torch"] = "0.0-recorded"
+    (out / "config.json").write_text(json.dumps(record))
+    extend(out, 3)
+    after = json.loads((out / "config.json").read_text())
+    assert after["run"]["interactions"] == 3 and after["versions"]["torch"] == "0.0-recorded"
+    # going on in other software is recorded where it happened, once
+    assert main(["train", "--resume", str(out), "--no-progress"]) == 0
+    assert main(["train", "--resume", str(out), "--interactions", "4", "--no-progress"]) == 0
+    after = json.loads((out / "config.json").read_text())
+    (continued,) = after["continued"]
+    assert (
+        continued["from_interaction"] == 2 and continued["versions"]["torch"] == torch.__version__
+    )
+    assert after["versions"]["torch"] == "0.0-recorded"
+
+
+def test_a_run_a_sweep_worker_is_training_is_not_resumed_beside_it(tmp_path, capsys, monkeypatch):
     out = tmp_path / "run"
     args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "2", *FAST]
     assert main([*args, "--out", str(out)]) == 0
@@ -701,11 +734,20 @@ def test_a_run_a_sweep_worker_is_training_is_not_resumed_beside_it(tmp_path, cap
     (out / "worker.json").write_text(json.dumps({"pid": os.getpid(), "host": host}))
     capsys.readouterr()
     assert main(["train", "--resume", str(out), "--interactions", "3", "--no-progress"]) == 2
-    assert f"is being trained by a sweep worker (process {os.getpid()})" in capsys.readouterr().err
+    assert f"is being trained by process {os.getpid()} (a sweep's worker" in capsys.readouterr().err
     gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], check=True,
                           capture_output=True, text=True)  # fmt: skip
     (out / "worker.json").write_text(json.dumps({"pid": int(gone.stdout), "host": host}))
+    claims = []  # sili train claims the run while it trains it, as a sweep's worker does
+    play = training.play_interaction
+
+    def watched(*args, **kwargs):
+        claims.append(json.loads((out / "worker.json").read_text())["pid"])
+        return play(*args, **kwargs)
+
+    monkeypatch.setattr(training, "play_interaction", watched)
     assert main(["train", "--resume", str(out), "--interactions", "3", "--no-progress"]) == 0
+    assert claims == [os.getpid()] and not (out / "worker.json").exists()
 
 
 def test_more_threads_than_cores_is_trained_with_a_note(tmp_path, capsys, monkeypatch):

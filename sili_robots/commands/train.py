@@ -191,8 +191,8 @@ def _task_names() -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.runs import check_resumable
-    from sili_robots.sweep.state import run_state, training_worker
-    from sili_robots.training import extend, resume, train, write_summary
+    from sili_robots.sweep.state import run_state, training_claim, training_worker
+    from sili_robots.training import check_extension, resume, train, write_summary
     from sili_robots.verdict import verdict
 
     if args.resume is not None:
@@ -201,8 +201,8 @@ def run(args: argparse.Namespace) -> int:
         pid = training_worker(args.resume)
         if pid is not None:
             raise ConfigError(
-                f"{args.resume} is being trained by a sweep worker (process {pid}); resume the "
-                "sweep instead (sili sweep --resume), or stop it first"
+                f"{args.resume} is being trained by process {pid} (a sweep's worker or another "
+                "sili train); let it finish or stop it first (a sweep's: sili sweep --resume)"
             )
         ignored = given_options(args, {"resume", "interactions", "no_progress"})
         if ignored:
@@ -211,7 +211,7 @@ def run(args: argparse.Namespace) -> int:
                 f"only --interactions (to extend it) and --no-progress, not {', '.join(ignored)}"
             )
         if args.interactions is not None:
-            extend(args.resume, args.interactions)
+            check_extension(args.resume, args.interactions)
         elif run_state(args.resume) == "done":
             print(
                 f"{args.resume} has already trained all {read_config(args.resume).interactions} "
@@ -219,8 +219,8 @@ def run(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
         _note_threads_beyond_cores(read_config(args.resume).threads)
-        with _resume_hint(args.resume):
-            run_dir = resume(args.resume, progress=not args.no_progress)
+        with _resume_hint(args.resume), training_claim(args.resume):
+            run_dir = resume(args.resume, not args.no_progress, args.interactions)
     else:
         cfg = config_from_args(args)
         if args.out is None:
@@ -231,7 +231,7 @@ def run(args: argparse.Namespace) -> int:
             clear_run(args.out)  # the run's own files; anything else in the folder stays
         make_run_dir(args.out)
         _note_threads_beyond_cores(cfg.threads)
-        with _resume_hint(args.out):
+        with _resume_hint(args.out), training_claim(args.out):
             run_dir = train(cfg, args.out, progress=not args.no_progress)
     summary = write_summary(run_dir)
     print(json.dumps({"run_dir": str(run_dir), **summary}, indent=2))

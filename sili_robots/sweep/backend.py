@@ -8,6 +8,10 @@ from typing import Protocol
 
 from sili_robots.sweep.worker import Job, Outcome
 
+#: how long a worker asked to stop (SIGTERM) may take to finish and checkpoint its interaction
+#: before it is killed (by the sweep, either backend) or exits (an orphan whose sweep is gone)
+STOP_GRACE_S = 30.0
+
 
 class Monitor(Protocol):
     """Receives a backend's events; ``tick`` is called about once a second while runs go on."""

@@ -23,9 +23,12 @@ import pandas as pd
 from sili_robots.atomic import write_bytes
 from sili_robots.errors import ConfigError
 from sili_robots.runs import (
+    CHECKPOINT,
     COMPRESSED_METRICS,
     CONFIG,
     DAMAGED_SUMMARY,
+    ERROR_FILE,
+    METRICS,
     SUMMARY,
     differences,
     metrics_file,
@@ -81,13 +84,17 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
                 chosen[name] = (run_dir, ident, length)
     for name, (run_dir, _, length) in chosen.items():
         target = Path(dest) / RUNS_DIR / name
-        complete = (target / SUMMARY).is_file() and (target / COMPRESSED_METRICS).is_file()
-        if complete and (
-            (target / SUMMARY).read_bytes() == (run_dir / SUMMARY).read_bytes()
-            or _length(target) > length  # the collection holds it longer
-        ):
+        finished = (target / SUMMARY).is_file() and metrics_file(target) is not None
+        if (
+            finished
+            and (
+                (target / SUMMARY).read_bytes() == (run_dir / SUMMARY).read_bytes()
+                or _length(target) > length  # dest holds it longer
+            )
+        ) or _rows_trained(target) > length:  # a training in dest (a sweep's) is past it
             report.unchanged.append(name)
             continue
+        superseded = not finished or _length(target) < length
         was_there = (target / CONFIG).is_file()
         metrics = metrics_file(run_dir)
         target.mkdir(parents=True, exist_ok=True)
@@ -96,6 +103,9 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
         # the summary last, each file whole: an interrupted copy is redone next time
         write_bytes(target / COMPRESSED_METRICS, data)
         write_bytes(target / CONFIG, (run_dir / CONFIG).read_bytes())
+        if superseded:  # a shorter training in its place (a sweep's): read before the copy
+            for leftover in (METRICS, CHECKPOINT, ERROR_FILE):
+                (target / leftover).unlink(missing_ok=True)
         write_bytes(target / SUMMARY, (run_dir / SUMMARY).read_bytes())
         (report.replaced if was_there else report.added).append(name)
     return report
@@ -106,6 +116,15 @@ def _identity(run_dir: Path) -> dict[str, Any]:
     run = recorded_run(run_dir)
     run.pop("interactions")
     return run
+
+
+def _rows_trained(run_dir: Path) -> int:
+    """How many interactions a training in ``run_dir`` has logged (0 without one)."""
+    path = run_dir / METRICS
+    if not path.is_file():
+        return 0
+    with path.open() as f:
+        return max(sum(1 for _ in f) - 1, 0)  # the header
 
 
 def _length(run_dir: Path) -> int:

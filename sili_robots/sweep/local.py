@@ -25,14 +25,11 @@ from pathlib import Path
 
 from sili_robots.errors import ConfigError
 from sili_robots.runs import ERROR_FILE, RUNNING_FILE
-from sili_robots.sweep.backend import Monitor, describe_exit
+from sili_robots.sweep.backend import STOP_GRACE_S, Monitor, describe_exit
 from sili_robots.sweep.worker import THREAD_ENV, Job, Outcome, limit_threads, run_job
 
 #: imported once by the forkserver, so forked workers start with them loaded
 PRELOAD = ["sili_robots.sweep.worker", "sili_robots.training", "torch.utils.tensorboard"]
-#: how long a worker asked to stop (SIGTERM) may take to finish and checkpoint its interaction
-#: before it is killed (by the sweep) or exits (an orphan whose sweep is gone)
-STOP_GRACE_S = 30.0
 
 
 def _raise_exit(signum: int, _frame: object) -> None:

@@ -3,22 +3,27 @@
 Each run is one task with ``num_cpus=1`` and ``max_calls=1``, so Ray gives every run a fresh
 worker process (libsumo: one simulation per process) and Ray's scheduler decides placement.
 ``max_retries`` re-runs a task whose worker died; the retry resumes from the run's checkpoint.
+A stopped sweep (Ctrl-C, SIGTERM) interrupts each running task, which logs and checkpoints the
+interaction it is in, as the local backend's workers do.
 On a multi-node cluster the sweep directory must be on a filesystem every node sees, and every
 node needs this package installed. Ray is optional: ``pip install sili-robots[ray]``.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
+import threading
 import time
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 from sili_robots.errors import ConfigError
 from sili_robots.runs import ERROR_FILE, RUNNING_FILE
-from sili_robots.sweep.backend import Monitor
+from sili_robots.sweep.backend import STOP_GRACE_S, Monitor
 from sili_robots.sweep.worker import Job, Outcome, run_job
 
 
@@ -55,7 +60,8 @@ class RayBackend:
         else:
             kwargs.update(num_cpus=self.workers or os.cpu_count() or 1, include_dashboard=False)
         try:
-            ray.init(**kwargs)
+            with _keeping_stop_handlers():
+                ray.init(**kwargs)
         except ConnectionError as err:
             raise ConfigError(f"cannot connect to Ray at {self.address!r}: {err}") from None
         except ValueError as err:  # e.g. an address ray.init cannot read
@@ -92,8 +98,7 @@ class RayBackend:
                         monitor.started(job)
                 monitor.tick()
         except BaseException:
-            for ref in in_flight:
-                ray.cancel(ref, force=True)
+            _stop(ray, in_flight)
             raise
         finally:
             if started_here:
@@ -113,6 +118,38 @@ class RayBackend:
             (path / ERROR_FILE).write_text(str(err) + "\n")
             (path / RUNNING_FILE).unlink(missing_ok=True)
             return Outcome(job.name, "failed", error=reason)
+
+
+@contextlib.contextmanager
+def _keeping_stop_handlers() -> Iterator[None]:
+    """``ray.init`` installs its own SIGTERM handler in the driver (it exits with status 1);
+    the command's own (``sili sweep``: stop like Ctrl-C, exit 128 + signal) is put back."""
+    on_main = threading.current_thread() is threading.main_thread()
+    signals = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP) if on_main else ()
+    handlers = {s: signal.getsignal(s) for s in signals}
+    try:
+        yield
+    finally:
+        for sig, handler in handlers.items():
+            if handler is not None:
+                signal.signal(sig, handler)
+
+
+def _stop(ray: Any, in_flight: dict[Any, Job]) -> None:
+    """Stop the running tasks as the local backend stops its workers: each is interrupted
+    (Ray raises KeyboardInterrupt in it, which the training loop holds until the interaction
+    it is in is logged and checkpointed) and killed only if still running after
+    ``STOP_GRACE_S``, or at a second stop."""
+    refs = list(in_flight)
+    for ref in refs:
+        ray.cancel(ref, force=False)
+    not_ready = refs
+    try:
+        _, not_ready = ray.wait(refs, num_returns=len(refs), timeout=STOP_GRACE_S)
+    finally:
+        for ref in not_ready:
+            ray.cancel(ref, force=True)
+            (Path(in_flight[ref].run_dir) / RUNNING_FILE).unlink(missing_ok=True)
 
 
 def _wait_for_workers(ray: Any, cancelled: dict[Any, Job]) -> None:

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from sili_robots.errors import ConfigError
-from sili_robots.runs import SUMMARY, write_config
+from sili_robots.runs import write_config
 from sili_robots.sweep import tensorboard
 from sili_robots.sweep.backend import Backend, Monitor
 from sili_robots.sweep.local import LocalBackend
@@ -142,6 +142,7 @@ def run_sweep(
         for run in planned:
             if run not in shorter:
                 check_existing(sweep_dir, run)
+            check_not_training(sweep_dir, run.name)  # e.g. by sili train --resume
         if recorded:
             write_invocations(sweep_dir, specs)
         if shorter:
@@ -149,15 +150,14 @@ def run_sweep(
 
             for run in shorter:
                 path = run_path(sweep_dir, run.name)
-                extend_run(path, run.config.interactions)
-                (path / SUMMARY).unlink(missing_ok=True)  # it summed up the shorter run
+                extend_run(path, run.config.interactions)  # and unfinished: no summary
         for spec in specs:
             record_invocation(sweep_dir, spec)
         report = SweepReport(sweep_dir, [r.name for r in planned])
         jobs: list[Job] = []
         for run in planned:
             path = run_path(sweep_dir, run.name)
-            (path / RUNNING_FILE).unlink(missing_ok=True)  # stale: we hold the sweep's lock
+            (path / RUNNING_FILE).unlink(missing_ok=True)  # stale: its process is gone
             if run_state(path) == "done":
                 report.skipped.append(run.name)
                 continue

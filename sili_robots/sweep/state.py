@@ -93,8 +93,8 @@ def clear_sweep(sweep_dir: Path, names: list[str]) -> None:
 
 
 def training_worker(run_dir: Path) -> int | None:
-    """The process id of a live sweep worker on this host training ``run_dir``, if any (a
-    second process training the same run would interleave its files)."""
+    """The process id of a live process on this host training ``run_dir`` (a sweep worker or
+    ``sili train``), if any: a second process training the same run would interleave its files."""
     try:
         info = json.loads((Path(run_dir) / RUNNING_FILE).read_text())
         pid = int(info["pid"])
@@ -111,21 +111,46 @@ def training_worker(run_dir: Path) -> int | None:
     return pid
 
 
+@contextlib.contextmanager
+def training_claim(run_dir: Path) -> Iterator[None]:
+    """Mark ``run_dir`` as trained by this process while the block runs, so that a sweep or a
+    second ``sili train --resume`` refuses it (``training_worker``) instead of training beside."""
+    path = Path(run_dir) / RUNNING_FILE
+    path.write_text(json.dumps({"pid": os.getpid(), "host": socket.gethostname()}))
+    try:
+        yield
+    finally:
+        path.unlink(missing_ok=True)
+
+
 def check_not_training(sweep_dir: Path, name: str) -> None:
     """ConfigError when a live worker trains the run ``name``: it is not to be changed now."""
     pid = training_worker(run_path(sweep_dir, name))
     if pid is not None:
         raise ConfigError(
-            f"run {name} in {sweep_dir} is being trained by process {pid}; stop it first"
+            f"run {name} in {sweep_dir} is being trained by process {pid}; let it finish or "
+            "stop it first"
         )
 
 
 def run_state(run_dir: Path) -> RunState:
-    if (run_dir / SUMMARY).is_file():
+    if (run_dir / SUMMARY).is_file() and not _summed_short(run_dir):
         return "done"
     if (run_dir / CHECKPOINT).is_file():
         return "resumable"
     return "new"
+
+
+def _summed_short(run_dir: Path) -> bool:
+    """A summary of fewer interactions than the run is set to, beside a checkpoint to go on
+    from: an extension stopped before it trained (earlier versions left it so), not a finished
+    run."""
+    if not (run_dir / CHECKPOINT).is_file():
+        return False
+    with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
+        summed = json.loads((run_dir / SUMMARY).read_text())["interactions"]
+        return int(summed) < int(json.loads((run_dir / CONFIG).read_text())["run"]["interactions"])
+    return False
 
 
 def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:

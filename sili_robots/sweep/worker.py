@@ -9,9 +9,7 @@ the sweep. This module imports torch only inside the call, after capping threads
 from __future__ import annotations
 
 import contextlib
-import json
 import os
-import socket
 import time
 import traceback
 import warnings
@@ -19,8 +17,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from sili_robots.runs import ERROR_FILE, RUNNING_FILE
-from sili_robots.sweep.state import run_state
+from sili_robots.runs import ERROR_FILE
+from sili_robots.sweep.state import run_state, training_claim
 
 #: one thread per worker: K workers share the machine's cores
 THREAD_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
@@ -64,18 +62,18 @@ def run_job(job: Job) -> Outcome:
     state = run_state(run_dir)
     if state == "done":
         return Outcome(job.name, "done", pid=os.getpid(), verdict=_verdict(run_dir))
-    running = run_dir / RUNNING_FILE
-    running.write_text(json.dumps({"pid": os.getpid(), "host": socket.gethostname()}))
+    (run_dir / ERROR_FILE).unlink(missing_ok=True)  # an earlier attempt's: this one decides
     try:
-        import torch
+        with training_claim(run_dir):
+            import torch
 
-        from sili_robots.runs import RunConfig
-        from sili_robots.training import train
+            from sili_robots.runs import RunConfig
+            from sili_robots.training import train
 
-        torch.set_num_threads(1)
-        cfg = RunConfig.from_dict(job.config)
-        with _tensorboard(run_dir, job.tensorboard):
-            train(cfg, run_dir, resume=state == "resumable", progress=False)
+            torch.set_num_threads(1)
+            cfg = RunConfig.from_dict(job.config)
+            with _tensorboard(run_dir, job.tensorboard):
+                train(cfg, run_dir, resume=state == "resumable", progress=False)
     except (KeyboardInterrupt, SystemExit):
         raise  # the sweep is being stopped: the run stays resumable from its checkpoint
     except Exception as err:  # a run's failure must not reach the sweep
@@ -88,9 +86,6 @@ def run_job(job: Job) -> Outcome:
             wall_time_s=time.perf_counter() - t0,
             pid=os.getpid(),
         )
-    finally:
-        running.unlink(missing_ok=True)
-    (run_dir / ERROR_FILE).unlink(missing_ok=True)
     return Outcome(
         job.name,
         "done",
