@@ -7,7 +7,6 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 from dataclasses import replace
 
 import numpy as np
@@ -17,6 +16,7 @@ import torch
 from cli_helpers import sili as sili_in_process
 from fast_settings import FAST_AGENT as FAST
 from fast_settings import FAST_ARGS
+from process_helpers import metrics_rows, signal_when, wait_for
 
 from sili_robots.cli import main
 from sili_robots.evaluation import load_trained
@@ -177,19 +177,6 @@ def test_failing_run_is_reported_and_the_others_complete(tmp_path):
     assert "Traceback" not in res.stderr
 
 
-def _wait_for(predicate, timeout=120.0):
-    deadline = time.time() + timeout
-    while time.time() < deadline:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return False
-
-
-def _rows(path):
-    return max(len(path.read_text().splitlines()) - 1, 0) if path.exists() else 0
-
-
 def test_killed_worker_is_reported_and_the_sweep_resumes_its_run(tmp_path):
     out = tmp_path / "sweep"
     args = ["--tasks", "circle-3", "--methods", "sili", "--seeds", "0,1", "--interactions", 40]
@@ -202,7 +189,7 @@ def test_killed_worker_is_reported_and_the_sweep_resumes_its_run(tmp_path):
     )
     victim = out / "runs" / "circle-3__sili-bschedule__s0"
     try:
-        assert _wait_for(lambda: _rows(victim / "metrics.csv") >= 12), "run never got going"
+        assert wait_for(lambda: metrics_rows(victim / "metrics.csv") >= 12), "run never got going"
         pid = json.loads((victim / "worker.json").read_text())["pid"]
         assert pid != proc.pid
         os.kill(pid, signal.SIGKILL)
@@ -511,14 +498,14 @@ def _long_sweep(tmp_path, **popen_kwargs):
 def test_workers_stop_when_the_sweep_process_is_killed(tmp_path):
     proc, run_dir = _long_sweep(tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
-        assert _wait_for(lambda: _rows(run_dir / "metrics.csv") >= 5)
+        assert wait_for(lambda: metrics_rows(run_dir / "metrics.csv") >= 5)
         pid = json.loads((run_dir / "worker.json").read_text())["pid"]
     finally:
         proc.kill()
         proc.wait()
-    assert _wait_for(lambda: not _alive(pid), timeout=20), "the worker outlived its sweep"
+    assert wait_for(lambda: not _alive(pid), timeout=20), "the worker outlived its sweep"
     assert not (run_dir / "summary.json").exists()
-    assert _rows(run_dir / "metrics.csv") < 5000
+    assert metrics_rows(run_dir / "metrics.csv") < 5000
 
 
 def test_sigterm_stops_a_sweep_as_ctrl_c_does(tmp_path):
@@ -526,22 +513,24 @@ def test_sigterm_stops_a_sweep_as_ctrl_c_does(tmp_path):
     written, the exit code says which signal."""
     proc, run_dir = _long_sweep(tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     out = run_dir.parents[1]
-    try:
-        assert _wait_for(lambda: _rows(run_dir / "metrics.csv") >= 5)
-        pid = json.loads((run_dir / "worker.json").read_text())["pid"]
-        proc.send_signal(signal.SIGTERM)
-        _, stderr = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
+    pids = []
+
+    def training() -> bool:
+        if metrics_rows(run_dir / "metrics.csv") < 5:
+            return False
+        pids.append(json.loads((run_dir / "worker.json").read_text())["pid"])
+        return True
+
+    stderr = signal_when(proc, training)
+    pid = pids[0]
     assert proc.returncode == 128 + signal.SIGTERM, stderr
     assert "sweep: 0 done, 0 failed, 1 not run (1 stopped midway, resumable)" in stderr
     assert "sili sweep: stopped by SIGTERM" in stderr and "Traceback" not in stderr
     assert pd.read_csv(out / "runs.csv")["status"].tolist() == ["incomplete"]
-    assert _wait_for(lambda: not _alive(pid), timeout=20)
+    assert wait_for(lambda: not _alive(pid), timeout=20)
     # the worker logged and checkpointed the interaction it was in before it stopped
     checkpointed = torch.load(run_dir / "checkpoint.pt", weights_only=False)["interaction"]
-    assert checkpointed == _rows(run_dir / "metrics.csv") >= 5
+    assert checkpointed == metrics_rows(run_dir / "metrics.csv") >= 5
 
 
 def test_progress_display_counts_runs_and_interactions(tmp_path):

@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 import torch
 from fast_settings import FAST_AGENT as FAST
+from process_helpers import metrics_rows, signal_when
 
 from sili_robots.runs import RunConfig
 from sili_robots.sweep import RayBackend, SweepSpec, expand, run_sweep
@@ -153,22 +154,11 @@ def test_a_stopped_ray_sweep_checkpoints_the_interaction_each_run_is_in(ray_clus
         [sys.executable, "-m", "sili_robots.cli", *args], stderr=subprocess.PIPE, text=True
     )
     run_dir = out / "runs" / "circle-3__sac__s0"
-
-    def rows():
-        metrics = run_dir / "metrics.csv"
-        return len(metrics.read_text().splitlines()) - 1 if metrics.exists() else 0
-
-    try:
-        deadline = time.monotonic() + 240
-        while rows() < 5 and time.monotonic() < deadline:
-            time.sleep(0.1)
-        proc.send_signal(signal.SIGTERM)
-        _, stderr = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
+    stderr = signal_when(proc, lambda: metrics_rows(run_dir / "metrics.csv") >= 5)
     assert proc.returncode == 128 + signal.SIGTERM, stderr
     assert "1 stopped midway, resumable" in stderr
     checkpoint = torch.load(run_dir / "checkpoint.pt", weights_only=False)
-    assert checkpoint["interaction"] == rows() >= 5  # logged and saved, nothing lost
+    assert (
+        checkpoint["interaction"] == metrics_rows(run_dir / "metrics.csv") >= 5
+    )  # logged and saved, nothing lost
     assert not (run_dir / "worker.json").exists()
