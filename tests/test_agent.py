@@ -103,6 +103,31 @@ def test_partial_stability_reward_is_the_observed_flag_each_step():
     assert stats.stability_reward == -3.0  # flags at t=2, t=5 and the boundary
 
 
+def test_the_reward_is_the_b_weighted_sum_of_task_and_stability_rewards():
+    """R = (1 - b) R_task + b R_stable, on the same sampled transitions."""
+    agent = _agent(latent="partial")
+    _fill(agent, 3, [np.array([0, 1, 0, 0, 1, 0, 1], np.float32)] * 3)
+    state = agent.rng.bit_generator.state
+    rewards = {}
+    for beta in (0.0, 1.0, 0.3):
+        agent.rng.bit_generator.state = state  # the same transitions each time
+        rewards[beta] = agent.sample_batches(2, beta=beta)[2].numpy()
+    task, stable = rewards[0.0], rewards[1.0]
+    assert np.abs(task).sum() > 0 and np.abs(stable).sum() > 0 and not np.allclose(task, stable)
+    np.testing.assert_allclose(rewards[0.3], 0.7 * task + 0.3 * stable, rtol=1e-6, atol=1e-7)
+
+
+def test_the_logged_latent_change_is_a_change_of_category():
+    """``latent_changed`` (metrics.csv, the summary's change agreement): z^j's category against
+    z^{j+1}'s; the game's first interaction has no z^{j} to compare."""
+    agent = _agent()
+    _fill(agent, 4)
+    agent.Z = np.eye(4, dtype=np.float32)[[0, 1, 1, 2, 2]]
+    stats = [agent._stats(j, np.zeros(3, np.float32), {}) for j in range(4)]
+    assert [s.latent_changed for s in stats] == [False, False, True, False]
+    assert [s.latent_category for s in stats] == [1, 1, 2, 2]
+
+
 def test_true_latent_mode_uses_the_true_strategy():
     agent = _agent(latent="true")
     agent.begin_game({"strategy": np.array([0, 0], np.float32)})

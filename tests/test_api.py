@@ -179,7 +179,8 @@ def test_evaluate_plays_on_the_models_own_simulation_and_close_frees_it():
     assert model.evaluate(2)["interactions"] == 2
     assert model.env.action_space.contains(model.predict(model.env.reset()[0]))
     model.close()
-    other = SILI("driving", method="sac", settings=FAST_AGENT)  # the simulation is free again
+    other = SILI("driving", method="sac", settings=FAST_AGENT)
+    other.env.reset()  # SUMO starts here: the process's one simulation is free again
     other.close()
     del model
     gc.collect()

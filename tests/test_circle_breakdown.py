@@ -75,6 +75,25 @@ def test_ending_inside_is_played_against_the_moved_on_opponent(
     np.testing.assert_array_equal(played_at[1:], np.where(radii < 1, 0, 2))  # 2 -> 0 moved on
 
 
+def test_a_greedy_interaction_is_played_against_the_given_location(
+    breakdown: ModuleType, run: Path
+) -> None:
+    agent, task, _ = breakdown.load_run(run)
+    z = np.zeros(agent.zdim * agent.n_latents, np.float32)
+    played = []
+    for location in range(3):
+        got = breakdown.greedy_interaction(agent, task, location, z)
+        obs, _ = task.reset(options={"strategy": location})
+        total = 0.0
+        for _ in range(task.horizon):
+            x = torch.from_numpy(np.concatenate([obs, z]).astype(np.float32)).unsqueeze(0)
+            obs, reward, _, _, _ = task.step(agent.sac.act(x, deterministic=True)[0].numpy())
+            total += reward
+        assert got == pytest.approx(total)
+        played.append(got)
+    assert len(set(played)) == 3  # the same play, against three places
+
+
 @pytest.mark.parametrize(("version", "rim"), [("v0", 1.0), ("v1", 1.1)])
 def test_probes_straddle_the_tasks_edge(breakdown: ModuleType, version: str, rim: float) -> None:
     task = make_task(f"sili/Circle3-{version}").unwrapped

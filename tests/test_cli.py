@@ -213,6 +213,21 @@ def test_bad_input_found_after_the_output_check_leaves_no_directory(tmp_path):
     assert not (tmp_path / "new").exists()
 
 
+def test_beta_options_set_b_as_given():
+    from sili_robots.agent.schedule import Schedule
+    from sili_robots.cli import _parse, build_parser
+    from sili_robots.commands.train import config_from_args
+
+    def b(*options):
+        argv = ["train", "--task", "circle-3", "--method", "sili", *options]
+        return config_from_args(_parse(build_parser(), argv)).agent.sili.beta
+
+    assert b("--beta", "0.7") == 0.7
+    assert b("--beta-anneal", "0.1", "0.6", "10", "5") == Schedule(((5, 0.1), (15, 0.6)))
+    assert b("--beta-anneal", "0.9", "0.2", "4") == Schedule(((0, 0.9), (4, 0.2)))
+    assert b("--beta-schedule", "250:0,300:0.5") == Schedule(((250, 0.0), (300, 0.5)))
+
+
 def test_beta_and_a_set_of_b_together_exit_2(tmp_path):
     train = ["train", "--task", "circle-3", "--out", str(tmp_path / "r")]
     code, _, err = _main(*train, "--beta", "0.3", "--set", "sili.beta=0.7")

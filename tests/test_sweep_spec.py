@@ -184,7 +184,7 @@ def test_an_existing_run_with_other_settings_is_refused(tmp_path):
     check_existing(tmp_path, run)
 
 
-def test_a_sweep_records_its_kernel_library_and_older_records_resume_on_aten(tmp_path):
+def test_a_sweep_records_its_kernel_library_and_older_records_resume_on_aten(tmp_path, monkeypatch):
     spec = _spec(betas=[0.5])  # a constant b: the flat layout held no schedule
     assert spec.agent_overrides["matmul"] == default_matmul()
     assert SweepSpec.from_dict(spec.to_dict()) == spec
@@ -200,10 +200,12 @@ def test_a_sweep_records_its_kernel_library_and_older_records_resume_on_aten(tmp
     del on_disk["agent"]["matmul"]
     (path / "config.json").write_text(json.dumps({"run": on_disk}))
     check_existing(tmp_path, run)
+    # planned anew on a machine whose timing chose oneDNN, they would be another sweep
+    monkeypatch.setattr("sili_robots.sweep.spec.default_matmul", lambda: "onednn")
     (new,) = expand(_spec(betas=[0.5]))
-    if new.config.agent.matmul != "aten":  # planned anew, they would be another sweep
-        with pytest.raises(ConfigError, match=r"agent\.matmul: 'aten' on disk, 'onednn' now"):
-            check_existing(tmp_path, new)
+    assert new.config.agent.matmul == "onednn"
+    with pytest.raises(ConfigError, match=r"agent\.matmul: 'aten' on disk, 'onednn' now"):
+        check_existing(tmp_path, new)
 
 
 def test_plan_unions_specs_and_rejects_a_name_planned_twice_differently():

@@ -98,12 +98,38 @@ def test_oracle_exposes_strategy_and_plain_does_not(name):
 
 
 @pytest.mark.parametrize("name", LIGHT_TASKS)
+def test_the_plain_observation_ends_with_t_over_h_and_the_same_play_sees_the_same_whatever_z(name):
+    env = make_task(name).unwrapped
+    actions = np.random.default_rng(0).uniform(-1, 1, (env.horizon, *env.action_space.shape))
+    # Speaker-Listener: the speaker's message (a z-dependent utterance) is what the ego decodes
+    shown = [0, 1, 5] if name.startswith("speaker") else slice(None)
+    traces = []
+    for z in env.strategy_choices() or [0.0, 2.0]:
+        obs, _ = env.reset(seed=0, options={"strategy": z})
+        trace = [obs]
+        for t, action in enumerate(actions, 1):
+            obs, *_ = env.step(action)
+            assert obs[-1] == pytest.approx(t / env.horizon)
+            trace.append(obs)
+        traces.append(np.array(trace)[:, shown])
+    assert len(traces) >= 2 and traces[0][0, -1] == 0.0
+    for trace in traces[1:]:
+        np.testing.assert_array_equal(trace, traces[0])
+
+
+@pytest.mark.parametrize("name", LIGHT_TASKS)
 def test_strategy_flag_is_last_element(name):
     env = StrategyFlag(make_task(name).unwrapped)
-    obs, info = env.reset(seed=0)
-    for _ in range(env.unwrapped.horizon):
-        obs, _, _, _, info = env.step(env.action_space.sample())
+    flags = []
+    for _ in range(8):  # random play ends inside, so the opponent moves on (Speaker-Listener:
+        obs, info = env.reset(seed=0) if not flags else env.reset()  # the mapping may change)
+        flags.append(obs[-1])
         assert obs[-1] == float(info["strategy_changed"])
+        for _ in range(env.unwrapped.horizon):
+            obs, _, _, _, info = env.step(env.action_space.sample())
+            flags.append(obs[-1])
+            assert obs[-1] == float(info["strategy_changed"])
+    assert 1.0 in flags and 0.0 in flags  # the flag is raised, and only when z changed
 
 
 def test_bad_arguments_are_named():

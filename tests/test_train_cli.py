@@ -14,12 +14,12 @@ import pandas as pd
 import pytest
 import torch
 from cli_helpers import sili as _sili
-from fast_settings import FAST_ARGS
+from fast_settings import FAST_AGENT, FAST_ARGS
 
 from sili_robots import training
 from sili_robots.addons import LatentFilter
 from sili_robots.cli import main
-from sili_robots.evaluation import evaluate, load_trained
+from sili_robots.evaluation import AgentFeedback, evaluate, load_trained
 from sili_robots.runs import load_checkpoint, save_checkpoint
 from sili_robots.sweep.state import run_state
 from sili_robots.training import extend, resume, write_summary
@@ -80,6 +80,48 @@ def test_train_writes_a_complete_run_and_eval_reads_it(tmp_path):
     # greedy, from the checkpointed game, learning nothing: the same numbers again
     assert {**evaluate(out, 4), "run_dir": str(out)} == result
     assert (out / "checkpoint.pt").read_bytes() == checkpoint
+    # the numbers of a greedy play of the same interactions, step by step
+    _, env, agent, game = load_trained(out)
+    play = AgentFeedback(env, agent, game)
+    obs, info = play.reset()
+    rewards, changed = [], []
+    for _ in range(4):
+        changed.append(info["strategy_changed"])
+        total = 0.0
+        for _ in range(env.unwrapped.horizon):
+            obs, reward, _, _, info = play.step(agent.act(obs, deterministic=True))
+            total += reward
+        rewards.append(total)
+        obs, info = play.reset()
+    play.close()
+    assert result["mean_task_reward"] == pytest.approx(np.mean(rewards))
+    assert result["fraction_strategy_unchanged"] == pytest.approx(1 - np.mean(changed))
+
+
+def test_the_first_interactions_are_random_and_learning_starts_after_them(tmp_path, monkeypatch):
+    from sili_robots.agent import SILIAgent
+    from sili_robots.build import make_run_config
+
+    calls = {"act": 0, "random": 0}
+    act, random_action = SILIAgent.act, SILIAgent.random_action
+
+    def counted_act(self, *args, **kwargs):
+        calls["act"] += 1
+        return act(self, *args, **kwargs)
+
+    def counted_random(self, *args, **kwargs):
+        calls["random"] += 1
+        return random_action(self, *args, **kwargs)
+
+    monkeypatch.setattr(SILIAgent, "act", counted_act)
+    monkeypatch.setattr(SILIAgent, "random_action", counted_random)
+    settings = {**FAST_AGENT, "random_interactions": 3}
+    cfg = make_run_config("circle-3", "sac", 0, 5, settings=settings)
+    training.train(cfg, tmp_path / "run", progress=False)
+    assert calls == {"random": 3 * 50, "act": 2 * 50}  # H = 50
+    df = pd.read_csv(tmp_path / "run" / "metrics.csv")
+    # SAC's first updates come after the last random interaction, on what it gathered
+    assert df["critic_loss"].isna().tolist() == [True, True, False, False, False]
 
 
 def test_the_summary_is_the_last_window_of_the_metrics(tmp_path):
