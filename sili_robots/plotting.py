@@ -212,8 +212,8 @@ def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFr
         df = df[df["finished"].astype(bool)]
     if df.empty:
         raise ConfigError(
-            f"{sweep_dir} has no finished runs to plot yet "
-            "(--include-unfinished plots partial runs)"
+            f"{sweep_dir} has no finished runs yet (sili plot --include-unfinished plots "
+            "partial runs)"
         )
     return df
 

@@ -34,6 +34,12 @@ DAMAGED_SUMMARY = (
     "--resume), or collect a collected one again"
 )
 COMPRESSED_METRICS = f"{METRICS}.gz"  # a run kept small (``sili collect``)
+DAMAGED_METRICS = (
+    "restore it, or train the run again (sili train --overwrite; in a sweep, delete the run's "
+    "folder and resume; in a collection, collect it again)"
+)
+#: the columns every reader of a run's history needs, numbers all
+READ_COLUMNS = ("interaction", "task_reward", "strategy_changed")
 
 
 METRIC_COLUMNS = (
@@ -67,6 +73,23 @@ def kept_fraction(rows: Any) -> float | None:
     return float(stayed.mean()) if len(stayed) else None
 
 
+def read_metrics(path: Path) -> Any:
+    """A run's per-interaction rows (``metrics.csv`` or its gzipped copy) as a DataFrame;
+    ConfigError naming the file when it is damaged (cut, overwritten, not a run's history)."""
+    import pandas as pd
+
+    try:
+        df = pd.read_csv(path)
+        missing = [c for c in READ_COLUMNS if c not in df.columns]
+        if missing:
+            raise ValueError(f"no column {', '.join(missing)}")
+        for column in READ_COLUMNS:
+            pd.to_numeric(df[column])
+    except (ValueError, TypeError, EOFError, OSError) as err:  # pandas' errors are ValueErrors
+        raise ConfigError(f"{path} is damaged ({_first_line(err)}); {DAMAGED_METRICS}") from None
+    return df
+
+
 def metrics_file(run_dir: Path) -> Path | None:
     """A run's ``metrics.csv``, or the gzipped copy a results collection keeps (None: neither)."""
     for path in (run_dir / METRICS, run_dir / COMPRESSED_METRICS):
@@ -95,7 +118,20 @@ class RunConfig:
     task_id: str | None = None
 
     def __post_init__(self) -> None:
+        from sili_robots.agent.methods import PRESETS
+
         self.seed = check_seed(self.seed)
+        for name, low in (("interactions", 0), ("checkpoint_every", 1), ("threads", 1)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise ConfigError(f"{name} must be an integer >= {low}, got {value!r}")
+        if self.method not in PRESETS:
+            raise ConfigError(f"unknown method {self.method!r}; allowed: {', '.join(PRESETS)}")
+        if not isinstance(self.env_kwargs, dict) or not isinstance(self.task, str):
+            raise ConfigError(
+                f"task must be a name and env_kwargs an object of its arguments, got "
+                f"{self.task!r} and {self.env_kwargs!r}"
+            )
         if self.task_id is None:
             from sili_robots.tasks import task_spec
 
@@ -312,7 +348,13 @@ def read_config(run_dir: Path) -> RunConfig:
             f"{run_dir} is not a run directory (no {CONFIG}); "
             "give a directory written by `sili train --out`"
         )
-    return RunConfig.from_dict(read_json(path, DAMAGED_CONFIG, "run")["run"])
+    raw = read_json(path, DAMAGED_CONFIG, "run")["run"]
+    try:
+        return RunConfig.from_dict(raw)
+    except ConfigError as err:  # a value no run can have
+        raise ConfigError(f"{path} is damaged ({err}); {DAMAGED_CONFIG}") from None
+    except (TypeError, KeyError, AttributeError, ValueError) as err:  # valid JSON, not a config
+        raise ConfigError(f"{path} is damaged ({_first_line(err)}); {DAMAGED_CONFIG}") from None
 
 
 def differences(a: Any, b: Any, prefix: str = "") -> list[tuple[str, Any, Any]]:
@@ -332,8 +374,18 @@ def check_history(run_dir: Path, interactions: int) -> None:
     path = Path(run_dir) / METRICS
     rows = 0
     if path.is_file():
-        with path.open(newline="") as f:
-            rows = sum(1 for _ in csv.DictReader(f))
+        try:
+            with path.open(newline="") as f:
+                reader = csv.DictReader(f)
+                rows = sum(1 for _ in reader)
+                unknown = set(reader.fieldnames or ()) - set(METRIC_COLUMNS)
+        except (UnicodeDecodeError, csv.Error) as err:
+            unknown = {_first_line(err)}
+        if unknown:  # it would not take the run's next rows
+            raise ConfigError(
+                f"{path} is damaged (not a run's history: {', '.join(sorted(unknown))}); "
+                f"{DAMAGED_METRICS}"
+            )
     if rows < interactions:
         state = f"holds {rows} rows" if path.is_file() else "is missing"
         raise ConfigError(
@@ -429,11 +481,10 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
         return None
     try:
         state = torch.load(path, weights_only=False)
-        agent = state["agent"]
+        state["agent"] = migrate_agent_state(state["agent"])
     except (pickle.UnpicklingError, RuntimeError, EOFError, ValueError, KeyError, TypeError) as err:
         raise ConfigError(
             f"{path} is damaged ({_first_line(err)}); it cannot be resumed: train the run again "
             "(sili train ... --overwrite)"
         ) from None
-    state["agent"] = migrate_agent_state(agent)
     return state

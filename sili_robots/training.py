@@ -19,6 +19,7 @@ from sili_robots.errors import ConfigError
 from sili_robots.progress import TrainingProgress
 from sili_robots.rollout import play_interaction
 from sili_robots.runs import (
+    METRICS,
     SUMMARY,
     MetricsWriter,
     RunConfig,
@@ -27,6 +28,7 @@ from sili_robots.runs import (
     kept_fraction,
     load_checkpoint,
     read_config,
+    read_metrics,
     record_continuation,
     save_checkpoint,
     set_target,
@@ -140,9 +142,7 @@ def train(
 
 def write_summary(run_dir: Path, window: int = 100) -> dict[str, Any]:
     """Final task reward and true stability over the last ``window`` interactions."""
-    import pandas as pd
-
-    df = pd.read_csv(Path(run_dir) / "metrics.csv")
+    df = read_metrics(Path(run_dir) / METRICS)
     tail = df.tail(window)
     summary = {
         "interactions": len(df),

@@ -18,6 +18,7 @@ from sili_robots.runs import (
     kept_fraction,
     metrics_file,
     read_config,
+    read_metrics,
 )
 from sili_robots.tasks.registry import other_task_arguments
 
@@ -29,7 +30,7 @@ def _last(run_dir: Path, window: int) -> pd.DataFrame:
     path = metrics_file(Path(run_dir))
     if path is None:
         raise ConfigError(f"{run_dir} has no {METRICS} (nor its gzipped copy): it logged nothing")
-    rows = pd.read_csv(path)
+    rows = read_metrics(path)
     if rows.empty:
         raise ConfigError(f"{run_dir} has logged no interaction yet")
     return rows.tail(window)

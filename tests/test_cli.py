@@ -2,12 +2,15 @@
 
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from cli_helpers import sili as sili_in_process
 from fast_settings import FAST_ARGS
 
 from sili_robots.tasks import make_task
+
+GRID = Path(__file__).resolve().parents[1] / "results" / "paper-grid"
 
 
 def _sili(*args):
@@ -336,3 +339,37 @@ def test_files_a_command_would_write_are_checked_before_its_work(tmp_path):
     assert code == 2 and f"--write {tmp_path} is a directory" in err
     code, _, err = _main("collect", "--into", str(tmp_path), str(tmp_path))
     assert code == 2 and "is also a source" in err
+
+
+def test_more_bad_input_exits_2_with_one_line_naming_it(tmp_path):
+    import json
+    import socket
+
+    from sili_robots.sweep.state import training_worker
+
+    binary = tmp_path / "binary.md"
+    binary.write_bytes(bytes(range(128, 256)))
+    sweep = tmp_path / "sweep"
+    sweep.mkdir()
+    (sweep / "sweep.json").write_text('{"invocations": []}')
+    out = str(tmp_path / "o")
+    for args, said in (
+        (["sweep", "--tasks", "circle-3", "--methods", "sili", "--beta", "0.1,0.1000001",
+          "--out", out, "--dry-run"], "two runs of this sweep would be named circle-3__sili-b0.1"),
+        (["sweep", "--tasks", "circle-3", "--methods", "sac", "--out", out, "--backend", "ray",
+          "--ray-address", "localhost:99999", "--dry-run"], "(PORT up to 65535)"),
+        (["preview", "circle-3", "--checkpoint", ""], "--checkpoint: an empty path"),
+        (["grid", "--fraction", "0.01", "--sweep-dir", out, "--into", out, "--dry-run"],
+         "--sweep-dir and --into are both"),
+        (["claims", str(GRID), "--write", str(binary)], "is not a text file"),
+        (["sweep", "--resume", str(sweep), "--dry-run"], "is damaged (no invocation recorded)"),
+    ):  # fmt: skip
+        code, _, err = _main(*args)
+        assert code == 2 and said in err and "Traceback" not in err, (args, err)
+        assert len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "o").exists()
+    for pid in (0, -1, 10**20):  # a damaged worker.json names no process that trains the run
+        (tmp_path / "worker.json").write_text(
+            json.dumps({"pid": pid, "host": socket.gethostname()})
+        )
+        assert training_worker(tmp_path) is None

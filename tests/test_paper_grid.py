@@ -249,16 +249,17 @@ def test_grid_blocks_and_budgets(capsys):
                 "--tasks",
                 "driving",
                 "--sweep-dir",
-                "/nonexistent",
+                "/nonexistent/sweep",
                 "--into",
-                "/nonexistent",
+                "/nonexistent/collection",
             ]
         )
         == 0
     )
     assert capsys.readouterr().out.strip().splitlines() == [
         "sili-oracle on driving (2500 interactions): 6 runs, 0 done",
-        "0 of 6 runs done, 0 of 15,000 interactions (in /nonexistent or /nonexistent)",
+        "0 of 6 runs done, 0 of 15,000 interactions (in /nonexistent/sweep or "
+        "/nonexistent/collection)",
     ]
     (spec,) = block("stable-smirl").specs(("circle-8",))
     assert spec.interactions == TASK_BUDGETS["circle-8"] // 2 and spec.methods == [

@@ -2,6 +2,7 @@
 
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -206,6 +207,12 @@ def test_every_latent_kind_trains(tmp_path, latent):
         (["--task", "circle-3", "--beta", "1.5"], "outside the allowed range [0, 1]"),
         (["--task", "circle-3", "--interactions", "0"], "need an integer >= 1"),
         (["--task", "circle-3", "--set", "gamma=2"], "sac.gamma must be in [1e-09, 1], got 2"),
+        (["--task", "circle-3", "--set", "sac.updates_per_step=Infinity"], "must be a finite"),
+        (["--task", "circle-3", "--set", "sac.target_entropy=-Infinity"], "must be a finite"),
+        (["--task", "circle-3", "--set", "hidden=1e300"], "hidden must be at most 2147483647"),
+        (["--task", "circle-3", "--set", "sac.lr.x=1"], "unknown setting 'sac.lr.x'"),
+        (["--task", "circle-3", "--set", 'sac.lr={"start": 0}'], "sac.lr: a schedule is"),
+        (["--task", "circle-3", "--set", 'sac.lr={"points": [[0, "a"]]}'], "a schedule is"),
         (["--task", "circle-3", "--method", "lili", "--beta", "0.3"], "does not apply to method"),
         (["--task", "circle-3", "--beta-anneal", "2", "0", "10"], "outside the allowed range"),
         (["--task", "circle-3", "--beta-anneal", "0", "0.5"], "START END LENGTH [DELAY]"),
@@ -803,3 +810,47 @@ def test_more_threads_than_cores_is_trained_with_a_note(tmp_path, capsys, monkey
     assert note in capsys.readouterr().err  # a resumed run keeps its threads, and the note
     assert main([*args, "--out", str(tmp_path / "one")]) == 0
     assert "note:" not in capsys.readouterr().err
+
+
+def test_a_record_or_history_damaged_in_its_content_exits_2_naming_the_file(tmp_path):
+    run = tmp_path / "run"
+    args = ["--task", "circle-3", "--method", "sac", "--interactions", 2, *FAST, "--out", run]
+    assert _sili("train", *args).returncode == 0
+    record = json.loads((run / "config.json").read_text())
+    for damage in (
+        {"bogus": 1},
+        {"agent": None},
+        {"checkpoint_every": 0},
+        {"threads": "x"},
+        {"method": "foo"},
+        {"env_kwargs": [1]},
+        {"agent": {**record["run"]["agent"], "sac": {"lr": {"points": [[0, "a"]]}}}},
+    ):
+        (run / "config.json").write_text(json.dumps({**record, "run": {**record["run"], **damage}}))
+        for command in (["eval", run], ["train", "--resume", run, "--interactions", 3]):
+            res = _sili(*command)
+            assert res.returncode == 2, (damage, res.stderr)
+            assert f"{run / 'config.json'} is damaged" in res.stderr, (damage, res.stderr)
+    (run / "config.json").write_text(json.dumps(record))
+    checkpoint = (run / "checkpoint.pt").read_bytes()
+    torch.save({"agent": None, "interaction": 2}, run / "checkpoint.pt")
+    res = _sili("eval", run)
+    assert res.returncode == 2 and f"{run / 'checkpoint.pt'} is damaged" in res.stderr
+    (run / "checkpoint.pt").write_bytes(checkpoint)
+    held = tmp_path / "held" / "runs" / "circle-3__sac__s0"  # as a collection holds it
+    shutil.copytree(run, held)
+    for content in (
+        "",
+        "a,b\n1,2\n",
+        "\x00\xff\xfe",
+        "interaction,task_reward,strategy_changed\n0,x,0\n",
+    ):
+        for where in (run, held):
+            (where / "metrics.csv").write_bytes(content.encode("latin-1"))
+        for command in (["runs", held.parents[1]], ["plot", held.parents[1]]):
+            res = _sili(*command)
+            assert res.returncode == 2, (content, command, res.stderr)
+            assert f"{held / 'metrics.csv'} is damaged" in res.stderr, (content, res.stderr)
+        if content.startswith(("a", "\x00")):  # what resuming would append to
+            res = _sili("train", "--resume", run, "--interactions", 3)
+            assert res.returncode == 2 and f"{run / 'metrics.csv'} is damaged" in res.stderr

@@ -171,7 +171,13 @@ def convert(name: str, tp: Any, value: Any) -> Any:
         if isinstance(value, Schedule) and Schedule in args:
             return value
         if isinstance(value, dict) and Schedule in args:
-            return Schedule.from_dict(value)
+            try:
+                return Schedule.from_dict(value)
+            except (TypeError, KeyError, ValueError):
+                raise ConfigError(
+                    f'setting {name}: a schedule is {{"points": [[INTERACTION, VALUE], ...]}} '
+                    f"(or INTERACTION:VALUE,... on the command line), got {value!r}"
+                ) from None
         for kind in (float, int, bool, str):
             if kind in args:
                 return convert(name, kind, value)
@@ -218,12 +224,17 @@ def check(obj: Any, prefix: str) -> None:
         low, high = f.metadata.get("low", -math.inf), f.metadata.get("high", math.inf)
         if isinstance(value, Schedule):
             value.check(name, low, high)
-        elif (
-            isinstance(value, int | float)
-            and not isinstance(value, bool)
-            and (not (low <= value <= high) or math.isnan(value))
-        ):
-            raise ConfigError(f"{name} must be {_range(low, high, hints[f.name])}, got {value}")
+        elif isinstance(value, int | float) and not isinstance(value, bool):
+            if math.isinf(value):  # no setting is unbounded in use (inf updates, inf entropy)
+                raise ConfigError(f"{name} must be a finite number, got {value}")
+            if hints[f.name] is int and value > LARGEST_INT:  # beyond, torch's sizes overflow
+                raise ConfigError(f"{name} must be at most {LARGEST_INT}, got {value:.6g}")
+            if not (low <= value <= high):
+                raise ConfigError(f"{name} must be {_range(low, high, hints[f.name])}, got {value}")
+
+
+#: the largest whole-number setting (a size or a count) a run can have
+LARGEST_INT = 2**31 - 1
 
 
 def _range(low: float, high: float, tp: Any) -> str:
@@ -270,9 +281,11 @@ def set_path(obj: Any, path: str, value: Any, prefix: str = "") -> None:
     *sections, leaf = path.split(".")
     target = obj
     for part in sections:
-        if not dataclasses.is_dataclass(target) or part not in {f.name for f in fields(target)}:
+        if not _is_section(target) or part not in {f.name for f in fields(target)}:
             raise UnknownSetting(prefix + path, _listing(obj, prefix))
         target = getattr(target, part)
+    if not _is_section(target):  # a path into a number (sac.lr.x)
+        raise UnknownSetting(prefix + path, _listing(obj, prefix))
     names = {f.name for f in fields(target)}
     hints = _hints(type(target))
     if leaf not in names or dataclasses.is_dataclass(hints[leaf]):

@@ -57,7 +57,12 @@ def _claims_block(path: Path) -> tuple[str, re.Pattern[str]]:
         raise ConfigError(f"--write {path} is a directory; give the file with the claims block")
     if not path.is_file():
         raise ConfigError(f"--write {path}: no such file")
-    text = path.read_text()
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise ConfigError(
+            f"--write {path} is not a text file; give the file with the claims block"
+        ) from None
     pattern = re.compile(re.escape(START) + ".*?" + re.escape(END), re.S)
     if not pattern.search(text):
         raise ConfigError(f"--write {path}: it has no {START} ... {END} block to replace")

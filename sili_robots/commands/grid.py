@@ -64,6 +64,11 @@ def run(args: argparse.Namespace) -> int:
         raise ConfigError("--fraction 0 trains nothing; give a fraction in (0, 1]")
     if args.fraction < 1.0:
         _check_own_folders(args)
+    if args.sweep_dir.resolve() == args.into.resolve():
+        raise ConfigError(
+            f"--sweep-dir and --into are both {args.into}: the grid trains in one and collects "
+            "the finished runs into the other; give two folders"
+        )
     for path, option in ((args.sweep_dir, "--sweep-dir"), (args.into, "--into")):
         check_sweep_dir(path, option)  # before any run, in a dry run too
         if not args.dry_run:  # a listing reads only

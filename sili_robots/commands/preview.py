@@ -46,7 +46,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         choices=("scripted", "random"),
         help="scripted = the task's stabilizing reference policy (default)",
     )
-    who.add_argument("--checkpoint", metavar="RUN_DIR", help="play the agent trained in RUN_DIR")
+    who.add_argument(
+        "--checkpoint", type=path_arg, metavar="RUN_DIR", help="play the agent trained in RUN_DIR"
+    )
     p.add_argument(
         "--interactions", type=positive_int, default=3, help="interactions to record (default 3)"
     )

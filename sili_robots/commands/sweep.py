@@ -139,9 +139,11 @@ RAY_ADDRESS = re.compile(r"auto|local|(ray://)?([A-Za-z0-9.\-]+|\[[0-9A-Fa-f:.]+
 def ray_address(text: str) -> str:
     """A Ray cluster address, checked before anything is written (Ray names a bad one only
     when the sweep connects)."""
-    if not RAY_ADDRESS.fullmatch(text.strip()):
+    port = text.strip().rpartition(":")[2]
+    if not RAY_ADDRESS.fullmatch(text.strip()) or (port.isdigit() and int(port) > 65535):
         raise argparse.ArgumentTypeError(
-            f"{text!r} is not a Ray address; give auto, local, HOST:PORT or ray://HOST:PORT"
+            f"{text!r} is not a Ray address; give auto, local, HOST:PORT or ray://HOST:PORT "
+            "(PORT up to 65535)"
         )
     return text.strip()
 

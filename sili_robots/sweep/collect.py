@@ -18,8 +18,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import pandas as pd
-
 from sili_robots.atomic import write_bytes
 from sili_robots.errors import ConfigError
 from sili_robots.runs import (
@@ -33,6 +31,7 @@ from sili_robots.runs import (
     differences,
     metrics_file,
     read_json,
+    read_metrics,
     recorded_run,
 )
 from sili_robots.sweep.results import runs_of
@@ -51,7 +50,7 @@ class CollectReport:
 
 def compressed_metrics(source: Path) -> bytes:
     """The run's metrics as reproducible gzipped CSV bytes."""
-    df = pd.read_csv(source)
+    df = read_metrics(source)
     text = df.to_csv(index=False, float_format="%.7g")
     return gzip.compress(text.encode(), compresslevel=9, mtime=0)
 

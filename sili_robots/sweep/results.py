@@ -30,6 +30,7 @@ from sili_robots.runs import (
     kept,
     metrics_file,
     read_json,
+    read_metrics,
     recorded_task_id,
 )
 from sili_robots.sweep.state import RESULTS, RUNS_DIR, RUNS_TABLE
@@ -134,7 +135,7 @@ def results_table(sweep_dir: Path) -> pd.DataFrame:
         path = metrics_file(run_dir)
         if path is None:
             continue
-        df = pd.read_csv(path)
+        df = read_metrics(path)
         if df.empty:
             continue
         ident, _ = _identity(run_dir)
@@ -156,7 +157,7 @@ def runs_table(sweep_dir: Path) -> pd.DataFrame:
         summary_path, error_path = run_dir / SUMMARY, run_dir / ERROR_FILE
         logged, path = 0, metrics_file(run_dir)
         if path is not None:
-            logged = len(pd.read_csv(path, usecols=["interaction"]))
+            logged = len(read_metrics(path))
         row = {**ident, "interactions": int(cfg["interactions"]), "interactions_logged": logged}
         if summary_path.is_file():
             keys = ("final_task_reward", "final_stability", "wall_time_s")

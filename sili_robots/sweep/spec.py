@@ -393,5 +393,10 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                         )
                         runs.append(PlannedRun(run, cfg))
     names = [r.name for r in runs]
-    assert len(set(names)) == len(names), "run names must be unique"
+    clash = sorted({n for n in names if names.count(n) > 1})
+    if clash:  # e.g. two b values that print alike (format_beta keeps 6 digits)
+        raise ConfigError(
+            f"two runs of this sweep would be named {clash[0]}; give values that differ in "
+            "their first 6 significant digits"
+        )
     return runs

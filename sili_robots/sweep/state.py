@@ -39,7 +39,7 @@ from sili_robots.runs import (
     read_json,
     recorded_run,
 )
-from sili_robots.sweep.spec import PlannedRun, SweepSpec
+from sili_robots.sweep.spec import PlannedRun, SweepSpec, validate
 
 SWEEP_FILE, RUNS_DIR, RESULTS, RUNS_TABLE, LOCK, FIGURES = (
     "sweep.json",
@@ -99,6 +99,8 @@ def training_worker(run_dir: Path) -> int | None:
         info = json.loads((Path(run_dir) / RUNNING_FILE).read_text())
         pid = int(info["pid"])
     except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if not 0 < pid < 2**22:  # no process's (Linux's pid_max): a damaged file, nobody trains
         return None
     if info.get("host") != socket.gethostname():
         return None  # another machine's (Ray): nothing to ask from here
@@ -219,8 +221,13 @@ def recorded_specs(sweep_dir: Path) -> list[SweepSpec]:
             "by `sili sweep --out`"
         )
     invocations = read_json(path, DAMAGED_SWEEP, "invocations")["invocations"]
+    if not isinstance(invocations, list) or not invocations:
+        raise ConfigError(f"{path} is damaged (no invocation recorded); {DAMAGED_SWEEP}")
     try:
-        return [SweepSpec.from_dict(d) for d in invocations]
+        specs = [SweepSpec.from_dict(d) for d in invocations]
+        for spec in specs:
+            validate(spec)  # a value no sweep can have (a hand edit)
+        return specs
     except ConfigError:
         raise
     except (TypeError, AttributeError, KeyError, ValueError) as err:
