@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
+import json
+import os
 import signal
 import subprocess
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 
@@ -38,3 +42,30 @@ def signal_when(
         if proc.poll() is None:
             proc.kill()
     return stderr
+
+
+@contextlib.contextmanager
+def killing_its_worker_once(run_dir: Path, after_rows: int = 12) -> Iterator[list[int]]:
+    """While the block runs (a sweep), SIGKILL the worker training ``run_dir`` once its history
+    holds more than ``after_rows`` rows (past a checkpoint); yields the killed pids. No fixed
+    deadline: on a loaded machine the worker may take minutes to get there."""
+    killed: list[int] = []
+    over = threading.Event()
+
+    def kill_once() -> None:
+        info = run_dir / "worker.json"
+        while not over.is_set():
+            if metrics_rows(run_dir / "metrics.csv") > after_rows and info.exists():
+                killed.append(json.loads(info.read_text())["pid"])
+                os.kill(killed[0], signal.SIGKILL)
+                return
+            time.sleep(0.02)
+
+    killer = threading.Thread(target=kill_once)
+    killer.start()
+    try:
+        yield killed
+    finally:
+        over.set()
+        killer.join()
+    assert killed, "the worker was never killed"

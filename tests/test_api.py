@@ -247,3 +247,18 @@ def test_a_temporary_run_stays_when_saved_or_loaded_where_it_is():
         kept.append(run_dir)
     for run_dir in kept:
         shutil.rmtree(run_dir)
+
+
+def test_the_two_doors_example_moves_the_door_as_its_rule_says():
+    """The README's template task: ending near the middle switches the door, at a door keeps it."""
+    env = TwoDoorsEnv(horizon=6)
+    _, info = env.reset(seed=0)
+    door = env.door
+    for _ in range(6):
+        env.step(np.zeros(1, np.float32))  # stays at x = 0: near the middle
+    _, info = env.reset()
+    assert env.door == -door and info["strategy_changed"] and info["strategy_id"] == -door
+    for _ in range(6):
+        env.step(np.array([env.door], np.float32))  # to the door: |x| reaches 1
+    _, info = env.reset()
+    assert env.door == -door and not info["strategy_changed"]

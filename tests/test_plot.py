@@ -167,6 +167,13 @@ def test_unfinished_runs_are_left_out_unless_asked(sweep_dir, tmp_path):
     assert "2 seeds (fewer where a run ended early)" in partial.get_suptitle()
     one = load_results(copy).query("seed == 0")
     assert "mean ± std over 1 seed, smoothed" in learning_curves(one, "circle-3").get_suptitle()
+    for summary in (copy / "runs").glob("*/summary.json"):  # none finished: the command says so
+        summary.unlink()
+    assert main(["plot", str(copy), "--tasks", "circle-3", "--formats", "png"]) == 2
+    figures = copy / "figures"
+    assert not figures.exists()
+    args = ["plot", str(copy), "--tasks", "circle-3", "--formats", "png", "--include-unfinished"]
+    assert main(args) == 0 and (figures / "circle-3.png").is_file()
 
 
 def test_plot_of_a_non_sweep_exits_2(tmp_path, capsys):

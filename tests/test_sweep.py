@@ -16,7 +16,7 @@ import torch
 from cli_helpers import sili as sili_in_process
 from fast_settings import FAST_AGENT as FAST
 from fast_settings import FAST_ARGS
-from process_helpers import metrics_rows, signal_when, wait_for
+from process_helpers import killing_its_worker_once, metrics_rows, signal_when, wait_for
 
 from sili_robots.cli import main
 from sili_robots.evaluation import load_trained
@@ -226,6 +226,16 @@ def test_killed_worker_is_reported_and_the_sweep_resumes_its_run(tmp_path):
         acc = EventAccumulator(str(victim / "tb"))
         acc.Reload()
         assert [e.step for e in acc.Scalars("reward/task")] == list(range(40))
+
+
+def test_a_killed_worker_is_retried_from_its_checkpoint_with_retries(tmp_path):
+    spec = _spec(methods=["sili"], seeds=[0], interactions=40, checkpoint_every=5)
+    run_dir = tmp_path / "runs" / "circle-3__sili-bschedule__s0"
+    with killing_its_worker_once(run_dir) as killed:
+        report = run_sweep(spec, tmp_path, LocalBackend(workers=1, retries=1), progress=False)
+    (outcome,) = report.outcomes.values()
+    assert outcome.status == "done" and outcome.resumed and outcome.pid != killed[0]
+    assert metrics_rows(run_dir / "metrics.csv") == 40 and (run_dir / "summary.json").is_file()
 
 
 def test_a_second_sweep_on_the_same_directory_is_refused(tmp_path):

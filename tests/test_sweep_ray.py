@@ -6,14 +6,12 @@ import os
 import signal
 import subprocess
 import sys
-import threading
-import time
 
 import pandas as pd
 import pytest
 import torch
 from fast_settings import FAST_AGENT as FAST
-from process_helpers import metrics_rows, signal_when
+from process_helpers import killing_its_worker_once, metrics_rows, signal_when
 
 from sili_robots.runs import RunConfig
 from sili_robots.sweep import RayBackend, SweepSpec, expand, run_sweep
@@ -111,28 +109,8 @@ def test_cli_joins_a_running_ray_cluster_by_address(ray_cluster, tmp_path):
 def test_ray_retries_a_killed_worker_from_its_checkpoint(ray_cluster, tmp_path):
     spec = _spec(methods=["sili"], seeds=[0], interactions=40, checkpoint_every=5)
     run_dir = tmp_path / "runs" / "circle-3__sili-bschedule__s0"
-    killed: list[int] = []
-    sweep_over = threading.Event()
-
-    def kill_once_past_a_checkpoint():
-        # no fixed deadline: on a loaded machine the worker may take minutes to get there
-        while not sweep_over.is_set():
-            metrics, info = run_dir / "metrics.csv", run_dir / "worker.json"
-            if metrics.exists() and len(metrics.read_text().splitlines()) > 12 and info.exists():
-                pid = json.loads(info.read_text())["pid"]
-                os.kill(pid, signal.SIGKILL)
-                killed.append(pid)
-                return
-            time.sleep(0.02)
-
-    killer = threading.Thread(target=kill_once_past_a_checkpoint)
-    killer.start()
-    try:
+    with killing_its_worker_once(run_dir) as killed:
         report = run_sweep(spec, tmp_path, RayBackend(retries=1), progress=False)
-    finally:
-        sweep_over.set()
-        killer.join()
-    assert killed, "the worker was never killed"
     (outcome,) = report.outcomes.values()
     assert outcome.status == "done" and outcome.resumed and outcome.pid != killed[0]
     cfg = RunConfig.from_dict(json.loads((run_dir / "config.json").read_text())["run"])

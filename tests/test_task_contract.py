@@ -177,9 +177,15 @@ def test_vector_env_steps():
     envs = gym.make_vec("sili/Circle3-v0", num_envs=2, vectorization_mode="sync")
     obs, _ = envs.reset(seed=0)
     assert obs.shape == (2, 3)
-    for _ in range(60):  # crosses an interaction boundary: autoreset begins the next one
-        obs, _r, _term, _trunc, _info = envs.step(envs.action_space.sample())
-    assert obs.shape == (2, 3)
+    truncated_at = []
+    for step in range(60):  # crosses an interaction boundary: autoreset begins the next one
+        obs, _r, _term, trunc, info = envs.step(envs.action_space.sample())
+        if trunc.any():
+            truncated_at.append(step)
+    assert obs.shape == (2, 3) and truncated_at == [49]  # H = 50
+    # the next interaction of the same repeated game, not a new game: 9 steps into interaction 1
+    assert info["interaction"].tolist() == [1, 1] and info["t"].tolist() == [9, 9]
+    np.testing.assert_allclose(obs[:, -1], 9 / 50)
     envs.close()
 
 

@@ -118,7 +118,7 @@ def training_claim(run_dir: Path) -> Iterator[None]:
     """Mark ``run_dir`` as trained by this process while the block runs, so that a sweep or a
     second ``sili train --resume`` refuses it (``training_worker``) instead of training beside."""
     path = Path(run_dir) / RUNNING_FILE
-    path.write_text(json.dumps({"pid": os.getpid(), "host": socket.gethostname()}))
+    write_text(path, json.dumps({"pid": os.getpid(), "host": socket.gethostname()}))
     try:
         yield
     finally:
