@@ -139,9 +139,13 @@ def _out_of_memory(err: BaseException) -> bool:
 
 
 def _allocation(err: BaseException) -> str:
-    """torch's "you tried to allocate 92000000000 bytes" as "92.0 GB were asked for"."""
+    """torch's "you tried to allocate 92000000000 bytes" as "92.0 GB were asked for", numpy's
+    "Unable to allocate 5.68 PiB for an array" as "5.68 PiB were asked for"."""
     match = re.search(r"allocate (\d+) bytes", str(err))
-    return f"{int(match.group(1)) / 1e9:.1f} GB were asked for" if match else type(err).__name__
+    if match:
+        return f"{int(match.group(1)) / 1e9:.1f} GB were asked for"
+    match = re.search(r"allocate ([\d.]+ [KMGTPE]iB)", str(err))
+    return f"{match.group(1)} were asked for" if match else type(err).__name__
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -165,8 +169,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         print(
             f"sili {args.command}: error: out of memory ({_allocation(err)}); the settings that "
-            "size the agent (hidden, sac.batch_interactions, sac.batch_steps, model.batch) may be "
-            "too large for this machine",
+            "size the agent (hidden, sac.batch_interactions, sac.batch_steps, model.batch) or "
+            "its batches per interaction (sac.updates_per_step) may be too large for this machine",
             file=sys.stderr,
         )
         return 1

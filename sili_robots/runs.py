@@ -212,10 +212,21 @@ def versions(threads: int = 1) -> dict[str, str]:
 ERROR_FILE = "error.txt"
 #: written by a sweep worker while it trains a run: {"pid": ..., "host": ...}
 RUNNING_FILE = "worker.json"
+#: written by a sweep that is stopping: its worker stops once the interaction it is in is saved
+STOP_FILE = "stop"
 #: a sweep run's TensorBoard scalars
 TB_DIR = "tb"
 #: what a run writes in its directory: ``--overwrite`` removes these and nothing else
-RUN_FILES = (CONFIG, METRICS, CHECKPOINT, SUMMARY, COMPRESSED_METRICS, ERROR_FILE, RUNNING_FILE)
+RUN_FILES = (
+    CONFIG,
+    METRICS,
+    CHECKPOINT,
+    SUMMARY,
+    COMPRESSED_METRICS,
+    ERROR_FILE,
+    RUNNING_FILE,
+    STOP_FILE,
+)
 RUN_DIRS = (TB_DIR,)
 
 

@@ -44,10 +44,12 @@ def train(
     resume: bool = False,
     progress: bool = True,
     env: gym.Env | None = None,
+    stop_file: Path | None = None,
 ) -> Path:
     """Train ``cfg`` into ``run_dir``; with ``resume`` continue from its last checkpoint.
     ``env``: the task instance to train on, as the method observes it (default: built from
-    ``cfg``; a given one is left open)."""
+    ``cfg``; a given one is left open). ``stop_file``: once it exists, the run stops after the
+    interaction it is in, saved, as at a stop signal (a sweep's worker on another machine)."""
     run_dir = Path(run_dir)
     state = load_checkpoint(run_dir) if resume else None
     if state is not None:
@@ -118,7 +120,13 @@ def train(
                 bar.advance(np.mean([r for r, _ in recent]), np.mean(stayed) if stayed else np.nan)
                 done = j + 1
                 stopping = stop.requested  # read once: a stop after this acts at the next end
-                if done % cfg.checkpoint_every == 0 or done == cfg.interactions or stopping:
+                asked = stop_file is not None and stop_file.exists()
+                if (
+                    done % cfg.checkpoint_every == 0
+                    or done == cfg.interactions
+                    or stopping
+                    or asked
+                ):
                     metrics.sync()
                     save_checkpoint(
                         run_dir,
@@ -131,6 +139,8 @@ def train(
                     )
                 if stopping:
                     stop.deliver()  # it came during the interaction, which is checkpointed
+                if asked and done < cfg.interactions:
+                    raise KeyboardInterrupt(f"{stop_file} asked the run to stop")
     finally:
         bar.close()
         metrics.close()

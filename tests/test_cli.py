@@ -4,6 +4,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from cli_helpers import sili as sili_in_process
 from fast_settings import FAST_ARGS
@@ -284,9 +285,12 @@ def test_an_agent_too_large_for_memory_is_one_line_and_other_errors_keep_their_t
     assert done.returncode == 1
     assert done.stderr == (
         "sili train: error: out of memory (4611686018.4 GB were asked for); the settings that size "
-        "the agent (hidden, sac.batch_interactions, sac.batch_steps, model.batch) may be too large "
-        "for this machine\n"
+        "the agent (hidden, sac.batch_interactions, sac.batch_steps, model.batch) or its batches "
+        "per interaction (sac.updates_per_step) may be too large for this machine\n"
     )
+    monkeypatch.setattr(train, "run", lambda _args: np.empty(2**57))  # numpy's own wording
+    done = sili_in_process("train", "--task", "circle-3")
+    assert done.returncode == 1 and "out of memory (1.00 EiB were asked for)" in done.stderr
 
     def fails(_args):
         raise RuntimeError("mat1 and mat2 shapes cannot be multiplied")

@@ -854,3 +854,19 @@ def test_a_record_or_history_damaged_in_its_content_exits_2_naming_the_file(tmp_
         if content.startswith(("a", "\x00")):  # what resuming would append to
             res = _sili("train", "--resume", run, "--interactions", 3)
             assert res.returncode == 2 and f"{run / 'metrics.csv'} is damaged" in res.stderr
+
+
+def test_a_stop_file_stops_the_run_once_its_interaction_is_saved(tmp_path):
+    """How a Ray sweep stops its runs: the interaction under way is logged and checkpointed."""
+    from sili_robots.build import make_run_config
+
+    cfg = make_run_config("circle-3", "sac", 0, 5, settings=FAST_AGENT)
+    stop = tmp_path / "stop"
+    stop.touch()
+    with pytest.raises(KeyboardInterrupt, match="asked the run to stop"):
+        training.train(cfg, tmp_path / "run", progress=False, stop_file=stop)
+    assert load_checkpoint(tmp_path / "run")["interaction"] == 1
+    assert len(pd.read_csv(tmp_path / "run" / "metrics.csv")) == 1
+    stop.unlink()
+    training.train(cfg, tmp_path / "run", resume=True, progress=False, stop_file=stop)
+    assert len(pd.read_csv(tmp_path / "run" / "metrics.csv")) == 5

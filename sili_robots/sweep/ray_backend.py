@@ -3,8 +3,8 @@
 Each run is one task with ``num_cpus=1`` and ``max_calls=1``, so Ray gives every run a fresh
 worker process (libsumo: one simulation per process) and Ray's scheduler decides placement.
 ``max_retries`` re-runs a task whose worker died; the retry resumes from the run's checkpoint.
-A stopped sweep (Ctrl-C, SIGTERM) interrupts each running task, which logs and checkpoints the
-interaction it is in, as the local backend's workers do.
+A stopped sweep (Ctrl-C, SIGTERM) asks each task to stop through a file in its run directory;
+the task logs and checkpoints the interaction it is in, as the local backend's workers do.
 On a multi-node cluster the sweep directory must be on a filesystem every node sees, and every
 node needs this package installed. Ray is optional: ``pip install sili-robots[ray]``.
 """
@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from sili_robots.errors import ConfigError
-from sili_robots.runs import ERROR_FILE, RUNNING_FILE
+from sili_robots.runs import ERROR_FILE, RUNNING_FILE, STOP_FILE
 from sili_robots.sweep.backend import STOP_GRACE_S, Monitor
 from sili_robots.sweep.worker import Job, Outcome, run_job
 
@@ -98,7 +98,7 @@ class RayBackend:
                         monitor.started(job)
                 monitor.tick()
         except BaseException:
-            _stop(ray, in_flight)
+            _stop(ray, in_flight, not_started)
             raise
         finally:
             if started_here:
@@ -135,14 +135,16 @@ def _keeping_stop_handlers() -> Iterator[None]:
                 signal.signal(sig, handler)
 
 
-def _stop(ray: Any, in_flight: dict[Any, Job]) -> None:
-    """Stop the running tasks as the local backend stops its workers: each is interrupted
-    (Ray raises KeyboardInterrupt in it, which the training loop holds until the interaction
-    it is in is logged and checkpointed) and killed only if still running after
-    ``STOP_GRACE_S``, or at a second stop."""
+def _stop(ray: Any, in_flight: dict[Any, Job], not_started: set[str]) -> None:
+    """Stop the tasks as the local backend stops its workers: each run's stop file asks its
+    training to stop once the interaction it is in is logged and checkpointed (Ray's own
+    interrupt, ``ray.cancel`` without force, did not always reach a running task); a task
+    still running after ``STOP_GRACE_S``, or at a second stop, is killed."""
     refs = list(in_flight)
-    for ref in refs:
-        ray.cancel(ref, force=False)
+    for ref, job in in_flight.items():
+        (Path(job.run_dir) / STOP_FILE).touch()
+        if job.name in not_started:  # still queued, most likely: it never starts
+            ray.cancel(ref, force=False)
     not_ready = refs
     try:
         _, not_ready = ray.wait(refs, num_returns=len(refs), timeout=STOP_GRACE_S)
@@ -150,6 +152,8 @@ def _stop(ray: Any, in_flight: dict[Any, Job]) -> None:
         for ref in not_ready:
             ray.cancel(ref, force=True)
             (Path(in_flight[ref].run_dir) / RUNNING_FILE).unlink(missing_ok=True)
+        for job in in_flight.values():
+            (Path(job.run_dir) / STOP_FILE).unlink(missing_ok=True)
 
 
 def _wait_for_workers(ray: Any, cancelled: dict[Any, Job]) -> None:

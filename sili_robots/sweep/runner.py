@@ -8,7 +8,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from sili_robots.errors import ConfigError
-from sili_robots.runs import write_config
+from sili_robots.runs import STOP_FILE, write_config
 from sili_robots.sweep import tensorboard
 from sili_robots.sweep.backend import Backend, Monitor
 from sili_robots.sweep.local import LocalBackend
@@ -158,6 +158,7 @@ def run_sweep(
         for run in planned:
             path = run_path(sweep_dir, run.name)
             (path / RUNNING_FILE).unlink(missing_ok=True)  # stale: its process is gone
+            (path / STOP_FILE).unlink(missing_ok=True)  # an earlier stopped sweep's
             if run_state(path) == "done":
                 report.skipped.append(run.name)
                 continue

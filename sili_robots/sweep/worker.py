@@ -17,7 +17,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from sili_robots.runs import ERROR_FILE
+from sili_robots.runs import ERROR_FILE, STOP_FILE
 from sili_robots.sweep.state import run_state, training_claim
 
 #: one thread per worker: K workers share the machine's cores
@@ -73,7 +73,8 @@ def run_job(job: Job) -> Outcome:
             torch.set_num_threads(1)
             cfg = RunConfig.from_dict(job.config)
             with _tensorboard(run_dir, job.tensorboard):
-                train(cfg, run_dir, resume=state == "resumable", progress=False)
+                stop_file = run_dir / STOP_FILE  # how a Ray sweep stops it
+                train(cfg, run_dir, state == "resumable", progress=False, stop_file=stop_file)
     except (KeyboardInterrupt, SystemExit):
         raise  # the sweep is being stopped: the run stays resumable from its checkpoint
     except Exception as err:  # a run's failure must not reach the sweep
