@@ -10,6 +10,8 @@ import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
+from sili_robots.errors import ConfigError
+
 
 @contextlib.contextmanager
 def replacing(path: Path, shared: bool = False) -> Iterator[Path]:
@@ -20,6 +22,8 @@ def replacing(path: Path, shared: bool = False) -> Iterator[Path]:
     path = Path(path)
     tag = f".{os.getpid()}-{uuid.uuid4().hex[:8]}" if shared else ""
     tmp = path.with_name(f"{path.name}{tag}.tmp")
+    if path.is_dir():  # os.replace would fail only after the work of writing it
+        raise ConfigError(f"{path} is a directory, where a file is written; move it away")
     try:
         yield tmp
         sync(tmp)

@@ -82,3 +82,12 @@ def test_training_syncs_its_history_before_each_checkpoint(tmp_path, monkeypatch
     cfg = make_run_config("circle-3", "sac", 0, 4, settings=FAST_AGENT, checkpoint_every=2)
     training.train(cfg, tmp_path / "run", progress=False)
     assert events == ["metrics 2", "checkpoint 2", "metrics 4", "checkpoint 4"]
+
+
+def test_a_directory_where_the_file_goes_is_named_before_anything_is_written(tmp_path):
+    from sili_robots.errors import ConfigError
+
+    (tmp_path / "results.csv").mkdir()
+    with pytest.raises(ConfigError, match=r"results.csv is a directory, where a file is written"):
+        write_text(tmp_path / "results.csv", "table")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["results.csv"]

@@ -213,6 +213,10 @@ def test_every_latent_kind_trains(tmp_path, latent):
         (["--task", "circle-3", "--set", "sac.lr.x=1"], "unknown setting 'sac.lr.x'"),
         (["--task", "circle-3", "--set", 'sac.lr={"start": 0}'], "sac.lr: a schedule is"),
         (["--task", "circle-3", "--set", 'sac.lr={"points": [[0, "a"]]}'], "a schedule is"),
+        (
+            ["--task", "circle-3", "--set", 'sac.lr={"points": [[2.7, 1e-3]]}'],
+            "whole numbers, got 2.7",
+        ),
         (["--task", "circle-3", "--method", "lili", "--beta", "0.3"], "does not apply to method"),
         (["--task", "circle-3", "--beta-anneal", "2", "0", "10"], "outside the allowed range"),
         (["--task", "circle-3", "--beta-anneal", "0", "0.5"], "START END LENGTH [DELAY]"),

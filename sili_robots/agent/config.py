@@ -173,6 +173,8 @@ def convert(name: str, tp: Any, value: Any) -> Any:
         if isinstance(value, dict) and Schedule in args:
             try:
                 return Schedule.from_dict(value)
+            except ConfigError as err:
+                raise ConfigError(f"setting {name}: {err}") from None
             except (TypeError, KeyError, ValueError):
                 raise ConfigError(
                     f'setting {name}: a schedule is {{"points": [[INTERACTION, VALUE], ...]}} '

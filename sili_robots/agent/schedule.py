@@ -24,7 +24,11 @@ class Schedule:
     points: tuple[tuple[int, float], ...]
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "points", tuple((int(i), float(v)) for i, v in self.points))
+        points = tuple((int(i), float(v)) for i, v in self.points)
+        fractional = [i for (i, _), (n, _) in zip(self.points, points, strict=True) if i != n]
+        if fractional:
+            raise ConfigError(f"a schedule's interactions are whole numbers, got {fractional[0]}")
+        object.__setattr__(self, "points", points)
 
     @classmethod
     def ramp(cls, start: float, end: float, length: int, delay: int = 0) -> Schedule:
