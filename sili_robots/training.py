@@ -166,14 +166,16 @@ def write_summary(run_dir: Path, window: int = 100) -> dict[str, Any]:
     return summary
 
 
-def check_extension(run_dir: Path, interactions: int) -> None:
-    """Refuse a target below the run's: a run can only be extended."""
+def check_extension(run_dir: Path, interactions: int) -> int:
+    """The run's recorded target; ConfigError for a target below it: a run can only be
+    extended."""
     recorded = read_config(run_dir).interactions
     if interactions < recorded:
         raise ConfigError(
             f"--interactions {interactions} would shorten {run_dir}, which is set to "
             f"{recorded}; a run can only be extended (allowed: >= {recorded})"
         )
+    return recorded
 
 
 def extend(run_dir: Path, interactions: int) -> None:
@@ -182,8 +184,7 @@ def extend(run_dir: Path, interactions: int) -> None:
     depends on the target). The run is unfinished from here on (its summary goes first, so a
     stop before it trains leaves it resumable, not done and short); the rest of its record
     (versions, machine) stays as written when it began."""
-    check_extension(run_dir, interactions)
-    if interactions != read_config(run_dir).interactions:
+    if interactions != check_extension(run_dir, interactions):
         (Path(run_dir) / SUMMARY).unlink(missing_ok=True)
         set_target(run_dir, interactions)
 

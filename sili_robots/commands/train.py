@@ -192,7 +192,7 @@ def _task_names() -> list[str]:
 def run(args: argparse.Namespace) -> int:
     from sili_robots.runs import check_resumable
     from sili_robots.sweep.state import run_state, training_claim, training_worker
-    from sili_robots.training import check_extension, resume, train, write_summary
+    from sili_robots.training import resume, train, write_summary
     from sili_robots.verdict import verdict
 
     if args.resume is not None:
@@ -210,9 +210,7 @@ def run(args: argparse.Namespace) -> int:
                 f"--resume continues {args.resume} as its config.json records it; with it give "
                 f"only --interactions (to extend it) and --no-progress, not {', '.join(ignored)}"
             )
-        if args.interactions is not None:
-            check_extension(args.resume, args.interactions)
-        elif run_state(args.resume) == "done":
+        if args.interactions is None and run_state(args.resume) == "done":
             print(
                 f"{args.resume} has already trained all {read_config(args.resume).interactions} "
                 "of its interactions; --interactions N extends it",

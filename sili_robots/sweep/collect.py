@@ -84,16 +84,12 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
     for name, (run_dir, _, length) in chosen.items():
         target = Path(dest) / RUNS_DIR / name
         finished = (target / SUMMARY).is_file() and metrics_file(target) is not None
-        if (
-            finished
-            and (
-                (target / SUMMARY).read_bytes() == (run_dir / SUMMARY).read_bytes()
-                or _length(target) > length  # dest holds it longer
-            )
-        ) or _rows_trained(target) > length:  # a training in dest (a sweep's) is past it
+        held = _length(target) if finished else 0  # the length dest holds it at, finished
+        same = finished and (target / SUMMARY).read_bytes() == (run_dir / SUMMARY).read_bytes()
+        if same or held > length or _rows_trained(target) > length:  # (a sweep's training)
             report.unchanged.append(name)
             continue
-        superseded = not finished or _length(target) < length
+        superseded = held < length
         was_there = (target / CONFIG).is_file()
         metrics = metrics_file(run_dir)
         target.mkdir(parents=True, exist_ok=True)
