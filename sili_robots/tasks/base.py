@@ -123,8 +123,8 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
 
     def _set_strategy(self, strategy: StrategyId) -> None:
         """Make ``strategy`` (already checked) the current one; tasks that allow a chosen first
-        strategy override this."""
-        raise ConfigError(f"{type(self).__name__} cannot start from a chosen strategy")
+        strategy override this (``_check_start`` refuses the rest)."""
+        raise NotImplementedError
 
     def _check_start(self, strategy: Any) -> None:
         """Refuse a chosen first strategy this task cannot start from, before ``reset`` changes
