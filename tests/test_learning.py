@@ -17,8 +17,7 @@ def test_oracle_learns_to_reach_the_opponent(tmp_path):
     cfg = make_run_config("circle-3", "oracle", 0, 150, settings={"hidden": 64})
     train(cfg, tmp_path / "run", progress=False)
     reward = pd.read_csv(tmp_path / "run" / "metrics.csv")["task_reward"]
-    # measured (Zen 4; seeds 0-2, and seed 0 with the instruction set capped to AVX2): the 20
-    # random interactions -47 to -54, the last 50 -11.5 to -12.2; standing still scores -50,
-    # the scripted oracle -3.9
+    # measured (benchmarks/RESULTS.md, "Short learning runs"): the 20 random interactions -47
+    # to -54, the last 50 -11.5 to -12.2; standing still scores -50, the scripted oracle -3.9
     assert reward[:20].mean() < -40
     assert reward[-50:].mean() > -25
