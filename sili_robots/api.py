@@ -1,5 +1,6 @@
 """The Python API, in stable-baselines3's shape: ``SILI(env).learn(n)``, ``predict``,
-``save`` and ``SILI.load``.
+``save`` and ``SILI.load`` (``predict`` returns the action alone, greedy by default, for one
+observation: the agent's latent follows the interactions played on ``model.env``).
 
 A model is a run directory (config, metrics, checkpoint) plus the agent and environment it
 describes, so a model trained here loads in ``sili eval`` and a run of ``sili train`` loads
@@ -25,6 +26,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+import torch
 
 from sili_robots.agent import SILIAgent
 from sili_robots.build import (
@@ -36,6 +38,7 @@ from sili_robots.build import (
     observed_as,
     task_kwargs_of,
     task_name_of,
+    task_version_of,
 )
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import AgentFeedback, evaluate
@@ -50,6 +53,7 @@ from sili_robots.runs import (
     clear_run,
     load_checkpoint,
     require_checkpoint,
+    set_target,
 )
 from sili_robots.runs import read_config as read_run_config
 from sili_robots.tasks import RepeatedInteractionEnv
@@ -140,6 +144,27 @@ class SILI:
             self.agent.load_state_dict(state["agent"])
             game = state["game"]
         self.env: gym.Env = AgentFeedback(base, self.agent, game)
+        #: the checkpoint's interaction this model holds, and what its run's files were then
+        self._done = 0 if state is None else int(state["interaction"])
+        self._loaded = None if state is None else _stamp(self.run_dir)
+
+    def _reload(self) -> None:
+        """The model as its run's last checkpoint; without one, a new model again (a first
+        ``learn`` stopped before its first checkpoint leaves nothing of itself)."""
+        state = load_checkpoint(self.run_dir)
+        if state is None:
+            clear_run(self.run_dir)
+            self.cfg.interactions = 0
+        else:
+            self.cfg = read_run_config(self.run_dir)
+        self._setup(state)
+
+    def _refresh(self) -> None:
+        """Catch up with a run trained further since this model loaded it (by another model
+        of the same run, or ``sili train --resume``), so counts and saves start from it."""
+        if self._done and _stamp(self.run_dir) != self._loaded:
+            self.close()
+            self._reload()
 
     @classmethod
     def load(cls, path: str | Path, env: gym.Env | None = None) -> SILI:
@@ -149,6 +174,12 @@ class SILI:
         _keep_temporary(path)  # another model's temporary run, now the user's to keep
         cfg = read_run_config(path)
         state = require_checkpoint(path)
+        if env is not None and task_version_of(env) != (cfg.task_id or cfg.task):
+            raise ConfigError(
+                f"env is {task_version_of(env)}; the run in {path} was trained on "
+                f"{cfg.task_id or cfg.task}: give an instance of that task (its arguments, "
+                "such as the controller, may differ)"
+            )
         model = cls.__new__(cls)
         model.cfg, model.run_dir, model._task_env, model._overwrite = cfg, path, env, False
         model._saved = {}
@@ -166,31 +197,62 @@ class SILI:
 
     # ------------------------------------------------------------------ sb3 API
     def learn(self, interactions: int, progress_bar: bool = False) -> SILI:
-        """Train for ``interactions`` more interactions (checkpointed in ``run_dir``)."""
-        _check_count(interactions)
-        done = self.cfg.interactions
+        """Train ``interactions`` more interactions from the model's checkpoint, in
+        ``run_dir`` (a loaded run trains where it lies). Stopped (Ctrl-C) or failed, the model
+        is its run's last checkpoint, and the next ``learn`` counts from there."""
+        interactions = _check_count(interactions)
+        self._refresh()
+        done = self._done
         if done == 0:  # as when the model was made (nothing came in since), before any change
             self._check_run_dir()
+        self._check_own_task()
         if self._task_env is None:
             self.env.close()  # training builds its own (libsumo holds one simulation)
-        self.cfg.interactions = done + interactions
+        target = done + interactions
         env = None if self._task_env is None else observed_as(self._task_env, self.cfg)
-        if done == 0:
-            if self._overwrite:
-                clear_run(self.run_dir)
-            train(self.cfg, self.run_dir, progress=progress_bar, env=env)
-        else:
-            if env is None:
-                resume(self.run_dir, progress_bar, self.cfg.interactions)
+        threads = torch.get_num_threads()  # training sets the run's; the caller's come back
+        try:
+            if done == 0:
+                if self._overwrite:
+                    clear_run(self.run_dir)
+                self.cfg.interactions = target
+                train(self.cfg, self.run_dir, progress=progress_bar, env=env)
             else:
-                train(self.cfg, self.run_dir, resume=True, progress=progress_bar, env=env)
-        self._setup(load_checkpoint(self.run_dir))
+                if target < self.cfg.interactions:  # a learn stopped short set more
+                    set_target(self.run_dir, target)
+                self.cfg.interactions = target
+                if env is None:
+                    resume(self.run_dir, progress_bar, target)
+                else:
+                    train(self.cfg, self.run_dir, resume=True, progress=progress_bar, env=env)
+        finally:
+            torch.set_num_threads(threads)
+            self._reload()
         return self
 
+    def _check_own_task(self) -> None:
+        """A loaded run trains on its own task only: one given to ``load`` with other arguments
+        (another controller) plays it, but the run would not record them."""
+        if self._task_env is None or self._done == 0:
+            return  # built from the run's record, or recorded from the instance itself
+        given = task_kwargs_of(self._task_env)
+        if given != self.cfg.env_kwargs:
+            raise ConfigError(
+                f"the run in {self.run_dir} was trained with {self.cfg.env_kwargs}; env, built "
+                f"with {given}, can play it but not train it (the run records one task): "
+                "load it without env, or with an instance built as the run says"
+            )
+
     def predict(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
-        """The action for ``obs`` of the interaction being played on ``model.env``."""
+        """The action (alone; greedy unless ``deterministic=False``) for one observation of
+        the interaction being played on ``model.env``."""
         obs = np.asarray(obs, np.float32)
         expected = self.env.observation_space.shape
+        if obs.shape[1:] == expected:
+            raise ConfigError(
+                f"obs is a batch of {obs.shape[0]}; predict takes one observation (the agent's "
+                "latent follows the interactions played on model.env)"
+            )
         if obs.shape != expected:
             raise ConfigError(
                 f"obs has shape {obs.shape}; this model observes shape {expected} "
@@ -203,6 +265,7 @@ class SILI:
         directory, or one this model saved to before (replaced, as stable-baselines3's ``save``
         replaces its file); another run there is replaced only with ``overwrite``."""
         path = Path(path)
+        self._refresh()
         self._check_trained("save")
         if path.exists() and not path.is_dir():
             raise ConfigError(f"cannot save to {path}: it is a file; give a directory")
@@ -230,7 +293,8 @@ class SILI:
         """Greedy play continuing the saved game: mean task reward and stability. ``model.env``
         starts again from the saved game afterwards (the evaluation plays on the same task:
         libsumo holds one simulation per process)."""
-        _check_count(interactions)
+        interactions = _check_count(interactions)
+        self._refresh()
         self._check_trained("evaluate")
         self.close()
         try:
@@ -276,6 +340,9 @@ def _stamp(run_dir: Path) -> tuple:
     return tuple((s.st_ino, s.st_ctime_ns) for s in stats)
 
 
-def _check_count(interactions: Any) -> None:
-    if isinstance(interactions, bool) or not isinstance(interactions, int) or interactions < 1:
+def _check_count(interactions: Any) -> int:
+    """``interactions`` as an int (numpy's integers too), or ConfigError."""
+    integral = isinstance(interactions, (int, np.integer)) and not isinstance(interactions, bool)
+    if not integral or interactions < 1:
         raise ConfigError(f"interactions must be an integer >= 1, got {interactions!r}")
+    return int(interactions)

@@ -93,8 +93,28 @@ def canonical_task(task: str) -> str:
         ) from None
 
 
+#: the wrappers ``gym.make`` adds, which change nothing a run records
+_NEUTRAL_WRAPPERS = (gym.wrappers.OrderEnforcing, gym.wrappers.PassiveEnvChecker)
+
+
+def check_recordable(env: gym.Env) -> None:
+    """A run records a task instance by its name and arguments, and is rebuilt from them; a
+    wrapper around it (changing what the agent sees or does) would silently be lost."""
+    layer = env
+    while isinstance(layer, gym.Wrapper):
+        if not isinstance(layer, _NEUTRAL_WRAPPERS):
+            raise ConfigError(
+                f"env is wrapped in {type(layer).__name__}, which a run cannot record (it is "
+                "rebuilt from its task's name and arguments, and each method adds its own "
+                "observation wrappers); give the task itself (env.unwrapped), or a task class "
+                "of your own that does what the wrapper does"
+            )
+        layer = layer.env
+
+
 def task_name_of(env: gym.Env) -> str:
     """How a run records an environment instance: its task's name, else its class path."""
+    check_recordable(env)
     spec = env.spec if env.spec is not None else env.unwrapped.spec
     if spec is not None:
         try:
@@ -103,6 +123,13 @@ def task_name_of(env: gym.Env) -> str:
             pass
     cls = type(env.unwrapped)
     return f"{cls.__module__}:{cls.__qualname__}"
+
+
+def task_version_of(env: gym.Env) -> str:
+    """The task version an instance is: its gymnasium id, or its class path (as a run's
+    ``task_id or task``)."""
+    name = task_name_of(env)
+    return name if is_class_path(name) else task_spec(name).gym_id
 
 
 def task_kwargs_of(env: gym.Env) -> dict[str, Any]:

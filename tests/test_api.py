@@ -262,3 +262,96 @@ def test_the_two_doors_example_moves_the_door_as_its_rule_says():
         env.step(np.array([env.door], np.float32))  # to the door: |x| reaches 1
     _, info = env.reset()
     assert env.door == -door and not info["strategy_changed"]
+
+
+def test_learn_stopped_by_ctrl_c_leaves_the_model_at_its_checkpoint_and_counts_on_from_it(
+    tmp_path, monkeypatch
+):
+    """As a stable-baselines3 model after Ctrl-C: what was learned stays in the model, and the
+    next ``learn(n)`` trains n more (not up to the stopped learn's target)."""
+    import signal
+
+    from sili_robots import training
+
+    played, calls = training.play_interaction, []
+
+    def ctrl_c_in_the_fourth(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 4:
+            signal.raise_signal(signal.SIGINT)
+        return played(*args, **kwargs)
+
+    monkeypatch.setattr(training, "play_interaction", ctrl_c_in_the_fourth)
+    run = tmp_path / "run"
+    model = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run, checkpoint_every=50)
+    with pytest.raises(KeyboardInterrupt):
+        model.learn(2000)
+    assert model.agent.buffer.n == 4  # the checkpoint's agent, not the untrained one
+    model.learn(2)
+    assert len((run / "metrics.csv").read_text().splitlines()) == 1 + 6
+    assert model.agent.buffer.n == 6 and SILI.load(run).cfg.interactions == 6
+
+
+def test_learn_failing_before_its_first_checkpoint_leaves_a_new_model(tmp_path, monkeypatch):
+    from sili_robots import training
+
+    def failing(*args, **kwargs):
+        raise RuntimeError("the simulator fell over")
+
+    run = tmp_path / "run"
+    model = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run)
+    with monkeypatch.context() as patch:
+        patch.setattr(training, "play_interaction", failing)
+        with pytest.raises(RuntimeError, match="fell over"):
+            model.learn(5)
+    assert not (run / "config.json").exists()  # nothing of the failed start
+    model.learn(2)  # not refused as a run already there
+    assert len((run / "metrics.csv").read_text().splitlines()) == 1 + 2
+
+
+def test_two_models_of_one_run_each_count_from_the_run_as_it_is(tmp_path):
+    run = tmp_path / "run"
+    SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run).learn(2)
+    a, b = SILI.load(run), SILI.load(run)
+    a.learn(2)
+    b.learn(2)  # not "already at 4": b catches up with a's training first
+    assert len((run / "metrics.csv").read_text().splitlines()) == 1 + 6
+    assert b.agent.buffer.n == 6 and b.cfg.interactions == 6
+
+
+def test_what_a_run_cannot_record_or_train_on_is_refused(tmp_path):
+    import gymnasium as gym
+
+    from sili_robots.wrappers import OracleObservation
+
+    task = gym.make("sili/Circle3-v1")
+    scaled = gym.wrappers.TransformObservation(task, lambda o: o * 100, task.observation_space)
+    with pytest.raises(ConfigError, match="env is wrapped in TransformObservation, which a run"):
+        SILI(scaled, method="sac")
+    with pytest.raises(ConfigError, match="env is wrapped in OracleObservation"):
+        SILI(OracleObservation(task.unwrapped), method="oracle")  # the method adds its own
+    run = tmp_path / "run"
+    SILI(task, method="sac", settings=FAST_AGENT, run_dir=run).learn(2)
+    with pytest.raises(ConfigError, match=r"env is sili/Circle8-v1; the run in .* was trained on"):
+        SILI.load(run, env=gym.make("sili/Circle8-v1"))  # same sizes, another game
+    other = SILI.load(run, env=gym.make("sili/Circle3-v1", outside_margin=0.3))
+    assert other.predict(other.env.reset()[0]).shape == (2,)  # plays it
+    with pytest.raises(ConfigError, match=r"built with \{'outside_margin': 0.3\}, can play it but"):
+        other.learn(1)
+    assert len((run / "metrics.csv").read_text().splitlines()) == 1 + 2
+
+
+def test_predict_env_and_learn_as_a_user_of_numpy_and_torch_expects(tmp_path):
+    import torch
+
+    torch.set_num_threads(2)
+    model = SILI("circle-3", method="sac", settings=FAST_AGENT).learn(np.int64(3))
+    assert torch.get_num_threads() == 2  # the caller's, back after training on the run's one
+    obs, info = model.env.reset(seed=5)  # a seed alone: the game the run trained in goes on
+    assert info["interaction"] == 3
+    with pytest.raises(ConfigError, match="obs is a batch of 4; predict takes one observation"):
+        model.predict(np.stack([obs] * 4))
+    model.close()
+    model = SILI.load(model.run_dir)
+    obs, info = model.env.reset(seed=5, options={"strategy": 0})  # another game, as asked
+    assert (info["interaction"], info["strategy_id"]) == (0, 0)

@@ -33,10 +33,11 @@ def _rollout(env, seed, interactions=6):
     return trace
 
 
-@pytest.mark.parametrize("name", LIGHT_TASKS)
+@pytest.mark.parametrize("name", [*LIGHT_TASKS, "two-doors"])
 def test_check_env_passes(name):
+    """Every light task, and the README's template task (a reset before any step is legal)."""
     for wrap in (lambda e: e, OracleObservation, StrategyFlag):
-        env = wrap(make_task(name).unwrapped)
+        env = wrap(TwoDoorsEnv() if name == "two-doors" else make_task(name).unwrapped)
         check_env(env, skip_render_check=True)
         env.close()
 

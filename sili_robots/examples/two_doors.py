@@ -36,7 +36,7 @@ class TwoDoorsEnv(RepeatedInteractionEnv):
         self.door = float(self.np_random.choice([-1.0, 1.0]))
 
     def _advance_strategy(self, trajectory: list[dict[str, Any]]) -> None:
-        if abs(trajectory[-1]["x"]) < 0.8:
+        if not trajectory or abs(trajectory[-1]["x"]) < 0.8:  # no step: still in the middle
             self.door = -self.door
 
     def _begin_interaction(self) -> None:

@@ -88,7 +88,8 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
 
     @abstractmethod
     def _advance_strategy(self, trajectory: list[dict[str, Any]]) -> None:
-        """Apply T^z: move to z^{j+1} given the finished interaction's trajectory."""
+        """Apply T^z: move to z^{j+1} given the finished interaction's trajectory (short, or
+        empty, when ``reset`` comes before the interaction's last step, or before its first)."""
 
     @abstractmethod
     def _begin_interaction(self) -> None:
