@@ -43,7 +43,7 @@ class InteractionSummary:
     interaction: int
     task_reward: float  # sum of task rewards over the interaction
     strategy_changed: bool  # the true strategy changed at the boundary or within it
-    strategy_id: float
+    end_strategy_id: float  # after its last step
 
 
 def play_interaction(
@@ -83,19 +83,18 @@ def run_interactions(
     policy: Callable[[gym.Env, np.ndarray], np.ndarray],
     interactions: int,
     seed: int | None = 0,
-    on_step: Callable[[np.ndarray, dict], None] | None = None,
+    on_step: StepCallback | None = None,
     options: dict | None = None,
 ) -> list[InteractionSummary]:
     """Play ``interactions`` whole interactions, restarting the game with ``seed`` (and the
-    first reset's ``options``, e.g. ``{"strategy": z}``); ``on_step(obs, info)`` sees each
-    step's outcome."""
+    first reset's ``options``, e.g. ``{"strategy": z}``); ``on_step`` sees each step, as in
+    ``play_interaction``."""
     out: list[InteractionSummary] = []
     obs, info = env.reset(seed=seed, options=options)
     env.action_space.seed(seed)
-    step = None if on_step is None else (lambda _o, _a, _r, o2, i: on_step(o2, i))
     for j in range(interactions):
         last = j == interactions - 1
-        played = play_interaction(env, obs, info, lambda o: policy(env, o), step, reset=not last)
+        played = play_interaction(env, obs, info, lambda o: policy(env, o), on_step, reset=not last)
         out.append(
             InteractionSummary(
                 j, played.task_reward, played.strategy_changed, played.end_strategy_id

@@ -415,7 +415,7 @@ class MetricsWriter:
             with self.path.open() as f:
                 rows = list(csv.DictReader(f))[:keep_rows]
             self._rewrite(rows)
-        elif keep_rows is None or not self.path.exists():
+        else:
             self._rewrite([])
         self._file = self.path.open("a", newline="")
         self._writer = csv.DictWriter(self._file, METRIC_COLUMNS)

@@ -17,6 +17,12 @@ from types import FrameType
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
+def exit_on_signal(signum: int, _frame: object) -> None:
+    """A handler that exits with 128 + signal, as a shell reports it, running ``finally``
+    blocks on the way (which close simulators and servers)."""
+    raise SystemExit(128 + signum)
+
+
 class StopBetweenInteractions:
     """``with StopBetweenInteractions() as stop:`` around the loop; ``stop.requested`` says a
     stop is held (checkpoint now), ``stop.deliver()`` lets it act."""

@@ -849,3 +849,17 @@ def test_posteriors_need_discrete_latents_and_runs_saved_with_them_record_them_o
         **saved["addons"],
         **{k.removeprefix("addons__"): v for k, v in setting.items()},
     }
+
+
+def test_the_settings_allow_exactly_the_kernels_and_estimators_the_code_runs():
+    """The settings' allowed values (``agent/config.py``) and the code's own lists are kept in
+    two places: adding a kernel, precision or estimator to one must add it to the other."""
+    import typing
+
+    from sili_robots.agent.config import Estimator, Matmul, Precision
+    from sili_robots.agent.latent import ESTIMATORS
+    from sili_robots.agent.matmul import MATMULS, PRECISIONS
+
+    assert set(typing.get_args(Matmul)) == set(MATMULS)
+    assert set(typing.get_args(Precision)) == set(PRECISIONS)
+    assert set(typing.get_args(Estimator)) == set(ESTIMATORS)

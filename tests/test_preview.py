@@ -48,7 +48,7 @@ def test_recording_has_every_step_of_every_interaction():
         scripted_policy(env, "stabilizing"),
         2,
         seed=0,
-        on_step=lambda obs, info: seen.append(obs[:2].copy()),
+        on_step=lambda _s, _a, _r, obs, _i: seen.append(obs[:2].copy()),
     )
     env.close()
     recorded = np.array([f["ego"] for f in rec.frames if f["t"] > 0])

@@ -134,7 +134,7 @@ def test_scripted_policies_hold_or_move_the_goal_end_to_end():
     env = make_task("sawyer-reach")
     stable = run_interactions(env, scripted_policy(env, "stabilizing"), 4, seed=0)
     assert all(not s.strategy_changed for s in stable[1:])
-    assert len({s.strategy_id for s in stable}) == 1
+    assert len({s.end_strategy_id for s in stable}) == 1
     chase = run_interactions(env, scripted_policy(env, "oracle"), 4, seed=0)
     assert all(s.strategy_changed for s in chase[1:])
     # Reaching the true goal beats ending above the plane on task reward within an interaction.

@@ -139,7 +139,7 @@ def test_unequal_v1_near_locations_move_on_at_random_far_one_by_the_rule():
 
 def test_unequal_v1_best_blind_policy_holds_far_and_beats_tracking():
     blind = _play("circle-unequal", "blind", 60)
-    settled = [s.strategy_id for s in blind[10:]]
+    settled = [s.end_strategy_id for s in blind[10:]]
     assert settled == [0.0] * len(settled)  # holds the far location once it is there
     tracking = _play("circle-unequal", "tracking", 60)
     reward = np.mean([s.task_reward for s in blind[10:]])

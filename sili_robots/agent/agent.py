@@ -38,7 +38,8 @@ class InteractionStats:
 
     stability_reward: float  # R_stable as the agent measured it (before weighting by b)
     latent_category: int  # argmax of z^{j+1} (-1 when there is no discrete latent)
-    latent_changed: bool  # the agent's own latent changed between j and j+1
+    #: the agent's own latent changed between j and j+1 (partial: the observed flag was raised)
+    latent_changed: bool
     extra: dict[str, float] = field(default_factory=dict)  # add-ons' metric columns
 
 

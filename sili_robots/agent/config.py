@@ -54,7 +54,7 @@ class SACConfig:
     batch_interactions: int = setting(16, 1)  # an RL batch = this many interactions ...
     batch_steps: int = setting(16, 1)  # ... times this many timesteps from each
     updates_per_step: Scheduled = setting(1.0, 0.0)
-    random_interactions: int = setting(20, 0)  # uniform random actions first (20 x 50 steps)
+    random_interactions: int = setting(20, 0)  # interactions of uniform random actions first
     #: ``bfloat16``: forward passes under CPU autocast (weights, gradients stay float32); by
     #: default chosen per machine by a timing (agent/matmul.py), recorded with each run
     precision: Precision = field(default_factory=default_precision)
@@ -117,14 +117,10 @@ class AgentConfig:
         return self.latent in ("discrete", "continuous")
 
     @property
-    def latent_width(self) -> int:
-        """Width of one latent as fed to the policy (0 when the policy sees none)."""
-        return self.model.dim if self.latent in ("discrete", "continuous", "true") else 0
-
-    @property
     def policy_latents(self) -> int:
-        """How many latents the policy is conditioned on: z^j (and z^{j-1} for SILI/Stable)."""
-        if self.latent_width == 0:
+        """How many latents the policy is conditioned on: z^j (and z^{j-1} for SILI/Stable);
+        none without a latent (SAC, Oracle, SMiRL, and the partial flag in the observation)."""
+        if self.latent not in ("discrete", "continuous", "true"):
             return 0
         return 1 if self.method == "lili" else 2
 

@@ -1,4 +1,4 @@
-"""The latent strategy model: encoder E(tau^{j-1}) -> z^j, decoder D(s, a, z^j) -> (s', r).
+"""The latent strategy model: encoder E(tau^{j-1}) -> z^j, decoder D(s, a, z^j) -> (s' - s, r).
 
 Encoder aggregation (a design choice the paper leaves open): each transition (s, a, r, s') of
 the previous interaction goes through the same 2 x 256 MLP, and the set of features is pooled by
@@ -88,7 +88,6 @@ class LatentModel(nn.Module):
         kind: str,
         estimator: str = "expected",
         usage_bonus: float = 0.1,
-        evidence_scale: float = 1.0,
         preact_penalty: float = 0.0,
         readouts: Sequence[Callable[[torch.Tensor], torch.Tensor]] = (),
         matmul: str = "aten",
@@ -99,7 +98,6 @@ class LatentModel(nn.Module):
         if estimator not in ESTIMATORS:
             raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
         self.kind, self.estimator, self.usage_bonus = kind, estimator, usage_bonus
-        self.evidence_scale = evidence_scale
         self.preact_penalty = preact_penalty
         self.readouts = list(readouts)
         self.latent_dim = latent_dim
@@ -170,7 +168,8 @@ class LatentModel(nn.Module):
         return self.head(torch.cat(parts, dim=-1))
 
     def encode(self, traj: torch.Tensor, sample: bool = False) -> torch.Tensor:
-        """The latent z; ``sample`` draws a straight-through Gumbel one-hot (training)."""
+        """The latent z; ``sample`` draws a Gumbel-max one-hot instead of the most likely
+        category (the z^j acted on and cached, ``model.sample``)."""
         out = self.encode_logits(traj)
         if self.kind == "continuous":
             return torch.tanh(out)
@@ -219,8 +218,8 @@ class LatentModel(nn.Module):
         heads = (self._heads(obs, act) - mean) / scale  # [B, H, k, out]
         err = (heads - target.unsqueeze(-2)).pow(2).mean(-1).mean(1)  # [B, k]
         if self.estimator == "marginal":
-            # -log sum_k q_k p(tau^j | k); log p = -0.5 * evidence_scale * H * err (per step)
-            log_lik = -0.5 * self.evidence_scale * obs.shape[1] * err
+            # -log sum_k q_k p(tau^j | k); log p = -0.5 * H * err (unit-variance Gaussian steps)
+            log_lik = -0.5 * obs.shape[1] * err
             log_q = F.log_softmax(logits, dim=-1)
             nll = -torch.logsumexp(log_q + log_lik, dim=-1).mean() / obs.shape[1]
             usage = log_q.exp().mean(0)

@@ -16,16 +16,13 @@ learned as well as float32 (3 seeds, benchmarks/RESULTS.md).
 
 from __future__ import annotations
 
-import typing
 from contextlib import nullcontext
 
 import torch
 import torch.nn.functional as F
 
-from sili_robots.agent.config import Precision
+from sili_robots.agent.matmul import PRECISIONS
 from sili_robots.agent.networks import Actor, TwinCritic
-
-PRECISIONS = typing.get_args(Precision)
 
 
 class SAC:

@@ -14,7 +14,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "plot",
         help="figures of a sweep: learning curves per task, the b sweep, an overview",
-        description="Rebuilds SWEEP_DIR/results.csv from the run directories, then writes per "
+        description="Rebuilds a sweep's SWEEP_DIR/results.csv from its run directories (a "
+        "collection of `sili collect` is only read), then writes per "
         "task TASK.png/pdf (task reward, true stability, stability reward per interaction; mean "
         "± std across seeds), TASK_beta.png/pdf where SILI ran with several b, and "
         "overview.png/pdf.",

@@ -29,7 +29,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--interactions", type=positive_int, default=20, help="interactions to play (default 20)"
     )
-    p.add_argument("--seed", type=seed, default=0, help="first interaction's seed (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="the game's seed (default 0)")
     add_task_args(p)
     p.set_defaults(run=run)
 

@@ -35,7 +35,7 @@ class ArmSpec:
     torque_actuators: np.ndarray  # torque motors (ctrl: N m)
     ee_site: str  # end-effector site the task is about
     ee_site_id: int
-    base_site: str  # a site fixed to the arm's base (robosuite's OSC reads its velocity)
+    base_site: str  # a site fixed to the arm's base (robosuite's OSC reads its velocity by name)
     velocity_limits: np.ndarray  # rad/s per arm joint
     torque_limits: np.ndarray  # N m per arm joint
     home_qpos: np.ndarray  # full-model qpos the interaction starts from
@@ -47,8 +47,6 @@ class ArmSpec:
 class EndEffectorController(ABC):
     """Track a Cartesian target pose, advancing the physics by one control step per command."""
 
-    #: short registry name
-    name: ClassVar[str]
     #: what the scene must put on the arm joints: "position", "velocity" or "torque" actuators
     actuation: ClassVar[str]
 

@@ -26,7 +26,6 @@ DLS_DAMPING = 1e-2  # damped least squares lambda (m)
 class JointVelocityController(EndEffectorController):
     """Damped least-squares resolved rates -> joint velocity targets -> velocity servos."""
 
-    name: ClassVar[str] = "joint_velocity"
     actuation: ClassVar[str] = "velocity"
 
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, arm: ArmSpec) -> None:

@@ -54,7 +54,6 @@ CHUNKS = 5
 class MinkIKController(EndEffectorController):
     """mink differential IK -> joint reference (q*, qdot*) -> MuJoCo PD servos."""
 
-    name: ClassVar[str] = "mink"
     actuation: ClassVar[str] = "position"
 
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, arm: ArmSpec) -> None:

@@ -24,6 +24,9 @@ from sili_robots.controllers.robosuite_logging import quiet_robosuite_import
 
 OSC_KP = 150.0
 OSC_DAMPING_RATIO = 1.0
+#: robosuite's names for the arm: its OSC reads the velocity of the site
+#: ``{NAMING_PREFIX}{PART_NAME}_center``, which must be the scene's ``ArmSpec.base_site``
+NAMING_PREFIX, PART_NAME = "robot0_", "right"
 
 
 def _rotvec(rotation: np.ndarray) -> np.ndarray:
@@ -37,11 +40,15 @@ def _rotvec(rotation: np.ndarray) -> np.ndarray:
 class RobosuiteOSCController(EndEffectorController):
     """robosuite OSC torques every substep on the scene's torque motors."""
 
-    name: ClassVar[str] = "osc"
     actuation: ClassVar[str] = "torque"
 
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, arm: ArmSpec) -> None:
         super().__init__(model, data, arm)
+        if arm.base_site != f"{NAMING_PREFIX}{PART_NAME}_center":
+            raise ValueError(
+                f"robosuite's OSC reads the site {NAMING_PREFIX}{PART_NAME}_center; this arm's "
+                f"base site is {arm.base_site!r}"
+            )
         quiet_robosuite_import()
         from robosuite.controllers.parts.arm.osc import OperationalSpaceController
         from robosuite.utils.binding_utils import MjSim
@@ -65,8 +72,8 @@ class RobosuiteOSCController(EndEffectorController):
             input_type="absolute",
             input_ref_frame="world",
             uncouple_pos_ori=True,
-            part_name="right",
-            naming_prefix="robot0_",
+            part_name=PART_NAME,
+            naming_prefix=NAMING_PREFIX,
             lite_physics=True,
         )
         self._goal_rotvec = _rotvec(arm.ee_rotation)

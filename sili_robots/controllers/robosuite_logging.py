@@ -1,6 +1,6 @@
 """robosuite's import-time warnings about optional extras, filtered from its logger.
 
-Shared by the robosuite controller ablations and the Sawyer scene (which imports robosuite's
+Shared by the robosuite OSC controller (an ablation) and the Sawyer scene (which imports robosuite's
 models); it lives with the controllers, the lower of the two layers.
 """
 

@@ -120,8 +120,8 @@ def circle_stabilizing(env: RepeatedInteractionEnv, obs: np.ndarray) -> np.ndarr
 
 
 def circle_blind(env: RepeatedInteractionEnv, obs: np.ndarray, revealed: Any) -> np.ndarray:
-    """Hold the strategy the last interaction revealed; on Unequal, the far location (the only
-    one that can be held) unless the far location was revealed."""
+    """Hold the strategy the last interaction revealed where it can be held, else (and before
+    any is revealed) the first that can: on Unequal always the far location, the only one."""
     if env.variant == "continuous":
         belief = math.pi / 2 if revealed is None else revealed
     elif revealed is None or int(revealed) not in env.stable_locations:

@@ -255,7 +255,7 @@ def preview(
         result = PreviewResult(prev, None)
         if out is not None or png is not None:
             t1 = time.perf_counter()
-            result.html = _write(prev, out, png)
+            result.html = _write(prev, out)
             seconds["html"] = time.perf_counter() - t1
         if png is not None:
             t2 = time.perf_counter()
@@ -278,7 +278,7 @@ def preview(
         env.close()
 
 
-def _write(prev: Preview, out: str | Path | None, png: str | Path | None) -> Path:
+def _write(prev: Preview, out: str | Path | None) -> Path:
     if out is not None:
         return prev.write_html(out)
     import tempfile

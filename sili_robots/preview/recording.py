@@ -15,7 +15,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from sili_robots.rollout import InteractionSummary, run_interactions
+from sili_robots.rollout import run_interactions
 
 Snapshot = Callable[[Any], dict[str, Any]]
 
@@ -30,7 +30,6 @@ class Recording:
     interactions: int
     seed: int
     frames: list[dict[str, Any]] = field(default_factory=list)
-    summaries: list[InteractionSummary] = field(default_factory=list)
     #: snapshot of things that never change (layout), taken once
     static: dict[str, Any] = field(default_factory=dict)
 
@@ -89,10 +88,9 @@ def record_rollout(
             take(0.0)
         return policy(e, obs)
 
-    def after_step(obs: np.ndarray, info: dict) -> None:
-        reward = float(task_env._trajectory[-1]["reward"]) if task_env._trajectory else 0.0
+    def after_step(_s: np.ndarray, _a: np.ndarray, reward: float, *_after: Any) -> None:
         returns[0] += reward
         take(reward)
 
-    rec.summaries = run_interactions(env, acting, interactions, seed=seed, on_step=after_step)
+    run_interactions(env, acting, interactions, seed=seed, on_step=after_step)
     return rec

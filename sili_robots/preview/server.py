@@ -24,6 +24,8 @@ from pathlib import Path
 
 import meshcat
 
+from sili_robots.stopping import exit_on_signal
+
 STARTUP_TIMEOUT = 20.0
 
 
@@ -114,7 +116,7 @@ class LiveServer:
         previous = signal.getsignal(signal.SIGTERM)
         in_main = _in_main_thread()
         if in_main:
-            signal.signal(signal.SIGTERM, _raise_exit)
+            signal.signal(signal.SIGTERM, exit_on_signal)
         try:
             if on_ready is not None:
                 on_ready()
@@ -138,10 +140,6 @@ def zmq_linger() -> int:
     import zmq
 
     return zmq.LINGER
-
-
-def _raise_exit(signum: int, frame: object) -> None:
-    raise SystemExit(128 + signum)
 
 
 def _in_main_thread() -> bool:

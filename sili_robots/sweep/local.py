@@ -25,15 +25,12 @@ from pathlib import Path
 
 from sili_robots.errors import ConfigError
 from sili_robots.runs import ERROR_FILE, RUNNING_FILE
+from sili_robots.stopping import exit_on_signal
 from sili_robots.sweep.backend import STOP_GRACE_S, Monitor, describe_exit
 from sili_robots.sweep.worker import THREAD_ENV, Job, Outcome, limit_threads, run_job
 
 #: imported once by the forkserver, so forked workers start with them loaded
 PRELOAD = ["sili_robots.sweep.worker", "sili_robots.training", "torch.utils.tensorboard"]
-
-
-def _raise_exit(signum: int, _frame: object) -> None:
-    raise SystemExit(128 + signum)
 
 
 def _exit_when_orphaned(alive: Connection) -> None:
@@ -57,7 +54,7 @@ def _exit_when_orphaned(alive: Connection) -> None:
 def _child(job: Job, conn: Connection, alive: Connection) -> None:
     """Entry point of a worker process."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the sweep's to handle
-    signal.signal(signal.SIGTERM, _raise_exit)  # run `finally` blocks (closes simulators)
+    signal.signal(signal.SIGTERM, exit_on_signal)  # run `finally` blocks (closes simulators)
     signal.signal(signal.SIGHUP, signal.SIG_IGN)  # a hangup too: the sweep stops its workers
     _exit_when_orphaned(alive)
     limit_threads()

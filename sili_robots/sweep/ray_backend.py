@@ -23,6 +23,7 @@ from typing import Any
 
 from sili_robots.errors import ConfigError
 from sili_robots.runs import ERROR_FILE, RUNNING_FILE, STOP_FILE
+from sili_robots.stopping import STOP_SIGNALS
 from sili_robots.sweep.backend import STOP_GRACE_S, Monitor
 from sili_robots.sweep.worker import Job, Outcome, run_job
 
@@ -125,7 +126,7 @@ def _keeping_stop_handlers() -> Iterator[None]:
     """``ray.init`` installs its own SIGTERM handler in the driver (it exits with status 1);
     the command's own (``sili sweep``: stop like Ctrl-C, exit 128 + signal) is put back."""
     on_main = threading.current_thread() is threading.main_thread()
-    signals = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP) if on_main else ()
+    signals = STOP_SIGNALS if on_main else ()
     handlers = {s: signal.getsignal(s) for s in signals}
     try:
         yield

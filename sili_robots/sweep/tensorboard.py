@@ -130,19 +130,3 @@ class MetricsTail:
                 self._writer.add_scalar(tag, value, step)
             self.rows_written += 1
         self._writer.flush()
-
-
-def export_run(run_dir: Path) -> int:
-    """Write ``RUN_DIR/tb/`` from a run's whole ``metrics.csv`` (e.g. for a ``sili train`` run);
-    returns the number of interactions written."""
-    from torch.utils.tensorboard import SummaryWriter
-
-    run_dir = Path(run_dir)
-    shutil.rmtree(run_dir / TB_DIR, ignore_errors=True)
-    n = 0
-    with (run_dir / METRICS).open(newline="") as f, SummaryWriter(str(run_dir / TB_DIR)) as w:
-        for row in csv.DictReader(f):
-            for tag, value in _scalars(row).items():
-                w.add_scalar(tag, value, int(row["interaction"]))
-            n += 1
-    return n

@@ -238,14 +238,6 @@ class DrivingEnv(RepeatedInteractionEnv):
             np.float32,
         )
 
-    def _step_record(self) -> dict[str, Any]:
-        return {
-            "ego_y": self.ego_y,
-            "opp_y": self.opp_y,
-            "collision": self.collided,
-            "left_before_red_line": self.left_before_red_line,
-        }
-
     def _info(self) -> dict[str, Any]:
         info = super()._info()
         info["collision"] = self.collided

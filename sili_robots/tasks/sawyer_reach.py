@@ -129,9 +129,6 @@ class SawyerReachEnv(RepeatedInteractionEnv):
             raise RuntimeError(f"simulation diverged under controller {self.controller_name!r}")
         return -float(np.linalg.norm(ee - self.goal_position))
 
-    def _step_record(self) -> dict[str, Any]:
-        return {"ee": self.scene.ee_pos.copy()}
-
     def _base_observation(self) -> np.ndarray:
         return np.concatenate(
             [self.scene.ee_pos, self.scene.ee_velocity(), [self.time_fraction]]

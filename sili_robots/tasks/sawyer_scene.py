@@ -301,7 +301,3 @@ class SawyerScene:
             self.model, self.data, mujoco.mjtObj.mjOBJ_SITE, self.arm.ee_site_id, out, 0
         )
         return out[3:]
-
-    @property
-    def arm_qpos(self) -> np.ndarray:
-        return self.data.qpos[self.arm.qpos_adr]

@@ -77,7 +77,6 @@ class SpeakerListenerEnv(RepeatedInteractionEnv):
             )
         self.change_rule = change_rule
         self.speaker = where
-        self.goals = GOALS
         self.position = np.zeros(2)
         self.goal = 0
         self.mapping = 0

@@ -153,8 +153,3 @@ def change_frames(values: np.ndarray) -> list[int]:
 def frame_of(rec: Recording, interaction: int, t: int) -> int:
     """Frame index of step ``t`` of ``interaction`` (H + 1 frames per interaction)."""
     return interaction * (rec.horizon + 1) + t
-
-
-def circle_points(radius: float, n: int = 8) -> np.ndarray:
-    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    return np.column_stack([radius * np.cos(a), radius * np.sin(a)])

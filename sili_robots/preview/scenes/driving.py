@@ -37,7 +37,6 @@ INTENT = 0xF08080
 
 ROAD_FROM, ROAD_TO = -80.0, 280.0  # metres from the ego's start
 DASH, GAP = 3.0, 6.0
-CAR_HEIGHT = 1.45
 PASS_STEP = 6  # decision step at which the ego draws level with the opponent
 HOLD = 0.02  # frames: the cars jump back to the start between interactions
 
@@ -63,7 +62,9 @@ class DrivingScene(TaskScene):
         }
 
     def snapshot(self, task: Any) -> dict[str, Any]:
-        sub = task.substeps[-s_per_step(task) :] if task.t > 0 else []
+        from sili_robots.tasks.driving import DECISION_SUBSTEPS  # SUMO steps per decision
+
+        sub = task.substeps[-DECISION_SUBSTEPS:] if task.t > 0 else []
         return {
             "ego": np.array([task.ego_x, task.ego_y]),
             "opponent": np.array([task.opp_x, task.opp_y]),
@@ -241,10 +242,3 @@ class DrivingScene(TaskScene):
                 Marker("red line", (s["red_line"], 2 * w / 3 + 0.5, 0.015), RED_LINE, 0.25, 0.3)
             )
         return out
-
-
-def s_per_step(task: Any) -> int:
-    """SUMO steps per decision step (the task keeps every SUMO step of the interaction)."""
-    from sili_robots.tasks.driving import DECISION_SUBSTEPS
-
-    return DECISION_SUBSTEPS
