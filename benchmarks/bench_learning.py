@@ -223,12 +223,17 @@ def main() -> None:
     df = table(dirs, args.window)
     print(df.drop(columns="variant").to_string(index=False, float_format="%.3g"))
     finals = ["final_task_reward", "final_stability"]
-    agg = df.groupby(["task", "method"])[finals].agg(["mean", "std"])
+    # std over seeds with ddof 0, as the figures and RESULTS.md's tables
+    agg = df.groupby(["task", "method"])[finals].agg([("mean", "mean"), ("std", _population_std)])
     print()
     print(agg.to_string(float_format="%.3g"))
     for what, met, numbers in check_targets(df):
         print(f"{MARKS[met]} {what}: {numbers}")
     print(f"\nwall time {(time.perf_counter() - t0) / 60:.1f} min with {args.workers} workers")
+
+
+def _population_std(values: pd.Series) -> float:
+    return float(values.std(ddof=0))
 
 
 if __name__ == "__main__":
