@@ -40,6 +40,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from sili_robots.atomic import write_text
+from sili_robots.cache import cache_dir
 
 MATMULS = ("onednn", "aten")
 PRECISIONS = ("float32", "bfloat16")
@@ -55,14 +56,6 @@ def onednn_available() -> bool:
     """Whether this PyTorch build has oneDNN's linear op (the x86 and aarch64 wheels do)."""
     ops = torch.ops.mkldnn
     return torch.backends.mkldnn.is_available() and hasattr(ops, "_linear_pointwise")
-
-
-def cache_dir() -> Path:
-    """``$SILI_ROBOTS_CACHE``, else ``$XDG_CACHE_HOME/sili-robots`` (``~/.cache/sili-robots``)."""
-    if os.environ.get("SILI_ROBOTS_CACHE"):
-        return Path(os.environ["SILI_ROBOTS_CACHE"])
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "sili-robots"
 
 
 #: environment variables that cap the instruction set torch's kernels use (set to emulate an

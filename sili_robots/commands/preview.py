@@ -52,7 +52,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--interactions", type=positive_int, default=3, help="interactions to record (default 3)"
     )
-    p.add_argument("--seed", type=seed, default=0, help="the game's seed (default 0)")
+    p.add_argument(
+        "--seed",
+        type=seed,
+        default=0,
+        help="the game's seed (default 0); a --checkpoint's agent goes on with the game it "
+        "trained in",
+    )
     p.add_argument(
         "--out", type=path_arg, default="preview.html", help="HTML file to write (preview.html)"
     )

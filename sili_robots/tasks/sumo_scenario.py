@@ -17,6 +17,8 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from sili_robots.cache import cache_dir
+
 # -- geometry (metres, seconds); lanes are numbered 0 (right) .. 2 (left) as in SUMO
 LANE_WIDTH = 3.2
 NUM_LANES = 3
@@ -166,15 +168,6 @@ def config_xml(net: str, routes: str) -> str:
 
 
 # -- generation and cache ------------------------------------------------------------------------
-def cache_root() -> Path:
-    """Where generated scenarios live: ``$SILI_ROBOTS_CACHE``, else the user cache directory."""
-    env = os.environ.get("SILI_ROBOTS_CACHE")
-    if env:
-        return Path(env) / "sumo"
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "sili-robots" / "sumo"
-
-
 def scenario_key() -> str:
     text = "\n".join([sumo_version(), nodes_xml(), edges_xml(), routes_xml(), config_xml("", "")])
     return hashlib.sha256(text.encode()).hexdigest()[:16]
@@ -183,7 +176,9 @@ def scenario_key() -> str:
 def scenario_files(root: Path | None = None) -> ScenarioFiles:
     """Return the scenario's files, building them with the wheel's netconvert if not cached."""
     roots = (
-        [root] if root is not None else [cache_root(), Path(tempfile.gettempdir()) / "sili-sumo"]
+        [root]
+        if root is not None
+        else [cache_dir() / "sumo", Path(tempfile.gettempdir()) / "sili-sumo"]
     )
     errors = []
     for base in roots:
