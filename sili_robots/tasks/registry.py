@@ -137,7 +137,7 @@ def other_task_arguments(task_id: str | None, env_kwargs: dict[str, Any]) -> dic
     return {
         k: v
         for k, v in env_kwargs.items()
-        if k not in same and not _same(defaults.get(k, missing), v)
+        if k not in same and not _same_argument(defaults.get(k, missing), v)
     }
 
 
@@ -145,7 +145,7 @@ def _task_class(spec: TaskSpec) -> type:
     return load_env_creator(spec.entry_point)
 
 
-def _same(default: Any, value: Any) -> bool:
+def _same_argument(default: Any, value: Any) -> bool:
     """A default and a value as config.json records it (tuples and arrays as lists)."""
     try:
         return bool(np.array_equal(np.asarray(default), np.asarray(value)))
@@ -160,7 +160,11 @@ def identity_conflict(name: str, kwargs: dict[str, Any]) -> str | None:
     spec = task_spec(name)
     fixed = _task_class(spec).identity_arguments
     return next(
-        (k for k in sorted(kwargs) if k in fixed and not _same(spec.kwargs.get(k), kwargs[k])),
+        (
+            k
+            for k in sorted(kwargs)
+            if k in fixed and not _same_argument(spec.kwargs.get(k), kwargs[k])
+        ),
         None,
     )
 
