@@ -36,6 +36,8 @@ from sili_robots.build import (
     make_run_config,
     make_run_env,
     observed_as,
+    same_task_arguments,
+    same_task_version,
     task_kwargs_of,
     task_name_of,
     task_version_of,
@@ -56,6 +58,7 @@ from sili_robots.runs import (
     set_target,
 )
 from sili_robots.runs import read_config as read_run_config
+from sili_robots.sweep.state import training_claim, training_worker
 from sili_robots.tasks import RepeatedInteractionEnv
 from sili_robots.training import resume, train
 
@@ -149,21 +152,16 @@ class SILI:
         self._loaded = None if state is None else _stamp(self.run_dir)
 
     def _reload(self) -> None:
-        """The model as its run's last checkpoint; without one, a new model again (a first
-        ``learn`` stopped before its first checkpoint leaves nothing of itself)."""
-        state = load_checkpoint(self.run_dir)
-        if state is None:
-            clear_run(self.run_dir)
-            self.cfg.interactions = 0
-        else:
-            self.cfg = read_run_config(self.run_dir)
+        """The model as its run's last checkpoint (ConfigError saying why when there is none)."""
+        state = require_checkpoint(self.run_dir)
+        self.close()
+        self.cfg = read_run_config(self.run_dir)
         self._setup(state)
 
     def _refresh(self) -> None:
         """Catch up with a run trained further since this model loaded it (by another model
         of the same run, or ``sili train --resume``), so counts and saves start from it."""
         if self._done and _stamp(self.run_dir) != self._loaded:
-            self.close()
             self._reload()
 
     @classmethod
@@ -171,14 +169,14 @@ class SILI:
         """A model saved by ``save`` or a run directory of ``sili train``; ``env``: the task
         instance for a run of a user's task class that cannot be imported by name."""
         path = Path(path)
-        _keep_temporary(path)  # another model's temporary run, now the user's to keep
         cfg = read_run_config(path)
         state = require_checkpoint(path)
-        if env is not None and task_version_of(env) != (cfg.task_id or cfg.task):
+        recorded = cfg.task_id or cfg.task
+        if env is not None and not same_task_version(recorded, task_version_of(env)):
             raise ConfigError(
-                f"env is {task_version_of(env)}; the run in {path} was trained on "
-                f"{cfg.task_id or cfg.task}: give an instance of that task (its arguments, "
-                "such as the controller, may differ)"
+                f"env is {task_version_of(env)}; the run in {path} was trained on {recorded}: "
+                "give an instance of that task (its arguments, such as the controller, may "
+                "differ)"
             )
         model = cls.__new__(cls)
         model.cfg, model.run_dir, model._task_env, model._overwrite = cfg, path, env, False
@@ -193,6 +191,7 @@ class SILI:
                 f"env does not fit the run in {path}, trained on {cfg.task} with "
                 f"{cfg.env_kwargs}; env is {given} ({str(err).splitlines()[0]})"
             ) from None
+        _keep_temporary(path)  # another model's temporary run, now the user's to keep
         return model
 
     # ------------------------------------------------------------------ sb3 API
@@ -205,29 +204,38 @@ class SILI:
         done = self._done
         if done == 0:  # as when the model was made (nothing came in since), before any change
             self._check_run_dir()
+        else:
+            check_not_trained_elsewhere(self.run_dir)
         self._check_own_task()
         if self._task_env is None:
             self.env.close()  # training builds its own (libsumo holds one simulation)
         target = done + interactions
         env = None if self._task_env is None else observed_as(self._task_env, self.cfg)
         threads = torch.get_num_threads()  # training sets the run's; the caller's come back
+        self.run_dir.mkdir(parents=True, exist_ok=True)
         try:
-            if done == 0:
-                if self._overwrite:
-                    clear_run(self.run_dir)
-                self.cfg.interactions = target
-                train(self.cfg, self.run_dir, progress=progress_bar, env=env)
-            else:
-                if target < self.cfg.interactions:  # a learn stopped short set more
-                    set_target(self.run_dir, target)
-                self.cfg.interactions = target
-                if env is None:
-                    resume(self.run_dir, progress_bar, target)
+            with training_claim(self.run_dir):
+                if done == 0:
+                    if self._overwrite:
+                        clear_run(self.run_dir)
+                    self.cfg.interactions = target
+                    train(self.cfg, self.run_dir, progress=progress_bar, env=env)
                 else:
-                    train(self.cfg, self.run_dir, resume=True, progress=progress_bar, env=env)
+                    if target < self.cfg.interactions:  # a learn stopped short set more
+                        set_target(self.run_dir, target)
+                    self.cfg.interactions = target
+                    if env is None:
+                        resume(self.run_dir, progress_bar, target)
+                    else:
+                        train(self.cfg, self.run_dir, resume=True, progress=progress_bar, env=env)
         finally:
             torch.set_num_threads(threads)
-            self._reload()
+            if done == 0 and not (self.run_dir / CHECKPOINT).is_file():
+                clear_run(self.run_dir)  # stopped before its first checkpoint: a new model again
+                self.cfg.interactions = 0
+                self._setup(None)
+            else:
+                self._reload()
         return self
 
     def _check_own_task(self) -> None:
@@ -235,8 +243,8 @@ class SILI:
         (another controller) plays it, but the run would not record them."""
         if self._task_env is None or self._done == 0:
             return  # built from the run's record, or recorded from the instance itself
-        given = task_kwargs_of(self._task_env)
-        if given != self.cfg.env_kwargs:
+        if not same_task_arguments(self._task_env, self.cfg.env_kwargs):
+            given = task_kwargs_of(self._task_env)
             raise ConfigError(
                 f"the run in {self.run_dir} was trained with {self.cfg.env_kwargs}; env, built "
                 f"with {given}, can play it but not train it (the run records one task): "
@@ -314,6 +322,16 @@ class SILI:
     @property
     def config(self) -> RunConfig:
         return self.cfg
+
+
+def check_not_trained_elsewhere(run_dir: Path) -> None:
+    """ConfigError when another live process (``sili train``, a sweep's worker) trains the run:
+    two writers would interleave its files."""
+    pid = training_worker(run_dir)
+    if pid is not None:
+        raise ConfigError(
+            f"{run_dir} is being trained by process {pid}; let it finish or stop it first"
+        )
 
 
 #: temporary run directories of live models, removed with their model

@@ -28,7 +28,7 @@ from sili_robots.errors import ConfigError
 from sili_robots.migrations import LEGACY_SETTINGS, setting_path
 from sili_robots.runs import RunConfig
 from sili_robots.tasks import RepeatedInteractionEnv, make_task, task_spec
-from sili_robots.tasks.registry import identity_conflict
+from sili_robots.tasks.registry import identity_conflict, same_argument
 from sili_robots.wrappers import OracleObservation, StrategyFlag
 
 
@@ -130,6 +130,32 @@ def task_version_of(env: gym.Env) -> str:
     ``task_id or task``)."""
     name = task_name_of(env)
     return name if is_class_path(name) else task_spec(name).gym_id
+
+
+def same_task_version(recorded: str, given: str) -> bool:
+    """Whether ``given`` (``task_version_of`` an instance) is the task a run ``recorded``; a
+    class a script defined is recorded as ``__main__:Name``, which the same class imported
+    from a module is (``SILI.load(path, env=...)`` exists for it)."""
+    if recorded.startswith("__main__:") and is_class_path(given):
+        return recorded.partition(":")[2] == given.partition(":")[2]
+    return recorded == given
+
+
+def same_task_arguments(env: gym.Env, recorded: dict[str, Any]) -> bool:
+    """Whether the task instance ``env`` was built with the arguments a run ``recorded`` (of
+    the same version): an argument given at its default is the same as one left out."""
+    params = inspect.signature(type(env.unwrapped).__init__).parameters
+    defaults = {n: q.default for n, q in params.items() if q.default is not inspect.Parameter.empty}
+    name = task_name_of(env)
+    if not is_class_path(name):
+        defaults.update(gym.spec(task_spec(name).gym_id).kwargs)
+    given, missing = task_kwargs_of(env), object()
+    return all(
+        same_argument(
+            given.get(k, defaults.get(k, missing)), recorded.get(k, defaults.get(k, missing))
+        )
+        for k in set(given) | set(recorded)
+    )
 
 
 def task_kwargs_of(env: gym.Env) -> dict[str, Any]:

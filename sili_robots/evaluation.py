@@ -24,7 +24,8 @@ class AgentFeedback(gym.Wrapper):
     """Feeds each finished interaction back to the agent so z^{j+1} = E(tau^j) is inferred.
 
     The first ``reset`` continues the checkpointed game (whatever its seed: evaluations and
-    previews pass one), unless its ``options`` ask for another game (``restart``, ``strategy``).
+    previews pass one), unless its ``options`` ask for another game (``restart``, ``strategy``,
+    ``restore``).
     """
 
     def __init__(self, env: gym.Env, agent: SILIAgent, game_state: dict[str, Any]) -> None:
@@ -37,12 +38,14 @@ class AgentFeedback(gym.Wrapper):
         self._first_info: dict[str, Any] = {}
 
     def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
-        if self._game_state is not None and not kwargs.get("options"):
+        options = kwargs.get("options") or {}
+        another = options.get("restart") or "strategy" in options or options.get("restore")
+        if self._game_state is not None and not another:
             obs, info = resume_game(self.env, self._game_state)
             self._game_state = None
         else:
-            self._game_state = None
             obs, info = self.env.reset(**kwargs)
+            self._game_state = None  # only once reset took it: a refused one keeps the game
             if self._first_obs is not None and len(self._steps) == self.env.unwrapped.horizon:
                 o = np.stack([self._first_obs, *[s[0] for s in self._steps]])
                 a = np.stack([s[1] for s in self._steps])

@@ -345,13 +345,76 @@ def test_predict_env_and_learn_as_a_user_of_numpy_and_torch_expects(tmp_path):
     import torch
 
     torch.set_num_threads(2)
-    model = SILI("circle-3", method="sac", settings=FAST_AGENT).learn(np.int64(3))
+    run = tmp_path / "run"
+    model = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run).learn(np.int64(3))
     assert torch.get_num_threads() == 2  # the caller's, back after training on the run's one
     obs, info = model.env.reset(seed=5)  # a seed alone: the game the run trained in goes on
     assert info["interaction"] == 3
     with pytest.raises(ConfigError, match="obs is a batch of 4; predict takes one observation"):
         model.predict(np.stack([obs] * 4))
-    model.close()
-    model = SILI.load(model.run_dir)
+    for first in ({"restart": False}, None):  # asks for no other game: the trained one goes on
+        model = SILI.load(run)
+        with pytest.raises(ConfigError, match="unknown strategy 99"):
+            model.env.reset(options={"strategy": 99})  # refused: the game is as it was
+        assert model.env.reset(options=first)[1]["interaction"] == 3
+    model = SILI.load(run)
     obs, info = model.env.reset(seed=5, options={"strategy": 0})  # another game, as asked
     assert (info["interaction"], info["strategy_id"]) == (0, 0)
+
+
+def test_a_model_never_removes_its_run_and_never_trains_beside_another_process(tmp_path):
+    import os
+    import socket
+    import subprocess
+
+    run = tmp_path / "run"
+    SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run).learn(2)
+    model = SILI.load(run)
+    (run / "checkpoint.pt").unlink()  # a run kept without its checkpoint
+    with pytest.raises(ConfigError, match="checkpoint"):
+        model.save(tmp_path / "copy")
+    assert {"config.json", "metrics.csv", "summary.json"} <= {p.name for p in run.iterdir()}
+    gone = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=tmp_path / "gone")
+    gone.learn(2)
+    shutil.rmtree(gone.run_dir)
+    with pytest.raises(ConfigError):
+        gone.learn(2)  # not a new run in its place
+    assert not gone.run_dir.exists()
+    busy = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=tmp_path / "busy").learn(1)
+    other = subprocess.Popen(["sleep", "60"])
+    try:  # as `sili train --resume` or a sweep's worker marks the run it trains
+        host = socket.gethostname()
+        (busy.run_dir / "worker.json").write_text(json.dumps({"pid": other.pid, "host": host}))
+        with pytest.raises(ConfigError, match=f"being trained by process {other.pid}"):
+            busy.learn(1)
+    finally:
+        other.kill()
+        other.wait()
+    assert os.getpid() != other.pid and len(SILI.load(busy.run_dir).agent.Z) == 1 + 1
+
+
+def test_load_takes_the_task_a_script_defined_and_an_instance_built_at_its_defaults(tmp_path):
+    import gymnasium as gym
+
+    run = tmp_path / "run"
+    SILI(TwoDoorsEnv(horizon=6), method="sac", settings=FAST_AGENT, run_dir=run).learn(2)
+    record = json.loads((run / "config.json").read_text())
+    record["run"]["task"], record["run"]["task_id"] = "__main__:TwoDoorsEnv", None
+    (run / "config.json").write_text(json.dumps(record))  # as a script defining the class does
+    assert SILI.load(run, env=TwoDoorsEnv(horizon=6)).learn(1).cfg.interactions == 3
+    circle = tmp_path / "circle"
+    SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=circle).learn(1)
+    same = SILI.load(circle, env=gym.make("sili/Circle3-v1", horizon=50))  # the default
+    assert same.learn(1).cfg.interactions == 2
+
+
+def test_a_refused_load_leaves_a_temporary_run_to_its_model():
+    import gymnasium as gym
+
+    model = SILI("circle-3", method="sac", settings=FAST_AGENT).learn(1)
+    with pytest.raises(ConfigError, match="env is sili/Circle8-v1"):
+        SILI.load(model.run_dir, env=gym.make("sili/Circle8-v1"))
+    run_dir = model.run_dir
+    del model
+    gc.collect()
+    assert not run_dir.exists()

@@ -137,7 +137,7 @@ def other_task_arguments(task_id: str | None, env_kwargs: dict[str, Any]) -> dic
     return {
         k: v
         for k, v in env_kwargs.items()
-        if k not in same and not _same_argument(defaults.get(k, missing), v)
+        if k not in same and not same_argument(defaults.get(k, missing), v)
     }
 
 
@@ -145,7 +145,7 @@ def _task_class(spec: TaskSpec) -> type:
     return load_env_creator(spec.entry_point)
 
 
-def _same_argument(default: Any, value: Any) -> bool:
+def same_argument(default: Any, value: Any) -> bool:
     """A default and a value as config.json records it (tuples and arrays as lists)."""
     try:
         return bool(np.array_equal(np.asarray(default), np.asarray(value)))
@@ -163,7 +163,7 @@ def identity_conflict(name: str, kwargs: dict[str, Any]) -> str | None:
         (
             k
             for k in sorted(kwargs)
-            if k in fixed and not _same_argument(spec.kwargs.get(k), kwargs[k])
+            if k in fixed and not same_argument(spec.kwargs.get(k), kwargs[k])
         ),
         None,
     )
