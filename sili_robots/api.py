@@ -204,20 +204,19 @@ class SILI:
         done = self._done
         if done == 0:  # as when the model was made (nothing came in since), before any change
             self._check_run_dir()
-        else:
-            check_not_trained_elsewhere(self.run_dir)
+        check_not_trained_elsewhere(self.run_dir)  # overwrite=True too: never under a trainer
         self._check_own_task()
         if self._task_env is None:
             self.env.close()  # training builds its own (libsumo holds one simulation)
         target = done + interactions
         env = None if self._task_env is None else observed_as(self._task_env, self.cfg)
         threads = torch.get_num_threads()  # training sets the run's; the caller's come back
+        if done == 0 and self._overwrite:
+            clear_run(self.run_dir)  # before the claim, which is one of a run's files
         self.run_dir.mkdir(parents=True, exist_ok=True)
         try:
             with training_claim(self.run_dir):
                 if done == 0:
-                    if self._overwrite:
-                        clear_run(self.run_dir)
                     self.cfg.interactions = target
                     train(self.cfg, self.run_dir, progress=progress_bar, env=env)
                 else:

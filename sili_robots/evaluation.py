@@ -17,7 +17,7 @@ from sili_robots.agent import SILIAgent
 from sili_robots.build import build_agent, make_run_env, observed_as
 from sili_robots.rollout import run_interactions
 from sili_robots.runs import RunConfig, read_config, require_checkpoint
-from sili_robots.tasks.base import resume_game
+from sili_robots.tasks.base import RESET_OPTIONS, resume_game
 
 
 class AgentFeedback(gym.Wrapper):
@@ -40,6 +40,7 @@ class AgentFeedback(gym.Wrapper):
     def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
         options = kwargs.get("options") or {}
         another = options.get("restart") or "strategy" in options or options.get("restore")
+        another = another or set(options) - set(RESET_OPTIONS)  # the task names what it lacks
         if self._game_state is not None and not another:
             obs, info = resume_game(self.env, self._game_state)
             self._game_state = None

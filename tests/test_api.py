@@ -356,6 +356,8 @@ def test_predict_env_and_learn_as_a_user_of_numpy_and_torch_expects(tmp_path):
         model = SILI.load(run)
         with pytest.raises(ConfigError, match="unknown strategy 99"):
             model.env.reset(options={"strategy": 99})  # refused: the game is as it was
+        with pytest.raises(ConfigError, match=r"unknown reset options \['Strategy'\]"):
+            model.env.reset(options={"Strategy": 0})  # a slip, not the old game unasked
         assert model.env.reset(options=first)[1]["interaction"] == 3
     model = SILI.load(run)
     obs, info = model.env.reset(seed=5, options={"strategy": 0})  # another game, as asked
@@ -387,6 +389,9 @@ def test_a_model_never_removes_its_run_and_never_trains_beside_another_process(t
         (busy.run_dir / "worker.json").write_text(json.dumps({"pid": other.pid, "host": host}))
         with pytest.raises(ConfigError, match=f"being trained by process {other.pid}"):
             busy.learn(1)
+        anew = SILI("circle-3", settings=FAST_AGENT, run_dir=busy.run_dir, overwrite=True)
+        with pytest.raises(ConfigError, match=f"being trained by process {other.pid}"):
+            anew.learn(1)  # not cleared from under it
     finally:
         other.kill()
         other.wait()
@@ -418,3 +423,19 @@ def test_a_refused_load_leaves_a_temporary_run_to_its_model():
     del model
     gc.collect()
     assert not run_dir.exists()
+
+
+def test_learn_marks_the_run_it_trains_also_when_it_replaces_one(tmp_path, monkeypatch):
+    from sili_robots import training
+
+    played, claimed = training.play_interaction, []
+
+    def noting_the_claim(*args, **kwargs):
+        claimed.append((tmp_path / "run" / "worker.json").is_file())
+        return played(*args, **kwargs)
+
+    SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=tmp_path / "run").learn(1)
+    monkeypatch.setattr(training, "play_interaction", noting_the_claim)
+    SILI("circle-3", settings=FAST_AGENT, run_dir=tmp_path / "run", overwrite=True).learn(2)
+    assert claimed == [True, True]  # a sweep or `sili train --resume` would refuse the run
+    assert not (tmp_path / "run" / "worker.json").exists()  # and it is given back

@@ -29,6 +29,8 @@ from gymnasium import spaces
 from sili_robots.errors import ConfigError
 
 StrategyId = int | float
+#: what ``reset(options=...)`` takes: restart the game, restore a saved one, start from z
+RESET_OPTIONS = ("restart", "restore", "strategy")
 
 
 class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
@@ -148,11 +150,10 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         options = dict(options or {})
-        unknown = set(options) - {"restart", "restore", "strategy"}
+        unknown = set(options) - set(RESET_OPTIONS)
         if unknown:
             raise ConfigError(
-                f"unknown reset options {sorted(unknown)}; "
-                "allowed: ['restart', 'restore', 'strategy']"
+                f"unknown reset options {sorted(unknown)}; allowed: {list(RESET_OPTIONS)}"
             )
         if "strategy" in options:
             self._check_start(options["strategy"])
