@@ -67,7 +67,8 @@ def slip_costs(
     each list is the deterministic play."""
     out = {}
     for label in ("no filter", "filter"):
-        _, env, agent, game = load_trained(run)
+        _, env, agent, state = load_trained(run)
+        game = state["game"]
         task = env.unwrapped
         if label == "filter":
             with_filter(agent, eps, noise)

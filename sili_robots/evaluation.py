@@ -77,13 +77,13 @@ def load_trained(
     run_dir: Path, task_env: gym.Env | None = None
 ) -> tuple[RunConfig, gym.Env, SILIAgent, dict[str, Any]]:
     """Rebuild a run's env (or observe ``task_env``, the task instance) and agent from its config
-    and last checkpoint."""
+    and last checkpoint (returned too: its ``game`` and ``interaction``)."""
     cfg = read_config(run_dir)
     state = require_checkpoint(run_dir)
     env = make_run_env(cfg) if task_env is None else observed_as(task_env, cfg)
     agent = build_agent(cfg, env)
     agent.load_state_dict(state["agent"])
-    return cfg, env, agent, state["game"]
+    return cfg, env, agent, state
 
 
 def policy_from_run(
@@ -95,20 +95,21 @@ def policy_from_run(
     cfg = read_config(run_dir)
 
     def make_policy(env: gym.Env) -> tuple[gym.Env, Callable]:
-        _, own_env, agent, game = load_trained(run_dir)
+        _, own_env, agent, state = load_trained(run_dir)
         own_env.close()
-        wrapped = AgentFeedback(observed_as(env, cfg), agent, game)
+        wrapped = AgentFeedback(observed_as(env, cfg), agent, state["game"])
         return wrapped, lambda _env, obs: agent.act(obs, deterministic=True)
 
     return cfg.task_id or cfg.task, dict(cfg.env_kwargs), make_policy
 
 
-def evaluate(run_dir: Path, interactions: int, task_env: gym.Env | None = None) -> dict[str, float]:
-    """Mean task reward and fraction of interactions whose true strategy stayed the same,
-    acting deterministically (no exploration, no learning); on ``task_env``, the task instance,
-    when given (left open)."""
-    _, env, agent, game = load_trained(run_dir, task_env)
-    wrapped = AgentFeedback(env, agent, game)
+def evaluate(run_dir: Path, interactions: int, task_env: gym.Env | None = None) -> dict[str, Any]:
+    """Mean task reward and fraction of interactions whose true strategy stayed the same (after
+    the first, whose change training's last interaction caused; None for one interaction),
+    acting deterministically (no exploration, no learning), from the checkpoint's interaction
+    (``trained_interactions``); on ``task_env``, the task instance, when given (left open)."""
+    _, env, agent, state = load_trained(run_dir, task_env)
+    wrapped = AgentFeedback(env, agent, state["game"])
     try:
         summary = run_interactions(
             wrapped, lambda _env, obs: agent.act(obs, deterministic=True), interactions, seed=None
@@ -116,8 +117,10 @@ def evaluate(run_dir: Path, interactions: int, task_env: gym.Env | None = None) 
     finally:
         if task_env is None:
             wrapped.close()
+    kept = [not s.strategy_changed for s in summary[1:]]
     return {
         "interactions": interactions,
+        "trained_interactions": int(state["interaction"]),
         "mean_task_reward": float(np.mean([s.task_reward for s in summary])),
-        "fraction_strategy_unchanged": float(np.mean([not s.strategy_changed for s in summary])),
+        "fraction_strategy_unchanged": float(np.mean(kept)) if kept else None,
     }

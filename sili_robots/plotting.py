@@ -200,7 +200,10 @@ def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFr
 
     check_exists(sweep_dir)
     if (Path(sweep_dir) / SWEEP_FILE).is_file():
-        df, _ = write_tables(sweep_dir)
+        try:
+            df, _ = write_tables(sweep_dir)
+        except PermissionError:  # a sweep one may read but not write: its tables as they are
+            df = results_table(sweep_dir)
     elif run_dirs(sweep_dir):
         df = results_table(sweep_dir)
     else:

@@ -342,9 +342,11 @@ def read_json(path: Path, what: str, *keys: str) -> dict[str, Any]:
     damaged (``what``: what it should be, and what to do)."""
     try:
         data = json.loads(Path(path).read_text())
-        missing = [k for k in keys if k not in data] if isinstance(data, dict) else ["an object"]
     except ValueError as err:
         raise ConfigError(f"{path} is damaged ({_first_line(err)}); {what}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path} is damaged (not a JSON object); {what}")
+    missing = [k for k in keys if k not in data]
     if missing:
         raise ConfigError(f"{path} is damaged (no {', '.join(missing)}); {what}")
     return data

@@ -26,7 +26,7 @@ def _sili(*args):
 def test_rollout_prints_result():
     out = _sili("rollout", "circle-3", "--interactions", "5")
     assert out.returncode == 0, out.stderr
-    assert "unchanged: 1.000" in out.stdout
+    assert "unchanged (after the first): 1.000" in out.stdout
 
 
 def test_version_and_an_options_own_arguments_in_its_usage():
@@ -377,3 +377,31 @@ def test_more_bad_input_exits_2_with_one_line_naming_it(tmp_path):
             json.dumps({"pid": pid, "host": socket.gethostname()})
         )
         assert training_worker(tmp_path) is None
+
+
+def test_read_outs_name_a_damaged_summary_and_read_a_sweep_they_cannot_write(tmp_path, monkeypatch):
+    import json
+    import shutil
+
+    from sili_robots.plotting import load_results
+    from sili_robots.sweep import results
+
+    collection = tmp_path / "collection"
+    shutil.copytree(Path(__file__).resolve().parents[1] / "results" / "main-job-zen4", collection)
+    assert "2 runs done" in sili_in_process("runs", collection).stdout
+    summary = collection / "runs" / "s1" / "summary.json"
+    summary.write_text(json.dumps({**json.loads(summary.read_text()), "final_task_reward": "x"}))
+    bad = sili_in_process("runs", collection)
+    assert bad.returncode == 2 and "summary.json is damaged (a value of final_task" in bad.stderr
+    summary.write_text("[1, 2]")
+    bad = sili_in_process("runs", collection)
+    assert bad.returncode == 2 and "summary.json is damaged (not a JSON object)" in bad.stderr
+    shutil.copy(collection / "runs" / "s2" / "summary.json", summary)
+    (collection / "sweep.json").write_text("{}")  # read as a sweep, whose tables are rebuilt
+
+    def read_only(_sweep_dir):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(results, "write_tables", read_only)
+    read = load_results(collection)  # its runs as they are, nothing written
+    assert sorted(set(read["run"])) == ["s1", "s2"] and len(read) == 2 * 600

@@ -191,4 +191,4 @@ def test_cli_rollout_runs_on_sawyer(capsys):
     )
     out = capsys.readouterr().out
     assert "task=sawyer-reach" in out
-    assert "unchanged: 1.000" in out
+    assert "unchanged (after the first): 1.000" in out

@@ -21,7 +21,7 @@ from sili_robots import training
 from sili_robots.addons import LatentFilter
 from sili_robots.cli import main
 from sili_robots.evaluation import AgentFeedback, evaluate, load_trained
-from sili_robots.runs import load_checkpoint, save_checkpoint
+from sili_robots.runs import load_checkpoint, save_checkpoint, set_target
 from sili_robots.sweep.state import run_state
 from sili_robots.training import extend, resume, write_summary
 
@@ -82,8 +82,8 @@ def test_train_writes_a_complete_run_and_eval_reads_it(tmp_path):
     assert {**evaluate(out, 4), "run_dir": str(out)} == result
     assert (out / "checkpoint.pt").read_bytes() == checkpoint
     # the numbers of a greedy play of the same interactions, step by step
-    _, env, agent, game = load_trained(out)
-    play = AgentFeedback(env, agent, game)
+    _, env, agent, state = load_trained(out)
+    play = AgentFeedback(env, agent, state["game"])
     obs, info = play.reset()
     rewards, changed = [], []
     for _ in range(4):
@@ -96,7 +96,14 @@ def test_train_writes_a_complete_run_and_eval_reads_it(tmp_path):
         obs, info = play.reset()
     play.close()
     assert result["mean_task_reward"] == pytest.approx(np.mean(rewards))
-    assert result["fraction_strategy_unchanged"] == pytest.approx(1 - np.mean(changed))
+    # after the first, whose change the training's last interaction caused
+    assert result["fraction_strategy_unchanged"] == pytest.approx(1 - np.mean(changed[1:]))
+    assert result["trained_interactions"] == 12 and "unfinished" not in ev.stderr
+    set_target(out, 20)  # as a run stopped short of its target
+    note = _sili("eval", out, "--interactions", 1)
+    assert note.returncode == 0
+    assert "is unfinished: this evaluates its checkpoint at interaction 12 of 20" in note.stderr
+    assert json.loads(note.stdout)["fraction_strategy_unchanged"] is None  # none after the first
 
 
 def test_the_first_interactions_are_random_and_learning_starts_after_them(tmp_path, monkeypatch):

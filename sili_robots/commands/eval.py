@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
 from sili_robots.commands.common import path_arg, positive_int
 
@@ -12,14 +13,26 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("eval", help="evaluate a trained run without exploration")
     p.add_argument("run_dir", type=path_arg)
     p.add_argument(
-        "--interactions", type=positive_int, default=100, help="interactions to play (default 100)"
+        "--interactions",
+        type=positive_int,
+        default=100,
+        help="interactions to play (default 100); the stability counts those after the first, "
+        "whose change the training's last interaction caused",
     )
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.evaluation import evaluate
+    from sili_robots.runs import read_config
 
     result = evaluate(args.run_dir, args.interactions)
+    target = read_config(args.run_dir).interactions
+    if result["trained_interactions"] < target:
+        print(
+            f"{args.run_dir} is unfinished: this evaluates its checkpoint at interaction "
+            f"{result['trained_interactions']} of {target}",
+            file=sys.stderr,
+        )
     print(json.dumps({"run_dir": str(args.run_dir), **result}, indent=2))
     return 0

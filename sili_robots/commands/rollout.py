@@ -48,6 +48,9 @@ def run(args: argparse.Namespace) -> int:
     given = "".join(f" {k}={v!r}" for k, v in env_kwargs.items())
     print(f"task={args.task}{given} policy={args.policy} interactions={args.interactions}")
     print(f"mean task reward per interaction: {rewards.mean():.3f}")
-    if stable.size:
-        print(f"fraction of interactions with the true strategy unchanged: {stable.mean():.3f}")
+    if stable.size:  # the first has no interaction of this policy before it
+        print(
+            "fraction of interactions with the true strategy unchanged (after the first): "
+            f"{stable.mean():.3f}"
+        )
     return 0

@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
@@ -79,7 +80,8 @@ def check_exists(directory: Path) -> None:
     if (Path(directory) / CONFIG).is_file():
         raise ConfigError(
             f"{directory} is a run, not a sweep or a collection; give the folder that holds its "
-            f"runs/ (one run alone: sili eval {directory})"
+            f"runs/ (one run alone: its summary.json, or sili eval {directory} if it kept its "
+            "checkpoint)"
         )
 
 
@@ -162,6 +164,11 @@ def runs_table(sweep_dir: Path) -> pd.DataFrame:
         if summary_path.is_file():
             keys = ("final_task_reward", "final_stability", "wall_time_s")
             summary = read_json(summary_path, DAMAGED_SUMMARY, *keys)
+            if not all(_is_number(summary[k]) for k in keys):
+                raise ConfigError(
+                    f"{summary_path} is damaged (a value of {', '.join(keys)} is not a number); "
+                    f"{DAMAGED_SUMMARY}"
+                )
             row.update(status="done", **{k: summary[k] for k in keys})
         elif error_path.is_file():
             text = error_path.read_text().strip().splitlines()
@@ -170,6 +177,10 @@ def runs_table(sweep_dir: Path) -> pd.DataFrame:
             row.update(status="incomplete" if logged else "not started")
         rows.append(row)
     return pd.DataFrame(rows, columns=list(RUN_COLUMNS))
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def write_tables(sweep_dir: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
