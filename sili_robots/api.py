@@ -296,8 +296,9 @@ class SILI:
         self._saved[path.resolve()] = _stamp(path)
         return path
 
-    def evaluate(self, interactions: int = 100) -> dict[str, float]:
-        """Greedy play continuing the saved game: mean task reward and stability. ``model.env``
+    def evaluate(self, interactions: int = 100) -> dict[str, Any]:
+        """Greedy play continuing the saved game: mean task reward, and stability after the first
+        interaction (``sili eval``'s numbers, ``evaluation.evaluate``). ``model.env``
         starts again from the saved game afterwards (the evaluation plays on the same task:
         libsumo holds one simulation per process)."""
         interactions = _check_count(interactions)

@@ -202,7 +202,7 @@ def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFr
     if (Path(sweep_dir) / SWEEP_FILE).is_file():
         try:
             df, _ = write_tables(sweep_dir)
-        except PermissionError:  # a sweep one may read but not write: its tables as they are
+        except OSError:  # a sweep one may read but not write (or on a read-only disk)
             df = results_table(sweep_dir)
     elif run_dirs(sweep_dir):
         df = results_table(sweep_dir)

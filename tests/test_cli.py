@@ -397,10 +397,13 @@ def test_read_outs_name_a_damaged_summary_and_read_a_sweep_they_cannot_write(tmp
     bad = sili_in_process("runs", collection)
     assert bad.returncode == 2 and "summary.json is damaged (not a JSON object)" in bad.stderr
     shutil.copy(collection / "runs" / "s2" / "summary.json", summary)
+    record = json.loads(summary.read_text())
+    summary.write_text(json.dumps({**record, "final_stability": None}))  # a 1-interaction run's
+    assert sili_in_process("runs", collection).returncode == 0
     (collection / "sweep.json").write_text("{}")  # read as a sweep, whose tables are rebuilt
 
     def read_only(_sweep_dir):
-        raise PermissionError(13, "Permission denied")
+        raise OSError(30, "Read-only file system")
 
     monkeypatch.setattr(results, "write_tables", read_only)
     read = load_results(collection)  # its runs as they are, nothing written

@@ -164,7 +164,10 @@ def runs_table(sweep_dir: Path) -> pd.DataFrame:
         if summary_path.is_file():
             keys = ("final_task_reward", "final_stability", "wall_time_s")
             summary = read_json(summary_path, DAMAGED_SUMMARY, *keys)
-            if not all(_is_number(summary[k]) for k in keys):
+            stability = summary["final_stability"]  # None after one interaction: no change
+            if not (_is_number(stability) or stability is None) or not all(
+                _is_number(summary[k]) for k in ("final_task_reward", "wall_time_s")
+            ):
                 raise ConfigError(
                     f"{summary_path} is damaged (a value of {', '.join(keys)} is not a number); "
                     f"{DAMAGED_SUMMARY}"
