@@ -696,3 +696,13 @@ def test_in_a_log_the_closing_line_starts_a_line_of_its_own(tmp_path):
     with SweepProgress([], {"old": 10}, already_done=1, console=Console(file=buf, width=100)):
         pass
     assert "\nsweep: 1 done (1 of them earlier)" in buf.getvalue()
+
+
+def test_a_sweeps_run_extended_by_hand_updates_the_sweeps_tables(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    args = ["sweep", "--tasks", "circle-3", "--methods", "sac", "--seeds", "0"]
+    assert main([*args, "--interactions", "3", *FAST_ARGS, "--out", str(out), "--no-progress"]) == 0
+    run = out / "runs" / "circle-3__sac__s0"
+    assert main(["train", "--resume", str(run), "--interactions", "5", "--no-progress"]) == 0
+    assert pd.read_csv(out / "runs.csv")["interactions_logged"].tolist() == [5]
+    assert len(pd.read_csv(out / "results.csv")) == 5

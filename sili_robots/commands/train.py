@@ -189,6 +189,24 @@ def _task_names() -> list[str]:
     return list(TASKS)
 
 
+def _rebuild_sweep_tables(run_dir: Path) -> None:
+    """A sweep's run trained on by hand: the sweep's tables (results.csv, runs.csv) follow."""
+    from sili_robots.sweep.results import write_tables
+    from sili_robots.sweep.state import RUNS_DIR, SWEEP_FILE
+
+    run_dir = Path(run_dir).resolve()
+    sweep_dir = run_dir.parent.parent
+    if run_dir.parent.name != RUNS_DIR or not (sweep_dir / SWEEP_FILE).is_file():
+        return
+    try:
+        write_tables(sweep_dir)
+    except (OSError, ConfigError) as err:  # the run is trained; only its sweep's tables lag
+        print(
+            f"{sweep_dir}'s tables were not rebuilt ({err}); `sili plot {sweep_dir}` rebuilds them",
+            file=sys.stderr,
+        )
+
+
 def run(args: argparse.Namespace) -> int:
     from sili_robots.runs import check_resumable
     from sili_robots.sweep.state import run_state, training_claim, training_worker
@@ -219,6 +237,7 @@ def run(args: argparse.Namespace) -> int:
         _note_threads_beyond_cores(read_config(args.resume).threads)
         with _resume_hint(args.resume), training_claim(args.resume):
             run_dir = resume(args.resume, not args.no_progress, args.interactions)
+        _rebuild_sweep_tables(run_dir)
     else:
         cfg = config_from_args(args)
         if args.out is None:
