@@ -58,7 +58,7 @@ from sili_robots.runs import (
     set_target,
 )
 from sili_robots.runs import read_config as read_run_config
-from sili_robots.sweep.state import training_claim, training_worker
+from sili_robots.sweep.state import check_not_trained, training_claim
 from sili_robots.tasks import RepeatedInteractionEnv
 from sili_robots.training import resume, train
 
@@ -204,7 +204,7 @@ class SILI:
         done = self._done
         if done == 0:  # as when the model was made (nothing came in since), before any change
             self._check_run_dir()
-        check_not_trained_elsewhere(self.run_dir)  # overwrite=True too: never under a trainer
+        check_not_trained(self.run_dir)  # overwrite=True too: never under a trainer
         self._check_own_task()
         if self._task_env is None:
             self.env.close()  # training builds its own (libsumo holds one simulation)
@@ -322,16 +322,6 @@ class SILI:
     @property
     def config(self) -> RunConfig:
         return self.cfg
-
-
-def check_not_trained_elsewhere(run_dir: Path) -> None:
-    """ConfigError when another live process (``sili train``, a sweep's worker) trains the run:
-    two writers would interleave its files."""
-    pid = training_worker(run_dir)
-    if pid is not None:
-        raise ConfigError(
-            f"{run_dir} is being trained by process {pid}; let it finish or stop it first"
-        )
 
 
 #: temporary run directories of live models, removed with their model

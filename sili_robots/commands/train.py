@@ -209,19 +209,15 @@ def _rebuild_sweep_tables(run_dir: Path) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.runs import check_resumable
-    from sili_robots.sweep.state import run_state, training_claim, training_worker
+    from sili_robots.sweep.state import check_not_trained, run_state, training_claim
     from sili_robots.training import resume, train, write_summary
     from sili_robots.verdict import verdict
 
     if args.resume is not None:
         read_config(args.resume)  # a clear error when it is not a run
         check_resumable(args.resume)
-        pid = training_worker(args.resume)
-        if pid is not None:
-            raise ConfigError(
-                f"{args.resume} is being trained by process {pid} (a sweep's worker or another "
-                "sili train); let it finish or stop it first (a sweep's: sili sweep --resume)"
-            )
+        by = " (a sweep's worker, which sili sweep --resume goes on with, or another sili train)"
+        check_not_trained(args.resume, by=by)
         ignored = given_options(args, {"resume", "interactions", "no_progress"})
         if ignored:
             raise ConfigError(

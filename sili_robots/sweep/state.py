@@ -125,14 +125,20 @@ def training_claim(run_dir: Path) -> Iterator[None]:
         path.unlink(missing_ok=True)
 
 
-def check_not_training(sweep_dir: Path, name: str) -> None:
-    """ConfigError when a live worker trains the run ``name``: it is not to be changed now."""
-    pid = training_worker(run_path(sweep_dir, name))
+def check_not_trained(run_dir: Path, who: str | None = None, by: str = "") -> None:
+    """ConfigError when another live process trains the run (``who``, default its folder;
+    ``by``: who that may be): two writers would interleave its files."""
+    pid = training_worker(run_dir)
     if pid is not None:
         raise ConfigError(
-            f"run {name} in {sweep_dir} is being trained by process {pid}; let it finish or "
-            "stop it first"
+            f"{who or run_dir} is being trained by process {pid}{by}; let it finish or stop it "
+            "first"
         )
+
+
+def check_not_training(sweep_dir: Path, name: str) -> None:
+    """ConfigError when a live worker trains the run ``name``: it is not to be changed now."""
+    check_not_trained(run_path(sweep_dir, name), f"run {name} in {sweep_dir}")
 
 
 def run_state(run_dir: Path) -> RunState:
