@@ -137,6 +137,91 @@ def test_missing_chromium_is_reported_with_the_install_hint(monkeypatch, tmp_pat
         find_chromium()
 
 
+def test_a_failed_render_leaves_no_temporary_page(monkeypatch, tmp_path):
+    import tempfile
+
+    from sili_robots.preview import BrowserError
+
+    monkeypatch.setenv("SILI_CHROMIUM", "false")  # an executable that exits at once
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    with pytest.raises(BrowserError):
+        preview("circle-3", interactions=1, out=None, png=tmp_path / "p.png")
+    assert list(tmp_path.iterdir()) == []
+
+
+RED = 0xD62728
+
+
+def _picture(*discs):
+    """A grey 40 x 40 picture with a red disc of radius 5 at each (x, y)."""
+    rgb = np.full((40, 40, 3), 200, np.int16)
+    yy, xx = np.mgrid[0:40, 0:40]
+    for x, y in discs:
+        rgb[(xx - x) ** 2 + (yy - y) ** 2 <= 25] = [0xD6, 0x27, 0x28]
+    return rgb
+
+
+def test_a_marker_behind_another_body_is_looked_for_with_that_body_hidden():
+    from sili_robots.preview.check import marker_results
+    from sili_robots.preview.scenes.base import Marker, hidden_set
+
+    covered, uncovered = _picture(), _picture((20, 20))  # the arm hides the goal
+    goal = Marker("goal", (0, 0, 0), RED, 0.1, 0.5)
+    behind = Marker("goal", (0, 0, 0), RED, 0.1, 0.5, behind=("robot",))
+    assert behind.views() == [("robot",)]
+    hidden = {hidden_set("robot"): uncovered}
+    (plain,) = marker_results(covered, [goal], [(20, 20)], [(24, 20)], hidden)
+    (seen,) = marker_results(covered, [behind], [(20, 20)], [(24, 20)], hidden)
+    assert not plain.ok and seen.ok and seen.fraction == 1.0
+    # hidden or not, a goal drawn elsewhere is still missing
+    (gone,) = marker_results(covered, [behind], [(20, 20)], [(24, 20)], {("robot",): covered})
+    assert not gone.ok
+
+
+def test_a_body_in_front_of_another_counts_both_as_drawn():
+    """Two cars collided: hiding the one behind changes nothing; with the front car hidden,
+    hiding the one behind does."""
+    from sili_robots.preview.check import marker_results
+    from sili_robots.preview.scenes.base import Marker, hidden_set
+
+    front, back_only, empty = _picture((20, 20)), _picture((21, 20)), _picture()
+    shots = {
+        ("back",): front,  # the back car hidden: the front car still covers its place
+        ("front",): back_only,
+        hidden_set("front", "back"): empty,
+    }
+    back = Marker("back", (0, 0, 0), 0, 0.1, 0.5, toggle="back", behind=("front",))
+    assert back.views() == [("back",), ("front",), ("back", "front")]
+    alone = Marker("back", (0, 0, 0), 0, 0.1, 0.5, toggle="back")
+    (seen,) = marker_results(front, [back], [(21, 20)], [(25, 20)], shots)
+    (unseen,) = marker_results(front, [alone], [(21, 20)], [(25, 20)], shots)
+    assert seen.ok and not unseen.ok
+
+
+def test_markers_out_of_the_cameras_view_are_not_asked_for():
+    from sili_robots.preview.check import marker_results, problems
+    from sili_robots.preview.scenes.base import Marker
+
+    rgb = _picture((20, 20))
+    png = _png(rgb)
+    here, away = Marker("here", (0, 0, 0), RED, 0.1, 0.5), Marker("away", (9, 9, 9), RED, 0.1)
+    results = marker_results(rgb, [here, away], [(20, 20), (-1, -1)], [(24, 20), (-1, -1)])
+    assert [r.in_view for r in results] == [True, False] and all(r.ok for r in results)
+    assert problems(png, results) == []
+    alone = marker_results(rgb, [away], [(55, 3)], [(60, 3)])
+    assert problems(png, alone) == ["no scene element is in the camera's view (1 looked for)"]
+
+
+def _png(rgb):
+    import io
+
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(rgb.astype(np.uint8)).save(buf, format="PNG")
+    return buf.getvalue()
+
+
 def test_cli_rejects_bad_input_with_exit_2(tmp_path, capsys):
     for argv, message in [
         (["--policy", "greedy"], "invalid choice: 'greedy'"),

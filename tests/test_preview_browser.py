@@ -11,6 +11,7 @@ import os
 import re
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import meshcat
@@ -22,6 +23,7 @@ from PIL import Image
 from sili_robots.preview import Browser, BrowserError, Preview, make_env_and_policy
 from sili_robots.preview.build import populate
 from sili_robots.preview.html import SceneRecorder
+from sili_robots.preview.render import render_html
 from sili_robots.tasks.registry import TASKS
 
 # every registered task: a new task without a preview scene fails here
@@ -48,13 +50,13 @@ def _commands(html: str) -> list[dict]:
     return [umsgpack.unpackb(base64.b64decode(c)) for c in json.loads(blob)]
 
 
-def _record(task, interactions=2, policy="scripted"):
+def _record(task, interactions=2, policy="scripted", seed=0):
     """A recorded preview, made once per test module run (Sawyer takes seconds)."""
-    key = (task, interactions, policy)
+    key = (task, interactions, policy, seed)
     if key not in _CACHE:
         name, env, pol, label = make_env_and_policy(task, policy)
         try:
-            _CACHE[key] = Preview.record(env, pol, interactions, 0, name, label)
+            _CACHE[key] = Preview.record(env, pol, interactions, seed, name, label)
         finally:
             env.close()
     return _CACHE[key]
@@ -102,6 +104,24 @@ def test_driving_timeline_follows_the_cars(browser, tmp_path):
     assert shot.problems() == []
     ego = prev.recording.frames
     assert ego[prev.frame()]["ego"][0] - ego[1]["ego"][0] > 50  # 100 m further down the road
+
+
+@pytest.mark.parametrize(
+    ("task", "seed", "hidden_by"),
+    [("driving", 11, "COLLISION"), ("sawyer-reach", 3, "opponent's goal 2")],
+)
+def test_a_body_hidden_behind_another_passes_the_check(task, seed, hidden_by, browser, tmp_path):
+    """Cars that collided stand one in front of the other; the arm covers a goal. Both are
+    drawn where they belong, so the picture is right (these games used to fail the check)."""
+    prev = _record(task, 1, "random", seed)
+    html = prev.write_html(tmp_path / "p.html")
+    caption = "document.getElementById('preview-caption').textContent"
+    shot = prev.render(html, browser=browser, evaluate=caption)
+    assert hidden_by in shot.page.value  # still the game that shows it
+    assert shot.problems() == []
+    plain = [(replace(m, behind=()), p) for m, p in prev.markers(shot.frame)]
+    again = render_html(html, shot.frame, plain, browser=browser)
+    assert any(" not seen at pixel" in p for p in again.problems())  # without looking behind
 
 
 def _variant(prev, tmp_path, draw=True, shift=None, path=""):
@@ -199,6 +219,19 @@ def test_browser_processes_end_with_close():
     b.close()
     assert _alive_with(profile) == []
     assert not os.path.exists(profile)
+
+
+def test_chromium_writes_nothing_in_the_home_folder(monkeypatch, tmp_path):
+    home = tmp_path / "home"
+    home.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    for name in ("XDG_CONFIG_HOME", "XDG_CACHE_HOME"):
+        monkeypatch.delenv(name, raising=False)
+    prev = _record("circle-3")
+    html = prev.write_html(tmp_path / "p.html")
+    with Browser() as b:
+        assert prev.render(html, browser=b).problems() == []
+    assert sorted(home.rglob("*")) == []
 
 
 def test_sawyer_is_drawn_from_the_models_own_geoms_and_joint_positions():

@@ -5,11 +5,13 @@ left behind on a normal exit, an error, Ctrl-C, SIGTERM, or when the parent is k
 """
 
 import base64
+import contextlib
 import os
 import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -95,7 +97,7 @@ def test_server_stops_after_serving_for_a_while(tmp_path):
         out=None,
         serve=True,
         serve_seconds=0.3,
-        on_url=urls.append,
+        on_ready=lambda r: urls.append(r.url),
     )
     assert urls == [result.url] and result.url.startswith("http://127.0.0.1:")
     assert not _children_running(os.getpid(), "meshcat_child")
@@ -105,7 +107,7 @@ def _default_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
-def _serve_cli(tmp_path):
+def _serve_cli(tmp_path, *extra):
     proc = subprocess.Popen(
         [
             sys.executable,
@@ -118,6 +120,7 @@ def _serve_cli(tmp_path):
             "--out",
             str(tmp_path / "p.html"),
             "--serve",
+            *extra,
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -126,10 +129,57 @@ def _serve_cli(tmp_path):
         # reaches a process whose SIGINT is at its default, so start it that way
         preexec_fn=_default_sigint,
     )
-    line = proc.stdout.readline()
-    assert line.startswith("meshcat server: http://127.0.0.1:"), line + proc.stderr.read()
+    proc.before = []  # what was printed before the URL
+    while not (line := proc.stdout.readline()).startswith("meshcat server: "):
+        assert line, "".join(proc.before) + proc.stderr.read()
+        proc.before.append(line)
+    assert line.startswith("meshcat server: http://127.0.0.1:"), line
     (server,) = _children_running(proc.pid, "meshcat_child")
     return proc, server
+
+
+def _listening_addresses(pid: int) -> set[str]:
+    """Local addresses (hex, as in /proc/net/tcp) of the sockets ``pid`` listens on."""
+    inodes = set()
+    for fd in Path(f"/proc/{pid}/fd").iterdir():
+        with contextlib.suppress(OSError):
+            target = os.readlink(fd)
+            if target.startswith("socket:["):
+                inodes.add(target[8:-1])
+    out = set()
+    for table in ("tcp", "tcp6"):
+        for row in Path(f"/proc/{pid}/net/{table}").read_text().splitlines()[1:]:
+            cols = row.split()
+            if cols[3] == "0A" and cols[9] in inodes:  # LISTEN
+                out.add(cols[1].rsplit(":", 1)[0])
+    return out
+
+
+def test_cli_reports_the_files_and_the_check_before_serving_on_the_loopback(tmp_path):
+    proc, server = _serve_cli(tmp_path, "--png", str(tmp_path / "p.png"))
+    try:
+        printed = "".join(proc.before)
+        assert "wrote " + str(tmp_path / "p.html") in printed
+        assert "picture check: ok" in printed and (tmp_path / "p.png").is_file()
+        # the web page and the zmq socket: 127.0.0.1 only, never every interface
+        assert _listening_addresses(server) == {"0100007F"}
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=30)
+    assert _wait_dead(server)
+
+
+def test_a_server_started_in_a_thread_lives_until_it_is_stopped():
+    started = []
+    thread = threading.Thread(target=lambda: started.append(LiveServer().start()))
+    thread.start()
+    thread.join()
+    (server,) = started
+    try:
+        time.sleep(1.0)  # the thread that started it has ended; the process has not
+        assert _alive(server.pid)
+    finally:
+        server.stop()
 
 
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 128 + 15)])
@@ -143,6 +193,8 @@ def test_ctrl_c_and_sigterm_stop_the_server(sig, code, tmp_path):
 
 def test_server_dies_with_a_killed_parent(tmp_path):
     proc, server = _serve_cli(tmp_path)
+    log = os.readlink(f"/proc/{server}/fd/1")
+    assert log.endswith(" (deleted)")  # the server's log is gone once its URLs were read
     proc.kill()  # no cleanup code runs in the parent
     proc.wait(timeout=30)
     assert _wait_dead(server)

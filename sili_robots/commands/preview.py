@@ -2,7 +2,8 @@
 
 Writes one self-contained HTML file (opens offline, animated with meshcat's timeline), optionally
 renders its picture frame (the last; Driving's last pass) to PNG in headless Chromium (and checks
-the picture shows the scene), and optionally serves the scene live on 127.0.0.1 until Ctrl-C.
+the picture shows the scene), and optionally serves the scene live on 127.0.0.1 until Ctrl-C
+(what was written and checked is printed before serving).
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import argparse
 import functools
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from sili_robots.commands.common import (
     add_task_args,
@@ -22,6 +24,9 @@ from sili_robots.commands.common import (
     writable_file,
 )
 from sili_robots.errors import ConfigError
+
+if TYPE_CHECKING:
+    from sili_robots.preview import PreviewResult
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -78,8 +83,11 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.preview import BrowserError, preview
     from sili_robots.preview.server import ServerError
 
-    def announce(url: str) -> None:
-        print(f"meshcat server: {url}  (Ctrl-C to stop)", flush=True)
+    reported: list[int] = []
+
+    def serving(result: PreviewResult) -> None:  # what was written and checked, then the URL
+        reported.append(_report(result))
+        print(f"meshcat server: {result.url}  (Ctrl-C to stop)", flush=True)
 
     env_kwargs = task_arguments_given(args)
     if env_kwargs:
@@ -100,14 +108,18 @@ def run(args: argparse.Namespace) -> int:
             out=args.out,
             png=args.png,
             serve=args.serve,
-            on_url=announce,
+            on_ready=serving,
             env_kwargs=env_kwargs,
         )
     except (BrowserError, ServerError) as err:
         print(f"sili preview: error: {err}", file=sys.stderr)
         return 1
+    return reported[0] if reported else _report(result)
+
+
+def _report(result: PreviewResult) -> int:
+    """Print what was recorded, written and checked; 1 when the picture failed its checks."""
     rec = result.preview.recording
-    secs = ", ".join(f"{k} {v:.2f} s" for k, v in result.seconds.items())
     print(f"task={rec.task} policy={rec.policy} interactions={rec.interactions} frames={len(rec)}")
     if result.html is not None:
         print(f"wrote {result.html} ({result.html.stat().st_size / 1e6:.1f} MB, self-contained)")
@@ -115,10 +127,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {result.png} (frame {result.rendered.frame})")
         found = result.rendered.problems()
         if found:
-            print("the picture failed its checks:", *found, sep="\n  ", file=sys.stderr)
+            print("the picture failed its checks:", *found, sep="\n  ", file=sys.stderr, flush=True)
             return 1
-        print(f"picture check: ok ({len(result.rendered.markers)} scene elements seen)")
-    print(f"time: {secs}")
+        print(f"picture check: ok ({result.rendered.seen_summary()})")
+    print("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.seconds.items()), flush=True)
     return 0
 
 

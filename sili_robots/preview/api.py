@@ -222,16 +222,17 @@ def preview(
     png: str | Path | None = None,
     serve: bool = False,
     serve_seconds: float | None = None,
-    on_url: Callable[[str], None] | None = None,
+    on_ready: Callable[[PreviewResult], None] | None = None,
     env_kwargs: dict[str, Any] | None = None,
 ) -> PreviewResult:
     """Record ``interactions`` interactions of ``task`` and write/render/serve the preview.
 
     ``png`` renders the scene's picture frame (the last; on Driving the last interaction's
     moment the ego draws level with the opponent) in headless Chromium (``out`` is written
-    first; a temporary file is used when ``out`` is None). ``serve`` starts a live meshcat
-    server on 127.0.0.1, calls ``on_url`` with its URL and blocks for ``serve_seconds`` (None:
-    until Ctrl-C); the server is stopped on every exit path.
+    first; a temporary file is used when ``out`` is None, and removed). ``serve`` starts a live
+    meshcat server on 127.0.0.1, calls ``on_ready`` with the result so far (files written,
+    picture checked, ``url`` set) and blocks for ``serve_seconds`` (None: until Ctrl-C); the
+    server is stopped on every exit path.
     """
     from sili_robots.preview.server import LiveServer
 
@@ -239,6 +240,7 @@ def preview(
     t0 = time.perf_counter()
     name, env, pol, label = make_env_and_policy(task, policy, checkpoint, env_kwargs)
     server = LiveServer() if serve else None
+    temporary: Path | None = None
     try:
         if server is not None:
             server.start()
@@ -252,10 +254,11 @@ def preview(
             live=server.visualizer if server is not None else None,
         )
         seconds["record_and_build"] = time.perf_counter() - t0
-        result = PreviewResult(prev, None)
+        result = PreviewResult(prev, None, seconds=seconds)
         if out is not None or png is not None:
             t1 = time.perf_counter()
             result.html = _write(prev, out)
+            temporary = None if out is not None else result.html
             seconds["html"] = time.perf_counter() - t1
         if png is not None:
             t2 = time.perf_counter()
@@ -264,15 +267,18 @@ def preview(
             result.png.parent.mkdir(parents=True, exist_ok=True)
             result.png.write_bytes(result.rendered.png)
             seconds["png"] = time.perf_counter() - t2
-            if out is None:
-                result.html.unlink(missing_ok=True)
-                result.html = None
-        result.seconds = seconds
+        if temporary is not None:
+            temporary.unlink(missing_ok=True)
+            result.html = temporary = None
         if server is not None:
-            url = result.url = server.web_url
-            server.serve(serve_seconds, on_ready=None if on_url is None else lambda: on_url(url))
+            result.url = server.web_url
+            server.serve(
+                serve_seconds, on_ready=None if on_ready is None else lambda: on_ready(result)
+            )
         return result
     finally:
+        if temporary is not None:
+            temporary.unlink(missing_ok=True)
         if server is not None:
             server.stop()
         env.close()

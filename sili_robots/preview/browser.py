@@ -39,6 +39,8 @@ CHROMIUM_FLAGS = (
     "--enable-unsafe-swiftshader",
     "--hide-scrollbars",
     "--mute-audio",
+    "--disable-breakpad",
+    "--disable-crash-reporter",
     # Any host but this machine's loopback fails at once: a preview must render offline
     # (the loopback stays reachable for a live meshcat server).
     "--host-resolver-rules=MAP * ~NOTFOUND, EXCLUDE 127.0.0.1",
@@ -88,12 +90,13 @@ class PageResult:
     requests: list[str] = field(default_factory=list)
     #: console errors and uncaught exceptions
     errors: list[str] = field(default_factory=list)
-    #: pixel (x, y) of each world point asked for, through the page's own camera
+    #: pixel (x, y) of each world point asked for, through the page's own camera; a point
+    #: behind the camera lands at (-1, -1), outside the picture
     projections: list[tuple[float, float]] = field(default_factory=list)
     #: whatever the ``evaluate`` expression returned
     value: Any = None
-    #: screenshots with one meshcat node hidden, by path
-    hidden: dict[str, bytes] = field(default_factory=dict)
+    #: screenshots with some meshcat nodes hidden, by the (sorted) paths hidden
+    hidden: dict[tuple[str, ...], bytes] = field(default_factory=dict)
     #: (x0, y0, x1, y1) of HTML boxes drawn over the 3D view (captions, controls)
     covered: list[tuple[float, float, float, float]] = field(default_factory=list)
 
@@ -134,6 +137,7 @@ class Browser:
                 stdout=subprocess.DEVNULL,
                 stderr=subprocess.DEVNULL,
                 start_new_session=True,
+                env=_profile_env(self._profile),
             )
         finally:
             os.close(to_browser_r)
@@ -263,14 +267,14 @@ class Browser:
         points: list[tuple[float, float, float]] | None = None,
         evaluate: str | None = None,
         ready_timeout: float = 30.0,
-        toggles: list[str] = (),
+        hide: list[tuple[str, ...]] = (),
     ) -> PageResult:
         """Open a local HTML file (or a URL), wait for ``ready`` (a JS expression), run
         ``setup``, take a screenshot.
 
         ``points`` are projected to pixels with the page's ``viewer.camera`` (meshcat) after the
-        frame is drawn, so checks can look where the scene puts things. For each meshcat path in
-        ``toggles`` a second screenshot is taken with that node hidden.
+        frame is drawn, so checks can look where the scene puts things. For each set of meshcat
+        paths in ``hide`` another screenshot is taken with those nodes hidden.
         """
         if isinstance(html, str) and html.startswith(("http://", "https://", "file://")):
             url = html
@@ -315,11 +319,13 @@ class Browser:
             value = self.evaluate(session, evaluate) if evaluate else None
             covered = self.evaluate(session, COVERED_JS)
             shot = self._screenshot(session)
-            hidden: dict[str, bytes] = {}
-            for path in dict.fromkeys(toggles):
-                self.evaluate(session, _visible_js(path, False))
-                hidden[path] = self._screenshot(session)
-                self.evaluate(session, _visible_js(path, True))
+            hidden: dict[tuple[str, ...], bytes] = {}
+            for paths in dict.fromkeys(hide):
+                for path in paths:
+                    self.evaluate(session, _visible_js(path, False))
+                hidden[paths] = self._screenshot(session)
+                for path in paths:
+                    self.evaluate(session, _visible_js(path, True))
         finally:
             with contextlib.suppress(BrowserError):
                 self.call("Target.closeTarget", {"targetId": target})
@@ -373,6 +379,18 @@ def _page_errors(events: list[dict[str, Any]], session: str) -> list[str]:
     return out
 
 
+def _profile_env(profile: str) -> dict[str, str]:
+    """The environment with the home, config and cache folders in the temporary profile:
+    Chromium writes crash-report settings and a dconf cache there whatever ``--user-data-dir``
+    says, and a preview leaves nothing in the user's home."""
+    return {
+        **os.environ,
+        "HOME": profile,
+        "XDG_CONFIG_HOME": os.path.join(profile, "config"),
+        "XDG_CACHE_HOME": os.path.join(profile, "cache"),
+    }
+
+
 def _high_fd(fd: int) -> int:
     """A copy of ``fd`` numbered 10 or more (the original is closed)."""
     import fcntl
@@ -390,5 +408,6 @@ def _project_js(points: list[tuple[float, float, float]]) -> str:
         f" return {json.dumps([list(map(float, p)) for p in points])}.map(p => {{"
         # meshcat's scene root turns its z-up world into three.js' y-up world
         " v.set(p[0], p[1], p[2]).applyMatrix4(m).project(c);"
+        " if (v.z > 1) return [-1, -1];"  # behind the camera: mirrored, not in the picture
         " return [(v.x + 1) / 2 * el.clientWidth, (1 - v.y) / 2 * el.clientHeight]; }); })()"
     )

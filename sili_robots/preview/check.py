@@ -1,9 +1,11 @@
 """Does a rendered preview show what the scene says it shows? Checked like a person would.
 
 The picture must not be blank (a meshcat page with an empty scene is just the background), and
-each of the scene's ``Marker``s must be visible: around the pixel where the page's own camera
-projects the marker's world point, enough pixels have the marker's colour. An empty scene, a
-scene drawn in the wrong place or a page that failed to load fails the same test.
+each of the scene's ``Marker``s in the camera's view must be visible: around the pixel where the
+page's own camera projects the marker's world point, enough pixels have the marker's colour
+(or change when its body is hidden), in the picture or, for a marker that may be behind another
+body, with that body hidden. An empty scene, a scene drawn in the wrong place or a page that
+failed to load fails the same test; so does a picture in which no marker is in view.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from PIL import Image
 
-from sili_robots.preview.scenes.base import Marker
+from sili_robots.preview.scenes.base import Marker, hidden_set
 from sili_robots.preview.shapes import hex_rgb
 
 
@@ -24,10 +26,12 @@ class MarkerResult:
     pixel: tuple[float, float]
     radius_px: float
     fraction: float  # share of pixels around ``pixel`` with the marker's colour
+    #: the point projects into the picture; one outside the camera's view is not asked for
+    in_view: bool = True
 
     @property
     def ok(self) -> bool:
-        return self.fraction >= self.marker.min_fraction
+        return not self.in_view or self.fraction >= self.marker.min_fraction
 
 
 def load_rgb(png: bytes) -> np.ndarray:
@@ -62,32 +66,44 @@ def marker_results(
     markers: list[Marker],
     centres: list[tuple[float, float]],
     edges: list[tuple[float, float]],
-    hidden: dict[str, np.ndarray] | None = None,
+    hidden: dict[tuple[str, ...], np.ndarray] | None = None,
 ) -> list[MarkerResult]:
     """Share of matching pixels around each marker's projected centre (``edges``: centre +
     radius). A colour marker matches its colour; a toggle marker matches where the picture
-    with its node hidden (``hidden[path]``) differs."""
+    with its node hidden differs. ``hidden`` holds the pictures with nodes hidden, keyed by
+    ``hidden_set`` of their paths (``Marker.views``)."""
     h, w, _ = rgb.shape
     yy, xx = np.mgrid[0:h, 0:w]
+    shots = {(): rgb, **(hidden or {})}
     out = []
     for m, c, e in zip(markers, centres, edges, strict=True):
         r = max(2.0, float(np.hypot(e[0] - c[0], e[1] - c[1])))
         if not (0 <= c[0] < w and 0 <= c[1] < h):
-            out.append(MarkerResult(m, c, r, 0.0))
+            out.append(MarkerResult(m, c, r, 0.0, in_view=False))
             continue
         inside = (xx - c[0]) ** 2 + (yy - c[1]) ** 2 <= r * r
-        if m.toggle is not None:
-            other = (hidden or {}).get(m.toggle)
-            if other is None:
-                out.append(MarkerResult(m, c, r, 0.0))
-                continue
-            dist = np.linalg.norm(rgb[inside] - other[inside], axis=1)
-            frac = float((dist > m.tolerance).mean()) if dist.size else 0.0
-        else:
-            dist = np.linalg.norm(rgb[inside] - np.array(hex_rgb(m.color)), axis=1)
-            frac = float((dist <= m.tolerance).mean()) if dist.size else 0.0
+        frac = _matching(m, inside, shots, ())
+        if frac < m.min_fraction and m.behind:
+            frac = max(frac, _matching(m, inside, shots, m.behind))
         out.append(MarkerResult(m, c, r, frac))
     return out
+
+
+def _matching(
+    m: Marker, inside: np.ndarray, shots: dict[tuple[str, ...], np.ndarray], hide: tuple[str, ...]
+) -> float:
+    """Share of pixels in ``inside`` that show ``m`` in the picture with ``hide`` hidden."""
+    base = shots.get(hidden_set(*hide))
+    if base is None:
+        return 0.0
+    if m.toggle is not None:
+        other = shots.get(hidden_set(*hide, m.toggle))
+        if other is None:
+            return 0.0
+        dist = np.linalg.norm(base[inside] - other[inside], axis=1)
+        return float((dist > m.tolerance).mean()) if dist.size else 0.0
+    dist = np.linalg.norm(base[inside] - np.array(hex_rgb(m.color)), axis=1)
+    return float((dist <= m.tolerance).mean()) if dist.size else 0.0
 
 
 def problems(
@@ -101,7 +117,10 @@ def problems(
     blank = blank_problem(rgb, covered)
     if blank:
         found.append(blank)
-    for r in results_or_none or []:
+    results = results_or_none or []
+    if results and not any(r.in_view for r in results):
+        found.append(f"no scene element is in the camera's view ({len(results)} looked for)")
+    for r in results:
         if not r.ok:
             what = (
                 f"change when '{r.marker.toggle}' is hidden"

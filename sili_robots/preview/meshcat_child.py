@@ -1,32 +1,51 @@
-"""Run meshcat's server so that it dies with the process that started it.
+"""Run meshcat's server on the loopback only, and end it when the process that started it ends.
 
-Usage: ``python -m sili_robots.preview.meshcat_child PARENT_PID [meshcat-server args]``. Linux's
-``PR_SET_PDEATHSIG`` makes the kernel send SIGKILL when the parent exits for any reason (even
-SIGKILL); if the parent is already gone when this starts, it exits at once.
+Usage: ``python -m sili_robots.preview.meshcat_child PARENT_PID``. meshcat-python 0.3.2's own
+``meshcat-server`` binds its web port on every interface (tornado's ``listen`` with no address)
+although it prints a 127.0.0.1 URL; here both ports are bound to 127.0.0.1. A watchdog thread
+exits within ``POLL`` seconds of the parent process ending, however it ends (even SIGKILL). It
+watches the parent *process*: Linux's ``PR_SET_PDEATHSIG`` would fire when the parent *thread*
+ends, killing a server started from a worker thread that has finished.
 """
 
 from __future__ import annotations
 
-import ctypes
+import functools
 import os
-import runpy
-import signal
 import sys
+import threading
+import time
 
-PR_SET_PDEATHSIG = 1
+from meshcat.servers.zmqserver import ZMQWebSocketBridge
+
+LOOPBACK = "127.0.0.1"
+POLL = 0.2
+
+
+class LoopbackBridge(ZMQWebSocketBridge):
+    """meshcat's bridge with its web server listening on the loopback only."""
+
+    def make_app(self):
+        app = super().make_app()
+        app.listen = functools.partial(app.listen, address=LOOPBACK)
+        return app
+
+
+def exit_with(parent: int) -> None:
+    """End this process once ``parent`` is no longer its parent (it exited)."""
+    while os.getppid() == parent:
+        time.sleep(POLL)
+    os._exit(0)
 
 
 def main() -> None:
     parent = int(sys.argv[1])
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    except (OSError, AttributeError):  # not Linux: the parent's cleanup is all there is
-        pass
-    if os.getppid() != parent:
+    if os.getppid() != parent:  # the parent is already gone
         sys.exit(0)
-    sys.argv = ["meshcat-server", *sys.argv[2:]]
-    runpy.run_module("meshcat.servers.zmqserver", run_name="__main__")
+    threading.Thread(target=exit_with, args=(parent,), daemon=True).start()
+    bridge = LoopbackBridge(host=LOOPBACK)
+    print(f"zmq_url={bridge.zmq_url}\nweb_url={bridge.web_url}", flush=True)
+    bridge.run()  # until SIGTERM from ``LiveServer.stop`` or the watchdog's exit
 
 
 if __name__ == "__main__":

@@ -30,6 +30,12 @@ class Rendered:
     def png(self) -> bytes:
         return self.page.png
 
+    def seen_summary(self) -> str:
+        """ "7 scene elements seen" (and how many were out of the camera's view)."""
+        seen = sum(r.in_view for r in self.markers)
+        away = len(self.markers) - seen
+        return f"{seen} scene elements seen" + (f", {away} out of view" if away else "")
+
     def problems(self) -> list[str]:
         """What a person would object to: blank picture, missing things, page errors, and
         any request that left the file (the page must work offline)."""
@@ -72,13 +78,18 @@ def render_html(
             else LIVE_SEEK.format(time=int(frame) / live_fps),
             points=points + edges,
             evaluate=evaluate,
-            toggles=[f"/meshcat/{m.toggle}" for m, _ in markers if m.toggle is not None],
+            hide=[
+                tuple(f"/meshcat/{path}" for path in view) for m, _ in markers for view in m.views()
+            ],
         )
     finally:
         if own:
             b.close()
     n = len(points)
-    hidden = {path.removeprefix("/meshcat/"): _rgb(png) for path, png in page.hidden.items()}
+    hidden = {
+        tuple(p.removeprefix("/meshcat/") for p in paths): _rgb(png)
+        for paths, png in page.hidden.items()
+    }
     results = marker_results(
         _rgb(page.png),
         [m for m, _ in markers],

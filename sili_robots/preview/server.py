@@ -3,9 +3,9 @@
 meshcat-python 0.3.2's ``Visualizer.close()`` raises (its window has no ``close``) and its own
 server launcher only cleans up at interpreter exit, so a crash, a SIGTERM or a killed parent
 leaves ``meshcat-server`` running with its ports taken. Here the server runs in its own process
-group, is stopped in ``LiveServer.stop()`` on every exit path (``with`` block, Ctrl-C, SIGTERM
-turned into ``SystemExit`` while serving), and asks the kernel to kill it if its parent dies
-without cleaning up (``PR_SET_PDEATHSIG``, see ``meshcat_child``).
+group, listens on 127.0.0.1 only, is stopped in ``LiveServer.stop()`` on every exit path
+(``with`` block, Ctrl-C, SIGTERM turned into ``SystemExit`` while serving), and exits by itself
+when the process that started it ends without cleaning up (see ``meshcat_child``).
 """
 
 from __future__ import annotations
@@ -62,6 +62,8 @@ class LiveServer:
             os.close(fd)
         try:
             self.zmq_url, self.web_url = self._wait_for_urls()
+            # read: nothing else is needed from the log, and a killed parent leaves no file
+            self._log.unlink(missing_ok=True)
             # meshcat prints the URL itself when it connects; the caller prints it instead
             with contextlib.redirect_stdout(io.StringIO()):
                 self.visualizer = meshcat.Visualizer(zmq_url=self.zmq_url)

@@ -36,6 +36,24 @@ class Marker:
     #: for shaded bodies: instead of a colour, the pixels must change when the scene node at
     #: this path (under the scene root) is hidden, i.e. the body is what is seen there
     toggle: str | None = None
+    #: scene nodes that may stand between the camera and this marker (one car in front of the
+    #: other, the arm over a goal): where the marker is not seen, it is looked for again with
+    #: them hidden, so a body drawn where it belongs but behind another still counts as drawn
+    behind: tuple[str, ...] = ()
+
+    def views(self) -> list[tuple[str, ...]]:
+        """The sets of nodes hidden in the extra screenshots this marker is checked with."""
+        out = [] if self.toggle is None else [hidden_set(self.toggle)]
+        if self.behind:
+            out.append(hidden_set(*self.behind))
+            if self.toggle is not None:
+                out.append(hidden_set(*self.behind, self.toggle))
+        return out
+
+
+def hidden_set(*paths: str) -> tuple[str, ...]:
+    """One key per set of hidden nodes, whatever order they were named in."""
+    return tuple(sorted(set(paths)))
 
 
 @dataclass(frozen=True)

@@ -210,35 +210,45 @@ class DrivingScene(TaskScene):
         fr = rec.frames[frame]
         ego, opp = fr["ego"], fr["opponent"]
         length = s["length"]
-        out = [
-            Marker("ego", (ego[0] - length / 2, ego[1], 1.0), 0, 0.6, 0.6, toggle="vehicles/ego"),
-            Marker(
-                "opponent",
-                (opp[0] - length / 2, opp[1], 1.0),
-                0,
-                0.6,
-                0.6,
-                toggle="vehicles/opponent",
-            ),
-        ]
+        ego_node, opp_node = "vehicles/ego", "vehicles/opponent"
+        cars = (ego_node, opp_node)  # either may stand in front of the other (a collision)
+
+        def car(name: str, at: np.ndarray, node: str, other: str) -> Marker:
+            return Marker(
+                name, (at[0] - length / 2, at[1], 1.0), 0, 0.6, 0.6, toggle=node, behind=(other,)
+            )
+
+        out = [car("ego", ego, ego_node, opp_node), car("opponent", opp, opp_node, ego_node)]
         w = s["lane_width"]
         ahead = ego[0] + 12.0
-        cars = [ego, opp]
         intent_y = (fr["target_lane"] - s["centre"]) * w
         for lane_y in (-w, 0.0, w):  # bare road: a lane no car (or tint) is in, a little ahead
             if lane_y == intent_y:
                 continue
-            if all(abs(c[1] - lane_y) > w / 2 or abs(c[0] - ahead) > 8 for c in cars):
+            if all(abs(c[1] - lane_y) > w / 2 or abs(c[0] - ahead) > 8 for c in (ego, opp)):
                 out.append(Marker("road", (ahead, lane_y, 0.0), ROAD, 0.5, 0.6))
                 break
         if -25.0 < s["hazard_x"] - ego[0] < 70.0:
             out.append(
                 Marker(
-                    "hazard", (s["hazard_x"] - length / 2, 0.0, 1.0), 0, 0.6, 0.6, toggle="hazard"
+                    "hazard",
+                    (s["hazard_x"] - length / 2, 0.0, 1.0),
+                    0,
+                    0.6,
+                    0.6,
+                    toggle="hazard",
+                    behind=cars,
                 )
             )
         if -12.0 < s["red_line"] - ego[0] < 70.0:
             out.append(
-                Marker("red line", (s["red_line"], 2 * w / 3 + 0.5, 0.015), RED_LINE, 0.25, 0.3)
+                Marker(
+                    "red line",
+                    (s["red_line"], 2 * w / 3 + 0.5, 0.015),
+                    RED_LINE,
+                    0.25,
+                    0.3,
+                    behind=cars,
+                )
             )
         return out

@@ -158,20 +158,21 @@ class SawyerReachScene(TaskScene):
         for name in CHECKED_BODIES:
             p = pose[model.body(name).id, :3, 3]
             out.append(Marker(f"robot {name}", tuple(p), 0, 0.02, 0.5, toggle="robot"))
-        chosen = s["goals"][fr["goal"]]
-        ee = fr["ee"]
+        # the arm may stand between the camera and a goal or the plane's edge: those are looked
+        # for again with the robot hidden
         out.append(
             Marker(
                 "opponent's goal",
-                tuple(chosen),
+                tuple(s["goals"][fr["goal"]]),
                 OPPONENT,
                 CHOSEN_RADIUS * 0.7,
                 0.3,
                 SEEN_THROUGH_PLANE,
+                behind=("robot",),
             )
         )
         for i, goal in enumerate(s["goals"]):
-            if i != fr["goal"] and np.linalg.norm(goal[:2] - ee[:2]) > 0.08:
+            if i != fr["goal"]:
                 out.append(
                     Marker(
                         f"goal {i}",
@@ -180,8 +181,18 @@ class SawyerReachScene(TaskScene):
                         GOAL_RADIUS * 0.7,
                         0.3,
                         SEEN_THROUGH_PLANE,
+                        behind=("robot",),
                     )
                 )
         half, z = s["table_half"], s["plane_z"]
-        out.append(Marker("height plane edge", (half, -half * 0.5, z), PLANE, PLANE_EDGE, 0.3))
+        out.append(
+            Marker(
+                "height plane edge",
+                (half, -half * 0.5, z),
+                PLANE,
+                PLANE_EDGE,
+                0.3,
+                behind=("robot",),
+            )
+        )
         return out
