@@ -1,5 +1,6 @@
 """The ``sili`` command line: bad input exits 2 with a message; good input prints a result."""
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -179,8 +180,8 @@ def test_sweep_refuses_bad_seeds_a_task_twice_and_a_latent_no_method_takes(tmp_p
     code, _, err = _main(*sweep, "sac", "--tasks", "circle-3", "--latent", "continuous")
     assert code == 2 and "--latent applies to methods sili, lili, stable only" in err
     mixed = ["sac,lili", "--tasks", "circle-3", "--latent", "continuous"]
-    code, out, _ = _main(*sweep, *mixed)  # names as recorded sweeps have them, so they resume
-    assert code == 0 and "circle-3__sac-continuous__s0\t" in out, out
+    code, out, _ = _main(*sweep, *mixed)  # SAC learns no latent: not named after one
+    assert code == 0 and "circle-3__sac__s0\tnew" in out and "lili-continuous__s0" in out, out
     assert not (tmp_path / "s").exists()  # a dry run writes nothing
 
 
@@ -377,6 +378,34 @@ def test_more_bad_input_exits_2_with_one_line_naming_it(tmp_path):
             json.dumps({"pid": pid, "host": socket.gethostname()})
         )
         assert training_worker(tmp_path) is None
+
+
+def test_a_claim_whose_pid_another_process_took_since_is_stale(tmp_path):
+    """A sweep killed with SIGKILL leaves its workers' claims; once their pids are reused
+    (a reboot, a new container) the run is not refused for an unrelated process."""
+    import json
+    import socket
+
+    from sili_robots.sweep.state import process_started, training_claim, training_worker
+
+    claim = tmp_path / "worker.json"
+    with training_claim(tmp_path):
+        recorded = json.loads(claim.read_text())
+        assert recorded["started"] == process_started(os.getpid()) is not None
+        assert training_worker(tmp_path) == os.getpid()
+    sleeper = subprocess.Popen(["sleep", "60"])
+    try:
+        host = socket.gethostname()
+        for pid, started, trained_by in (
+            (sleeper.pid, process_started(sleeper.pid), sleeper.pid),  # the process that claimed
+            (sleeper.pid, recorded["started"], None),  # a claim of a process gone: reused pid
+            (sleeper.pid, None, sleeper.pid),  # where start times cannot be read: the pid alone
+        ):
+            claim.write_text(json.dumps({"pid": pid, "host": host, "started": started}))
+            assert training_worker(tmp_path) == trained_by
+    finally:
+        sleeper.kill()
+        sleeper.wait()
 
 
 def test_read_outs_name_a_damaged_summary_and_read_a_sweep_they_cannot_write(tmp_path, monkeypatch):

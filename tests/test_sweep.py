@@ -360,6 +360,24 @@ def test_resume_of_a_non_sweep_and_changed_settings_exit_2(tiny_sweep, tmp_path,
     assert "it takes no --seeds (" in capsys.readouterr().err
 
 
+def test_a_record_that_cannot_run_is_named_and_a_dry_run_refuses_it_too(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    base = ["sweep", "--tasks", "circle-3", "--methods", "sac", "--out", str(out), *FAST_ARGS]
+    assert main([*base, "--interactions", "2", "--no-progress"]) == 0
+    record = out / "sweep.json"
+    kept = json.loads(record.read_text())
+    kept["invocations"][0]["betas"] = [5]  # a hand edit no sweep can have
+    record.write_text(json.dumps(kept))
+    capsys.readouterr()
+    assert main(["sweep", "--resume", str(out), "--dry-run"]) == 2
+    err = capsys.readouterr().err
+    assert f"{record} records a sweep that cannot run: --beta applies to methods" in err, err
+    record.write_text("{")
+    for dry in (["--dry-run"], []):  # a new invocation is added to the record: it must read
+        assert main([*base, "--interactions", "2", *dry]) == 2
+        assert f"{record} is damaged" in capsys.readouterr().err
+
+
 def test_overwrite_starts_the_sweep_anew_and_keeps_a_users_files(tmp_path, capsys):
     out = tmp_path / "sweep"
     base = ["sweep", "--tasks", "circle-3", "--methods", "sac", "--out", str(out), *FAST_ARGS]
@@ -377,8 +395,9 @@ def test_overwrite_starts_the_sweep_anew_and_keeps_a_users_files(tmp_path, capsy
     (s1 / "worker.json").write_text(json.dumps(trainer))
     assert main([*again, "--overwrite"]) == 2  # e.g. an orphan still saving its interaction
     assert f"circle-3__sac__s1 in {out} is being trained by process" in capsys.readouterr().err
-    assert main(["sweep", "--resume", str(out), "--no-progress"]) == 2  # nor resumed beside it
-    assert f"circle-3__sac__s1 in {out} is being trained by process" in capsys.readouterr().err
+    for dry in ([], ["--dry-run"]):  # nor resumed beside it; a dry run says so as well
+        assert main(["sweep", "--resume", str(out), "--no-progress", *dry]) == 2
+        assert f"circle-3__sac__s1 in {out} is being trained by process" in capsys.readouterr().err
     (s1 / "worker.json").unlink()
     (out / "figures").mkdir()
     (out / "figures" / "curves.png").write_text("the replaced sweep's")
@@ -446,6 +465,44 @@ def test_resume_with_interactions_extends_every_run_as_if_started_with_that_budg
     )
     assert main(["sweep", "--resume", str(out), "--no-progress"]) == 0  # nothing left to do
     assert json.loads(capsys.readouterr().out)["already_done"] == 2
+
+
+def test_a_run_an_earlier_version_named_after_the_sweeps_latent_is_resumed_not_retrained(
+    tmp_path, capsys
+):
+    out = tmp_path / "sweep"
+    args = ["sweep", "--tasks", "circle-3", "--methods", "sac,stable", "--latent", "continuous"]
+    assert main([*args, "--interactions", "2", *FAST_ARGS, "--out", str(out), "--no-progress"]) == 0
+    runs = out / "runs"
+    (runs / "circle-3__sac__s0").rename(runs / "circle-3__sac-continuous__s0")  # as named before
+    capsys.readouterr()
+    assert main(["sweep", "--resume", str(out), "--dry-run"]) == 0
+    assert capsys.readouterr().out.splitlines()[0] == (
+        "circle-3__sac__s0\tdone (its folder circle-3__sac-continuous__s0 is renamed to it first)"
+    )
+    assert main(["sweep", "--resume", str(out), "--no-progress"]) == 0
+    assert json.loads(capsys.readouterr().out)["already_done"] == 2
+    names = ["circle-3__sac__s0", "circle-3__stable-continuous__s0"]
+    assert sorted(p.name for p in runs.iterdir()) == names
+    assert sorted(pd.read_csv(out / "runs.csv")["run"]) == names
+    # --overwrite removes the run under either name
+    (runs / "circle-3__sac__s0").rename(runs / "circle-3__sac-continuous__s0")
+    assert (
+        main(
+            [
+                *args,
+                "--interactions",
+                "2",
+                *FAST_ARGS,
+                "--out",
+                str(out),
+                "--overwrite",
+                "--dry-run",
+            ]
+        )
+        == 0
+    )
+    assert "circle-3__sac-continuous__s0\tremoved" in capsys.readouterr().out
 
 
 def test_an_extension_checks_every_run_first_and_one_cut_short_is_finished_by_a_resume(
@@ -541,6 +598,36 @@ def test_sigterm_stops_a_sweep_as_ctrl_c_does(tmp_path):
     # the worker logged and checkpointed the interaction it was in before it stopped
     checkpointed = torch.load(run_dir / "checkpoint.pt", weights_only=False)["interaction"]
     assert checkpointed == metrics_rows(run_dir / "metrics.csv") >= 5
+
+
+def test_a_sigterm_to_the_whole_process_group_loses_no_interaction(tmp_path):
+    """`timeout` and job schedulers signal the sweep and its workers together: each worker
+    still logs and checkpoints the interaction it is in (the sweep's own stop used to reach
+    it as a second signal, which stops at once)."""
+    out = tmp_path / "sweep"
+    args = ["--tasks", "circle-3", "--methods", "sac", "--seeds", "0-1", "--interactions", 5000]
+    args += [*FAST_ARGS, "--workers", 2, "--checkpoint-every", 1000, "--no-progress", "--out", out]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sili_robots.cli", "sweep", *map(str, args)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # its own process group, as under `timeout`
+    )
+    runs = [out / "runs" / f"circle-3__sac__s{i}" for i in (0, 1)]
+    try:
+        assert wait_for(lambda: all(metrics_rows(r / "metrics.csv") >= 3 for r in runs), 240)
+        os.killpg(proc.pid, signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 128 + signal.SIGTERM, stderr
+    assert "Traceback" not in stderr
+    for run in runs:
+        checkpointed = torch.load(run / "checkpoint.pt", weights_only=False)["interaction"]
+        assert checkpointed == metrics_rows(run / "metrics.csv") >= 3
+        assert not (run / "stop").exists() and not (run / "worker.json").exists()
 
 
 def test_progress_display_counts_runs_and_interactions(tmp_path):

@@ -140,3 +140,43 @@ def test_a_stopped_ray_sweep_checkpoints_the_interaction_each_run_is_in(ray_clus
         checkpoint["interaction"] == metrics_rows(run_dir / "metrics.csv") >= 5
     )  # logged and saved, nothing lost
     assert not (run_dir / "worker.json").exists()
+
+
+def _children_named(parent: int, name: str) -> list[int]:
+    """Processes whose parent is ``parent`` and whose command is ``name``."""
+    out = []
+    for d in os.scandir("/proc"):
+        if d.name.isdigit():
+            try:
+                with open(f"/proc/{d.name}/stat") as f:
+                    comm, rest = f.read().rsplit(")", 1)
+            except OSError:
+                continue
+            if comm.endswith(f"({name}") and int(rest.split()[1]) == parent:
+                out.append(int(d.name))
+    return out
+
+
+def test_sigterm_while_ray_starts_stops_the_sweep_as_a_sigterm_does(tmp_path):
+    """``ray.init`` puts in its own SIGTERM handler (exit 15, no report) while it starts the
+    local instance; a SIGTERM then still stops the sweep as the command says (128 + 15)."""
+    args = ["sweep", "--backend", "ray", "--tasks", "circle-3", "--methods", "sac"]
+    args += ["--interactions", "3", "--out", str(tmp_path / "s"), "--no-progress"]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sili_robots.cli", *args], stderr=subprocess.PIPE, text=True
+    )
+    # Ray's GCS server is the first process ray.init starts; it goes on starting the rest
+    stderr = signal_when(proc, lambda: bool(_children_named(proc.pid, "gcs_server")))
+    assert proc.returncode == 128 + signal.SIGTERM, stderr
+    assert "sili sweep: stopped by SIGTERM" in stderr and "Traceback" not in stderr
+
+
+def test_an_address_where_no_cluster_listens_is_refused_before_anything_is_written(tmp_path):
+    args = ["sweep", "--backend", "ray", "--ray-address", "127.0.0.1:1", "--tasks", "circle-3"]
+    args += ["--methods", "sac", "--interactions", "3", "--out", str(tmp_path / "s")]
+    out = subprocess.run(
+        [sys.executable, "-m", "sili_robots.cli", *args], capture_output=True, text=True, timeout=60
+    )
+    assert out.returncode == 2, out.stderr
+    assert "cannot connect to Ray at '127.0.0.1:1': Connection refused" in out.stderr
+    assert not (tmp_path / "s").exists()

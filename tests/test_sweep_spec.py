@@ -120,6 +120,27 @@ def test_latent_kind_other_than_the_default_is_named():
     assert lili.name == "speaker-listener__lili__s0"
 
 
+def test_a_run_is_named_by_the_latent_it_learns_not_the_one_the_sweep_asked_for():
+    """SAC learns no latent and LILI turns partial into discrete: the same run whatever
+    --latent says, so the same name (earlier versions named it after --latent)."""
+    plain = {r.config.method: r for r in expand(_spec(methods=["sili", "sac", "lili"]))}
+    for latent, sili_name in (("continuous", "sili-continuous"), ("partial", "sili-partial")):
+        runs = {
+            r.config.method: r
+            for r in expand(_spec(methods=["sili", "sac", "lili"], latent=latent))
+        }
+        assert runs["sili"].name == f"circle-3__{sili_name}-bschedule__s0"
+        assert runs["sac"].name == "circle-3__sac__s0"
+        assert runs["sac"].former_name == f"circle-3__sac-{latent}__s0"
+        assert runs["sac"].config.to_dict() == plain["sac"].config.to_dict()
+    assert (
+        runs["lili"].name == "circle-3__lili__s0"
+        and runs["lili"].former_name == "circle-3__lili-partial__s0"
+    )
+    assert runs["lili"].config.to_dict() == plain["lili"].config.to_dict()
+    assert runs["sili"].former_name is None and plain["sac"].former_name is None
+
+
 @pytest.mark.parametrize(
     "kw,message",
     [

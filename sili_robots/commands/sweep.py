@@ -6,6 +6,7 @@ import argparse
 import json
 import os
 import re
+from dataclasses import replace
 from pathlib import Path
 
 from sili_robots.agent import LATENT_CHOICES, PROFILES
@@ -217,6 +218,50 @@ def _specs_and_dir(args: argparse.Namespace) -> tuple[list[SweepSpec], Path]:
     return [spec_from_args(args)], args.out
 
 
+def _dry_run(args: argparse.Namespace, specs: list[SweepSpec], sweep_dir: Path) -> int:
+    """Print each planned run and what the sweep would do with it; refuse what it would."""
+    from sili_robots.runs import CHECKPOINT, ERROR_FILE
+    from sili_robots.sweep.runner import former_folder, plan, replaced_runs
+    from sili_robots.sweep.state import (
+        SWEEP_FILE,
+        check_existing,
+        check_not_training,
+        recorded_specs,
+        run_path,
+        run_state,
+        shorter_run,
+    )
+
+    planned = plan(specs)
+    if args.overwrite:  # what is on disk goes: every planned run is new
+        names = [r.name for r in planned]
+        for name in replaced_runs(sweep_dir, planned):
+            print(f"{name}\t{'new' if name in names else 'removed'}")
+        print(f"{len(planned)} runs")
+        return 0
+    if args.resume is None and (Path(sweep_dir) / SWEEP_FILE).is_file():
+        recorded_specs(sweep_dir)  # a new invocation is added to the record: it must read
+    for run_ in planned:
+        shown, notes = run_.name, []
+        former = former_folder(sweep_dir, run_)
+        if former is not None:  # the sweep renames it first
+            notes.append(f"its folder {former.name} is renamed to it first")
+            run_ = replace(run_, name=former.name)
+        path = run_path(sweep_dir, run_.name)
+        check_not_training(sweep_dir, run_.name)
+        if args.resume is not None and shorter_run(sweep_dir, run_):
+            state = "resumable" if (path / CHECKPOINT).is_file() else "new"
+            notes.insert(0, f"extended to {run_.config.interactions}")
+        else:
+            check_existing(sweep_dir, run_)
+            state = run_state(path)
+            if (path / ERROR_FILE).is_file():  # the run's last attempt failed
+                notes.insert(0, f"failed before, see its {ERROR_FILE}")
+        print(f"{shown}\t{state}" + (f" ({', '.join(notes)})" if notes else ""))
+    print(f"{len(planned)} runs")
+    return 0
+
+
 def _extends(args: argparse.Namespace) -> bool:
     """``--resume SWEEP_DIR --interactions N``: the recorded sweep, every run extended to N."""
     return args.resume is not None and "interactions" in args.typed_options
@@ -236,15 +281,8 @@ def _backend(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from sili_robots.runs import CHECKPOINT, ERROR_FILE
-    from sili_robots.sweep.runner import plan, replaced_runs, run_sweep
-    from sili_robots.sweep.state import (
-        check_existing,
-        check_sweep_dir,
-        run_path,
-        run_state,
-        shorter_run,
-    )
+    from sili_robots.sweep.runner import run_sweep
+    from sili_robots.sweep.state import check_sweep_dir
 
     specs, sweep_dir = _specs_and_dir(args)
     if args.resume is None:
@@ -252,24 +290,11 @@ def run(args: argparse.Namespace) -> int:
     backend = _backend(args)  # its options checked in a dry run too; nothing starts yet
     writable_dir(sweep_dir, "--resume" if args.resume else "--out")  # creates nothing
     if args.dry_run:
-        planned = plan(specs)
-        if args.overwrite:  # what is on disk goes: every planned run is new
-            names = [r.name for r in planned]
-            for name in replaced_runs(sweep_dir, planned):
-                print(f"{name}\t{'new' if name in names else 'removed'}")
-        else:
-            for run_ in planned:
-                path = run_path(sweep_dir, run_.name)
-                if args.resume is not None and shorter_run(sweep_dir, run_):
-                    state = "resumable" if (path / CHECKPOINT).is_file() else "new"
-                    print(f"{run_.name}\t{state} (extended to {run_.config.interactions})")
-                    continue
-                check_existing(sweep_dir, run_)
-                failed = (path / ERROR_FILE).is_file()  # the run's last attempt failed
-                said = f" (failed before, see its {ERROR_FILE})" if failed else ""
-                print(f"{run_.name}\t{run_state(path)}{said}")
-        print(f"{len(planned)} runs")
-        return 0
+        return _dry_run(args, specs, sweep_dir)
+    if args.ray_address:  # before the sweep writes anything
+        from sili_robots.sweep.ray_backend import check_reachable
+
+        check_reachable(args.ray_address)
     report = run_sweep(
         specs,
         sweep_dir,

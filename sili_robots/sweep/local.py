@@ -24,13 +24,19 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 
 from sili_robots.errors import ConfigError
-from sili_robots.runs import ERROR_FILE, RUNNING_FILE
+from sili_robots.runs import ERROR_FILE, RUNNING_FILE, STOP_FILE
 from sili_robots.stopping import exit_on_signal
 from sili_robots.sweep.backend import STOP_GRACE_S, Monitor, describe_exit
 from sili_robots.sweep.worker import THREAD_ENV, Job, Outcome, limit_threads, run_job
 
-#: imported once by the forkserver, so forked workers start with them loaded
-PRELOAD = ["sili_robots.sweep.worker", "sili_robots.training", "torch.utils.tensorboard"]
+#: imported once by the forkserver, so forked workers start with them loaded (the first keeps
+#: the forkserver alive through a stop signal sent to the whole process group)
+PRELOAD = [
+    "sili_robots.sweep.forkserver_signals",
+    "sili_robots.sweep.worker",
+    "sili_robots.training",
+    "torch.utils.tensorboard",
+]
 
 
 def _exit_when_orphaned(alive: Connection) -> None:
@@ -58,7 +64,10 @@ def _child(job: Job, conn: Connection, alive: Connection) -> None:
     signal.signal(signal.SIGHUP, signal.SIG_IGN)  # a hangup too: the sweep stops its workers
     _exit_when_orphaned(alive)
     limit_threads()
-    outcome = run_job(job)
+    try:
+        outcome = run_job(job)
+    except KeyboardInterrupt:  # its stop file: stopped after a checkpoint, as the sweep asked
+        return
     conn.send(outcome.to_dict())
     conn.close()
 
@@ -169,17 +178,30 @@ class LocalBackend:
 
     @staticmethod
     def _stop(workers) -> None:
-        """Stop the workers still running (an interrupted sweep): SIGTERM, then SIGKILL."""
+        """Stop the workers still running (an interrupted sweep) as a Ray sweep does: each
+        run's stop file asks its training to stop once the interaction it is in is logged and
+        checkpointed. No signal is sent first: a worker may already hold one (``timeout`` and
+        job schedulers signal the whole process group), and a second stops it at once, losing
+        the interaction. A worker still running after ``STOP_GRACE_S``, or at a second stop of
+        the sweep, is killed."""
         workers = list(workers)
-        for w in workers:
-            if w.process.is_alive():
-                w.process.terminate()
-        for w in workers:
-            w.process.join(timeout=STOP_GRACE_S)
-            if w.process.is_alive():
-                w.process.kill()
-                w.process.join()
-            w.conn.close()
+        stop_files = [Path(w.job.run_dir) / STOP_FILE for w in workers]
+        for path in stop_files:
+            with contextlib.suppress(OSError):
+                path.touch()
+        try:
+            deadline = time.monotonic() + STOP_GRACE_S
+            for w in workers:
+                w.process.join(timeout=max(0.0, deadline - time.monotonic()))
+        finally:
+            for w in workers:
+                if w.process.is_alive():
+                    w.process.kill()
+                    w.process.join()
+                    (Path(w.job.run_dir) / RUNNING_FILE).unlink(missing_ok=True)
+                w.conn.close()
+            for path in stop_files:
+                path.unlink(missing_ok=True)
 
 
 def _record_crash(job: Job, reason: str) -> None:

@@ -14,12 +14,13 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import socket
 import threading
 import time
 from collections import deque
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from sili_robots.errors import ConfigError
 from sili_robots.runs import ERROR_FILE, RUNNING_FILE, STOP_FILE
@@ -60,9 +61,18 @@ class RayBackend:
             kwargs["address"] = self.address
         else:
             kwargs.update(num_cpus=self.workers or os.cpu_count() or 1, include_dashboard=False)
+        if self.address:
+            check_reachable(self.address)
         try:
-            with _keeping_stop_handlers():
+            with _keeping_stop_handlers() as handlers:
                 ray.init(**kwargs)
+        except SystemExit as stop:
+            if stop.code != signal.SIGTERM:
+                raise
+            # ray.init's own SIGTERM handler (exit 15) was in charge: stop as the command would
+            with contextlib.suppress(Exception):
+                ray.shutdown()
+            _as_before(signal.SIGTERM, handlers.get(signal.SIGTERM))
         except ConnectionError as err:
             raise ConfigError(f"cannot connect to Ray at {self.address!r}: {err}") from None
         except ValueError as err:  # e.g. an address ray.init cannot read
@@ -121,15 +131,38 @@ class RayBackend:
             return Outcome(job.name, "failed", error=reason)
 
 
+def check_reachable(address: str, timeout: float = 5.0) -> None:
+    """ConfigError when nothing listens at a Ray cluster's ``host:port`` (``ray://`` too):
+    ``ray.init`` would retry its connection forever, printing Ray's log lines."""
+    hostport = address.split("://", 1)[-1]
+    host, _, port = hostport.rpartition(":")
+    if not host or not port.isdigit():  # "auto", or an address ray.init names itself
+        return
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+    except OSError as err:
+        raise ConfigError(
+            f"cannot connect to Ray at {address!r}: {err.strerror or err}; is a Ray cluster's "
+            "head (`ray start --head`) running there?"
+        ) from None
+
+
+def _as_before(signum: int, handler: Any) -> NoReturn:
+    """Let ``signum`` act through ``handler``, the one the command had before ``ray.init``."""
+    if callable(handler):
+        handler(signum, None)
+    raise SystemExit(128 + signum)
+
+
 @contextlib.contextmanager
-def _keeping_stop_handlers() -> Iterator[None]:
-    """``ray.init`` installs its own SIGTERM handler in the driver (it exits with status 1);
+def _keeping_stop_handlers() -> Iterator[dict[int, Any]]:
+    """``ray.init`` installs its own SIGTERM handler in the driver (``sys.exit(15)``);
     the command's own (``sili sweep``: stop like Ctrl-C, exit 128 + signal) is put back."""
     on_main = threading.current_thread() is threading.main_thread()
     signals = STOP_SIGNALS if on_main else ()
     handlers = {s: signal.getsignal(s) for s in signals}
     try:
-        yield
+        yield handlers
     finally:
         for sig, handler in handlers.items():
             if handler is not None:

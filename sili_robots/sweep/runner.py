@@ -61,12 +61,30 @@ def plan(specs: Sequence[SweepSpec]) -> list[PlannedRun]:
     return list(runs.values())
 
 
+def former_folder(sweep_dir: Path, run: PlannedRun) -> Path | None:
+    """The run's folder under the name an earlier version gave it, when only that one exists."""
+    if run.former_name is None or run_path(sweep_dir, run.name).exists():
+        return None
+    former = run_path(sweep_dir, run.former_name)
+    return former if former.is_dir() else None
+
+
+def adopt_former_names(sweep_dir: Path, planned: Sequence[PlannedRun]) -> None:
+    """Rename each planned run's folder that an earlier version named otherwise, so the run
+    resumes (or counts as done) under its name instead of being trained again beside it."""
+    for run in planned:
+        former = former_folder(sweep_dir, run)
+        if former is not None:
+            check_not_training(sweep_dir, former.name)
+            former.rename(run_path(sweep_dir, run.name))
+
+
 def replaced_runs(sweep_dir: Path, planned: Sequence[PlannedRun]) -> list[str]:
     """The runs ``--overwrite`` removes: the planned ones and those the recorded sweep plans.
     ConfigError when that cannot be told safely: the folder is a results collection (its runs may
     be the only copy), the record is damaged, or a run is being trained."""
     sweep_dir = Path(sweep_dir)
-    names = [r.name for r in planned]
+    names = _own_names(planned)
     runs_dir = sweep_dir / RUNS_DIR
     if (sweep_dir / SWEEP_FILE).is_file():
         try:
@@ -76,7 +94,7 @@ def replaced_runs(sweep_dir: Path, planned: Sequence[PlannedRun]) -> list[str]:
                 f"{err}; --overwrite cannot tell which runs are the sweep's: remove {sweep_dir} "
                 "yourself or give another --out"
             ) from None
-        names += [r.name for r in recorded if r.name not in names]
+        names += [n for n in _own_names(recorded) if n not in names]
     elif runs_dir.is_dir() and any(runs_dir.iterdir()):
         raise ConfigError(
             f"{sweep_dir} is a results collection, not a sweep (no {SWEEP_FILE}): --overwrite "
@@ -85,6 +103,11 @@ def replaced_runs(sweep_dir: Path, planned: Sequence[PlannedRun]) -> list[str]:
     for name in names:
         check_not_training(sweep_dir, name)
     return names
+
+
+def _own_names(planned: Sequence[PlannedRun]) -> list[str]:
+    """The runs' names, and the names earlier versions gave them (``PlannedRun.former_name``)."""
+    return [n for r in planned for n in (r.name, r.former_name) if n is not None]
 
 
 def extended(specs: Sequence[SweepSpec], interactions: int, sweep_dir: Path) -> list[SweepSpec]:
@@ -136,6 +159,7 @@ def run_sweep(
     with sweep_lock(sweep_dir):
         if overwrite:
             clear_sweep(sweep_dir, replaced_runs(sweep_dir, planned))
+        adopt_former_names(sweep_dir, planned)
         # every run checked before anything changes; a shorter one (an extension cut short, or
         # one asked for now) goes on to the planned budget
         shorter = [run for run in planned if recorded and shorter_run(sweep_dir, run)]

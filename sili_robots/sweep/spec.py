@@ -8,6 +8,7 @@ the same name in every sweep and a re-invoked sweep finds its earlier runs.
 from __future__ import annotations
 
 import contextlib
+import functools
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
@@ -144,6 +145,9 @@ class PlannedRun:
 
     name: str
     config: RunConfig
+    #: the name earlier versions gave the same run (they named the sweep's ``--latent`` also
+    #: for methods that take none or take it as another kind); a sweep resumes it under ``name``
+    former_name: str | None = None
 
 
 #: the most seeds one sweep takes (far beyond any study; more is a slip such as 0-99999999)
@@ -374,16 +378,20 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                     )
                     b = base.agent.sili.beta
                     label = "schedule" if isinstance(b, Schedule) else b
+                    taken = _latent_of(latent, method)  # what the run learns, not what was asked
+                    named = None if taken == _latent_of(task_default_latent, method) else taken
                     for seed in spec.seeds:
-                        run = run_name(
+                        naming = functools.partial(
+                            run_name,
                             name,
                             method,
                             seed,
                             beta=label if method in BETA_METHODS else None,
                             controller=controller,
-                            latent=None if latent == task_default_latent else latent,
                             profile=profile,
                         )
+                        run = naming(latent=named)
+                        former = naming(latent=None if latent == task_default_latent else latent)
                         cfg = replace(
                             base,
                             task_id=task_id,
@@ -391,7 +399,7 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                             interactions=spec.interactions,
                             checkpoint_every=spec.checkpoint_every,
                         )
-                        runs.append(PlannedRun(run, cfg))
+                        runs.append(PlannedRun(run, cfg, former if former != run else None))
     names = [r.name for r in runs]
     clash = sorted({n for n in names if names.count(n) > 1})
     if clash:  # e.g. two b values that print alike (format_beta keeps 6 digits)

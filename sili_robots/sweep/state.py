@@ -110,7 +110,21 @@ def training_worker(run_dir: Path) -> int | None:
         return None
     except PermissionError:
         pass  # alive, another user's
+    started = info.get("started")
+    if started is not None and process_started(pid) not in (None, started):
+        return None  # the pid is another process's now (the claim's outlived a kill -9)
     return pid
+
+
+def process_started(pid: int) -> str | None:
+    """Which process ``pid`` is: this boot's id and its start time (Linux); None elsewhere.
+    A pid alone is reused once its process is gone, after a reboot or in a new container."""
+    try:
+        boot = Path("/proc/sys/kernel/random/boot_id").read_text().strip()
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        return f"{boot}:{stat.rsplit(')', 1)[1].split()[19]}"  # field 22: start time, in ticks
+    except (OSError, IndexError):
+        return None
 
 
 @contextlib.contextmanager
@@ -118,7 +132,9 @@ def training_claim(run_dir: Path) -> Iterator[None]:
     """Mark ``run_dir`` as trained by this process while the block runs, so that a sweep or a
     second ``sili train --resume`` refuses it (``training_worker``) instead of training beside."""
     path = Path(run_dir) / RUNNING_FILE
-    write_text(path, json.dumps({"pid": os.getpid(), "host": socket.gethostname()}))
+    pid = os.getpid()
+    claim = {"pid": pid, "host": socket.gethostname(), "started": process_started(pid)}
+    write_text(path, json.dumps(claim))
     try:
         yield
     finally:
@@ -234,8 +250,8 @@ def recorded_specs(sweep_dir: Path) -> list[SweepSpec]:
         for spec in specs:
             validate(spec)  # a value no sweep can have (a hand edit)
         return specs
-    except ConfigError:
-        raise
+    except ConfigError as err:  # named with the file: the value is in it, not on the command line
+        raise ConfigError(f"{path} records a sweep that cannot run: {err}") from None
     except (TypeError, AttributeError, KeyError, ValueError) as err:
         damage = f"{type(err).__name__}: {err}"
         raise ConfigError(f"{path} is damaged ({damage}); {DAMAGED_SWEEP}") from None

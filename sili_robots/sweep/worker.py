@@ -73,7 +73,7 @@ def run_job(job: Job) -> Outcome:
             torch.set_num_threads(1)
             cfg = RunConfig.from_dict(job.config)
             with _tensorboard(run_dir, job.tensorboard):
-                stop_file = run_dir / STOP_FILE  # how a Ray sweep stops it
+                stop_file = run_dir / STOP_FILE  # how a sweep stops it
                 train(cfg, run_dir, state == "resumable", progress=False, stop_file=stop_file)
     except (KeyboardInterrupt, SystemExit):
         raise  # the sweep is being stopped: the run stays resumable from its checkpoint
