@@ -210,7 +210,8 @@ def versions(threads: int = 1) -> dict[str, str]:
 
 #: written by a failed sweep run (the traceback or how its worker died); removed when it succeeds
 ERROR_FILE = "error.txt"
-#: written by a sweep worker while it trains a run: {"pid": ..., "host": ...}
+#: written by the process that trains a run (``sili train``, a sweep worker, ``SILI.learn``):
+#: {"pid": ..., "host": ..., "started": boot id and start time, which tell a reused pid}
 RUNNING_FILE = "worker.json"
 #: written by a sweep that is stopping: its worker stops once the interaction it is in is saved
 STOP_FILE = "stop"

@@ -284,8 +284,13 @@ def test_learn_stopped_by_ctrl_c_leaves_the_model_at_its_checkpoint_and_counts_o
     monkeypatch.setattr(training, "play_interaction", ctrl_c_in_the_fourth)
     run = tmp_path / "run"
     model = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run, checkpoint_every=50)
-    with pytest.raises(KeyboardInterrupt):
-        model.learn(2000)
+    # as at a terminal: a background job (e.g. a CI runner's) starts with SIGINT ignored
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            model.learn(2000)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert model.agent.buffer.n == 4  # the checkpoint's agent, not the untrained one
     model.learn(2)
     assert len((run / "metrics.csv").read_text().splitlines()) == 1 + 6

@@ -182,6 +182,8 @@ def test_sweep_refuses_bad_seeds_a_task_twice_and_a_latent_no_method_takes(tmp_p
     mixed = ["sac,lili", "--tasks", "circle-3", "--latent", "continuous"]
     code, out, _ = _main(*sweep, *mixed)  # SAC learns no latent: not named after one
     assert code == 0 and "circle-3__sac__s0\tnew" in out and "lili-continuous__s0" in out, out
+    code, out, _ = _main(*sweep, *mixed, "--overwrite")  # nothing on disk: nothing removed
+    assert code == 0 and "removed" not in out and "circle-3__sac__s0\tnew" in out, out
     assert not (tmp_path / "s").exists()  # a dry run writes nothing
 
 

@@ -198,18 +198,24 @@ def test_a_body_in_front_of_another_counts_both_as_drawn():
     assert seen.ok and not unseen.ok
 
 
-def test_markers_out_of_the_cameras_view_are_not_asked_for():
+def test_a_marker_out_of_the_cameras_view_is_asked_for_only_if_it_must_be_seen():
     from sili_robots.preview.check import marker_results, problems
     from sili_robots.preview.scenes.base import Marker
 
     rgb = _picture((20, 20))
     png = _png(rgb)
-    here, away = Marker("here", (0, 0, 0), RED, 0.1, 0.5), Marker("away", (9, 9, 9), RED, 0.1)
-    results = marker_results(rgb, [here, away], [(20, 20), (-1, -1)], [(24, 20), (-1, -1)])
+    here = Marker("here", (0, 0, 0), RED, 0.1, 0.5)
+    passed = Marker("passed", (9, 9, 9), RED, 0.1, may_leave_view=True)
+    results = marker_results(rgb, [here, passed], [(20, 20), (-1, -1)], [(24, 20), (-1, -1)])
     assert [r.in_view for r in results] == [True, False] and all(r.ok for r in results)
     assert problems(png, results) == []
-    alone = marker_results(rgb, [away], [(55, 3)], [(60, 3)])
-    assert problems(png, alone) == ["no scene element is in the camera's view (1 looked for)"]
+    framed_badly = marker_results(rgb, [here], [(55, 3)], [(60, 3)])  # the camera looks away
+    assert problems(png, framed_badly) == [
+        "here is not in the camera's view (at pixel (55, 3) of 40 x 40)"
+    ]
+    # a centre in view whose edge point lies behind the camera: looked for, with a small radius
+    (edge_behind,) = marker_results(rgb, [here], [(20, 20)], [(-1, -1)])
+    assert edge_behind.ok and edge_behind.radius_px == 2.0
 
 
 def _png(rgb):

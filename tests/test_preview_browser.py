@@ -16,6 +16,7 @@ from pathlib import Path
 
 import meshcat
 import meshcat.transformations as tf
+import numpy as np
 import pytest
 import umsgpack
 from PIL import Image
@@ -122,6 +123,22 @@ def test_a_body_hidden_behind_another_passes_the_check(task, seed, hidden_by, br
     plain = [(replace(m, behind=()), p) for m, p in prev.markers(shot.frame)]
     again = render_html(html, shot.frame, plain, browser=browser)
     assert any(" not seen at pixel" in p for p in again.problems())  # without looking behind
+
+
+def test_a_point_behind_the_camera_is_out_of_the_picture(browser, tmp_path):
+    """Projected as is, a point straight behind the camera lands mid-picture (mirrored)."""
+    from sili_robots.preview.build import world_point
+    from sili_robots.preview.scenes.base import Marker
+
+    prev = _record("circle-3")
+    html = prev.write_html(tmp_path / "p.html")
+    frame = prev.frame()
+    cam = prev.scene.camera(prev.recording)
+    behind = 2 * np.asarray(cam.position) - np.asarray(cam.target)
+    marker = Marker("behind", tuple(behind), 0xD62728, 0.1)
+    point = world_point(prev.scene, prev.recording, marker.position, frame)
+    (result,) = render_html(html, frame, [(marker, point)], browser=browser).markers
+    assert result.pixel == (-1, -1) and not result.in_view and not result.ok
 
 
 def _variant(prev, tmp_path, draw=True, shift=None, path=""):

@@ -369,9 +369,11 @@ def test_a_record_that_cannot_run_is_named_and_a_dry_run_refuses_it_too(tmp_path
     kept["invocations"][0]["betas"] = [5]  # a hand edit no sweep can have
     record.write_text(json.dumps(kept))
     capsys.readouterr()
-    assert main(["sweep", "--resume", str(out), "--dry-run"]) == 2
-    err = capsys.readouterr().err
-    assert f"{record} records a sweep that cannot run: --beta applies to methods" in err, err
+    for again in (["sweep", "--resume", str(out)], [*base, "--interactions", "2"]):
+        for dry in (["--dry-run"], []):  # a new invocation joins the record: it must read too
+            assert main([*again, *dry]) == 2
+            err = capsys.readouterr().err
+            assert f"{record} records a sweep that cannot run: --beta applies to" in err, err
     record.write_text("{")
     for dry in (["--dry-run"], []):  # a new invocation is added to the record: it must read
         assert main([*base, "--interactions", "2", *dry]) == 2
@@ -475,7 +477,15 @@ def test_a_run_an_earlier_version_named_after_the_sweeps_latent_is_resumed_not_r
     assert main([*args, "--interactions", "2", *FAST_ARGS, "--out", str(out), "--no-progress"]) == 0
     runs = out / "runs"
     (runs / "circle-3__sac__s0").rename(runs / "circle-3__sac-continuous__s0")  # as named before
+    # a resume refused for another run's sake renames nothing
+    config = runs / "circle-3__stable-continuous__s0" / "config.json"
+    kept = config.read_text()
+    config.write_text(kept.replace('"seed": 0', '"seed": 7'))
     capsys.readouterr()
+    assert main(["sweep", "--resume", str(out), "--no-progress"]) == 2
+    assert "seed: 7 on disk, 0 now" in capsys.readouterr().err
+    assert (runs / "circle-3__sac-continuous__s0").is_dir()
+    config.write_text(kept)
     assert main(["sweep", "--resume", str(out), "--dry-run"]) == 0
     assert capsys.readouterr().out.splitlines()[0] == (
         "circle-3__sac__s0\tdone (its folder circle-3__sac-continuous__s0 is renamed to it first)"
@@ -793,3 +803,14 @@ def test_a_sweeps_run_extended_by_hand_updates_the_sweeps_tables(tmp_path, capsy
     assert main(["train", "--resume", str(run), "--interactions", "5", "--no-progress"]) == 0
     assert pd.read_csv(out / "runs.csv")["interactions_logged"].tolist() == [5]
     assert len(pd.read_csv(out / "results.csv")) == 5
+
+
+def test_a_ray_address_is_probed_where_its_port_can_be_told():
+    from sili_robots.errors import ConfigError
+    from sili_robots.sweep.ray_backend import check_reachable
+
+    for nothing_there in ("127.0.0.1:1", "[::1]:1", "ray://127.0.0.1:1", "localhost:1"):
+        with pytest.raises(ConfigError, match=r"cannot connect to Ray at .*: Connection refused"):
+            check_reachable(nothing_there)
+    for not_probed in ("auto", "::1", "fe80::1%eth0"):  # ray.init reads these itself
+        check_reachable(not_probed)

@@ -6,7 +6,6 @@ import argparse
 import json
 import os
 import re
-from dataclasses import replace
 from pathlib import Path
 
 from sili_robots.agent import LATENT_CHOICES, PROFILES
@@ -221,7 +220,7 @@ def _specs_and_dir(args: argparse.Namespace) -> tuple[list[SweepSpec], Path]:
 def _dry_run(args: argparse.Namespace, specs: list[SweepSpec], sweep_dir: Path) -> int:
     """Print each planned run and what the sweep would do with it; refuse what it would."""
     from sili_robots.runs import CHECKPOINT, ERROR_FILE
-    from sili_robots.sweep.runner import former_folder, plan, replaced_runs
+    from sili_robots.sweep.runner import as_found, plan, replaced_runs
     from sili_robots.sweep.state import (
         SWEEP_FILE,
         check_existing,
@@ -236,17 +235,19 @@ def _dry_run(args: argparse.Namespace, specs: list[SweepSpec], sweep_dir: Path) 
     if args.overwrite:  # what is on disk goes: every planned run is new
         names = [r.name for r in planned]
         for name in replaced_runs(sweep_dir, planned):
-            print(f"{name}\t{'new' if name in names else 'removed'}")
+            if name in names:
+                print(f"{name}\tnew")
+            elif run_path(sweep_dir, name).is_dir():
+                print(f"{name}\tremoved")
         print(f"{len(planned)} runs")
         return 0
     if args.resume is None and (Path(sweep_dir) / SWEEP_FILE).is_file():
         recorded_specs(sweep_dir)  # a new invocation is added to the record: it must read
-    for run_ in planned:
-        shown, notes = run_.name, []
-        former = former_folder(sweep_dir, run_)
-        if former is not None:  # the sweep renames it first
-            notes.append(f"its folder {former.name} is renamed to it first")
-            run_ = replace(run_, name=former.name)
+    for planned_run in planned:
+        run_ = as_found(sweep_dir, planned_run)
+        shown, notes = planned_run.name, []
+        if run_ is not planned_run:  # the sweep renames it first
+            notes.append(f"its folder {run_.name} is renamed to it first")
         path = run_path(sweep_dir, run_.name)
         check_not_training(sweep_dir, run_.name)
         if args.resume is not None and shorter_run(sweep_dir, run_):
@@ -288,13 +289,11 @@ def run(args: argparse.Namespace) -> int:
     if args.resume is None:
         check_sweep_dir(sweep_dir, "--out")
     backend = _backend(args)  # its options checked in a dry run too; nothing starts yet
+    if args.ray_address:  # before the sweep writes anything
+        backend.check_reachable()
     writable_dir(sweep_dir, "--resume" if args.resume else "--out")  # creates nothing
     if args.dry_run:
         return _dry_run(args, specs, sweep_dir)
-    if args.ray_address:  # before the sweep writes anything
-        from sili_robots.sweep.ray_backend import check_reachable
-
-        check_reachable(args.ray_address)
     report = run_sweep(
         specs,
         sweep_dir,

@@ -1,11 +1,12 @@
 """Does a rendered preview show what the scene says it shows? Checked like a person would.
 
 The picture must not be blank (a meshcat page with an empty scene is just the background), and
-each of the scene's ``Marker``s in the camera's view must be visible: around the pixel where the
-page's own camera projects the marker's world point, enough pixels have the marker's colour
-(or change when its body is hidden), in the picture or, for a marker that may be behind another
-body, with that body hidden. An empty scene, a scene drawn in the wrong place or a page that
-failed to load fails the same test; so does a picture in which no marker is in view.
+each of the scene's ``Marker``s must be visible: around the pixel where the page's own camera
+projects the marker's world point, enough pixels have the marker's colour (or change when its
+body is hidden), in the picture or, for a marker that may be behind another body, with that body
+hidden. A marker the camera need not always see is not looked for out of the picture; any other
+out of the picture is a framing error. An empty scene, a scene drawn in the wrong place, a camera
+pointed elsewhere or a page that failed to load fails the same test.
 """
 
 from __future__ import annotations
@@ -26,12 +27,14 @@ class MarkerResult:
     pixel: tuple[float, float]
     radius_px: float
     fraction: float  # share of pixels around ``pixel`` with the marker's colour
-    #: the point projects into the picture; one outside the camera's view is not asked for
+    #: the point projects into the picture
     in_view: bool = True
 
     @property
     def ok(self) -> bool:
-        return not self.in_view or self.fraction >= self.marker.min_fraction
+        if not self.in_view:
+            return self.marker.may_leave_view
+        return self.fraction >= self.marker.min_fraction
 
 
 def load_rgb(png: bytes) -> np.ndarray:
@@ -77,7 +80,8 @@ def marker_results(
     shots = {(): rgb, **(hidden or {})}
     out = []
     for m, c, e in zip(markers, centres, edges, strict=True):
-        r = max(2.0, float(np.hypot(e[0] - c[0], e[1] - c[1])))
+        behind = tuple(e) == (-1, -1)  # the edge point behind the camera: no size to go by
+        r = 2.0 if behind else max(2.0, float(np.hypot(e[0] - c[0], e[1] - c[1])))
         if not (0 <= c[0] < w and 0 <= c[1] < h):
             out.append(MarkerResult(m, c, r, 0.0, in_view=False))
             continue
@@ -117,11 +121,13 @@ def problems(
     blank = blank_problem(rgb, covered)
     if blank:
         found.append(blank)
-    results = results_or_none or []
-    if results and not any(r.in_view for r in results):
-        found.append(f"no scene element is in the camera's view ({len(results)} looked for)")
-    for r in results:
-        if not r.ok:
+    for r in results_or_none or []:
+        if not r.in_view and not r.ok:
+            found.append(
+                f"{r.marker.name} is not in the camera's view (at pixel ({r.pixel[0]:.0f}, "
+                f"{r.pixel[1]:.0f}) of {rgb.shape[1]} x {rgb.shape[0]})"
+            )
+        elif not r.ok:
             what = (
                 f"change when '{r.marker.toggle}' is hidden"
                 if r.marker.toggle is not None

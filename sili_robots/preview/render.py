@@ -31,9 +31,9 @@ class Rendered:
         return self.page.png
 
     def seen_summary(self) -> str:
-        """ "7 scene elements seen" (and how many were out of the camera's view)."""
-        seen = sum(r.in_view for r in self.markers)
-        away = len(self.markers) - seen
+        """What the check saw, e.g. "7 scene elements seen, 1 out of view"."""
+        seen = sum(r.in_view and r.ok for r in self.markers)
+        away = sum(not r.in_view for r in self.markers)
         return f"{seen} scene elements seen" + (f", {away} out of view" if away else "")
 
     def problems(self) -> list[str]:

@@ -8,8 +8,9 @@ from typing import Protocol
 
 from sili_robots.sweep.worker import Job, Outcome
 
-#: how long a worker asked to stop (SIGTERM) may take to finish and checkpoint its interaction
-#: before it is killed (by the sweep, either backend) or exits (an orphan whose sweep is gone)
+#: how long a worker asked to stop (its run's stop file, or SIGTERM) may take to finish and
+#: checkpoint its interaction before it is killed (by the sweep, either backend) or exits (an
+#: orphan whose sweep is gone)
 STOP_GRACE_S = 30.0
 
 

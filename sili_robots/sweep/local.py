@@ -29,6 +29,8 @@ from sili_robots.stopping import exit_on_signal
 from sili_robots.sweep.backend import STOP_GRACE_S, Monitor, describe_exit
 from sili_robots.sweep.worker import THREAD_ENV, Job, Outcome, limit_threads, run_job
 
+#: how long a worker sent SIGTERM after its grace may take to run its `finally` blocks
+KILL_AFTER_S = 5.0
 #: imported once by the forkserver, so forked workers start with them loaded (the first keeps
 #: the forkserver alive through a stop signal sent to the whole process group)
 PRELOAD = [
@@ -183,7 +185,7 @@ class LocalBackend:
         checkpointed. No signal is sent first: a worker may already hold one (``timeout`` and
         job schedulers signal the whole process group), and a second stops it at once, losing
         the interaction. A worker still running after ``STOP_GRACE_S``, or at a second stop of
-        the sweep, is killed."""
+        the sweep, is sent SIGTERM, and killed if it is still there ``KILL_AFTER_S`` later."""
         workers = list(workers)
         stop_files = [Path(w.job.run_dir) / STOP_FILE for w in workers]
         for path in stop_files:
@@ -195,6 +197,9 @@ class LocalBackend:
                 w.process.join(timeout=max(0.0, deadline - time.monotonic()))
         finally:
             for w in workers:
+                if w.process.is_alive():  # SIGTERM first: its `finally` blocks close simulators
+                    w.process.terminate()
+                    w.process.join(timeout=KILL_AFTER_S)
                 if w.process.is_alive():
                     w.process.kill()
                     w.process.join()

@@ -50,6 +50,13 @@ class RayBackend:
         self.address = address
         self.workers = workers
         self.retries = retries
+        self._reachable = False
+
+    def check_reachable(self) -> None:
+        """ConfigError when nothing listens at ``address`` (see ``check_reachable``); once."""
+        if self.address and not self._reachable:
+            check_reachable(self.address)
+            self._reachable = True
 
     def _connect(self, ray: Any) -> bool:
         """Connect (or start a local instance); True when this call started Ray."""
@@ -61,8 +68,7 @@ class RayBackend:
             kwargs["address"] = self.address
         else:
             kwargs.update(num_cpus=self.workers or os.cpu_count() or 1, include_dashboard=False)
-        if self.address:
-            check_reachable(self.address)
+        self.check_reachable()
         try:
             with _keeping_stop_handlers() as handlers:
                 ray.init(**kwargs)
@@ -136,10 +142,14 @@ def check_reachable(address: str, timeout: float = 5.0) -> None:
     ``ray.init`` would retry its connection forever, printing Ray's log lines."""
     hostport = address.split("://", 1)[-1]
     host, _, port = hostport.rpartition(":")
+    if host.startswith("[") and host.endswith("]"):
+        host = host[1:-1]  # [v6]:port
+    elif ":" in host:  # a bare IPv6 address: where its port starts cannot be told
+        return
     if not host or not port.isdigit():  # "auto", or an address ray.init names itself
         return
     try:
-        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
+        socket.create_connection((host, int(port)), timeout=timeout).close()
     except OSError as err:
         raise ConfigError(
             f"cannot connect to Ray at {address!r}: {err.strerror or err}; is a Ray cluster's "

@@ -69,13 +69,18 @@ def former_folder(sweep_dir: Path, run: PlannedRun) -> Path | None:
     return former if former.is_dir() else None
 
 
+def as_found(sweep_dir: Path, run: PlannedRun) -> PlannedRun:
+    """The run under the name its folder has on disk (an earlier version's, until renamed)."""
+    former = former_folder(sweep_dir, run)
+    return run if former is None else replace(run, name=former.name)
+
+
 def adopt_former_names(sweep_dir: Path, planned: Sequence[PlannedRun]) -> None:
     """Rename each planned run's folder that an earlier version named otherwise, so the run
     resumes (or counts as done) under its name instead of being trained again beside it."""
     for run in planned:
         former = former_folder(sweep_dir, run)
         if former is not None:
-            check_not_training(sweep_dir, former.name)
             former.rename(run_path(sweep_dir, run.name))
 
 
@@ -159,14 +164,17 @@ def run_sweep(
     with sweep_lock(sweep_dir):
         if overwrite:
             clear_sweep(sweep_dir, replaced_runs(sweep_dir, planned))
-        adopt_former_names(sweep_dir, planned)
-        # every run checked before anything changes; a shorter one (an extension cut short, or
-        # one asked for now) goes on to the planned budget
-        shorter = [run for run in planned if recorded and shorter_run(sweep_dir, run)]
+        elif not recorded and (sweep_dir / SWEEP_FILE).is_file():
+            recorded_specs(sweep_dir)  # this invocation joins the record: it must read back
+        # every run checked (as found on disk) before anything changes; a shorter one (an
+        # extension cut short, or one asked for now) goes on to the planned budget
+        found = {run.name: as_found(sweep_dir, run) for run in planned}
+        shorter = [run for run in planned if recorded and shorter_run(sweep_dir, found[run.name])]
         for run in planned:
             if run not in shorter:
-                check_existing(sweep_dir, run)
-            check_not_training(sweep_dir, run.name)  # e.g. by sili train --resume
+                check_existing(sweep_dir, found[run.name])
+            check_not_training(sweep_dir, found[run.name].name)  # e.g. by sili train --resume
+        adopt_former_names(sweep_dir, planned)
         if recorded:
             write_invocations(sweep_dir, specs)
         if shorter:

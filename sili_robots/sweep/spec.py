@@ -1,8 +1,8 @@
 """What a sweep is: tasks x methods x seeds x b values x controllers, expanded into run configs.
 
-Every run gets a name made only from what distinguishes it (task, controller, method, latent
-kind when not the task's default, b for the methods where b is free, seed), so the same run has
-the same name in every sweep and a re-invoked sweep finds its earlier runs.
+Every run gets a name made only from what distinguishes it (task, controller, method, the latent
+kind it learns when not the one it learns by default, b for the methods where b is free, seed),
+so the same run has the same name in every sweep and a re-invoked sweep finds its earlier runs.
 """
 
 from __future__ import annotations

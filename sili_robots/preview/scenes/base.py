@@ -40,6 +40,9 @@ class Marker:
     #: other, the arm over a goal): where the marker is not seen, it is looked for again with
     #: them hidden, so a body drawn where it belongs but behind another still counts as drawn
     behind: tuple[str, ...] = ()
+    #: the camera need not see it in every frame (a car far ahead, a hazard passed): out of the
+    #: picture it is not looked for; any other marker out of the picture is a framing error
+    may_leave_view: bool = False
 
     def views(self) -> list[tuple[str, ...]]:
         """The sets of nodes hidden in the extra screenshots this marker is checked with."""

@@ -213,12 +213,23 @@ class DrivingScene(TaskScene):
         ego_node, opp_node = "vehicles/ego", "vehicles/opponent"
         cars = (ego_node, opp_node)  # either may stand in front of the other (a collision)
 
-        def car(name: str, at: np.ndarray, node: str, other: str) -> Marker:
+        def car(name: str, at: np.ndarray, node: str, other: str, leaves: bool) -> Marker:
             return Marker(
-                name, (at[0] - length / 2, at[1], 1.0), 0, 0.6, 0.6, toggle=node, behind=(other,)
+                name,
+                (at[0] - length / 2, at[1], 1.0),
+                0,
+                0.6,
+                0.6,
+                toggle=node,
+                behind=(other,),
+                may_leave_view=leaves,
             )
 
-        out = [car("ego", ego, ego_node, opp_node), car("opponent", opp, opp_node, ego_node)]
+        # the camera follows the ego; the rest may be out of its view (far ahead, or passed)
+        out = [
+            car("ego", ego, ego_node, opp_node, False),
+            car("opponent", opp, opp_node, ego_node, True),
+        ]
         w = s["lane_width"]
         ahead = ego[0] + 12.0
         intent_y = (fr["target_lane"] - s["centre"]) * w
@@ -226,7 +237,9 @@ class DrivingScene(TaskScene):
             if lane_y == intent_y:
                 continue
             if all(abs(c[1] - lane_y) > w / 2 or abs(c[0] - ahead) > 8 for c in (ego, opp)):
-                out.append(Marker("road", (ahead, lane_y, 0.0), ROAD, 0.5, 0.6))
+                out.append(
+                    Marker("road", (ahead, lane_y, 0.0), ROAD, 0.5, 0.6, may_leave_view=True)
+                )
                 break
         if -25.0 < s["hazard_x"] - ego[0] < 70.0:
             out.append(
@@ -238,6 +251,7 @@ class DrivingScene(TaskScene):
                     0.6,
                     toggle="hazard",
                     behind=cars,
+                    may_leave_view=True,
                 )
             )
         if -12.0 < s["red_line"] - ego[0] < 70.0:
@@ -249,6 +263,7 @@ class DrivingScene(TaskScene):
                     0.25,
                     0.3,
                     behind=cars,
+                    may_leave_view=True,
                 )
             )
         return out
