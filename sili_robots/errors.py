@@ -24,6 +24,11 @@ def check_seed(seed: object) -> int:
     return int(seed)
 
 
+def is_number(value: object) -> bool:
+    """A real number, numpy's too (``np.float32(0.1)``), and not a bool."""
+    return not isinstance(value, bool) and isinstance(value, numbers.Real)
+
+
 def one_line_errors(main: Callable[[], object], prog: str) -> None:
     """Run a script's ``main``: bad input (``ConfigError``) is one line on stderr and exit 2, as
     the CLI does, not a traceback."""

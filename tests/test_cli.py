@@ -10,6 +10,8 @@ import pytest
 from cli_helpers import sili as sili_in_process
 from fast_settings import FAST_ARGS
 
+from sili_robots.policies import scripted_policy
+from sili_robots.rollout import run_interactions
 from sili_robots.tasks import make_task
 
 GRID = Path(__file__).resolve().parents[1] / "results" / "paper-grid"
@@ -142,7 +144,14 @@ def test_bad_input_a_user_types_names_the_command_the_value_and_what_is_allowed(
     done = sili_in_process("train", "--task", "x/y:Z")
     assert "; or a task class of your own as package.module:ClassName" in done.stderr
     done = sili_in_process("rollout", DOORS, "--policy", "still", "--interactions", "3")
-    assert done.returncode == 0 and "mean task reward per interaction: " in done.stdout
+    assert done.returncode == 0 and "task reward per interaction (after the first): " in done.stdout
+    done = sili_in_process("rollout", "circle-3", "--policy", "random", "--interactions", "3")
+    env = make_task("circle-3")
+    played = run_interactions(env, scripted_policy(env, "random"), 3, seed=0)
+    env.close()
+    later = np.mean([s.task_reward for s in played[1:]])  # as sili bounds counts
+    assert f"mean task reward per interaction (after the first): {later:.3f}" in done.stdout
+    assert abs(later - np.mean([s.task_reward for s in played])) > 1e-3  # the first differs
     done = sili_in_process(
         "rollout", "circle-3", "--env-kwarg", "horizon=10", "--interactions", "2"
     )

@@ -140,7 +140,7 @@ def test_bad_arguments_are_named():
         ConfigError, match=r"circle-3 fixes variant='3' .*variant='7' is not allowed"
     ):
         make_task("circle-3", variant="7")
-    with pytest.raises(ConfigError, match="horizon must be an integer >= 1, got 0"):
+    with pytest.raises(ConfigError, match=r"horizon must be an integer in \[1, 10000\], got 0"):
         make_task("circle-3", horizon=0)
     with pytest.raises(ConfigError, match="unknown task 'nope'; allowed: circle-3"):
         make_task("nope")
@@ -150,6 +150,40 @@ def test_bad_arguments_are_named():
         env.step(np.zeros(3))
     with pytest.raises(ConfigError, match="finite"):
         env.step(np.array([np.nan, 0.0]))
+
+
+def test_task_arguments_take_numpy_numbers_their_printed_bounds_and_name_bad_ones():
+    from sili_robots.tasks.speaker_listener import SpeakerListenerEnv
+
+    assert CircleEnv(outside_margin=np.float32(0.25)).outside_margin == 0.25
+    with pytest.raises(ConfigError, match=r"horizon must be an integer in .* got 100000000000"):
+        CircleEnv(horizon=10**11)  # named here, not an allocation failure of a rollout
+    with pytest.raises(ConfigError, match=r"speaker must be an \(x, y\) position .*got 'ab'"):
+        SpeakerListenerEnv(speaker="ab")
+
+
+@pytest.mark.parametrize("start_z", [0.86, np.float32(1.0), 1.1])
+def test_sawyer_takes_the_start_heights_its_message_names(start_z):
+    from sili_robots.tasks.sawyer_reach import START_Z_RANGE, SawyerReachEnv
+
+    assert START_Z_RANGE == (0.86, 1.1)
+    env = SawyerReachEnv(start_z=start_z)
+    env.close()
+    with pytest.raises(ConfigError, match=r"start_z must be a height in \[0.86, 1.1\] m, got 1.2"):
+        SawyerReachEnv(start_z=1.2)
+
+
+def test_an_observation_of_another_shape_than_the_space_is_named():
+    class Short(TwoDoorsEnv):
+        def _base_observation(self):
+            return np.zeros(1)  # the space says 2 values: numpy would broadcast it silently
+
+    with pytest.raises(
+        ConfigError,
+        match=r"Short._base_observation\(\) returned shape \(1,\); its observation_space has "
+        r"shape \(2,\)",
+    ):
+        Short().reset(seed=0)
 
 
 def test_an_action_space_other_than_minus_one_to_one_is_refused():

@@ -1,4 +1,6 @@
-"""``sili rollout``: play a scripted policy on a task and print per-interaction results."""
+"""``sili rollout``: play a scripted policy on a task and print its mean task reward and how
+often the opponent kept its strategy, both after the game's first interaction (as ``sili
+bounds`` counts: the first has no interaction of this policy before it)."""
 
 from __future__ import annotations
 
@@ -43,14 +45,17 @@ def run(args: argparse.Namespace) -> int:
         )
     finally:
         env.close()
-    rewards = np.array([s.task_reward for s in summary])
-    stable = np.array([not s.strategy_changed for s in summary[1:]])
     given = "".join(f" {k}={v!r}" for k, v in env_kwargs.items())
     print(f"task={args.task}{given} policy={args.policy} interactions={args.interactions}")
-    print(f"mean task reward per interaction: {rewards.mean():.3f}")
-    if stable.size:  # the first has no interaction of this policy before it
-        print(
-            "fraction of interactions with the true strategy unchanged (after the first): "
-            f"{stable.mean():.3f}"
-        )
+    if len(summary) == 1:
+        print(f"task reward of the one interaction: {summary[0].task_reward:.3f}")
+        return 0
+    later = summary[1:]  # the first has no interaction of this policy before it
+    rewards = np.array([s.task_reward for s in later])
+    stable = np.array([not s.strategy_changed for s in later])
+    print(f"mean task reward per interaction (after the first): {rewards.mean():.3f}")
+    print(
+        "fraction of interactions with the true strategy unchanged (after the first): "
+        f"{stable.mean():.3f}"
+    )
     return 0

@@ -31,6 +31,9 @@ from sili_robots.errors import ConfigError
 StrategyId = int | float
 #: what ``reset(options=...)`` takes: restart the game, restore a saved one, start from z
 RESET_OPTIONS = ("restart", "restore", "strategy")
+#: the longest interaction a task takes (steps): far beyond the paper's (50), and small enough
+#: that a slip (1e11) is named here, not met as a failed allocation of the history's arrays
+LONGEST_HORIZON = 10_000
 
 
 class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
@@ -61,8 +64,11 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         return env
 
     def __init__(self, horizon: int) -> None:
-        if isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer)) or horizon < 1:
-            raise ConfigError(f"horizon must be an integer >= 1, got {horizon!r}")
+        whole = not isinstance(horizon, bool) and isinstance(horizon, (int, np.integer))
+        if not (whole and 1 <= horizon <= LONGEST_HORIZON):
+            raise ConfigError(
+                f"horizon must be an integer in [1, {LONGEST_HORIZON}], got {horizon!r}"
+            )
         self.horizon = int(horizon)
         self.interaction = -1  # index of the current interaction; -1 before the first reset
         self.t = 0
@@ -255,11 +261,18 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
             )
         if not np.all(np.isfinite(arr)):
             raise ConfigError(f"action must be finite, got {arr.tolist()}")
+        # outside the box: clipped to it, as gymnasium's ClipAction (a policy's noise may cross it)
         return np.clip(arr, self.action_space.low, self.action_space.high)
 
     def _observation(self) -> np.ndarray:
         obs = np.asarray(self._base_observation(), np.float32)
-        return np.clip(obs, self.observation_space.low, self.observation_space.high)
+        space = self.observation_space
+        if obs.shape != space.shape:  # a task's own mistake: numpy would broadcast or fail
+            raise ConfigError(
+                f"{type(self).__name__}._base_observation() returned shape {obs.shape}; its "
+                f"observation_space has shape {space.shape}"
+            )
+        return np.clip(obs, space.low, space.high)
 
     def _info(self) -> dict[str, Any]:
         return {

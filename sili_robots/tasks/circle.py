@@ -38,7 +38,7 @@ from typing import Any, ClassVar
 import numpy as np
 from gymnasium import spaces
 
-from sili_robots.errors import ConfigError, check_choice
+from sili_robots.errors import ConfigError, check_choice, is_number
 from sili_robots.tasks.base import RepeatedInteractionEnv
 
 VARIANTS = ("3", "8", "continuous", "unequal")
@@ -68,9 +68,7 @@ class CircleEnv(RepeatedInteractionEnv):
     ) -> None:
         check_choice("Circle variant", variant, VARIANTS)
         check_choice("near_moves", near_moves, NEAR_MOVES)
-        if isinstance(outside_margin, bool) or not (
-            isinstance(outside_margin, (int, float)) and 0.0 <= outside_margin < ARENA - RADIUS
-        ):
+        if not (is_number(outside_margin) and 0.0 <= outside_margin < ARENA - RADIUS):
             raise ConfigError(
                 f"outside_margin must be a number in [0, {ARENA - RADIUS:g}) (outside must be "
                 f"reachable in the arena), got {outside_margin!r}"

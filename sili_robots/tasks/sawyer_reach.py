@@ -33,13 +33,13 @@ import numpy as np
 from gymnasium import spaces
 
 from sili_robots.controllers import DEFAULT_CONTROLLER, controller_class
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, is_number
 from sili_robots.tasks.base import RepeatedInteractionEnv
 from sili_robots.tasks.sawyer_scene import GOALS, PLANE_Z, START_EE, TABLE_TOP_Z, SawyerScene
 
 MAX_SPEED = 0.4  # m/s per axis at |action| = 1
 #: allowed start heights (m): above the goals, within the arm's comfortable reach
-START_Z_RANGE = (TABLE_TOP_Z + 0.06, 1.1)
+START_Z_RANGE = (round(TABLE_TOP_Z + 0.06, 6), 1.1)  # rounded: the bound as it is printed
 #: the stabilizing reference leaves the goal this many steps before the end of an interaction
 RISE_STEPS = 15
 #: ... and ends this far above the plane
@@ -65,9 +65,7 @@ class SawyerReachEnv(RepeatedInteractionEnv):
         start_z: float = float(START_EE[2]),
     ) -> None:
         cls = controller_class(controller)  # ConfigError naming the choices, before any build
-        if isinstance(start_z, bool) or not (
-            isinstance(start_z, (int, float)) and START_Z_RANGE[0] <= start_z <= START_Z_RANGE[1]
-        ):
+        if not (is_number(start_z) and START_Z_RANGE[0] <= start_z <= START_Z_RANGE[1]):
             raise ConfigError(
                 f"start_z must be a height in [{START_Z_RANGE[0]:g}, {START_Z_RANGE[1]:g}] m, "
                 f"got {start_z!r}"

@@ -69,7 +69,10 @@ class SpeakerListenerEnv(RepeatedInteractionEnv):
         speaker: tuple[float, float] | list[float] = tuple(SPEAKER),
     ) -> None:
         check_choice("change_rule", change_rule, CHANGE_RULES)
-        where = np.asarray(speaker, dtype=float)
+        try:
+            where = np.asarray(speaker, dtype=float)
+        except (TypeError, ValueError):  # not numbers: named below with what is allowed
+            where = np.full(3, np.nan)
         if where.shape != (2,) or not np.all(np.abs(where) <= ARENA):
             raise ConfigError(
                 f"speaker must be an (x, y) position in the arena [-{ARENA:g}, {ARENA:g}]^2, "
