@@ -336,7 +336,9 @@ def make_run_config(
             seed=seed,
             interactions=interactions,
             agent=method_config(method, latent, profile, agent_settings, default_latent(task)),
-            env_kwargs=dict(env_kwargs or {}),
+            # as config.json records them (numpy numbers as Python's), so a run is built from
+            # what it records
+            env_kwargs={k: _as_json(k, v) for k, v in (env_kwargs or {}).items()},
             checkpoint_every=checkpoint_every,
             threads=threads,
         )

@@ -29,6 +29,11 @@ def is_number(value: object) -> bool:
     return not isinstance(value, bool) and isinstance(value, numbers.Real)
 
 
+def compared(value: object) -> str:
+    """``value`` as a range check compares it: ``np.float32(1.1)`` is 1.100000023841858."""
+    return repr(float(value)) if is_number(value) else repr(value)
+
+
 def one_line_errors(main: Callable[[], object], prog: str) -> None:
     """Run a script's ``main``: bad input (``ConfigError``) is one line on stderr and exit 2, as
     the CLI does, not a traceback."""

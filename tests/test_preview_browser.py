@@ -125,6 +125,23 @@ def test_a_body_hidden_behind_another_passes_the_check(task, seed, hidden_by, br
     assert any(" not seen at pixel" in p for p in again.problems())  # without looking behind
 
 
+@pytest.mark.parametrize("corner", [(-1.0, -1.0), (1.0, 1.0)])
+def test_the_circle_camera_sees_the_whole_arena(corner, browser, tmp_path):
+    """An agent may run to the arena's walls; the ego is looked for wherever it goes."""
+    name, env, _, label = make_env_and_policy("circle-3")
+    try:
+        prev = Preview.record(env, lambda _env, _obs: np.array(corner), 1, 0, name, label)
+    finally:
+        env.close()
+    ego = prev.recording.frames[-1]["ego"]
+    assert np.all(np.abs(ego) > 1.9)  # in the corner
+    html = prev.write_html(tmp_path / "p.html")
+    shot = prev.render(html, browser=browser)
+    assert shot.problems() == []
+    (seen,) = [r for r in shot.markers if r.marker.name == "ego"]
+    assert seen.in_view and seen.ok
+
+
 def test_a_point_behind_the_camera_is_out_of_the_picture(browser, tmp_path):
     """Projected as is, a point straight behind the camera lands mid-picture (mirrored)."""
     from sili_robots.preview.build import world_point

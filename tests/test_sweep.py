@@ -814,3 +814,31 @@ def test_a_ray_address_is_probed_where_its_port_can_be_told():
             check_reachable(nothing_there)
     for not_probed in ("auto", "::1", "fe80::1%eth0"):  # ray.init reads these itself
         check_reachable(not_probed)
+
+
+def test_a_worker_past_its_grace_is_stopped_at_once_with_its_finally_blocks(tmp_path, monkeypatch):
+    """Asked to stop, a worker finishes its interaction; past STOP_GRACE_S two SIGTERMs stop it
+    at once (a first is held until the interaction ends), as a shell's exit 143, not SIGKILL."""
+    from sili_robots.build import make_run_config
+    from sili_robots.sweep import local
+    from sili_robots.sweep.worker import Job
+
+    # the first learning interaction (the third) takes seconds: 2,000 updates
+    cfg = make_run_config("circle-3", "sac", 0, 5000, settings={**FAST, "updates_per_step": 40})
+    run_dir = tmp_path / "run"
+    backend = LocalBackend(workers=1)
+    backend._ensure_forkserver()
+    alive_r, alive_w = backend._ctx.Pipe(duplex=False)
+    worker = backend._start(Job("run", cfg.to_dict(), str(run_dir)), alive_r)
+    try:
+        assert wait_for(lambda: metrics_rows(run_dir / "metrics.csv") >= 2)
+        monkeypatch.setattr(local, "STOP_GRACE_S", 0.0)  # past its grace at once
+        LocalBackend._stop([worker])
+        assert worker.process.exitcode == 128 + signal.SIGTERM  # not -9: `finally` blocks ran
+        assert metrics_rows(run_dir / "metrics.csv") == 2  # the long interaction was not waited for
+        assert not (run_dir / "worker.json").exists()  # its claim given back on the way out
+    finally:
+        if worker.process.is_alive():
+            worker.process.kill()
+        alive_r.close()
+        alive_w.close()

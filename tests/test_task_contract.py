@@ -158,8 +158,21 @@ def test_task_arguments_take_numpy_numbers_their_printed_bounds_and_name_bad_one
     assert CircleEnv(outside_margin=np.float32(0.25)).outside_margin == 0.25
     with pytest.raises(ConfigError, match=r"horizon must be an integer in .* got 100000000000"):
         CircleEnv(horizon=10**11)  # named here, not an allocation failure of a rollout
-    with pytest.raises(ConfigError, match=r"speaker must be an \(x, y\) position .*got 'ab'"):
-        SpeakerListenerEnv(speaker="ab")
+    for not_numbers in ("ab", ("0.5", "1"), (True, 0.5)):  # numpy would read some as numbers
+        with pytest.raises(ConfigError, match=r"speaker must be an \(x, y\) position .*got"):
+            SpeakerListenerEnv(speaker=not_numbers)
+
+
+def test_a_run_records_numpy_task_arguments_as_the_numbers_it_is_built_with():
+    import json
+
+    from sili_robots.build import make_run_config
+
+    cfg = make_run_config("circle-3", "sac", env_kwargs={"outside_margin": np.float32(0.05)})
+    recorded = json.loads(json.dumps(cfg.to_dict()))["env_kwargs"]  # config.json can hold it
+    assert recorded == {"outside_margin": float(np.float32(0.05))}
+    with pytest.raises(ConfigError, match=r"cannot be recorded in config\.json"):
+        make_run_config("circle-3", "sac", env_kwargs={"outside_margin": object()})
 
 
 @pytest.mark.parametrize("start_z", [0.86, np.float32(1.0), 1.1])
@@ -171,6 +184,9 @@ def test_sawyer_takes_the_start_heights_its_message_names(start_z):
     env.close()
     with pytest.raises(ConfigError, match=r"start_z must be a height in \[0.86, 1.1\] m, got 1.2"):
         SawyerReachEnv(start_z=1.2)
+    # a numpy float is named as the number compared: float32's 1.1 is above 1.1
+    with pytest.raises(ConfigError, match=r"got 1.100000023841858$"):
+        SawyerReachEnv(start_z=np.float32(1.1))
 
 
 def test_an_observation_of_another_shape_than_the_space_is_named():

@@ -185,7 +185,8 @@ class LocalBackend:
         checkpointed. No signal is sent first: a worker may already hold one (``timeout`` and
         job schedulers signal the whole process group), and a second stops it at once, losing
         the interaction. A worker still running after ``STOP_GRACE_S``, or at a second stop of
-        the sweep, is sent SIGTERM, and killed if it is still there ``KILL_AFTER_S`` later."""
+        the sweep, is sent SIGTERM twice (stop now), and killed if still there ``KILL_AFTER_S``
+        later."""
         workers = list(workers)
         stop_files = [Path(w.job.run_dir) / STOP_FILE for w in workers]
         for path in stop_files:
@@ -196,10 +197,16 @@ class LocalBackend:
             for w in workers:
                 w.process.join(timeout=max(0.0, deadline - time.monotonic()))
         finally:
+            # SIGTERM twice (a first is held until the interaction ends, a second acts at once,
+            # running the worker's `finally` blocks, which close simulators); then SIGKILL
+            for _ in range(2):
+                for w in workers:
+                    if w.process.is_alive():
+                        w.process.terminate()
+                time.sleep(0.2 if any(w.process.is_alive() for w in workers) else 0.0)
+            deadline = time.monotonic() + KILL_AFTER_S
             for w in workers:
-                if w.process.is_alive():  # SIGTERM first: its `finally` blocks close simulators
-                    w.process.terminate()
-                    w.process.join(timeout=KILL_AFTER_S)
+                w.process.join(timeout=max(0.0, deadline - time.monotonic()))
                 if w.process.is_alive():
                     w.process.kill()
                     w.process.join()

@@ -118,6 +118,7 @@ class RayBackend:
             _stop(ray, in_flight, not_started)
             raise
         finally:
+            self._reachable = False  # probed again by a later run: the cluster may be gone
             if started_here:
                 _wait_for_workers(ray, in_flight)
                 ray.shutdown()

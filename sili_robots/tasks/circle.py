@@ -38,7 +38,7 @@ from typing import Any, ClassVar
 import numpy as np
 from gymnasium import spaces
 
-from sili_robots.errors import ConfigError, check_choice, is_number
+from sili_robots.errors import ConfigError, check_choice, compared, is_number
 from sili_robots.tasks.base import RepeatedInteractionEnv
 
 VARIANTS = ("3", "8", "continuous", "unequal")
@@ -71,7 +71,7 @@ class CircleEnv(RepeatedInteractionEnv):
         if not (is_number(outside_margin) and 0.0 <= outside_margin < ARENA - RADIUS):
             raise ConfigError(
                 f"outside_margin must be a number in [0, {ARENA - RADIUS:g}) (outside must be "
-                f"reachable in the arena), got {outside_margin!r}"
+                f"reachable in the arena), got {compared(outside_margin)}"
             )
         self.variant = variant
         self.outside_margin = float(outside_margin)

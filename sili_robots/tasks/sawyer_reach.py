@@ -33,7 +33,7 @@ import numpy as np
 from gymnasium import spaces
 
 from sili_robots.controllers import DEFAULT_CONTROLLER, controller_class
-from sili_robots.errors import ConfigError, is_number
+from sili_robots.errors import ConfigError, compared, is_number
 from sili_robots.tasks.base import RepeatedInteractionEnv
 from sili_robots.tasks.sawyer_scene import GOALS, PLANE_Z, START_EE, TABLE_TOP_Z, SawyerScene
 
@@ -68,7 +68,7 @@ class SawyerReachEnv(RepeatedInteractionEnv):
         if not (is_number(start_z) and START_Z_RANGE[0] <= start_z <= START_Z_RANGE[1]):
             raise ConfigError(
                 f"start_z must be a height in [{START_Z_RANGE[0]:g}, {START_Z_RANGE[1]:g}] m, "
-                f"got {start_z!r}"
+                f"got {compared(start_z)}"
             )
         self.controller_name = controller
         self.start = np.array([START_EE[0], START_EE[1], float(start_z)])

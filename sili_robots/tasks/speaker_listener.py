@@ -43,7 +43,7 @@ from typing import Any, ClassVar
 import numpy as np
 from gymnasium import spaces
 
-from sili_robots.errors import ConfigError, check_choice
+from sili_robots.errors import ConfigError, check_choice, is_number
 from sili_robots.tasks.base import RepeatedInteractionEnv
 
 GOALS = np.array([[0.0, 1.0], [-np.sqrt(3) / 2, -0.5], [np.sqrt(3) / 2, -0.5]])
@@ -69,10 +69,9 @@ class SpeakerListenerEnv(RepeatedInteractionEnv):
         speaker: tuple[float, float] | list[float] = tuple(SPEAKER),
     ) -> None:
         check_choice("change_rule", change_rule, CHANGE_RULES)
-        try:
-            where = np.asarray(speaker, dtype=float)
-        except (TypeError, ValueError):  # not numbers: named below with what is allowed
-            where = np.full(3, np.nan)
+        # numbers only (not "0.5", which numpy would read as one): named below otherwise
+        xy = isinstance(speaker, (tuple, list, np.ndarray)) and all(map(is_number, speaker))
+        where = np.asarray(speaker, dtype=float) if xy else np.full(3, np.nan)
         if where.shape != (2,) or not np.all(np.abs(where) <= ARENA):
             raise ConfigError(
                 f"speaker must be an (x, y) position in the arena [-{ARENA:g}, {ARENA:g}]^2, "

@@ -203,7 +203,8 @@ class CircleScene(TaskScene):
         return f"{head}; {tail}"
 
     def camera(self, rec: Recording) -> Camera:
-        return Camera(position=(0.0, -1.3, 5.0), target=(0.0, -0.1, 0.0), fov=40.0)
+        # the whole arena, between the title and the legend: an agent may run to its walls
+        return Camera(position=(0.0, -2.0, 6.6), target=(0.0, -0.1, 0.0), fov=40.0)
 
     # ------------------------------------------------------------------ checks
     def markers(self, rec: Recording, frame: int) -> list[Marker]:
