@@ -31,6 +31,8 @@ def is_number(value: object) -> bool:
 
 def compared(value: object) -> str:
     """``value`` as a range check compares it: ``np.float32(1.1)`` is 1.100000023841858."""
+    if isinstance(value, numbers.Integral) and not isinstance(value, bool):
+        return repr(int(value))
     return repr(float(value)) if is_number(value) else repr(value)
 
 

@@ -816,9 +816,13 @@ def test_a_ray_address_is_probed_where_its_port_can_be_told():
         check_reachable(not_probed)
 
 
-def test_a_worker_past_its_grace_is_stopped_at_once_with_its_finally_blocks(tmp_path, monkeypatch):
-    """Asked to stop, a worker finishes its interaction; past STOP_GRACE_S two SIGTERMs stop it
-    at once (a first is held until the interaction ends), as a shell's exit 143, not SIGKILL."""
+@pytest.mark.parametrize("group_sigterm", [False, True])
+def test_a_worker_past_its_grace_is_stopped_at_once_with_its_finally_blocks(
+    group_sigterm, tmp_path, monkeypatch
+):
+    """Asked to stop, a worker finishes its interaction; past STOP_GRACE_S the sweep's STOP_NOW
+    stops it at once (a SIGTERM is held until the interaction ends), exit 143, not SIGKILL,
+    also when it already holds a SIGTERM sent to the whole process group."""
     from sili_robots.build import make_run_config
     from sili_robots.sweep import local
     from sili_robots.sweep.worker import Job
@@ -832,6 +836,8 @@ def test_a_worker_past_its_grace_is_stopped_at_once_with_its_finally_blocks(tmp_
     worker = backend._start(Job("run", cfg.to_dict(), str(run_dir)), alive_r)
     try:
         assert wait_for(lambda: metrics_rows(run_dir / "metrics.csv") >= 2)
+        if group_sigterm:
+            os.kill(worker.process.pid, signal.SIGTERM)  # held: the interaction goes on
         monkeypatch.setattr(local, "STOP_GRACE_S", 0.0)  # past its grace at once
         LocalBackend._stop([worker])
         assert worker.process.exitcode == 128 + signal.SIGTERM  # not -9: `finally` blocks ran

@@ -158,7 +158,11 @@ def test_task_arguments_take_numpy_numbers_their_printed_bounds_and_name_bad_one
     assert CircleEnv(outside_margin=np.float32(0.25)).outside_margin == 0.25
     with pytest.raises(ConfigError, match=r"horizon must be an integer in .* got 100000000000"):
         CircleEnv(horizon=10**11)  # named here, not an allocation failure of a rollout
-    for not_numbers in ("ab", ("0.5", "1"), (True, 0.5)):  # numpy would read some as numbers
+    with pytest.raises(ConfigError, match=r"outside_margin must be .*, got 2$"):
+        CircleEnv(outside_margin=np.int64(2))  # an integer is named as one
+    with pytest.raises(ConfigError, match=r"outside_margin must be .*, got 1000000000000\d+$"):
+        CircleEnv(outside_margin=10**400)  # too large for a float, named all the same
+    for not_numbers in ("ab", ("0.5", "1"), (True, 0.5), np.array(0.5)):  # numpy reads some
         with pytest.raises(ConfigError, match=r"speaker must be an \(x, y\) position .*got"):
             SpeakerListenerEnv(speaker=not_numbers)
 

@@ -25,11 +25,13 @@ from pathlib import Path
 
 from sili_robots.errors import ConfigError
 from sili_robots.runs import ERROR_FILE, RUNNING_FILE, STOP_FILE
-from sili_robots.stopping import exit_on_signal
 from sili_robots.sweep.backend import STOP_GRACE_S, Monitor, describe_exit
 from sili_robots.sweep.worker import THREAD_ENV, Job, Outcome, limit_threads, run_job
 
-#: how long a worker sent SIGTERM after its grace may take to run its `finally` blocks
+#: what the sweep sends a worker still running after its grace: stop at once (SIGTERM is held
+#: until the interaction ends, and two close together may reach Python as one)
+STOP_NOW = signal.SIGUSR1
+#: how long a worker sent STOP_NOW may take to run its `finally` blocks before SIGKILL
 KILL_AFTER_S = 5.0
 #: imported once by the forkserver, so forked workers start with them loaded (the first keeps
 #: the forkserver alive through a stop signal sent to the whole process group)
@@ -59,10 +61,19 @@ def _exit_when_orphaned(alive: Connection) -> None:
     threading.Thread(target=watch, name="sweep-watchdog", daemon=True).start()
 
 
+def _exit_now(signum: int, _frame: object) -> None:
+    """Exit as a stopped worker does (128 + SIGTERM), running the `finally` blocks on the way
+    (they close simulators) undisturbed: a further stop signal is ignored from here on."""
+    for sig in (signal.SIGTERM, STOP_NOW):
+        signal.signal(sig, signal.SIG_IGN)
+    raise SystemExit(128 + signal.SIGTERM)
+
+
 def _child(job: Job, conn: Connection, alive: Connection) -> None:
     """Entry point of a worker process."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the sweep's to handle
-    signal.signal(signal.SIGTERM, exit_on_signal)  # run `finally` blocks (closes simulators)
+    signal.signal(signal.SIGTERM, _exit_now)  # held while an interaction is played, then acts
+    signal.signal(STOP_NOW, _exit_now)  # never held: the sweep's stop past a worker's grace
     signal.signal(signal.SIGHUP, signal.SIG_IGN)  # a hangup too: the sweep stops its workers
     _exit_when_orphaned(alive)
     limit_threads()
@@ -185,8 +196,7 @@ class LocalBackend:
         checkpointed. No signal is sent first: a worker may already hold one (``timeout`` and
         job schedulers signal the whole process group), and a second stops it at once, losing
         the interaction. A worker still running after ``STOP_GRACE_S``, or at a second stop of
-        the sweep, is sent SIGTERM twice (stop now), and killed if still there ``KILL_AFTER_S``
-        later."""
+        the sweep, is sent ``STOP_NOW``, and killed if still there ``KILL_AFTER_S`` later."""
         workers = list(workers)
         stop_files = [Path(w.job.run_dir) / STOP_FILE for w in workers]
         for path in stop_files:
@@ -197,13 +207,10 @@ class LocalBackend:
             for w in workers:
                 w.process.join(timeout=max(0.0, deadline - time.monotonic()))
         finally:
-            # SIGTERM twice (a first is held until the interaction ends, a second acts at once,
-            # running the worker's `finally` blocks, which close simulators); then SIGKILL
-            for _ in range(2):
-                for w in workers:
-                    if w.process.is_alive():
-                        w.process.terminate()
-                time.sleep(0.2 if any(w.process.is_alive() for w in workers) else 0.0)
+            for w in workers:
+                if w.process.is_alive() and w.process.pid is not None:
+                    with contextlib.suppress(ProcessLookupError):
+                        os.kill(w.process.pid, STOP_NOW)
             deadline = time.monotonic() + KILL_AFTER_S
             for w in workers:
                 w.process.join(timeout=max(0.0, deadline - time.monotonic()))

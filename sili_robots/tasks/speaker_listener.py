@@ -70,7 +70,11 @@ class SpeakerListenerEnv(RepeatedInteractionEnv):
     ) -> None:
         check_choice("change_rule", change_rule, CHANGE_RULES)
         # numbers only (not "0.5", which numpy would read as one): named below otherwise
-        xy = isinstance(speaker, (tuple, list, np.ndarray)) and all(map(is_number, speaker))
+        xy = (
+            isinstance(speaker, (tuple, list, np.ndarray))
+            and np.ndim(speaker) == 1
+            and all(map(is_number, speaker))
+        )
         where = np.asarray(speaker, dtype=float) if xy else np.full(3, np.nan)
         if where.shape != (2,) or not np.all(np.abs(where) <= ARENA):
             raise ConfigError(
