@@ -54,6 +54,7 @@ from sili_robots.runs import (
     check_new_run_dir,
     clear_run,
     load_checkpoint,
+    make_run_dir,
     require_checkpoint,
     set_target,
 )
@@ -206,6 +207,7 @@ class SILI:
             self._check_run_dir()
         check_not_trained(self.run_dir)  # overwrite=True too: never under a trainer
         self._check_own_task()
+        make_run_dir(self.run_dir, "run_dir")  # before the model changes
         if self._task_env is None:
             self.env.close()  # training builds its own (libsumo holds one simulation)
         target = done + interactions
@@ -213,7 +215,6 @@ class SILI:
         threads = torch.get_num_threads()  # training sets the run's; the caller's come back
         if done == 0 and self._overwrite:
             clear_run(self.run_dir)  # before the claim, which is one of a run's files
-        self.run_dir.mkdir(parents=True, exist_ok=True)
         try:
             with training_claim(self.run_dir):
                 if done == 0:

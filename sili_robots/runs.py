@@ -293,16 +293,17 @@ def check_new_run_dir(
             )
 
 
-def make_run_dir(run_dir: Path) -> None:
-    """Create a run directory, or ConfigError naming it when it cannot be."""
+def make_run_dir(run_dir: Path, out: str = "--out") -> None:
+    """Create a run directory, or ConfigError naming it (and ``out``, what the caller calls
+    it) when it cannot be."""
     if Path(run_dir).is_file():
-        raise ConfigError(f"{run_dir} is a file; give --out a directory (new, or empty)")
+        raise ConfigError(f"{run_dir} is a file; give {out} a directory (new, or empty)")
     try:
         Path(run_dir).mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise ConfigError(
             f"cannot create the run directory {run_dir}: {err.strerror or err}; "
-            "give --out a directory that can be written"
+            f"give {out} a directory that can be written"
         ) from None
 
 
