@@ -193,12 +193,23 @@ def _as_json(name: str, value: Any) -> Any:
         raise TypeError(type(obj).__name__)
 
     try:
+        if _non_string_keys(value):  # JSON would record 1 as "1": another argument on resume
+            raise TypeError
         return json.loads(json.dumps(value, default=plain))
     except (TypeError, ValueError):
         raise ConfigError(
             f"task argument {name}={value!r} cannot be recorded in config.json; allowed: "
-            "numbers, strings, booleans, None, arrays and lists or dicts of them"
+            "numbers, strings, booleans, None, arrays and lists or dicts (with string keys) of them"
         ) from None
+
+
+def _non_string_keys(value: Any) -> bool:
+    """Whether a dict in ``value`` has a key that is not a string."""
+    if isinstance(value, dict):
+        return any(not isinstance(k, str) or _non_string_keys(v) for k, v in value.items())
+    if isinstance(value, (list, tuple)):
+        return any(map(_non_string_keys, value))
+    return False
 
 
 def default_profile(task: str, method: str) -> str:

@@ -175,8 +175,9 @@ def test_a_run_records_numpy_task_arguments_as_the_numbers_it_is_built_with():
     cfg = make_run_config("circle-3", "sac", env_kwargs={"outside_margin": np.float32(0.05)})
     recorded = json.loads(json.dumps(cfg.to_dict()))["env_kwargs"]  # config.json can hold it
     assert recorded == {"outside_margin": float(np.float32(0.05))}
-    with pytest.raises(ConfigError, match=r"cannot be recorded in config\.json"):
-        make_run_config("circle-3", "sac", env_kwargs={"outside_margin": object()})
+    for unrecordable in (object(), {1: 2}, [{"a": {0.5: 1}}]):  # JSON would make 1 "1"
+        with pytest.raises(ConfigError, match=r"cannot be recorded in config\.json"):
+            make_run_config("circle-3", "sac", env_kwargs={"outside_margin": unrecordable})
 
 
 @pytest.mark.parametrize("start_z", [0.86, np.float32(1.0), 1.1])
