@@ -23,6 +23,15 @@ def exit_on_signal(signum: int, _frame: object) -> None:
     raise SystemExit(128 + signum)
 
 
+def act_as(signum: int, handler: object) -> None:
+    """Let ``signum`` act through ``handler`` as the signal itself would (called like a signal
+    handler, or raised again for the default); an ignored one does nothing."""
+    if callable(handler):
+        handler(signum, None)
+    elif handler != signal.SIG_IGN:
+        signal.raise_signal(signum)
+
+
 class StopBetweenInteractions:
     """``with StopBetweenInteractions() as stop:`` around the loop; ``stop.requested`` says a
     stop is held (checkpoint now), ``stop.deliver()`` lets it act."""
@@ -54,10 +63,9 @@ class StopBetweenInteractions:
         signum, self.signum = self.signum, None
         handler = self._previous.get(signum)
         self._restore()
-        if callable(handler):  # called as the signal would: a raised one may not reach it
-            handler(signum, None)  # (Ray's workers do not route SIGINT to Python)
-        else:
-            signal.raise_signal(signum)
+        # called as the signal would: a raised one may not reach it (Ray's workers do not route
+        # SIGINT to Python)
+        act_as(signum, handler)
 
     def _hold(self, signum: int, _frame: FrameType | None) -> None:
         if self.signum is not None:  # asked twice: at once, as the second signal says

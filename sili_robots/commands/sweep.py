@@ -220,16 +220,8 @@ def _specs_and_dir(args: argparse.Namespace) -> tuple[list[SweepSpec], Path]:
 def _dry_run(args: argparse.Namespace, specs: list[SweepSpec], sweep_dir: Path) -> int:
     """Print each planned run and what the sweep would do with it; refuse what it would."""
     from sili_robots.runs import CHECKPOINT, ERROR_FILE
-    from sili_robots.sweep.runner import as_found, plan, replaced_runs
-    from sili_robots.sweep.state import (
-        SWEEP_FILE,
-        check_existing,
-        check_not_training,
-        recorded_specs,
-        run_path,
-        run_state,
-        shorter_run,
-    )
+    from sili_robots.sweep.runner import check_planned, plan, replaced_runs
+    from sili_robots.sweep.state import run_path, run_state
 
     planned = plan(specs)
     if args.overwrite:  # what is on disk goes: every planned run is new
@@ -241,24 +233,19 @@ def _dry_run(args: argparse.Namespace, specs: list[SweepSpec], sweep_dir: Path) 
                 print(f"{name}\tremoved")
         print(f"{len(planned)} runs")
         return 0
-    if args.resume is None and (Path(sweep_dir) / SWEEP_FILE).is_file():
-        recorded_specs(sweep_dir)  # a new invocation is added to the record: it must read
-    for planned_run in planned:
-        run_ = as_found(sweep_dir, planned_run)
-        shown, notes = planned_run.name, []
-        if run_ is not planned_run:  # the sweep renames it first
-            notes.append(f"its folder {run_.name} is renamed to it first")
-        path = run_path(sweep_dir, run_.name)
-        check_not_training(sweep_dir, run_.name)
-        if args.resume is not None and shorter_run(sweep_dir, run_):
+    found, shorter = check_planned(sweep_dir, planned, args.resume is not None)
+    for run_ in planned:
+        on_disk = found[run_.name]
+        path = run_path(sweep_dir, on_disk.name)
+        notes = [] if on_disk is run_ else [f"its folder {on_disk.name} is renamed to it first"]
+        if run_ in shorter:
             state = "resumable" if (path / CHECKPOINT).is_file() else "new"
             notes.insert(0, f"extended to {run_.config.interactions}")
         else:
-            check_existing(sweep_dir, run_)
             state = run_state(path)
             if (path / ERROR_FILE).is_file():  # the run's last attempt failed
                 notes.insert(0, f"failed before, see its {ERROR_FILE}")
-        print(f"{shown}\t{state}" + (f" ({', '.join(notes)})" if notes else ""))
+        print(f"{run_.name}\t{state}" + (f" ({', '.join(notes)})" if notes else ""))
     print(f"{len(planned)} runs")
     return 0
 

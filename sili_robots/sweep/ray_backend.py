@@ -20,11 +20,11 @@ import time
 from collections import deque
 from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any
 
 from sili_robots.errors import ConfigError
 from sili_robots.runs import ERROR_FILE, RUNNING_FILE, STOP_FILE
-from sili_robots.stopping import STOP_SIGNALS
+from sili_robots.stopping import STOP_SIGNALS, act_as
 from sili_robots.sweep.backend import STOP_GRACE_S, Monitor
 from sili_robots.sweep.worker import Job, Outcome, run_job
 
@@ -50,13 +50,11 @@ class RayBackend:
         self.address = address
         self.workers = workers
         self.retries = retries
-        self._reachable = False
 
     def check_reachable(self) -> None:
-        """ConfigError when nothing listens at ``address`` (see ``check_reachable``); once."""
-        if self.address and not self._reachable:
+        """ConfigError when nothing listens at ``address`` (see ``check_reachable``)."""
+        if self.address:
             check_reachable(self.address)
-            self._reachable = True
 
     def _connect(self, ray: Any) -> bool:
         """Connect (or start a local instance); True when this call started Ray."""
@@ -78,7 +76,8 @@ class RayBackend:
             # ray.init's own SIGTERM handler (exit 15) was in charge: stop as the command would
             with contextlib.suppress(Exception):
                 ray.shutdown()
-            _as_before(signal.SIGTERM, handlers.get(signal.SIGTERM))
+            act_as(signal.SIGTERM, handlers.get(signal.SIGTERM))
+            raise SystemExit(128 + signal.SIGTERM) from None  # it was ignored: Ray is half up
         except ConnectionError as err:
             raise ConfigError(f"cannot connect to Ray at {self.address!r}: {err}") from None
         except ValueError as err:  # e.g. an address ray.init cannot read
@@ -118,7 +117,6 @@ class RayBackend:
             _stop(ray, in_flight, not_started)
             raise
         finally:
-            self._reachable = False  # probed again by a later run: the cluster may be gone
             if started_here:
                 _wait_for_workers(ray, in_flight)
                 ray.shutdown()
@@ -156,13 +154,6 @@ def check_reachable(address: str, timeout: float = 5.0) -> None:
             f"cannot connect to Ray at {address!r}: {err.strerror or err}; is a Ray cluster's "
             "head (`ray start --head`) running there?"
         ) from None
-
-
-def _as_before(signum: int, handler: Any) -> NoReturn:
-    """Let ``signum`` act through ``handler``, the one the command had before ``ray.init``."""
-    if callable(handler):
-        handler(signum, None)
-    raise SystemExit(128 + signum)
 
 
 @contextlib.contextmanager

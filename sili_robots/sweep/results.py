@@ -13,13 +13,12 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import pandas as pd
 
 from sili_robots.agent.schedule import Schedule
 from sili_robots.atomic import replacing
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, is_number
 from sili_robots.migrations import migrate_run
 from sili_robots.runs import (
     CONFIG,
@@ -165,8 +164,8 @@ def runs_table(sweep_dir: Path) -> pd.DataFrame:
             keys = ("final_task_reward", "final_stability", "wall_time_s")
             summary = read_json(summary_path, DAMAGED_SUMMARY, *keys)
             stability = summary["final_stability"]  # None after one interaction: no change
-            if not (_is_number(stability) or stability is None) or not all(
-                _is_number(summary[k]) for k in ("final_task_reward", "wall_time_s")
+            if not (is_number(stability) or stability is None) or not all(
+                is_number(summary[k]) for k in ("final_task_reward", "wall_time_s")
             ):
                 raise ConfigError(
                     f"{summary_path} is damaged (a value of {', '.join(keys)} is not a number); "
@@ -180,10 +179,6 @@ def runs_table(sweep_dir: Path) -> pd.DataFrame:
             row.update(status="incomplete" if logged else "not started")
         rows.append(row)
     return pd.DataFrame(rows, columns=list(RUN_COLUMNS))
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def write_tables(sweep_dir: Path) -> tuple[pd.DataFrame, pd.DataFrame]:

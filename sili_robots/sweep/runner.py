@@ -75,6 +75,25 @@ def as_found(sweep_dir: Path, run: PlannedRun) -> PlannedRun:
     return run if former is None else replace(run, name=former.name)
 
 
+def check_planned(
+    sweep_dir: Path, planned: Sequence[PlannedRun], recorded: bool
+) -> tuple[dict[str, PlannedRun], list[PlannedRun]]:
+    """Check every planned run as found on disk before anything changes: its files agree with
+    its config, or (``recorded``, a resume) it is shorter, an extension cut short or asked for
+    now, which goes on to the planned budget; no live process trains it (e.g. ``sili train
+    --resume``); and a record a new invocation joins reads back. Returns the runs as found, by
+    name, and the shorter ones."""
+    if not recorded and (Path(sweep_dir) / SWEEP_FILE).is_file():
+        recorded_specs(sweep_dir)
+    found = {run.name: as_found(sweep_dir, run) for run in planned}
+    shorter = [run for run in planned if recorded and shorter_run(sweep_dir, found[run.name])]
+    for run in planned:
+        if run not in shorter:
+            check_existing(sweep_dir, found[run.name])
+        check_not_training(sweep_dir, found[run.name].name)
+    return found, shorter
+
+
 def adopt_former_names(sweep_dir: Path, planned: Sequence[PlannedRun]) -> None:
     """Rename each planned run's folder that an earlier version named otherwise, so the run
     resumes (or counts as done) under its name instead of being trained again beside it."""
@@ -164,16 +183,7 @@ def run_sweep(
     with sweep_lock(sweep_dir):
         if overwrite:
             clear_sweep(sweep_dir, replaced_runs(sweep_dir, planned))
-        elif not recorded and (sweep_dir / SWEEP_FILE).is_file():
-            recorded_specs(sweep_dir)  # this invocation joins the record: it must read back
-        # every run checked (as found on disk) before anything changes; a shorter one (an
-        # extension cut short, or one asked for now) goes on to the planned budget
-        found = {run.name: as_found(sweep_dir, run) for run in planned}
-        shorter = [run for run in planned if recorded and shorter_run(sweep_dir, found[run.name])]
-        for run in planned:
-            if run not in shorter:
-                check_existing(sweep_dir, found[run.name])
-            check_not_training(sweep_dir, found[run.name].name)  # e.g. by sili train --resume
+        _, shorter = check_planned(sweep_dir, planned, recorded)
         adopt_former_names(sweep_dir, planned)
         if recorded:
             write_invocations(sweep_dir, specs)

@@ -69,20 +69,19 @@ class SpeakerListenerEnv(RepeatedInteractionEnv):
         speaker: tuple[float, float] | list[float] = tuple(SPEAKER),
     ) -> None:
         check_choice("change_rule", change_rule, CHANGE_RULES)
-        # numbers only (not "0.5", which numpy would read as one): named below otherwise
-        xy = (
+        # two numbers (not "0.5", which numpy would read as one) in the arena
+        if not (
             isinstance(speaker, (tuple, list, np.ndarray))
             and np.ndim(speaker) == 1
-            and all(map(is_number, speaker))
-        )
-        where = np.asarray(speaker, dtype=float) if xy else np.full(3, np.nan)
-        if where.shape != (2,) or not np.all(np.abs(where) <= ARENA):
+            and len(speaker) == 2
+            and all(is_number(v) and abs(v) <= ARENA for v in speaker)
+        ):
             raise ConfigError(
                 f"speaker must be an (x, y) position in the arena [-{ARENA:g}, {ARENA:g}]^2, "
                 f"got {speaker!r}"
             )
         self.change_rule = change_rule
-        self.speaker = where
+        self.speaker = np.asarray(speaker, dtype=float)
         self.position = np.zeros(2)
         self.goal = 0
         self.mapping = 0

@@ -237,9 +237,7 @@ class DrivingScene(TaskScene):
             if lane_y == intent_y:
                 continue
             if all(abs(c[1] - lane_y) > w / 2 or abs(c[0] - ahead) > 8 for c in (ego, opp)):
-                out.append(
-                    Marker("road", (ahead, lane_y, 0.0), ROAD, 0.5, 0.6, may_leave_view=True)
-                )
+                out.append(Marker("road", (ahead, lane_y, 0.0), ROAD, 0.5, 0.6))
                 break
         if -25.0 < s["hazard_x"] - ego[0] < 70.0:
             out.append(
