@@ -13,10 +13,14 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 import numpy as np
 
 from sili_robots.agent.matmul import machine_key
+from sili_robots.commands.common import positive_int
+from sili_robots.commands.common import seed as seed_number
+from sili_robots.errors import one_line_errors
 from sili_robots.tasks.driving import DrivingEnv
 
 
@@ -52,8 +56,8 @@ def run(backend: str, interactions: int, seed: int) -> dict[str, float | list[fl
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--interactions", type=int, default=100)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--interactions", type=positive_int, default=100)
+    parser.add_argument("--seed", type=seed_number, default=0)
     args = parser.parse_args()
     print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
     results = {b: run(b, args.interactions, args.seed) for b in ("libsumo", "traci")}
@@ -70,4 +74,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -28,8 +29,11 @@ import torch
 from sili_robots.addons import build_addons
 from sili_robots.agent import SILIAgent
 from sili_robots.build import make_run_config
+from sili_robots.commands.common import positive_int
 from sili_robots.diagnostics import foresight_by_exit
+from sili_robots.errors import one_line_errors
 from sili_robots.rollout import play_interaction
+from sili_robots.sweep import parse_seeds
 from sili_robots.tasks.registry import make_task
 
 WANDER = 300  # interactions of wandering before the scripted ego holds the opponent
@@ -104,12 +108,12 @@ def line(c: dict[str, int]) -> str:
 
 def main() -> None:
     p = argparse.ArgumentParser()
-    p.add_argument("--interactions", type=int, default=3000)
+    p.add_argument("--interactions", type=positive_int, default=3000)
     p.add_argument("--seeds", default="0,1")
-    p.add_argument("--updates", type=int, default=5, help="latent updates per interaction")
+    p.add_argument("--updates", type=positive_int, default=5, help="latent updates per interaction")
     args = p.parse_args()
     torch.set_num_threads(1)
-    seeds = [int(s) for s in args.seeds.split(",")]
+    seeds = parse_seeds(args.seeds)
     totals: dict[str, dict[str, dict[str, int]]] = {}
     for seed in seeds:
         for label, last in (("pooled (reference)", False), ("pooled + last step", True)):
@@ -135,4 +139,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

@@ -12,12 +12,15 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
 import sili_robots  # noqa: F401  (registers the tasks)
 from sili_robots.agent.matmul import machine_key
+from sili_robots.commands.common import positive_int
+from sili_robots.errors import one_line_errors
 from sili_robots.tasks import TASKS
 
 
@@ -52,8 +55,8 @@ def vector_rate(env_id: str, steps: int, num_envs: int, mode: str) -> float:
 
 def main() -> None:
     p = argparse.ArgumentParser()
-    p.add_argument("--steps", type=int, default=20_000)
-    p.add_argument("--num-envs", type=int, default=4)
+    p.add_argument("--steps", type=positive_int, default=20_000)
+    p.add_argument("--num-envs", type=positive_int, default=4)
     args = p.parse_args()
     print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
     ids = [("Pendulum-v1 (reference)", "Pendulum-v1")]
@@ -77,4 +80,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

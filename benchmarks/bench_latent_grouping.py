@@ -24,8 +24,11 @@ import numpy as np
 import torch
 
 from sili_robots.build import build_agent, make_run_env
+from sili_robots.commands.common import positive_int
 from sili_robots.diagnostics import change_agreement, purity
+from sili_robots.errors import one_line_errors
 from sili_robots.runs import load_checkpoint, read_config
+from sili_robots.sweep import parse_seeds
 
 REFERENCE_BONUS = 0.03  # the previous default, trained and labelled without grouping
 
@@ -47,7 +50,7 @@ def labels(run_dir: Path, bonus: float, threshold: float, steps: int, seed: int)
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run_dir", type=Path)
-    parser.add_argument("--steps", type=int, default=2000)
+    parser.add_argument("--steps", type=positive_int, default=2000)
     parser.add_argument("--seeds", default="0,1")
     parser.add_argument("--bonus", type=float, default=0.1)
     parser.add_argument("--threshold", type=float, default=0.5)
@@ -70,7 +73,7 @@ def main() -> None:
     print(f"{args.run_dir}: {n} interactions, {args.steps} latent-model updates per fit")
     print(f"{'variant':38s} {'seed':>4s} {'purity':>7s} {'change agr.':>11s} {'categories':>10s}")
     rows: dict[str, list[tuple[float, float]]] = {}
-    for seed in (int(s) for s in args.seeds.split(",")):
+    for seed in parse_seeds(args.seeds):
         for name, bonus, threshold in variants:
             t0 = time.perf_counter()
             torch.manual_seed(seed)
@@ -91,4 +94,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

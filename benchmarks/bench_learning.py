@@ -21,19 +21,26 @@ from __future__ import annotations
 
 import argparse
 import copy
+import itertools
 import json
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from sili_robots.build import make_run_config
+from sili_robots.commands.common import parse_settings, positive_int, task_name
 from sili_robots.diagnostics import latent_diagnostics
+from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.migrations import migrate_run
 from sili_robots.runs import kept, kept_fraction
+from sili_robots.sweep import parse_seeds
 from sili_robots.sweep.results import metrics_file
 
 MARKS = {True: "MET    ", False: "NOT MET", None: "N/A    "}
@@ -184,14 +191,14 @@ def task_targets(task: str, df: pd.DataFrame) -> list[tuple[str, bool | None, st
 
 def main() -> None:
     p = argparse.ArgumentParser()
-    p.add_argument("--task", default="circle-3")
+    p.add_argument("--task", type=task_name, default="circle-3")
     p.add_argument("--methods", default="sili,lili,sac,oracle,stable,smirl")
-    p.add_argument("--seeds", default="0,1,2")
-    p.add_argument("--interactions", type=int, default=3000)
+    p.add_argument("--seeds", default="0,1,2", help="e.g. 0-2 or 0,2,7")
+    p.add_argument("--interactions", type=positive_int, default=3000)
     p.add_argument("--latent", default=None, help="latent kind for sili/stable")
     p.add_argument("--set", action="append", default=[], help="agent override KEY=VALUE")
-    p.add_argument("--window", type=int, default=100)
-    p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--window", type=positive_int, default=100)
+    p.add_argument("--workers", type=positive_int, default=2)
     p.add_argument("--out", default="runs/bench-learning")
     p.add_argument("--from-runs", type=Path, help="only tabulate the finished runs in this folder")
     args = p.parse_args()
@@ -206,9 +213,7 @@ def main() -> None:
                 "summary.json; a sweep keeps them in its runs/ folder)"
             )
     else:
-        jobs = [
-            (args.task, m, int(s)) for m in args.methods.split(",") for s in args.seeds.split(",")
-        ]
+        jobs = [(args.task, m, s) for m, s in itertools.product(*checked_jobs(p, args))]
         for task, method, seed in jobs:  # before any run starts: a run is never shortened
             config = Path(args.out) / f"{task}-{method}-s{seed}" / "config.json"
             if config.exists():
@@ -232,9 +237,28 @@ def main() -> None:
     print(f"\nwall time {(time.perf_counter() - t0) / 60:.1f} min with {args.workers} workers")
 
 
+def checked_jobs(p: argparse.ArgumentParser, args: argparse.Namespace) -> tuple[list, list]:
+    """The methods and seeds to train, each checked (with ``--set``) before any run starts;
+    a bad one exits 2 naming it and what is allowed."""
+
+    def checked(option: str, check: Callable[[], Any]) -> Any:
+        try:
+            return check()
+        except ConfigError as err:
+            p.error(f"{option}: {err}")
+
+    seeds = checked("--seeds", lambda: parse_seeds(args.seeds))
+    settings = checked("--set", lambda: parse_settings(args.set))
+    methods = [m.strip() for m in args.methods.split(",")]
+    for m in methods:
+        option = f"--methods {m}" + (" with --set" if args.set else "")
+        checked(option, lambda m=m: make_run_config(args.task, m, 0, 1, settings=settings))
+    return methods, seeds
+
+
 def _population_std(values: pd.Series) -> float:
     return float(values.std(ddof=0))
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

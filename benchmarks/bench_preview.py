@@ -20,6 +20,9 @@ from pathlib import Path
 from tempfile import TemporaryDirectory
 
 from sili_robots.agent.matmul import machine_key
+from sili_robots.commands.common import positive_int
+from sili_robots.commands.common import seed as seed_number
+from sili_robots.errors import one_line_errors
 from sili_robots.policies import scripted_policy
 from sili_robots.preview import Browser, Preview, make_env_and_policy
 from sili_robots.rollout import run_interactions
@@ -78,9 +81,9 @@ def preview_times(
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--interactions", type=int, default=3)
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--tasks", nargs="*", default=sorted(TASKS))
+    parser.add_argument("--interactions", type=positive_int, default=3)
+    parser.add_argument("--seed", type=seed_number, default=0)
+    parser.add_argument("--tasks", nargs="*", choices=sorted(TASKS), default=sorted(TASKS))
     parser.add_argument("--docs", type=Path, default=None)
     args = parser.parse_args()
     print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
@@ -118,4 +121,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

@@ -21,10 +21,13 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
 from sili_robots.agent.matmul import default_matmul, machine_key
+from sili_robots.commands.common import positive_int
+from sili_robots.errors import one_line_errors
 
 CONFIGS = {
     "continuous": {"latent": "continuous", "latent_last_step": True},
@@ -86,7 +89,7 @@ def run_child(config: str, padded: bool, interactions: int, matmul: str | None) 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--interactions", type=int, default=1500)
+    p.add_argument("--interactions", type=positive_int, default=1500)
     p.add_argument("--configs", default="continuous,filter")
     p.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     p.add_argument(
@@ -119,4 +122,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

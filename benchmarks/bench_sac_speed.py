@@ -45,6 +45,9 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from sili_robots.commands.common import positive_int
+from sili_robots.errors import one_line_errors
+
 #: our variants: label -> (precision, matmul)
 VARIANTS = {
     "float32, onednn": ("float32", "onednn"),
@@ -265,13 +268,17 @@ def matmul_only() -> None:
 def main() -> None:
     from sili_robots.agent.config import AgentConfig
     from sili_robots.agent.matmul import default_matmul, default_precision
+    from sili_robots.build import make_run_config
     from sili_robots.commands.common import parse_settings
+    from sili_robots.errors import ConfigError
 
     p = argparse.ArgumentParser()
-    p.add_argument("--updates", type=int, default=300)
-    p.add_argument("--threads", type=int, default=1)
-    p.add_argument("--interactions", type=int, default=30)
-    p.add_argument("--rounds", type=int, default=3, help="alternating rounds; medians reported")
+    p.add_argument("--updates", type=positive_int, default=300)
+    p.add_argument("--threads", type=positive_int, default=1)
+    p.add_argument("--interactions", type=positive_int, default=30)
+    p.add_argument(
+        "--rounds", type=positive_int, default=3, help="alternating rounds; medians reported"
+    )
     p.add_argument("--matmul-only", action="store_true", help="time the products alone")
     p.add_argument("--compile", action="store_true", help="also time a torch.compile'd update")
     p.add_argument(
@@ -285,6 +292,13 @@ def main() -> None:
     args = p.parse_args()
     if args.interactions < 7:  # 5 random interactions, then at least 2 learning ones to time
         p.error(f"--interactions {args.interactions}: need at least 7")
+    arms = {}  # checked now, not after minutes of timing
+    for arm in args.arm:
+        try:
+            arms[arm] = parse_settings(arm.split(";"))
+            make_run_config("circle-3", "sili", 0, args.interactions, settings=arms[arm])
+        except ConfigError as err:
+            p.error(f"--arm {arm!r}: {err}")
     torch.set_num_threads(args.threads)
     if args.matmul_only:
         matmul_only()
@@ -349,8 +363,8 @@ def main() -> None:
     )
     runs = [(f"default: {precision}, {matmul}", precision, matmul, {})]
     runs += [(label, p, m, {}) for label, (p, m) in VARIANTS.items() if p == "float32"]
-    for arm in args.arm:  # the default kernels unless the arm sets them
-        runs.append((arm, precision, matmul, parse_settings(arm.split(";"))))
+    for arm, settings in arms.items():  # the default kernels unless the arm sets them
+        runs.append((arm, precision, matmul, settings))
     # each run twice, in the order A B C C B A, each time between two timings of
     # stable-baselines3's 50 updates: its own reference, taken minutes apart from no other
     seconds: dict[str, list[float]] = {label: [] for label, *_ in runs}
@@ -373,4 +387,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

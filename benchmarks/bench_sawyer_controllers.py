@@ -22,11 +22,15 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 import numpy as np
 
 from sili_robots.agent.matmul import machine_key
+from sili_robots.commands.common import non_negative_int
+from sili_robots.commands.common import seed as seed_number
 from sili_robots.controllers import CONTROLLER_NAMES
+from sili_robots.errors import one_line_errors
 from sili_robots.tasks import make_task
 from sili_robots.tasks.sawyer_reach import RISE_MARGIN, action_toward
 from sili_robots.tasks.sawyer_scene import GOALS, PLANE_Z
@@ -81,8 +85,10 @@ def run(controller: str, points: np.ndarray) -> dict[str, object]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--extra", type=int, default=14, help="random workspace targets")
-    parser.add_argument("--seed", type=int, default=0, help="of the random targets")
+    parser.add_argument(
+        "--extra", type=non_negative_int, default=14, help="random workspace targets"
+    )
+    parser.add_argument("--seed", type=seed_number, default=0, help="of the random targets")
     args = parser.parse_args()
     print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
     points = targets(args.extra, args.seed)
@@ -110,4 +116,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

@@ -23,13 +23,17 @@ import argparse
 import copy
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import mujoco
 import numpy as np
 
 from sili_robots.agent.matmul import machine_key
+from sili_robots.commands.common import positive_int
+from sili_robots.commands.common import seed as seed_number
 from sili_robots.controllers import CONTROLLER_NAMES
 from sili_robots.controllers.robosuite_logging import quiet_robosuite_import
+from sili_robots.errors import one_line_errors
 from sili_robots.tasks import make_task, task_spec
 from sili_robots.tasks.sawyer_scene import N_SUBSTEPS, SawyerScene
 
@@ -104,9 +108,9 @@ def ours_block(controller: str, seed: int) -> tuple[Block, float]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--block", type=int, default=300, help="steps per timed block")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--rounds", type=positive_int, default=5)
+    parser.add_argument("--block", type=positive_int, default=300, help="steps per timed block")
+    parser.add_argument("--seed", type=seed_number, default=0)
     args = parser.parse_args()
     print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
 
@@ -147,4 +151,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

@@ -21,6 +21,8 @@ from pathlib import Path
 import pandas as pd
 
 from sili_robots.agent.matmul import machine_key
+from sili_robots.commands.common import positive_int
+from sili_robots.errors import one_line_errors
 from sili_robots.sweep import LocalBackend, NullMonitor, RayBackend, SweepSpec, run_sweep
 
 FAST = {
@@ -51,9 +53,9 @@ def _metrics(out: Path) -> pd.DataFrame:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--runs", type=int, default=8)
-    ap.add_argument("--interactions", type=int, default=10)
-    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--runs", type=positive_int, default=8)
+    ap.add_argument("--interactions", type=positive_int, default=10)
+    ap.add_argument("--workers", type=positive_int, default=2)
     args = ap.parse_args()
     print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
     backends = {
@@ -92,4 +94,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

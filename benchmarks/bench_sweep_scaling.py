@@ -17,6 +17,8 @@ import time
 from pathlib import Path
 
 from sili_robots.agent.matmul import machine_key
+from sili_robots.commands.common import positive_int
+from sili_robots.errors import one_line_errors
 from sili_robots.sweep import LocalBackend, NullMonitor, SweepSpec, run_sweep
 
 
@@ -36,8 +38,8 @@ def rate(workers: int, runs: int, interactions: int, out: Path) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--runs", type=int, default=2)
-    ap.add_argument("--interactions", type=int, default=30)
+    ap.add_argument("--runs", type=positive_int, default=2)
+    ap.add_argument("--interactions", type=positive_int, default=30)
     args = ap.parse_args()
     model, flags, *_ = machine_key().split(" | ")
     print(f"machine: {model}; {flags}")
@@ -57,4 +59,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

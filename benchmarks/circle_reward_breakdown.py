@@ -64,6 +64,7 @@ import torch
 
 from sili_robots.agent import SILIAgent
 from sili_robots.agent.latent import transitions
+from sili_robots.commands.common import positive_int
 from sili_robots.diagnostics import change_masks, foresight_by_exit
 from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.evaluation import load_trained
@@ -305,7 +306,7 @@ def overview(
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("runs", nargs="+", type=Path)
-    p.add_argument("--window", type=int, default=100)
+    p.add_argument("--window", type=positive_int, default=100)
     args = p.parse_args()
     torch.set_num_threads(1)
     for run in args.runs:

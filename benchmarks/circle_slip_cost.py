@@ -27,6 +27,7 @@ import torch
 from sili_robots.addons.filter_math import first_departure
 from sili_robots.addons.latent_filter import LatentFilter
 from sili_robots.agent import SILIAgent
+from sili_robots.commands.common import positive_int
 from sili_robots.errors import one_line_errors
 from sili_robots.evaluation import load_trained
 from sili_robots.tasks.circle import CircleEnv
@@ -90,7 +91,7 @@ def main() -> None:
     parser.add_argument("runs", nargs="+", type=Path)
     parser.add_argument("--eps", type=float, default=0.01, help="the filter's prior eps")
     parser.add_argument("--noise", type=float, default=0.25, help="latent_filter_noise")
-    parser.add_argument("--plays", type=int, default=5, help="sampled plays per case")
+    parser.add_argument("--plays", type=positive_int, default=5, help="sampled plays per case")
     args = parser.parse_args()
     torch.set_num_threads(1)
     for run in args.runs:

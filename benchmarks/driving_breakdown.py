@@ -31,6 +31,7 @@ import pandas as pd
 import torch
 
 from sili_robots.agent.agent import SILIAgent
+from sili_robots.commands.common import positive_int
 from sili_robots.diagnostics import category_strategies
 from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.evaluation import load_trained
@@ -115,8 +116,8 @@ def _lanes(split: dict[int, dict]) -> dict[int, dict[str, int]]:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("runs", nargs="+", type=Path)
-    p.add_argument("--window", type=int, default=200)
-    p.add_argument("--phases", type=int, help="a row per this many interactions instead")
+    p.add_argument("--window", type=positive_int, default=200)
+    p.add_argument("--phases", type=positive_int, help="a row per this many interactions instead")
     args = p.parse_args()
     torch.set_num_threads(1)
     for run in args.runs:

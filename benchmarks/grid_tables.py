@@ -81,7 +81,7 @@ def task_table(df: pd.DataFrame, source: Path, task: str) -> str:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("source", type=Path)
-    p.add_argument("--tasks", nargs="+", default=list(TASKS))
+    p.add_argument("--tasks", nargs="+", choices=list(TASKS), default=list(TASKS))
     args = p.parse_args()
     df = load_results(args.source)
     for task in args.tasks:

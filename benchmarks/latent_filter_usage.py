@@ -15,18 +15,25 @@ from pathlib import Path
 
 import pandas as pd
 
+from sili_robots.commands.common import non_negative_int, positive_int
 from sili_robots.diagnostics import filter_corrections
-from sili_robots.runs import METRICS
+from sili_robots.errors import one_line_errors
+from sili_robots.runs import METRICS, read_config
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", nargs="+", type=Path)
-    parser.add_argument("--start", type=int, default=1600, help="count from this interaction")
-    parser.add_argument("--window", type=int, default=100, help="final reward over the last N")
+    parser.add_argument(
+        "--start", type=non_negative_int, default=1600, help="count from this interaction"
+    )
+    parser.add_argument(
+        "--window", type=positive_int, default=100, help="final reward over the last N"
+    )
     args = parser.parse_args()
     rows = []
     for run in args.runs:
+        read_config(run)  # a run directory, or a one-line error naming it
         df = pd.read_csv(run / METRICS)
         out = filter_corrections(df, args.start)
         rows.append(
@@ -42,4 +49,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    one_line_errors(main, Path(__file__).name)

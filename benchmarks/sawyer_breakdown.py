@@ -28,6 +28,7 @@ import pandas as pd
 import torch
 
 from sili_robots.agent.agent import SILIAgent
+from sili_robots.commands.common import positive_int
 from sili_robots.diagnostics import category_strategies
 from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.evaluation import load_trained
@@ -79,7 +80,7 @@ def trajectories(agent: SILIAgent, task: SawyerReachEnv, m: pd.DataFrame) -> pd.
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("runs", nargs="+", type=Path)
-    p.add_argument("--block", type=int, default=250)
+    p.add_argument("--block", type=positive_int, default=250)
     args = p.parse_args()
     torch.set_num_threads(1)
     for run in args.runs:

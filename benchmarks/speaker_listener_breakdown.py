@@ -26,6 +26,7 @@ import pandas as pd
 import torch
 
 from sili_robots.bounds import stored_bounds
+from sili_robots.commands.common import positive_int
 from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.evaluation import load_trained
 from sili_robots.runs import kept
@@ -47,7 +48,7 @@ def visits(run: Path) -> tuple[np.ndarray, pd.DataFrame, SpeakerListenerEnv, obj
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("runs", nargs="+", type=Path)
-    p.add_argument("--block", type=int, default=150)
+    p.add_argument("--block", type=positive_int, default=150)
     args = p.parse_args()
     torch.set_num_threads(1)
     for run in args.runs:
