@@ -7,7 +7,10 @@ Task rewards are compared as a *score*: 0 = standing still, 1 = the task's scrip
 reference bounds, ``sili bounds``), so one margin means the same on every task. A claim is
 decided only from runs at the grid's full budget for their block (``paper_grid.py``); with any
 of its runs missing it is "not measured yet" and says how many it has, and so is a claim decided
-by scores on a task version without reference bounds.
+by scores on a task version without reference bounds. A run is the grid's by its name, its
+budget and its task's registered dynamics: runs with other task arguments (an ablation's
+``--env-kwarg``) are left out and named. Agent settings (``--set``) do not change a run's name:
+keep such sweeps out of the folder the claims read.
 
 Rules (the margins are the table's, fixed before the grid ran):
 
@@ -84,6 +87,7 @@ def run_finals(df: pd.DataFrame, upto: dict[str, int] | None = None) -> pd.DataF
                 "config_beta": float(first["config_beta"]),
                 "seed": int(first["seed"]),
                 "task_id": str(first["task_id"]),
+                "task_args": _text(first.get("task_args")),
                 "logged": len(g),
                 "task_reward": reward,
                 "stability": float(tail["true_stability"].mean()),
@@ -92,6 +96,11 @@ def run_finals(df: pd.DataFrame, upto: dict[str, int] | None = None) -> pd.DataF
             }
         )
     return pd.DataFrame(rows)
+
+
+def _text(value: object) -> str:
+    """A table's string cell; "" for a missing one (NaN in a CSV, absent in older tables)."""
+    return "" if value is None or (isinstance(value, float) and np.isnan(value)) else str(value)
 
 
 def score(task_reward: float, task_id: str) -> float:
@@ -117,11 +126,13 @@ def first_stable(stability: np.ndarray, window: int = 50) -> int | None:
 def _block_runs(finals: pd.DataFrame, b: Block, task: str, method: str) -> pd.DataFrame:
     """The block's runs of ``method`` on ``task`` that are in and at full budget: selected by the
     names the grid gives them, so no other run of the same method (another seed, latent kind,
-    b or budget) is counted."""
+    b or budget) is counted, and on the task's own dynamics (an ablation's task arguments, e.g.
+    ``--env-kwarg``, keep the run's name but are not the grid's task)."""
     from sili_robots.sweep.runner import plan
 
     names = {r.name for r in plan(b.specs((task,))) if r.config.method == method}
-    rows = finals[finals.run.isin(names) & (finals.logged == b.budget(task))]
+    grids = finals.run.isin(names) & (finals.task_args == "")
+    rows = finals[grids & (finals.logged == b.budget(task))]
     return rows.sort_values("seed")
 
 
@@ -353,6 +364,13 @@ def _default_profile(task: str, finals: pd.DataFrame) -> Claim:
 def claims_table(df: pd.DataFrame) -> list[Claim]:
     """The claims from a results table (``plotting.load_results`` of a collection)."""
     return decide(run_finals(df), df)
+
+
+def other_dynamics(df: pd.DataFrame) -> list[str]:
+    """The runs no claim counts because they ran with other task arguments than their task's
+    registered version (the grid runs none)."""
+    finals = run_finals(df)
+    return sorted(finals.loc[finals.task_args != "", "run"])
 
 
 def markdown(claims: list[Claim]) -> str:

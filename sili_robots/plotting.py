@@ -76,6 +76,14 @@ FINAL_METRICS = (("task_reward", "final task reward"), ("true_stability", "final
 #: metrics that are fractions: their seed band is clipped to the range (a mean +- std of a
 #: fraction can leave it, which would draw a stability below 0 or above 1)
 METRIC_RANGES = {"true_stability": (0.0, 1.0)}
+
+
+def spread(metric: str, mean: np.ndarray, std: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """mean -+ std, clipped to the metric's range (``METRIC_RANGES``)."""
+    low, high = METRIC_RANGES.get(metric, (-np.inf, np.inf))
+    return np.clip(mean - std, low, high), np.clip(mean + std, low, high)
+
+
 #: the panels that show reference bounds, and the bound each one reads
 BOUND_METRICS = {"task_reward": "task_reward", "true_stability": "stability"}
 #: (colour, dash pattern) of each bound kind's line
@@ -383,9 +391,7 @@ def _draw_curves(
             x = stats.index.to_numpy(float)
             mean, std = stats["mean"].to_numpy(), stats["std"].to_numpy()
             ax.plot(x, mean, style, color=color, label=label, lw=1.6)
-            low, high = METRIC_RANGES.get(metric, (-np.inf, np.inf))
-            band = np.clip(mean - std, low, high), np.clip(mean + std, low, high)
-            ax.fill_between(x, *band, color=color, alpha=0.18, lw=0)
+            ax.fill_between(x, *spread(metric, mean, std), color=color, alpha=0.18, lw=0)
     task_ids = _bound_ids(task_rows, str(task_rows["task"].iloc[0]))
     mixed = (task_rows["task_args"] != "").any()  # the bounds hold for some curves only
     for ax, (metric, ylabel) in zip(axes, metrics, strict=True):
@@ -494,10 +500,11 @@ def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "si
             stats = part.groupby("config_beta")[metric].agg(["mean", lambda s: s.std(ddof=0)])
             stats.columns = ["mean", "std"]
             b = stats.index.to_numpy(float)
-            (line,) = ax.plot(b, stats["mean"].to_numpy(), "o-", label=label, lw=1.6)
-            ax.errorbar(
-                b, stats["mean"], yerr=stats["std"], fmt="none", color=line.get_color(), capsize=4
-            )
+            mean = stats["mean"].to_numpy()
+            (line,) = ax.plot(b, mean, "o-", label=label, lw=1.6)
+            low, high = spread(metric, mean, stats["std"].to_numpy())
+            yerr = np.stack([mean - low, high - mean])
+            ax.errorbar(b, mean, yerr=yerr, fmt="none", color=line.get_color(), capsize=4)
             ax.set_xlabel("stability weight b")
             ax.set_ylabel(ylabel)
             ax.set_gid(metric)

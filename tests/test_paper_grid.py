@@ -12,7 +12,16 @@ import pytest
 from fast_settings import FAST_AGENT as FAST
 
 from sili_robots.build import default_profile
-from sili_robots.claims import HOLDS, NO, PART, claims_table, markdown, run_finals, score
+from sili_robots.claims import (
+    HOLDS,
+    NO,
+    PART,
+    claims_table,
+    markdown,
+    other_dynamics,
+    run_finals,
+    score,
+)
 from sili_robots.cli import main
 from sili_robots.commands.claims import END, START
 from sili_robots.paper_grid import BLOCKS, TASK_BUDGETS, block
@@ -238,6 +247,20 @@ def test_grid_checks_its_folders_and_selection_before_any_run(
     assert not (tmp_path / "s").exists() and not (tmp_path / "c").exists()
 
 
+def test_grid_outside_the_repository_trains_nothing_without_its_folders(
+    tmp_path, monkeypatch, capsys
+):
+    monkeypatch.chdir(tmp_path)  # no sweeps/paper-grid, no results/paper-grid here
+    args = ["grid", "--blocks", "b-sweep", "--workers", "1"]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert f"neither sweeps/paper-grid nor results/paper-grid exists here ({tmp_path})" in err
+    assert "give --sweep-dir and --into to train it afresh there" in err
+    assert list(tmp_path.iterdir()) == []
+    assert main([*args, "--dry-run"]) == 0  # a listing says the same and goes on
+    assert "neither exists here; run from the repository root" in capsys.readouterr().out
+
+
 def test_grid_blocks_and_budgets(capsys):
     assert (
         main(
@@ -280,9 +303,11 @@ def test_grid_blocks_and_budgets(capsys):
 
 
 # ---------------------------------------------------------------- the claims' decision rules
-def _rows(task, task_id, method, seed, rewards, stability, profile=None, beta=0.5, name=None):
+def _rows(
+    task, task_id, method, seed, rewards, stability, profile=None, beta=0.5, name=None, args=""
+):
     """A run's rows in the results table, named as the grid names it (unless ``name``); in the
-    task's profile for the method unless ``profile``."""
+    task's profile for the method unless ``profile``; ``args``: its other task arguments."""
     n = len(rewards)
     profile = profile or default_profile(task, method)
     if name is None:
@@ -294,6 +319,7 @@ def _rows(task, task_id, method, seed, rewards, stability, profile=None, beta=0.
             "task": task,
             "task_id": task_id,
             "method": method,
+            "task_args": args,
             "profile": profile,
             "config_beta": beta,
             "seed": seed,
@@ -360,6 +386,18 @@ def test_a_run_short_of_its_budget_or_outside_the_grid_does_not_count():
     parts.append(_rows("circle-3", "sili/Circle3-v1", "sili", 5, _const(2000, -5), _const(2000, 1)))
     first = claims_table(pd.concat(parts, ignore_index=True))[0]
     assert first.verdict == "not measured yet (runs at the grid's budget: SILI 0/3, Oracle 0/3)"
+    # the grid's names and budget on other dynamics (an ablation's --env-kwarg) count only on
+    # the task's own dynamics
+    ablation = '{"outside_margin": 0.5}'
+    parts = [
+        _rows("circle-3", "sili/Circle3-v1", m, s, _const(2000, -5), _const(2000, 1), args=ablation)
+        for m in ("sili", "oracle")
+        for s in range(3)
+    ]
+    df = pd.concat(parts, ignore_index=True)
+    assert claims_table(df)[0].verdict == first.verdict
+    assert len(other_dynamics(df)) == 6
+    assert claims_table(df.assign(task_args=""))[0].verdict == HOLDS
 
 
 def test_above_baselines_compares_smirl_over_its_own_interactions():
@@ -498,6 +536,15 @@ def test_claims_write_replaces_the_readme_block(sweep_and_collection, tmp_path, 
     text = readme.read_text()
     assert text.startswith(f"# x\n{START}\n| claim |") and text.endswith(f"{END}\ntail\n")
     assert table in text and "stale-table" not in text
+    # part of the grid (Circle 3's runs alone) would undo the decided rows of other tasks
+    part = tmp_path / "part"
+    for run in (committed / "runs").glob("circle-3__*"):
+        shutil.copytree(run, part / "runs" / run.name)
+    assert main(["claims", str(part), "--write", str(readme)]) == 2
+    printed = capsys.readouterr()
+    assert "would replace them with 'not measured yet'" in printed.err and printed.out == ""
+    assert "SILI comparable to Oracle on circle-8" in printed.err
+    assert readme.read_text() == text
     readme.write_text("no block")
     assert main(["claims", str(committed), "--write", str(readme)]) == 2
 
@@ -602,6 +649,47 @@ def test_a_damaged_summary_or_config_is_named_not_a_traceback(
     (run / "config.json").write_text("{")
     assert main(["sweep", "--resume", str(source), "--dry-run"]) == 2
     assert f"{run / 'config.json'} is damaged" in capsys.readouterr().err
+
+
+def test_collect_replaces_a_damaged_copy_and_never_copies_a_damaged_run(
+    sweep_and_collection, tmp_path, capsys
+):
+    sweep, collection = sweep_and_collection
+    mine = tmp_path / "collection"
+    shutil.copytree(collection, mine)
+    name = "circle-3__sili-bschedule__s0"
+    gz = mine / "runs" / name / "metrics.csv.gz"
+    whole = gz.read_bytes()
+    gz.write_bytes(whole[: len(whole) // 2])  # cut: the plot names it, "collect it again"
+    assert main(["plot", str(mine), "--out", str(tmp_path / "fig")]) == 2
+    assert f"{gz} is damaged" in capsys.readouterr().err
+    assert main(["collect", str(sweep), "--into", str(mine)]) == 0
+    assert json.loads(capsys.readouterr().out)["replaced"] == [name]
+    assert gz.read_bytes() == whole
+    # a damaged source is named and nothing is copied from it
+    source = tmp_path / "source"
+    shutil.copytree(sweep, source)
+    run = source / "runs" / name
+    lines = (run / "metrics.csv").read_text().splitlines(keepends=True)
+    (run / "metrics.csv").write_text("".join(lines[:-2]))  # rows lost at a row boundary
+    into = tmp_path / "into"
+    assert main(["collect", str(source), "--into", str(into)]) == 2
+    err = capsys.readouterr().err
+    assert f"{run / 'metrics.csv'} is damaged (it holds 4 rows, its summary.json says 6)" in err
+    assert not (into / "runs").exists()
+    (run / "metrics.csv").write_text("".join(lines))
+    summary = json.loads((run / "summary.json").read_text())
+    (run / "summary.json").write_text(json.dumps({**summary, "interactions": "abc"}))
+    assert main(["collect", str(source), "--into", str(into)]) == 2
+    assert "is damaged (interactions 'abc' is not a count)" in capsys.readouterr().err
+    (run / "summary.json").write_text(json.dumps(summary))
+    config = json.loads((run / "config.json").read_text())
+    del config["run"]["agent"]
+    (run / "config.json").write_text(json.dumps(config))
+    for args in (["collect", str(source), "--into", str(into)], ["claims", str(source)]):
+        assert main(args) == 2
+        assert f"{run / 'config.json'} is damaged (no 'agent')" in capsys.readouterr().err
+    assert not (into / "runs").exists()
 
 
 def test_a_rehearsal_at_a_fraction_of_the_budgets_goes_into_folders_of_its_own(

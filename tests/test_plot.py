@@ -2,6 +2,7 @@
 objects), and the command writes readable PNG and PDF files."""
 
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -109,6 +110,20 @@ def test_beta_figure_plots_final_values_against_b(sweep_dir):
         np.testing.assert_array_equal(xy[:, 0], [0.5, 1.0])
         np.testing.assert_allclose(xy[:, 1], finals.mean(axis=1).to_numpy())
         assert axes[metric].get_xlabel() == "stability weight b"
+
+
+def test_beta_figure_error_bars_stay_within_a_fractions_range():
+    """The grid's b sweep: b = 0.4 holds 0.994 +- 0.012, b = 0 0.062 +- 0.077 (mean +- std of
+    true stability), whose bars would reach past 1 and below 0."""
+    committed = Path(__file__).resolve().parents[1] / "results" / "paper-grid"
+    df = load_results(committed)
+    fig = beta_sweep(df[df.run.str.startswith("circle-3__sili-b")], "circle-3")
+    axes = {ax.get_gid(): ax for ax in fig.axes}
+    (bars,) = [c for c in axes["true_stability"].collections if c.get_segments()]
+    ends = np.concatenate([s[:, 1] for s in bars.get_segments()])
+    assert ends.min() == 0.0 and ends.max() == 1.0
+    (rewards,) = [c for c in axes["task_reward"].collections if c.get_segments()]
+    assert np.concatenate([s[:, 1] for s in rewards.get_segments()]).min() < -20  # not clipped
 
 
 def test_overview_has_a_row_per_task(sweep_dir):

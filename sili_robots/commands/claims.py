@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import sys
 from pathlib import Path
 
 from sili_robots.commands.common import path_arg
@@ -32,12 +33,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sili_robots.claims import claims_table, markdown
+    from sili_robots.claims import claims_table, markdown, other_dynamics
     from sili_robots.plotting import load_results
 
     if args.write is not None:
         _claims_block(args.write)  # a wrong file is named before the results are read
-    claims = claims_table(load_results(args.directory))
+    df = load_results(args.directory)
+    claims = claims_table(df)
+    left_out = other_dynamics(df)
+    if left_out:
+        print(
+            f"sili claims: left out {len(left_out)} runs with other task arguments than the "
+            f"grid's ({', '.join(left_out[:3])}{', ...' if len(left_out) > 3 else ''})",
+            file=sys.stderr,
+        )
     table = markdown(claims)
     if args.write is not None and all(c.verdict.startswith("not measured") for c in claims):
         raise ConfigError(  # before the table: a failed command prints none
@@ -45,10 +54,41 @@ def run(args: argparse.Namespace) -> int:
             "replace its table with 'not measured yet' everywhere; give the grid's results "
             "(results/paper-grid)"
         )
+    if args.write is not None:
+        _check_keeps_measured(args.write, claims, args.directory)
     print(table, end="")
     if args.write is not None:
         write_block(args.write, table)
     return 0
+
+
+def _measured_rows(path: Path) -> set[tuple[str, str]]:
+    """(claim, task) of the rows the claims block of ``path`` shows decided (a bold verdict)."""
+    text, pattern = _claims_block(path)
+    rows = set()
+    for line in pattern.search(text).group(0).splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 4 and cells[3].startswith("**"):
+            rows.add((cells[0], cells[1]))
+    return rows
+
+
+def _check_keeps_measured(path: Path, claims: list, directory: Path) -> None:
+    """ConfigError when ``--write`` would replace a decided row of ``path`` with "not measured
+    yet" (results of part of the grid, or another folder than the grid's)."""
+    measured = _measured_rows(path)
+    lost = [
+        f"{c.claim} on {c.task}"
+        for c in claims
+        if c.verdict.startswith("not measured") and (c.claim, c.task) in measured
+    ]
+    if lost:
+        more = f" and {len(lost) - 2} more" if len(lost) > 2 else ""
+        raise ConfigError(
+            f"{directory} does not measure claims that --write {path} shows decided "
+            f"({'; '.join(lost[:2])}{more}); it would replace them with 'not measured yet': give "
+            "the grid's whole results (results/paper-grid)"
+        )
 
 
 def _claims_block(path: Path) -> tuple[str, re.Pattern[str]]:

@@ -30,13 +30,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--sweep-dir",
         type=path_arg,
-        default=SWEEP_DIR,
         help="working sweep directory with checkpoints (default: sweeps/paper-grid)",
     )
     p.add_argument(
         "--into",
         type=path_arg,
-        default=COLLECTION,
         help="results collection (default: results/paper-grid)",
     )
     p.add_argument(
@@ -62,6 +60,13 @@ def run(args: argparse.Namespace) -> int:
 
     if args.fraction == 0.0:
         raise ConfigError("--fraction 0 trains nothing; give a fraction in (0, 1]")
+    elsewhere = _default_folders(args)
+    if elsewhere and not args.dry_run:  # days of training, not a resume
+        raise ConfigError(
+            f"neither {SWEEP_DIR} nor {COLLECTION} exists here ({Path.cwd()}): run from the "
+            "repository root to resume the grid and reuse its collected runs, or give "
+            "--sweep-dir and --into to train it afresh there"
+        )
     if args.fraction < 1.0:
         _check_own_folders(args)
     if args.sweep_dir.resolve() == args.into.resolve():
@@ -134,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps({**line, "replaced": got.replaced} if got.replaced else line))
     if args.dry_run:
         where = f"in {args.sweep_dir} or {args.into}"
-        if not any(d.exists() for d in dirs) and dirs == (SWEEP_DIR, COLLECTION):
+        if elsewhere:
             where += ": neither exists here; run from the repository root, or give them"
         print(
             f"{done} of {planned} runs done, "
@@ -143,6 +148,15 @@ def run(args: argparse.Namespace) -> int:
     if failed:
         print(json.dumps({"failed": failed}))
     return 1 if failed else 0
+
+
+def _default_folders(args: argparse.Namespace) -> bool:
+    """Fill in the default folders; True when both were left out and neither exists here (a
+    grid started outside the repository would train everything again)."""
+    left_out = args.sweep_dir is None and args.into is None
+    args.sweep_dir = SWEEP_DIR if args.sweep_dir is None else args.sweep_dir
+    args.into = COLLECTION if args.into is None else args.into
+    return left_out and not (SWEEP_DIR.exists() or COLLECTION.exists())
 
 
 def _check_own_folders(args: argparse.Namespace) -> None:

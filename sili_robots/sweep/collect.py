@@ -24,6 +24,7 @@ from sili_robots.runs import (
     CHECKPOINT,
     COMPRESSED_METRICS,
     CONFIG,
+    DAMAGED_METRICS,
     DAMAGED_SUMMARY,
     ERROR_FILE,
     METRICS,
@@ -34,7 +35,7 @@ from sili_robots.runs import (
     read_metrics,
     recorded_run,
 )
-from sili_robots.sweep.results import runs_of
+from sili_robots.sweep.results import run_identity, runs_of
 from sili_robots.sweep.state import RUNS_DIR
 
 
@@ -74,6 +75,7 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
                 report.unfinished.append(name)
                 continue
             ident, length = _identity(run_dir), _length(run_dir)
+            _check_sound(run_dir, length)  # a damaged copy never replaces a sound one
             target = Path(dest) / RUNS_DIR / name
             if name in chosen:
                 _check_same_run(name, chosen[name][0], chosen[name][1], run_dir, ident)
@@ -86,6 +88,8 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
         finished = (target / SUMMARY).is_file() and metrics_file(target) is not None
         held = _length(target) if finished else 0  # the length dest holds it at, finished
         same = finished and (target / SUMMARY).read_bytes() == (run_dir / SUMMARY).read_bytes()
+        if same and not _sound(target, held):  # damaged there: copied again
+            same, held = False, 0
         if same or held > length or _rows_trained(target) > length:  # (a sweep's training)
             report.unchanged.append(name)
             continue
@@ -123,7 +127,34 @@ def _rows_trained(run_dir: Path) -> int:
 
 
 def _length(run_dir: Path) -> int:
-    return int(read_json(run_dir / SUMMARY, DAMAGED_SUMMARY, "interactions")["interactions"])
+    path = run_dir / SUMMARY
+    length = read_json(path, DAMAGED_SUMMARY, "interactions")["interactions"]
+    if not isinstance(length, int) or isinstance(length, bool) or length < 1:
+        raise ConfigError(
+            f"{path} is damaged (interactions {length!r} is not a count); {DAMAGED_SUMMARY}"
+        )
+    return length
+
+
+def _check_sound(run_dir: Path, length: int) -> None:
+    """ConfigError naming the run's metrics unless they read back with its ``length`` rows,
+    and its config unless the tables can read it, before anything is copied."""
+    path = metrics_file(run_dir)
+    rows = len(read_metrics(path))
+    if rows < length:
+        raise ConfigError(
+            f"{path} is damaged (it holds {rows} rows, its {SUMMARY} says {length}); "
+            f"{DAMAGED_METRICS}"
+        )
+    run_identity(run_dir)
+
+
+def _sound(run_dir: Path, length: int) -> bool:
+    try:
+        _check_sound(run_dir, length)
+    except ConfigError:
+        return False
+    return True
 
 
 def _check_same_run(name: str, there: Path, ident: dict, run_dir: Path, mine: dict) -> None:

@@ -93,8 +93,23 @@ def runs_of(directory: Path) -> list[Path]:
     return runs
 
 
-def _identity(run_dir: Path) -> tuple[dict, dict]:
-    cfg = migrate_run(read_json(run_dir / CONFIG, DAMAGED_CONFIG, "run")["run"])
+def run_identity(run_dir: Path) -> tuple[dict, dict]:
+    """A run's identity columns and its recorded config (today's layout); ConfigError naming
+    its config.json when a value the tables need is missing or of another kind."""
+    path = run_dir / CONFIG
+    raw = read_json(path, DAMAGED_CONFIG, "run")["run"]
+    try:
+        cfg = migrate_run(raw)
+        ident = _identity(run_dir, cfg)
+        int(cfg["interactions"])
+    except KeyError as err:
+        raise ConfigError(f"{path} is damaged (no {err.args[0]!r}); {DAMAGED_CONFIG}") from None
+    except (TypeError, ValueError, AttributeError) as err:
+        raise ConfigError(f"{path} is damaged ({err}); {DAMAGED_CONFIG}") from None
+    return ident, cfg
+
+
+def _identity(run_dir: Path, cfg: dict) -> dict:
     agent = cfg["agent"]
     beta = agent.get("sili", {}).get("beta", 0.5)
     scheduled = isinstance(beta, dict)
@@ -116,7 +131,7 @@ def _identity(run_dir: Path) -> tuple[dict, dict]:
         "config_beta": float(beta),
         "beta_scheduled": scheduled,
     }
-    return ident, cfg
+    return ident
 
 
 def _controller(task_id: str | None, env_kwargs: dict) -> str:
@@ -139,7 +154,7 @@ def results_table(sweep_dir: Path) -> pd.DataFrame:
         df = read_metrics(path)
         if df.empty:
             continue
-        ident, _ = _identity(run_dir)
+        ident, _ = run_identity(run_dir)
         for key, value in ident.items():
             df[key] = value
         df["true_stability"] = kept(df)
@@ -154,7 +169,7 @@ def runs_table(sweep_dir: Path) -> pd.DataFrame:
     """One row per run with its state and final numbers (from ``summary.json`` when done)."""
     rows = []
     for run_dir in run_dirs(sweep_dir):
-        ident, cfg = _identity(run_dir)
+        ident, cfg = run_identity(run_dir)
         summary_path, error_path = run_dir / SUMMARY, run_dir / ERROR_FILE
         logged, path = 0, metrics_file(run_dir)
         if path is not None:
