@@ -137,16 +137,18 @@ def train(
                             "wall_time": elapsed0 + time.perf_counter() - t0,
                         },
                     )
-                if stopping:
+                if stopping and done < cfg.interactions:
                     stop.deliver()  # it came during the interaction, which is checkpointed
                 if asked and done < cfg.interactions:
                     raise KeyboardInterrupt(f"{stop_file} asked the run to stop")
+            # finished: a stop held through the last interaction acts after this, at the end
+            # of the block, and leaves the run done, not to be resumed
+            write_summary(run_dir)
     finally:
         bar.close()
         metrics.close()
         if own_env:
             env.close()
-    write_summary(run_dir)
     return run_dir
 
 

@@ -404,6 +404,11 @@ def test_a_claim_whose_pid_another_process_took_since_is_stale(tmp_path):
         recorded = json.loads(claim.read_text())
         assert recorded["started"] == process_started(os.getpid()) is not None
         assert training_worker(tmp_path) == os.getpid()
+    with training_claim(tmp_path):  # a process that took the folder over keeps its claim
+        taken = {"pid": 1, "host": "elsewhere", "started": None}
+        claim.write_text(json.dumps(taken))
+    assert json.loads(claim.read_text()) == taken
+    claim.unlink()
     sleeper = subprocess.Popen(["sleep", "60"])
     try:
         host = socket.gethostname()

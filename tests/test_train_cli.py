@@ -181,6 +181,18 @@ def test_entropy_discount_and_lr_schedules_are_saved_with_the_run(tmp_path):
     assert agent["sac"]["lr"] == {"points": [[1, 3e-4], [2, 3e-5]]}
 
 
+def test_a_setting_given_again_under_any_of_its_names_keeps_the_last_value():
+    from sili_robots.build import make_run_config
+    from sili_robots.commands.common import parse_settings
+
+    for items, last in (
+        (["sac.lr=0.001", "lr=0.002", "sac.lr=0.003"], 0.003),
+        (["lr=0.002", "sac.lr=0.003", "lr=0.004"], 0.004),
+    ):
+        cfg = make_run_config("circle-3", "sili", 0, 1, settings=parse_settings(items))
+        assert cfg.agent.sac.lr == last, items
+
+
 @pytest.mark.parametrize("latent", ["continuous", "partial", "true"])
 def test_every_latent_kind_trains(tmp_path, latent):
     out = tmp_path / latent
@@ -417,6 +429,32 @@ def test_a_stopped_run_checkpoints_its_last_interaction_first(tmp_path, sig, cod
     assert _sili("train", *args, "--out", full).returncode == 0
     a = pd.read_csv(full / "metrics.csv").drop(columns="wall_time")
     pd.testing.assert_frame_equal(a, pd.read_csv(run / "metrics.csv").drop(columns="wall_time"))
+
+
+def test_a_stop_in_the_last_interaction_leaves_the_run_finished(tmp_path, monkeypatch, capsys):
+    """Everything is trained and saved when the stop acts: the run is done (its summary
+    written), the command still stops as the signal says, and says the run finished."""
+    played = []
+    play = training.play_interaction
+
+    def last_is_stopped(*args, **kwargs):
+        played.append(1)
+        if len(played) == 3:
+            os.kill(os.getpid(), signal.SIGINT)  # held until the interaction is saved
+        return play(*args, **kwargs)
+
+    monkeypatch.setattr(training, "play_interaction", last_is_stopped)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    run = tmp_path / "run"
+    try:
+        args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "3", *FAST]
+        assert main([*args, "--out", str(run)]) == 130
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    err = capsys.readouterr().err
+    assert f"the run finished all its interactions: {run}" in err and "--resume" not in err
+    assert run_state(run) == "done"
+    assert json.loads((run / "summary.json").read_text())["interactions"] == 3
 
 
 def test_existing_run_is_not_overwritten_silently(tmp_path):
@@ -795,6 +833,10 @@ def test_a_run_a_sweep_worker_is_training_is_not_resumed_beside_it(tmp_path, cap
     capsys.readouterr()
     assert main(["train", "--resume", str(out), "--interactions", "3", "--no-progress"]) == 2
     assert f"is being trained by process {os.getpid()} (a sweep's worker" in capsys.readouterr().err
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert main([*args, "--seed", "1", "--out", str(out), "--overwrite"]) == 2  # not cleared
+    assert f"{out} is being trained by process {os.getpid()}" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], check=True,
                           capture_output=True, text=True)  # fmt: skip
     (out / "worker.json").write_text(json.dumps({"pid": int(gone.stdout), "host": host}))

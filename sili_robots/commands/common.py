@@ -231,7 +231,8 @@ def registered_task(text: str, command: str, why: str) -> str:
 
 
 def parse_env_kwargs(items: list[str], flag: str) -> dict:
-    """``KEY=VALUE`` pairs with JSON values (bare words are taken as strings)."""
+    """``KEY=VALUE`` pairs with JSON values (bare words are taken as strings), in the order
+    each key was last given, so a later name of the same setting (``lr`` for ``sac.lr``) wins."""
     import json
 
     out = {}
@@ -239,6 +240,7 @@ def parse_env_kwargs(items: list[str], flag: str) -> dict:
         key, sep, value = item.partition("=")
         if not sep or not key:
             raise ConfigError(f"{flag} takes KEY=VALUE, got {item!r}")
+        out.pop(key, None)
         try:
             out[key] = json.loads(value)
         except json.JSONDecodeError:

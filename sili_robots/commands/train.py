@@ -238,6 +238,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = config_from_args(args)
         if args.out is None:
             raise ConfigError("--out RUN_DIR is required for a new run")
+        check_not_trained(args.out)  # --overwrite too: never under a live trainer
         check_new_run_dir(args.out, args.overwrite, resume=f"--resume {args.out}")
         _check_env_builds(cfg)
         if args.overwrite:
@@ -270,7 +271,11 @@ def _resume_hint(run_dir: Path) -> Iterator[None]:
     try:
         yield
     except KeyboardInterrupt:
-        if (Path(run_dir) / CHECKPOINT).is_file():
+        from sili_robots.sweep.state import run_state
+
+        if run_state(Path(run_dir)) == "done":  # stopped in its last interaction
+            print(f"the run finished all its interactions: {run_dir}", file=sys.stderr)
+        elif (Path(run_dir) / CHECKPOINT).is_file():
             print(f"continue the run with: sili train --resume {run_dir}", file=sys.stderr)
         raise
 

@@ -137,8 +137,12 @@ def training_claim(run_dir: Path) -> Iterator[None]:
     write_text(path, json.dumps(claim))
     try:
         yield
-    finally:
-        path.unlink(missing_ok=True)
+    finally:  # the claim, unless another process has since claimed the folder
+        try:
+            if json.loads(path.read_text()) == claim:
+                path.unlink()
+        except (OSError, ValueError):
+            pass
 
 
 def check_not_trained(run_dir: Path, who: str | None = None, by: str = "") -> None:
