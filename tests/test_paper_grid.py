@@ -191,6 +191,33 @@ def test_runs_counts_runs_and_interactions(sweep_and_collection, capsys):
     assert sorted(table.profile) == ["package", "paper"] and table.done.tolist() == [1, 1]
 
 
+def test_runs_of_one_variant_with_other_settings_are_rows_of_their_own(
+    sweep_and_collection, tmp_path, capsys
+):
+    _, collection = sweep_and_collection
+    mixed = tmp_path / "mixed"
+    run = collection / "runs" / "circle-3__sili-bschedule__s0"
+    for seed, lr in ((0, None), (1, None), (2, 0.002)):  # seed 2 with --set sac.lr=0.002
+        copy = mixed / "runs" / f"s{seed}"
+        shutil.copytree(run, copy)
+        config = json.loads((copy / "config.json").read_text())
+        config["run"]["seed"] = seed
+        config["run"]["threads"] = 1 + seed % 2  # bookkeeping, not a setting
+        if lr is not None:
+            config["run"]["agent"]["sac"]["lr"] = lr
+        (copy / "config.json").write_text(json.dumps(config))
+    assert main(["runs", str(mixed), "--csv"]) == 0
+    table = pd.read_csv(__import__("io").StringIO(capsys.readouterr().out)).fillna("")
+    lr = json.loads((run / "config.json").read_text())["run"]["agent"]["sac"]["lr"]
+    assert sorted(zip(table.settings, table.seeds.astype(str), strict=True)) == [
+        (f"agent.sac.lr={json.dumps(lr)}", "0,1"),
+        ("agent.sac.lr=0.002", "2"),
+    ]
+    assert main(["runs", str(collection), "--csv"]) == 0  # runs that agree: no settings named
+    table = pd.read_csv(__import__("io").StringIO(capsys.readouterr().out)).fillna("")
+    assert (table.settings == "").all()
+
+
 def test_plot_reads_a_collection_without_writing_into_it(sweep_and_collection, tmp_path, capsys):
     _, collection = sweep_and_collection
     df = load_results(collection)

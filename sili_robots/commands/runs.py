@@ -11,9 +11,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "runs",
         help="count the runs of a sweep or collection: per task and method, and in total",
-        description="One line per task and method variant: runs done (and unfinished), "
-        "seeds, interactions per run, mean final task reward and true stability, CPU time; "
-        "then the totals.",
+        description="One line per task and method variant (runs of it trained with other "
+        "settings, e.g. --set, on lines of their own, `settings` naming the difference): runs "
+        "done (and unfinished), seeds, interactions per run, mean final task reward and true "
+        "stability, CPU time; then the totals.",
     )
     p.add_argument("directory", type=path_arg, metavar="DIR")
     p.add_argument("--csv", action="store_true", help="the per-variant table as CSV")

@@ -2,23 +2,32 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
 from sili_robots.labels import VARIANT_KEYS
-from sili_robots.sweep.results import runs_table
+from sili_robots.runs import recorded_run
+from sili_robots.sweep.results import run_dirs, runs_table
 
-#: one row per (task, variant)
-INVENTORY_KEYS = ("task", *VARIANT_KEYS)
+#: one row per (task, variant, the other settings its runs differ in)
+INVENTORY_KEYS = ("task", *VARIANT_KEYS, "settings")
+#: recorded settings that are not the configuration: the seed, the budget, and the machine's
+#: bookkeeping (how many threads, which float32 library, how often saved)
+NOT_SETTINGS = ("seed", "interactions", "threads", "checkpoint_every", "agent.matmul")
 
 
 def inventory(directory: Path) -> pd.DataFrame:
     """Per task and variant: done / unfinished runs, seeds, interactions per done run (min and
-    max), interactions trained in all, mean final task reward and stability, CPU hours."""
+    max), interactions trained in all, mean final task reward and stability, CPU hours. Runs of
+    one variant trained with other settings (``--set``) are rows of their own, ``settings``
+    naming what sets them apart ("" where the variant's runs agree)."""
     runs = runs_table(directory)
     runs["controller"] = runs["controller"].fillna("")
     runs["task_id"] = runs["task_id"].fillna("") if "task_id" in runs else ""
+    runs["settings"] = _settings_apart(runs, directory)
     rows = []
     for key, group in runs.groupby(list(INVENTORY_KEYS), sort=False):
         done = group[group["status"] == "done"]
@@ -40,6 +49,32 @@ def inventory(directory: Path) -> pd.DataFrame:
             }
         )
     return pd.DataFrame(rows)
+
+
+def _settings_apart(runs: pd.DataFrame, directory: Path) -> pd.Series:
+    """Per run, the settings (``key=value``) in which it differs from other runs of its task
+    and variant; "" when they all agree."""
+    flat = {d.name: _flat(recorded_run(d)) for d in run_dirs(directory)}
+    out = pd.Series("", index=runs.index)
+    for _, group in runs.groupby(["task", *VARIANT_KEYS], sort=False, dropna=False):
+        configs = [flat[name] for name in group["run"]]
+        keys = sorted({k for c in configs for k in c})
+        apart = [k for k in keys if len({json.dumps(c.get(k)) for c in configs}) > 1]
+        for idx, config in zip(group.index, configs, strict=True):
+            out[idx] = ", ".join(f"{k}={json.dumps(config.get(k))}" for k in apart)
+    return out
+
+
+def _flat(config: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """A recorded run config as dotted keys, without ``NOT_SETTINGS``."""
+    out: dict[str, Any] = {}
+    for key, value in config.items():
+        path = f"{prefix}{key}"
+        if isinstance(value, dict) and value and "points" not in value:
+            out.update(_flat(value, f"{path}."))
+        elif path not in NOT_SETTINGS:
+            out[path] = value
+    return out
 
 
 def _span(values: pd.Series) -> str:
