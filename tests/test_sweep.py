@@ -125,24 +125,43 @@ def test_rerunning_a_finished_sweep_skips_every_run(tiny_sweep, capsys):
     assert "circle-3__sac__s1\tdone" in listed and "4 runs" in listed
 
 
-@pytest.mark.skipif(not tb.available(), reason="tensorboard is not installed")
-def test_tensorboard_scalars_mirror_the_metrics(tiny_sweep):
+def _scalars_and_metrics(run_dir):
+    """The run's TensorBoard scalars (an event reader) and its metrics.csv, side by side;
+    checks that reward/task mirrors the metrics, step for step."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    out, _ = tiny_sweep
-    run_dir = out / "runs" / "circle-3__sili-bschedule__s0"
     acc = EventAccumulator(str(run_dir / "tb"))
     acc.Reload()
     metrics = pd.read_csv(run_dir / "metrics.csv")
     task = acc.Scalars("reward/task")
-    assert [e.step for e in task] == list(range(8))
+    assert [e.step for e in task] == list(range(len(metrics)))
     np.testing.assert_allclose([e.value for e in task], metrics["task_reward"], rtol=1e-6)
+    return acc, metrics
+
+
+@pytest.mark.skipif(not tb.available(), reason="tensorboard is not installed")
+def test_tensorboard_scalars_mirror_the_metrics(tiny_sweep):
+    out, _ = tiny_sweep
+    acc, metrics = _scalars_and_metrics(out / "runs" / "circle-3__sili-bschedule__s0")
+    assert len(metrics) == 8
     stable = acc.Scalars("stability/true")
     assert [e.step for e in stable] == list(range(1, 8))  # interaction 0 keeps nothing
     np.testing.assert_allclose([e.value for e in stable], 1 - metrics["strategy_changed"][1:])
     assert [e.step for e in acc.Scalars("loss/critic")] == list(
         metrics.index[metrics["critic_loss"].notna()]
     )
+
+
+@pytest.mark.skipif(not tb.available(), reason="tensorboard is not installed")
+def test_a_sweep_run_trained_on_by_hand_keeps_its_scalars_in_step(tiny_sweep, tmp_path):
+    import shutil
+
+    out, _ = tiny_sweep
+    run_dir = tmp_path / "run"
+    shutil.copytree(out / "runs" / "circle-3__sili-bschedule__s0", run_dir)
+    assert main(["train", "--resume", str(run_dir), "--interactions", "10", "--no-progress"]) == 0
+    _, metrics = _scalars_and_metrics(run_dir)
+    assert len(metrics) == 10
 
 
 def test_failing_run_is_reported_and_the_others_complete(tmp_path):

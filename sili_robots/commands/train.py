@@ -33,6 +33,7 @@ from sili_robots.errors import ConfigError
 from sili_robots.migrations import setting_path
 from sili_robots.runs import (
     CHECKPOINT,
+    TB_DIR,
     RunConfig,
     check_new_run_dir,
     clear_run,
@@ -209,6 +210,7 @@ def _rebuild_sweep_tables(run_dir: Path) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.runs import check_resumable
+    from sili_robots.sweep import tensorboard
     from sili_robots.sweep.state import check_not_trained, run_state, training_claim
     from sili_robots.training import resume, train, write_summary
     from sili_robots.verdict import verdict
@@ -231,7 +233,12 @@ def run(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
         _note_threads_beyond_cores(read_config(args.resume).threads)
-        with _resume_hint(args.resume), training_claim(args.resume):
+        scalars = _keeps_scalars(args.resume)
+        with (
+            _resume_hint(args.resume),
+            training_claim(args.resume),
+            tensorboard.mirrored(args.resume, scalars),
+        ):
             run_dir = resume(args.resume, not args.no_progress, args.interactions)
         _rebuild_sweep_tables(run_dir)
     else:
@@ -251,6 +258,23 @@ def run(args: argparse.Namespace) -> int:
     print(json.dumps({"run_dir": str(run_dir), **summary}, indent=2))
     print(verdict(run_dir), file=sys.stderr)  # for people; stdout stays one JSON document
     return 0
+
+
+def _keeps_scalars(run_dir: Path) -> bool:
+    """Whether the run's TensorBoard scalars (a sweep's run) are written on as it trains; a
+    note when they cannot be, as they would no longer match its metrics."""
+    from sili_robots.sweep import tensorboard
+
+    if not (Path(run_dir) / TB_DIR).is_dir():
+        return False
+    if tensorboard.available():
+        return True
+    print(
+        f"sili train: note: {Path(run_dir) / TB_DIR} is not updated (TensorBoard is not "
+        "installed: pip install 'sili-robots[tensorboard]'); it ends where the run was",
+        file=sys.stderr,
+    )
+    return False
 
 
 def _note_threads_beyond_cores(threads: int) -> None:

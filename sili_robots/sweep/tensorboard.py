@@ -9,6 +9,7 @@ TensorBoard is optional: without the ``tensorboard`` package nothing is written.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import importlib.util
 import io
@@ -17,6 +18,7 @@ import os
 import shutil
 import threading
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 
 from sili_robots.runs import METRIC_COLUMNS, METRICS, TB_DIR
@@ -130,3 +132,22 @@ class MetricsTail:
                 self._writer.add_scalar(tag, value, step)
             self.rows_written += 1
         self._writer.flush()
+
+
+@contextlib.contextmanager
+def mirrored(run_dir: Path, enabled: bool) -> Iterator[None]:
+    """Mirror the run's metrics into TensorBoard while it trains (``enabled``); a TensorBoard
+    problem only turns the scalars off (with a warning), it never fails the run."""
+    tail = None
+    if enabled:
+        try:
+            tail = MetricsTail(run_dir)
+            tail.start()
+        except Exception as err:
+            warnings.warn(f"TensorBoard scalars off for {Path(run_dir).name}: {err}", stacklevel=2)
+            tail = None
+    try:
+        yield
+    finally:
+        if tail is not None:
+            tail.stop()

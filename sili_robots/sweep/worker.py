@@ -8,16 +8,15 @@ the sweep. This module imports torch only inside the call, after capping threads
 
 from __future__ import annotations
 
-import contextlib
 import os
 import time
 import traceback
-import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 from sili_robots.runs import ERROR_FILE, STOP_FILE
+from sili_robots.sweep import tensorboard
 from sili_robots.sweep.state import run_state, training_claim
 
 #: one thread per worker: K workers share the machine's cores
@@ -72,7 +71,7 @@ def run_job(job: Job) -> Outcome:
 
             torch.set_num_threads(1)
             cfg = RunConfig.from_dict(job.config)
-            with _tensorboard(run_dir, job.tensorboard):
+            with tensorboard.mirrored(run_dir, job.tensorboard):
                 stop_file = run_dir / STOP_FILE  # how a sweep stops it
                 train(cfg, run_dir, state == "resumable", progress=False, stop_file=stop_file)
     except (KeyboardInterrupt, SystemExit):
@@ -105,24 +104,3 @@ def _verdict(run_dir: Path) -> str:
         return verdict(run_dir)
     except Exception as err:
         return f"(no verdict: {type(err).__name__}: {err})"
-
-
-@contextlib.contextmanager
-def _tensorboard(run_dir: Path, enabled: bool):
-    """Mirror metrics into TensorBoard while the run trains; a TensorBoard problem only turns
-    the scalars off (with a warning), it never fails the run."""
-    tail = None
-    if enabled:
-        try:
-            from sili_robots.sweep.tensorboard import MetricsTail
-
-            tail = MetricsTail(run_dir)
-            tail.start()
-        except Exception as err:
-            warnings.warn(f"TensorBoard scalars off for {run_dir.name}: {err}", stacklevel=2)
-            tail = None
-    try:
-        yield
-    finally:
-        if tail is not None:
-            tail.stop()
