@@ -63,6 +63,31 @@ def test_paper_profile_writes_the_papers_values(tmp_path):
     continuous = method_config("sili", "continuous", profile="paper")
     assert continuous.model.preact_penalty == 0.0  # the package adds 1e-3 (README's table)
     assert method_config("sili", "continuous").model.preact_penalty == 1e-3
+    # the paper's continuous z is the encoder's raw output, the package's its tanh; a discrete
+    # run records the setting unchanged (it has no use for it)
+    assert continuous.model.squash is False and method_config("sili", "continuous").model.squash
+    assert method_config("sili", profile="paper").model.squash is True
+
+
+def test_a_continuous_latent_is_the_raw_encoder_output_unless_squashed():
+    import torch
+
+    from sili_robots.agent.config import AgentConfig
+    from sili_robots.agent.latent import LatentModel
+
+    traj = torch.randn(6, 5, 3 + 2 + 1 + 3)
+    for squash in (True, False):
+        torch.manual_seed(0)
+        model = LatentModel(3, 2, latent_dim=4, hidden=16, kind="continuous", squash=squash)
+        with torch.no_grad():
+            model.head.bias.fill_(3.0)  # outputs beyond tanh's range
+            raw = model.encode_logits(traj)
+            z = model.encode(traj)
+        torch.testing.assert_close(z, torch.tanh(raw) if squash else raw)
+        assert (z.abs().max() > 1.0) is not squash
+    recorded = method_config("sili", "continuous", profile="paper").to_dict()
+    del recorded["model"]["squash"]  # a run saved before the setting: trained with tanh
+    assert AgentConfig.from_dict(recorded).model.squash is True
 
 
 def test_an_output_directory_that_cannot_be_created_exits_2_naming_it(capsys):

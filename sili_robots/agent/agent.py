@@ -88,6 +88,7 @@ class SILIAgent:
                 m.estimator,
                 value_at(m.usage_bonus, 0),
                 preact_penalty=value_at(m.preact_penalty, 0),
+                squash=m.squash,
                 readouts=[r for a in self.hooks["encoder_readouts"] for r in a.encoder_readouts()],
                 matmul=cfg.matmul,
             )

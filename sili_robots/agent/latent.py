@@ -32,12 +32,13 @@ Training objective for discrete latents (``estimator``):
 * ``gumbel``: the paper's straight-through Gumbel-Softmax (temperature 1): one-hot forward, soft
   gradient backward.
 
-Continuous latents are tanh of the encoder's output. Nothing in the reconstruction keeps that
-output small, and once it is large tanh passes no gradient back: measured on Circle (3 Goals),
-one seed's encoder outputs reached |16|-|22| in every dimension, so z^j sat at the corners of
-the box and flipped sign between interactions with no change of strategy (benchmarks/
-RESULTS.md). ``preact_penalty`` adds lambda * mean(output^2), negligible while the output is
-O(1) and strong once it saturates.
+Continuous latents are tanh of the encoder's output (``squash``; the paper profile, as the
+original implementation, takes the raw output: the paper bounds nothing). Nothing in the
+reconstruction keeps that output small, and once it is large tanh passes no gradient back:
+measured on Circle (3 Goals), one seed's encoder outputs reached |16|-|22| in every dimension,
+so z^j sat at the corners of the box and flipped sign between interactions with no change of
+strategy (benchmarks/RESULTS.md). ``preact_penalty`` adds lambda * mean(output^2), negligible
+while the output is O(1) and strong once it saturates.
 
 Targets are standardised per dimension within each batch, so the usage bonus weighs the same
 against the reconstruction whatever the task's reward scale.
@@ -89,6 +90,7 @@ class LatentModel(nn.Module):
         estimator: str = "expected",
         usage_bonus: float = 0.1,
         preact_penalty: float = 0.0,
+        squash: bool = True,
         readouts: Sequence[Callable[[torch.Tensor], torch.Tensor]] = (),
         matmul: str = "aten",
     ) -> None:
@@ -98,7 +100,7 @@ class LatentModel(nn.Module):
         if estimator not in ESTIMATORS:
             raise ValueError(f"estimator must be one of {ESTIMATORS}, got {estimator!r}")
         self.kind, self.estimator, self.usage_bonus = kind, estimator, usage_bonus
-        self.preact_penalty = preact_penalty
+        self.preact_penalty, self.squash = preact_penalty, squash
         self.readouts = list(readouts)
         self.latent_dim = latent_dim
         tr_dim = 2 * obs_dim + act_dim + 1
@@ -172,7 +174,7 @@ class LatentModel(nn.Module):
         category (the z^j acted on and cached, ``model.sample``)."""
         out = self.encode_logits(traj)
         if self.kind == "continuous":
-            return torch.tanh(out)
+            return torch.tanh(out) if self.squash else out
         if sample:
             return gumbel_straight_through(out)
         return F.one_hot(out.argmax(-1), self.latent_dim).to(out.dtype)
@@ -212,7 +214,7 @@ class LatentModel(nn.Module):
         target = (target - mean) / scale
         if self.kind == "continuous":
             out = self.encode_logits(prev_traj)
-            pred = self.decode(obs, act, torch.tanh(out))
+            pred = self.decode(obs, act, torch.tanh(out) if self.squash else out)
             return F.mse_loss(pred, target) + self.preact_penalty * out.pow(2).mean()
         logits = self.encode_logits(prev_traj)
         heads = (self._heads(obs, act) - mean) / scale  # [B, H, k, out]

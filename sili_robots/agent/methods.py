@@ -13,7 +13,8 @@ Two profiles give the starting settings: ``package`` (the defaults of ``AgentCon
 ``paper`` (the settings of the paper's appendix: discrete latents by straight-through
 Gumbel-Softmax at temperature 1, z^j sampled as its Eq. for z^j says, b = 0.5 constant (the
 package's SILI starts b at 0 and raises it to 0.5 over interactions 250-300), 2 x 256 networks,
-latent dimension 10, R_stable = -d(z^j, z^{j-1}) on every step, no grouping of categories).
+latent dimension 10, R_stable = -d(z^j, z^{j-1}) on every step, no grouping of categories,
+continuous latents the encoder's raw output as in the original implementation).
 Both keep the model's structure, which the paper leaves open or states loosely (the encoder's
 pooling, a discrete decoder with one head per category; README, "Two profiles").
 """
@@ -76,7 +77,7 @@ PAPER_PROFILE: dict[str, Any] = {
     "model.sample": True,
     "model.usage_bonus": 0.0,
     "model.merge_threshold": 0.0,
-    "model.preact_penalty": 0.0,  # continuous latents: the plain tanh output
+    "model.preact_penalty": 0.0,  # continuous latents: no penalty on the encoder's output
     "sili.beta": 0.5,
     "sili.credit": "per_step",
     "sili.scale": None,
@@ -140,4 +141,6 @@ def method_config(
         set_path(cfg, path, value)
     for path, (value, _) in fixed.items():
         set_path(cfg, path, value)
+    if profile == "paper" and cfg.latent == "continuous" and "model.squash" not in given:
+        cfg.model.squash = False  # the raw output (recorded for continuous latents alone)
     return cfg.validate()
