@@ -2,7 +2,7 @@
 # The main job: set up, then a short SILI training on Circle (3 Goals), two seeds at once (one per
 # core), each ending with a one-line verdict (did it hold the opponent over its last 50
 # interactions, and what it earned next to standing still and the scripted stabilizing policy),
-# then one line across the seeds and a greedy evaluation of the best run that worked.
+# then one line across the seeds and a greedy evaluation of the best run (one that worked, if any).
 # The delayed-b recipe (b = 0 until interaction 250, the latent model learning from a policy
 # that pursues the task; 0.5 from 300) on a small agent (2 x 64 networks) so 1,000 interactions
 # fit in minutes on 2 CPU cores; float32 products on every machine. A run held above standing

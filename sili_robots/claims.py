@@ -353,8 +353,8 @@ def _default_profile(task: str, finals: pd.DataFrame) -> Claim:
     if missing:
         return Claim(name, task, "", missing)
     s, p = _mean(package, "score"), _mean(paper, "score")
-    measured = (
-        f"score package {s:.2f} ({_reward_and_stability(package)}), "
+    measured = (  # more seeds than the other claims' SILI rows on Driving: said, not implied
+        f"{n_package} seeds each: score package {s:.2f} ({_reward_and_stability(package)}), "
         f"paper {p:.2f} ({_reward_and_stability(paper)})"
     )
     verdict = HOLDS if s - p > ABOVE else PART if s - p >= -ABOVE else NO

@@ -495,7 +495,7 @@ def test_the_default_profile_is_decided_against_the_paper_profile(paper_reward, 
     rows = {c.task: c for c in claims if c.claim == "package default over paper profile"}
     assert set(rows) == {"circle-3", "driving"}
     assert rows["circle-3"].verdict == verdict
-    assert rows["circle-3"].measured.startswith("score package 0.95 (reward -6.00")
+    assert rows["circle-3"].measured.startswith("3 seeds each: score package 0.95 (reward -6.00")
     assert (
         rows["driving"].verdict
         == "not measured yet (runs at the grid's budget: package 0/5, paper 0/5)"
@@ -527,7 +527,7 @@ def test_the_default_on_driving_is_decided_on_five_seeds_of_each_profile():
     df = pd.concat(parts, ignore_index=True)
     rows = {c.task: c for c in claims_table(df) if c.claim == "package default over paper profile"}
     assert rows["driving"].verdict == NO  # -0.5 against (3 x -0.5 + 2 x -0.2) / 5 = -0.38
-    assert rows["driving"].measured.startswith("score package 0.50 (reward -0.50")
+    assert rows["driving"].measured.startswith("5 seeds each: score package 0.50 (reward -0.50")
     four = claims_table(df[df.run != names["paper"][-1]])
     (row,) = [
         c for c in four if c.claim == "package default over paper profile" and c.task == "driving"
