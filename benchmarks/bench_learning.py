@@ -48,6 +48,10 @@ MARKS = {True: "MET    ", False: "NOT MET", None: "N/A    "}
 TARGET_METHODS = ("sili", "oracle", "lili", "sac")
 
 
+#: the methods ``--latent`` is passed on to
+LATENT_ARG_METHODS = ("sili", "stable")
+
+
 def run_one(task: str, method: str, seed: int, args: argparse.Namespace) -> Path:
     """Train (or finish) one run; a run stopped midway resumes as its config.json records it,
     and a finished shorter one is extended to ``--interactions``."""
@@ -61,7 +65,7 @@ def run_one(task: str, method: str, seed: int, args: argparse.Namespace) -> Path
     else:
         cmd = [*cli, "--task", task, "--method", method, "--seed", str(seed), "--out", str(out)]
         cmd += ["--interactions", str(args.interactions)]
-        if args.latent and method in ("sili", "stable"):
+        if args.latent and method in LATENT_ARG_METHODS:
             cmd += ["--latent", args.latent]
         for item in args.set:
             cmd += ["--set", item]
@@ -251,8 +255,15 @@ def checked_jobs(p: argparse.ArgumentParser, args: argparse.Namespace) -> tuple[
     settings = checked("--set", lambda: parse_settings(args.set))
     methods = [m.strip() for m in args.methods.split(",")]
     for m in methods:
+        latent = args.latent if m in LATENT_ARG_METHODS else None  # as run_one passes it on
         option = f"--methods {m}" + (" with --set" if args.set else "")
-        checked(option, lambda m=m: make_run_config(args.task, m, 0, 1, settings=settings))
+        option += f" with --latent {latent}" if latent else ""
+        checked(
+            option,
+            lambda m=m, latent=latent: make_run_config(
+                args.task, m, 0, 1, latent=latent, settings=settings
+            ),
+        )
     return methods, seeds
 
 

@@ -39,6 +39,7 @@ def test_every_script_checks_its_numbers_and_reports_bad_input_in_one_line(scrip
         ("bench_sweep_scaling.py", ["--runs", "0"], "argument --runs: 0 is not allowed"),
         ("bench_learning.py", ["--methods", "sili,bar"], "--methods bar: unknown method 'bar'"),
         ("bench_learning.py", ["--set", "foo=1"], "with --set: unknown setting 'foo'"),
+        ("bench_learning.py", ["--methods", "sac,sili", "--latent", "x"], "with --latent x:"),
         ("bench_preview.py", ["--tasks", "nope"], "invalid choice: 'nope'"),
         ("latent_filter_usage.py", ["/absent"], "/absent does not exist"),
     ],

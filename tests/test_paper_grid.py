@@ -203,6 +203,8 @@ def test_runs_of_one_variant_with_other_settings_are_rows_of_their_own(
         config = json.loads((copy / "config.json").read_text())
         config["run"]["seed"] = seed
         config["run"]["threads"] = 1 + seed % 2  # bookkeeping, not a setting
+        if seed == 1:  # the task's default spelled out: the same dynamics
+            config["run"]["env_kwargs"] = {"outside_margin": 0.1}
         if lr is not None:
             config["run"]["agent"]["sac"]["lr"] = lr
         (copy / "config.json").write_text(json.dumps(config))
@@ -569,8 +571,9 @@ def test_claims_write_replaces_the_readme_block(sweep_and_collection, tmp_path, 
         shutil.copytree(run, part / "runs" / run.name)
     assert main(["claims", str(part), "--write", str(readme)]) == 2
     printed = capsys.readouterr()
-    assert "would replace them with 'not measured yet'" in printed.err and printed.out == ""
-    assert "SILI comparable to Oracle on circle-8" in printed.err
+    assert "would replace rows it shows decided with 'not measured yet'" in printed.err
+    assert "SILI comparable to Oracle on circle-8: not measured yet (runs at" in printed.err
+    assert printed.out == ""
     assert readme.read_text() == text
     readme.write_text("no block")
     assert main(["claims", str(committed), "--write", str(readme)]) == 2
@@ -693,6 +696,12 @@ def test_collect_replaces_a_damaged_copy_and_never_copies_a_damaged_run(
     assert main(["collect", str(sweep), "--into", str(mine)]) == 0
     assert json.loads(capsys.readouterr().out)["replaced"] == [name]
     assert gz.read_bytes() == whole
+    config = mine / "runs" / name / "config.json"
+    intact = config.read_text()
+    config.write_text(json.dumps({"run": {"task": "circle-3"}}))  # a hand-edited copy
+    assert main(["collect", str(sweep), "--into", str(mine)]) == 0
+    assert json.loads(capsys.readouterr().out)["replaced"] == [name]
+    assert config.read_text() == intact
     # a damaged source is named and nothing is copied from it
     source = tmp_path / "source"
     shutil.copytree(sweep, source)
@@ -716,6 +725,9 @@ def test_collect_replaces_a_damaged_copy_and_never_copies_a_damaged_run(
     for args in (["collect", str(source), "--into", str(into)], ["claims", str(source)]):
         assert main(args) == 2
         assert f"{run / 'config.json'} is damaged (no 'agent')" in capsys.readouterr().err
+    (run / "config.json").write_text(json.dumps({"run": 5}))
+    assert main(["collect", str(source), "--into", str(into)]) == 2
+    assert f"{run / 'config.json'} is damaged" in capsys.readouterr().err
     assert not (into / "runs").exists()
 
 

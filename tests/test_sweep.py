@@ -159,6 +159,9 @@ def test_a_sweep_run_trained_on_by_hand_keeps_its_scalars_in_step(tiny_sweep, tm
     out, _ = tiny_sweep
     run_dir = tmp_path / "run"
     shutil.copytree(out / "runs" / "circle-3__sili-bschedule__s0", run_dir)
+    scalars = {p: p.read_bytes() for p in (run_dir / "tb").iterdir()}
+    assert main(["train", "--resume", str(run_dir), "--interactions", "2"]) == 2  # shorter
+    assert {p: p.read_bytes() for p in (run_dir / "tb").iterdir()} == scalars  # left as they were
     assert main(["train", "--resume", str(run_dir), "--interactions", "10", "--no-progress"]) == 0
     _, metrics = _scalars_and_metrics(run_dir)
     assert len(metrics) == 10

@@ -244,6 +244,20 @@ def test_a_sweep_recorded_before_the_b_schedule_keeps_b_05_on_resume():
     assert run.name == "circle-3__sili-b0.5__s0" and run.config.agent.sili.beta == 0.5
 
 
+def test_a_sweep_recorded_before_raw_paper_latents_keeps_tanh_on_resume():
+    spec = SweepSpec(
+        tasks=["circle-continuous"], methods=["sili"], seeds=[0], interactions=3, profile="paper"
+    )
+    (run,) = expand(spec)
+    assert run.config.agent.model.squash is False  # the paper's: the raw encoder output
+    again = SweepSpec.from_dict(json.loads(json.dumps(spec.to_dict())))
+    assert expand(again)[0].config == run.config
+    recorded = spec.to_dict()
+    del recorded["paper_raw_latents"]  # as sweeps recorded it before
+    (old,) = expand(SweepSpec.from_dict(recorded))
+    assert old.config.agent.model.squash is True and old.name == run.name
+
+
 def test_a_sweep_records_the_changed_defaults_and_older_records_keep_the_earlier_value():
     spec = _spec(agent_overrides={})
     assert spec.agent_overrides["model.updates_per_interaction"] == 5

@@ -78,16 +78,16 @@ def _check_keeps_measured(path: Path, claims: list, directory: Path) -> None:
     yet" (results of part of the grid, or another folder than the grid's)."""
     measured = _measured_rows(path)
     lost = [
-        f"{c.claim} on {c.task}"
+        f"{c.claim} on {c.task}: {c.verdict}"
         for c in claims
         if c.verdict.startswith("not measured") and (c.claim, c.task) in measured
     ]
     if lost:
-        more = f" and {len(lost) - 2} more" if len(lost) > 2 else ""
+        more = f"; and {len(lost) - 2} more" if len(lost) > 2 else ""
         raise ConfigError(
-            f"{directory} does not measure claims that --write {path} shows decided "
-            f"({'; '.join(lost[:2])}{more}); it would replace them with 'not measured yet': give "
-            "the grid's whole results (results/paper-grid)"
+            f"--write {path} would replace rows it shows decided with 'not measured yet' "
+            f"({'; '.join(lost[:2])}{more}): {directory} lacks what they need; give the grid's "
+            "whole results (results/paper-grid), or what the rows name"
         )
 
 

@@ -74,18 +74,20 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
             if not (run_dir / SUMMARY).is_file() or metrics_file(run_dir) is None:
                 report.unfinished.append(name)
                 continue
-            ident, length = _identity(run_dir), _length(run_dir)
+            length = _length(run_dir)
             _check_sound(run_dir, length)  # a damaged copy never replaces a sound one
+            ident = _identity(run_dir)
             target = Path(dest) / RUNS_DIR / name
             if name in chosen:
                 _check_same_run(name, chosen[name][0], chosen[name][1], run_dir, ident)
-            if (target / CONFIG).is_file():
+            if (target / CONFIG).is_file() and _readable(target):  # else: copied again
                 _check_same_run(name, target, _identity(target), run_dir, ident)
             if name not in chosen or length > chosen[name][2]:
                 chosen[name] = (run_dir, ident, length)
     for name, (run_dir, _, length) in chosen.items():
         target = Path(dest) / RUNS_DIR / name
         finished = (target / SUMMARY).is_file() and metrics_file(target) is not None
+        finished = finished and _readable(target)
         held = _length(target) if finished else 0  # the length dest holds it at, finished
         same = finished and (target / SUMMARY).read_bytes() == (run_dir / SUMMARY).read_bytes()
         if same and not _sound(target, held):  # damaged there: copied again
@@ -147,6 +149,18 @@ def _check_sound(run_dir: Path, length: int) -> None:
             f"{DAMAGED_METRICS}"
         )
     run_identity(run_dir)
+
+
+def _readable(run_dir: Path) -> bool:
+    """Whether a collected copy's config and (when it has one) summary read back: a damaged
+    copy is copied again, not compared."""
+    try:
+        run_identity(run_dir)
+        if (run_dir / SUMMARY).is_file():
+            _length(run_dir)
+    except ConfigError:
+        return False
+    return True
 
 
 def _sound(run_dir: Path, length: int) -> bool:

@@ -14,9 +14,19 @@ from sili_robots.sweep.results import run_dirs, runs_table
 
 #: one row per (task, variant, the other settings its runs differ in)
 INVENTORY_KEYS = ("task", *VARIANT_KEYS, "settings")
-#: recorded settings that are not the configuration: the seed, the budget, and the machine's
-#: bookkeeping (how many threads, which float32 library, how often saved)
-NOT_SETTINGS = ("seed", "interactions", "threads", "checkpoint_every", "agent.matmul")
+#: recorded settings that are not the configuration: the seed, the budget, the machine's
+#: bookkeeping (how many threads, which float32 library, how often saved), and the task and its
+#: arguments (the variant's own columns: ``task_args``, ``controller``, ``task_id``)
+NOT_SETTINGS = (
+    "seed",
+    "interactions",
+    "threads",
+    "checkpoint_every",
+    "agent.matmul",
+    "task",
+    "task_id",
+    "env_kwargs",
+)
 
 
 def inventory(directory: Path) -> pd.DataFrame:
@@ -70,9 +80,11 @@ def _flat(config: dict[str, Any], prefix: str = "") -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key, value in config.items():
         path = f"{prefix}{key}"
+        if path in NOT_SETTINGS:
+            continue
         if isinstance(value, dict) and value and "points" not in value:
             out.update(_flat(value, f"{path}."))
-        elif path not in NOT_SETTINGS:
+        else:
             out[path] = value
     return out
 

@@ -66,6 +66,9 @@ class SweepSpec:
     #: task name -> the profile SILI starts from there when ``profile`` is None, recorded when
     #: planned so ``--resume`` keeps it when a task's default moves on
     sili_profiles: dict[str, str] = field(default_factory=dict)
+    #: whether the paper profile's continuous latents are the encoder's raw output (False for
+    #: sweeps recorded before: they ran with tanh, ``model.squash``, and resume so)
+    paper_raw_latents: bool = True
 
     def __post_init__(self) -> None:
         # the kernel library is resolved once, when the sweep is planned, and recorded with it
@@ -73,6 +76,8 @@ class SweepSpec:
         # the defaults that have changed since sweeps were first recorded
         given = {setting_path(k) for k in self.agent_overrides}
         recorded = {"matmul": default_matmul(), **_current(CHANGED_DEFAULTS)}
+        if not self.paper_raw_latents:
+            recorded["model.squash"] = True
         self.agent_overrides = {
             **{k: v for k, v in recorded.items() if k not in given},
             **self.agent_overrides,
@@ -94,8 +99,8 @@ class SweepSpec:
         """Read a recorded invocation; one recorded before ``matmul`` existed ran on aten, one
         recorded before task versions ran each task's first version, one recorded before SILI's
         default b was a schedule ran at b = 0.5, one recorded before profiles ran the package's,
-        and one recorded before a default in ``CHANGED_DEFAULTS`` changed ran at the earlier
-        value."""
+        one recorded before a default in ``CHANGED_DEFAULTS`` changed ran at the earlier value,
+        and one recorded before ``paper_raw_latents`` squashed continuous latents by tanh."""
         given = {setting_path(k) for k in data.get("agent_overrides", {})}
         older = {"matmul": "aten", **CHANGED_DEFAULTS}
         overrides = {
@@ -105,7 +110,7 @@ class SweepSpec:
         task_ids = data.get("task_ids")
         if task_ids is None:
             task_ids = _task_ids(data.get("tasks", []), first_version)
-        data = {"sili_beta": 0.5, "profile": "package", **data}
+        data = {"sili_beta": 0.5, "profile": "package", "paper_raw_latents": False, **data}
         data = {**data, "agent_overrides": overrides, "task_ids": task_ids}
         return cls(**data)
 

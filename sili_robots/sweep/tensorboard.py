@@ -3,7 +3,8 @@
 The training loop writes one CSV row per interaction; a thread in the worker tails that file and
 mirrors each row into ``RUN_DIR/tb/`` (step = interaction), so TensorBoard shows runs live
 without the training loop knowing about it. A (re)started run rewrites ``tb/`` from the CSV,
-which the training loop has already trimmed to its checkpoint, so both always agree.
+which the training loop has already trimmed to its checkpoint, so both always agree; until it
+has, ``tb/`` is left as it was (a resume refused before it trains changes nothing).
 TensorBoard is optional: without the ``tensorboard`` package nothing is written.
 """
 
@@ -83,10 +84,8 @@ class MetricsTail:
             return None
 
     def start(self) -> None:
-        from torch.utils.tensorboard import SummaryWriter
+        from torch.utils.tensorboard import SummaryWriter  # noqa: F401  (fails here if absent)
 
-        shutil.rmtree(self.run_dir / TB_DIR, ignore_errors=True)
-        self._writer = SummaryWriter(str(self.run_dir / TB_DIR))
         self._thread.start()
 
     def stop(self) -> None:
@@ -120,6 +119,11 @@ class MetricsTail:
             inode = self._inode()
             if inode is None or inode == self._old_inode:
                 return  # training has not (re)created the CSV yet (or never did)
+            from torch.utils.tensorboard import SummaryWriter
+
+            # only now: a run refused or failed before it trains keeps its scalars
+            shutil.rmtree(self.run_dir / TB_DIR, ignore_errors=True)
+            self._writer = SummaryWriter(str(self.run_dir / TB_DIR))
             self._file = self._path.open(newline="")
             self._file.readline()  # header
         chunk = self._pending + self._file.read()
