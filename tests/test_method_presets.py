@@ -155,3 +155,25 @@ def test_oracle_alone_observes_the_true_strategy(tmp_path, method):
     assert obs.shape == (agent.obs_dim,)
     if extra:
         np.testing.assert_array_equal(obs[-extra:], info["strategy"])
+
+
+def test_a_setting_the_method_never_reads_is_recorded_with_a_note(tmp_path, capsys):
+    from sili_robots.agent.methods import unused_settings
+
+    assert unused_settings(method_config("sac"), ["model.dim", "sac.lr"]) == {
+        "model.dim": "it learns no latent model (latent 'none')"
+    }
+    assert unused_settings(method_config("sili"), ["model.dim"]) == {}
+    floor = ["sili.smirl_std_floor"]
+    assert "sili.smirl_std_floor" in unused_settings(method_config("lili"), floor)
+    assert unused_settings(method_config("smirl"), floor) == {}
+    out = tmp_path / "sac"
+    args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "1", *FAST_ARGS]
+    assert main([*args, "--set", "model.dim=4", "--out", str(out), "--no-progress"]) == 0
+    note = "sili train: note: --set model.dim does nothing here: it learns no latent model"
+    assert note in capsys.readouterr().err
+    assert json.loads((out / "config.json").read_text())["run"]["agent"]["model"]["dim"] == 4
+    sweep = ["sweep", "--tasks", "circle-3", "--methods", "sili,sac,oracle", "--seeds", "0-1"]
+    assert main([*sweep, "--set", "model.dim=4", "--out", str(tmp_path / "s"), "--dry-run"]) == 0
+    err = capsys.readouterr().err
+    assert "sili sweep: note: --set model.dim does nothing for sac, oracle: it learns no" in err

@@ -21,6 +21,7 @@ pooling, a discrete decoder with one head per category; README, "Two profiles").
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -144,3 +145,16 @@ def method_config(
     if profile == "paper" and cfg.latent == "continuous" and "model.squash" not in given:
         cfg.model.squash = False  # the raw output (recorded for continuous latents alone)
     return cfg.validate()
+
+
+def unused_settings(cfg: AgentConfig, given: Iterable[str]) -> dict[str, str]:
+    """The settings among ``given`` (dotted paths) that the agent ``cfg`` never reads, and why:
+    recorded in its config.json all the same, so a reader is told (a sweep gives its settings
+    to every method, so they are not refused)."""
+    out = {}
+    for path in given:
+        if path.startswith("model.") and not cfg.uses_latent_model:
+            out[path] = f"it learns no latent model (latent {cfg.latent!r})"
+        elif path == "sili.smirl_std_floor" and cfg.method != "smirl":
+            out[path] = "only SMiRL's state density reads it"
+    return out

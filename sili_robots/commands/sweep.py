@@ -6,7 +6,9 @@ import argparse
 import json
 import os
 import re
+import sys
 from pathlib import Path
+from typing import Any
 
 from sili_robots.agent import LATENT_CHOICES, PROFILES
 from sili_robots.commands.common import (
@@ -24,6 +26,7 @@ from sili_robots.commands.common import (
     writable_dir,
 )
 from sili_robots.errors import ConfigError
+from sili_robots.migrations import setting_path
 from sili_robots.sweep.spec import (
     SWEEP_SCHEDULES,
     SweepSpec,
@@ -184,7 +187,27 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
         checkpoint_every=args.checkpoint_every,
     )
     check_task_arguments(spec)  # new sweeps only, as --latent above
+    _note_unused_settings(spec, parse_settings(args.agent_set))
     return spec
+
+
+def _note_unused_settings(spec: SweepSpec, given: dict[str, Any]) -> None:
+    """A note per ``--set`` setting some of the sweep's methods never read (every run records
+    it; a sweep gives its settings to all its methods, so it is not refused)."""
+    from sili_robots.agent.methods import unused_settings
+    from sili_robots.sweep import expand
+
+    paths = {setting_path(name): name for name in given}
+    unread: dict[tuple[str, str], list[str]] = {}  # (name, why) -> methods
+    for run in expand(spec):
+        for path, why in unused_settings(run.config.agent, paths).items():
+            methods = unread.setdefault((paths[path], why), [])
+            methods += [run.config.method] if run.config.method not in methods else []
+    for (name, why), methods in unread.items():
+        print(
+            f"sili sweep: note: --set {name} does nothing for {', '.join(methods)}: {why}",
+            file=sys.stderr,
+        )
 
 
 def _controllers(text: str | None) -> list[str] | None:

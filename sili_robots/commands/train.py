@@ -11,6 +11,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from sili_robots.agent import BETA_METHODS, LATENT_CHOICES, METHODS, PROFILES, Schedule
+from sili_robots.agent.methods import unused_settings
 from sili_robots.build import make_run_config
 from sili_robots.commands.common import (
     CONTROLLERS_HELP,
@@ -148,7 +149,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     if args.latent is not None and "latent" in given:
         raise ConfigError(f"give one of --latent and --set {given['latent']}, not both")
     env_kwargs = task_arguments_given(args)
-    return make_run_config(
+    cfg = make_run_config(
         args.task,
         args.method,
         args.seed,
@@ -160,6 +161,9 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         checkpoint_every=args.checkpoint_every,
         threads=args.threads,
     )
+    for path, why in unused_settings(cfg.agent, given).items():
+        print(f"sili train: note: --set {given[path]} does nothing here: {why}", file=sys.stderr)
+    return cfg
 
 
 def beta_anneal(given: list[list[str]]) -> Schedule:
