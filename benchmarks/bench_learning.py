@@ -38,7 +38,7 @@ from sili_robots.build import make_run_config
 from sili_robots.commands.common import parse_settings, positive_int, task_name
 from sili_robots.diagnostics import latent_diagnostics
 from sili_robots.errors import ConfigError, one_line_errors
-from sili_robots.migrations import migrate_run
+from sili_robots.migrations import migrate_run, setting_path
 from sili_robots.runs import kept, kept_fraction
 from sili_robots.sweep import parse_seeds
 from sili_robots.sweep.results import metrics_file
@@ -253,11 +253,14 @@ def checked_jobs(p: argparse.ArgumentParser, args: argparse.Namespace) -> tuple[
 
     seeds = checked("--seeds", lambda: parse_seeds(args.seeds))
     settings = checked("--set", lambda: parse_settings(args.set))
+    if args.latent and any(setting_path(name) == "latent" for name in settings):
+        p.error("give one of --latent and --set latent, not both")  # as sili train says
     methods = [m.strip() for m in args.methods.split(",")]
     for m in methods:
         latent = args.latent if m in LATENT_ARG_METHODS else None  # as run_one passes it on
-        option = f"--methods {m}" + (" with --set" if args.set else "")
-        option += f" with --latent {latent}" if latent else ""
+        given = [f"--set {' '.join(args.set)}"] if args.set else []
+        given += [f"--latent {latent}"] if latent else []
+        option = f"--methods {m}" + (f" with {' and '.join(given)}" if given else "")
         checked(
             option,
             lambda m=m, latent=latent: make_run_config(

@@ -176,4 +176,8 @@ def test_a_setting_the_method_never_reads_is_recorded_with_a_note(tmp_path, caps
     sweep = ["sweep", "--tasks", "circle-3", "--methods", "sili,sac,oracle", "--seeds", "0-1"]
     assert main([*sweep, "--set", "model.dim=4", "--out", str(tmp_path / "s"), "--dry-run"]) == 0
     err = capsys.readouterr().err
-    assert "sili sweep: note: --set model.dim does nothing for sac, oracle: it learns no" in err
+    assert "note: --set model.dim does nothing for sac on circle-3; oracle on circle-3: it" in err
+    two = ["sweep", "--tasks", "circle-3,speaker-listener", "--methods", "sili", "--seeds", "0"]
+    assert main([*two, "--set", "model.dim=4", "--out", str(tmp_path / "t"), "--dry-run"]) == 0
+    err = capsys.readouterr().err  # SILI learns none on Speaker-Listener alone (partial)
+    assert "note: --set model.dim does nothing for sili on speaker-listener: it learns" in err

@@ -198,16 +198,14 @@ def _note_unused_settings(spec: SweepSpec, given: dict[str, Any]) -> None:
     from sili_robots.sweep import expand
 
     paths = {setting_path(name): name for name in given}
-    unread: dict[tuple[str, str], list[str]] = {}  # (name, why) -> methods
+    unread: dict[tuple[str, str], dict[str, list[str]]] = {}  # (name, why) -> method -> tasks
     for run in expand(spec):
         for path, why in unused_settings(run.config.agent, paths).items():
-            methods = unread.setdefault((paths[path], why), [])
-            methods += [run.config.method] if run.config.method not in methods else []
+            tasks = unread.setdefault((paths[path], why), {}).setdefault(run.config.method, [])
+            tasks += [run.config.task] if run.config.task not in tasks else []
     for (name, why), methods in unread.items():
-        print(
-            f"sili sweep: note: --set {name} does nothing for {', '.join(methods)}: {why}",
-            file=sys.stderr,
-        )
+        where = "; ".join(f"{m} on {', '.join(tasks)}" for m, tasks in methods.items())
+        print(f"sili sweep: note: --set {name} does nothing for {where}: {why}", file=sys.stderr)
 
 
 def _controllers(text: str | None) -> list[str] | None:
