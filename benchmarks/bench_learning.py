@@ -39,9 +39,8 @@ from sili_robots.commands.common import parse_settings, positive_int, task_name
 from sili_robots.diagnostics import latent_diagnostics
 from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.migrations import migrate_run, setting_path
-from sili_robots.runs import kept, kept_fraction
+from sili_robots.runs import kept, kept_fraction, run_metrics
 from sili_robots.sweep import parse_seeds
-from sili_robots.sweep.results import metrics_file
 
 MARKS = {True: "MET    ", False: "NOT MET", None: "N/A    "}
 #: the methods the targets compare
@@ -109,7 +108,7 @@ def table(run_dirs: list[Path], window: int) -> pd.DataFrame:
     for d in run_dirs:
         cfg = json.loads((d / "config.json").read_text())["run"]
         summary = json.loads((d / "summary.json").read_text())
-        df = pd.read_csv(metrics_file(d))  # metrics.csv, or a collected run's .csv.gz
+        df = run_metrics(d)  # metrics.csv, or a collected run's .csv.gz, checked
         rows.append(
             {
                 "task": cfg["task"],

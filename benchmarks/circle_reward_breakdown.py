@@ -162,7 +162,7 @@ def latent_changes(agent: SILIAgent, metrics: pd.DataFrame, window: int) -> None
     radius = final_radii(agent)[: len(metrics)]
     start = max(0, len(metrics) - window)
     c = foresight_by_exit(metrics, radius, CLEAR_INSIDE, start)
-    masks = {k: v[start:] for k, v in change_masks(metrics).items()}
+    masks = change_masks(metrics, start)
     false, settled = masks["false_alarms"], ~masks["latent_changes"] & ~masks["true_changes"]
     reward = metrics["task_reward"].to_numpy()[start:]
     r_false = float(reward[false].mean()) if false.any() else float("nan")

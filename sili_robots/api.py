@@ -42,7 +42,7 @@ from sili_robots.build import (
     task_name_of,
     task_version_of,
 )
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, check_count
 from sili_robots.evaluation import AgentFeedback, evaluate
 from sili_robots.runs import (
     CHECKPOINT,
@@ -200,7 +200,7 @@ class SILI:
         """Train ``interactions`` more interactions from the model's checkpoint, in
         ``run_dir`` (a loaded run trains where it lies). Stopped (Ctrl-C) or failed, the model
         is its run's last checkpoint, and the next ``learn`` counts from there."""
-        interactions = _check_count(interactions)
+        interactions = check_count("interactions", interactions)
         self._refresh()
         done = self._done
         if done == 0:  # as when the model was made (nothing came in since), before any change
@@ -302,7 +302,7 @@ class SILI:
         interaction (``sili eval``'s numbers, ``evaluation.evaluate``). ``model.env``
         starts again from the saved game afterwards (the evaluation plays on the same task:
         libsumo holds one simulation per process)."""
-        interactions = _check_count(interactions)
+        interactions = check_count("interactions", interactions)
         self._refresh()
         self._check_trained("evaluate")
         self.close()
@@ -347,11 +347,3 @@ def _stamp(run_dir: Path) -> tuple:
     change time (which, unlike a modification time, a copy cannot carry over)."""
     stats = [(run_dir / name).stat() for name in (CONFIG, CHECKPOINT) if (run_dir / name).exists()]
     return tuple((s.st_ino, s.st_ctime_ns) for s in stats)
-
-
-def _check_count(interactions: Any) -> int:
-    """``interactions`` as an int (numpy's integers too), or ConfigError."""
-    integral = isinstance(interactions, (int, np.integer)) and not isinstance(interactions, bool)
-    if not integral or interactions < 1:
-        raise ConfigError(f"interactions must be an integer >= 1, got {interactions!r}")
-    return int(interactions)

@@ -38,15 +38,8 @@ COMMANDS = (
 )
 
 
-def _available_commands() -> list:
-    modules = []
-    for name in COMMANDS:
-        try:
-            modules.append(importlib.import_module(f"sili_robots.commands.{name}"))
-        except ModuleNotFoundError as err:
-            if err.name != f"sili_robots.commands.{name}":
-                raise
-    return modules
+def _command_modules() -> list:
+    return [importlib.import_module(f"sili_robots.commands.{name}") for name in COMMANDS]
 
 
 class UsageArgsFormatter(argparse.HelpFormatter):
@@ -78,7 +71,7 @@ def build_parser() -> OneLineErrorParser:
     )
     parser.add_argument("--version", action="version", version=f"sili {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for module in _available_commands():
+    for module in _command_modules():
         module.add_parser(sub)
     parser.commands = sub.choices
     return parser

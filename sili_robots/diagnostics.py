@@ -29,8 +29,9 @@ def change_agreement(pred: np.ndarray, true: np.ndarray) -> float:
     return float(np.mean((pred[1:] != pred[:-1]) == (true[1:] != true[:-1])))
 
 
-def change_masks(df: pd.DataFrame) -> dict[str, np.ndarray]:
-    """Per row j (the interaction played with z^j): how the latent met the true strategy.
+def change_masks(df: pd.DataFrame, start: int = 0) -> dict[str, np.ndarray]:
+    """Per row j (the interaction played with z^j) from ``start`` on: how the latent met the
+    true strategy.
 
     ``latent_changes``: z^j differs from z^{j-1}. A true change at row j (``strategy_id``
     differs from row j-1's) was caused by interaction j-1, so the latent *foresaw* it when
@@ -46,7 +47,7 @@ def change_masks(df: pd.DataFrame) -> dict[str, np.ndarray]:
     keys = ("true_changes", "latent_changes", "foreseen", "late", "false_alarms")
     out = {k: np.zeros(n, bool) for k in keys}
     if n < 3:
-        return out
+        return {k: v[start:] for k, v in out.items()}
     true = np.r_[False, sid[1:] != sid[:-1]]
     latent = np.r_[False, False, cat[1:-1] != cat[:-2]]  # z^j differs from z^{j-1}
     late = np.r_[False, cat[1:] != cat[:-1]]  # z^{j+1} differs from z^j
@@ -54,12 +55,7 @@ def change_masks(df: pd.DataFrame) -> dict[str, np.ndarray]:
     out["foreseen"] = true & latent
     out["late"] = true & late & ~latent
     out["false_alarms"] = latent & ~true & ~np.r_[False, true[:-1]]
-    return out
-
-
-def change_detection(df: pd.DataFrame, start: int = 0) -> dict[str, int]:
-    """Counts of ``change_masks`` from interaction ``start`` on."""
-    return {k: int(v[start:].sum()) for k, v in change_masks(df).items()}
+    return {k: v[start:] for k, v in out.items()}
 
 
 def latent_diagnostics(df: pd.DataFrame, window: int = 100) -> dict[str, float]:
@@ -98,11 +94,11 @@ def latent_diagnostics(df: pd.DataFrame, window: int = 100) -> dict[str, float]:
 def foresight_by_exit(
     df: pd.DataFrame, end_radius: np.ndarray, clear_inside: float = 0.9, start: int = 0
 ) -> dict[str, int]:
-    """``change_detection`` with the true changes split by how the interaction that caused
+    """Counts of ``change_masks``, the true changes split by how the interaction that caused
     them ended (Circle): clearly inside (``end_radius`` below ``clear_inside``: a move on
     purpose) or near the edge (a slip). ``end_radius[j]`` is interaction j's final distance
     from the centre; a true change at row j was caused by row j-1."""
-    masks = {k: v[start:] for k, v in change_masks(df).items()}
+    masks = change_masks(df, start)
     true, seen = masks["true_changes"], masks["foreseen"]
     inside = np.r_[np.nan, np.asarray(end_radius)[: len(df) - 1]][start:] < clear_inside
     return {

@@ -24,6 +24,13 @@ def check_seed(seed: object) -> int:
     return int(seed)
 
 
+def check_count(name: str, value: object, low: int = 1) -> int:
+    """``value`` as an int (numpy's integers too) of at least ``low``, or ``ConfigError``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
+        raise ConfigError(f"{name} must be an integer >= {low}, got {value!r}")
+    return int(value)
+
+
 def is_number(value: object) -> bool:
     """A real number, numpy's too (``np.float32(0.1)``), and not a bool."""
     return not isinstance(value, bool) and isinstance(value, numbers.Real)

@@ -98,6 +98,13 @@ def metrics_file(run_dir: Path) -> Path | None:
     return None
 
 
+def run_metrics(run_dir: Path) -> Any:
+    """The run's per-interaction rows (``read_metrics`` of ``metrics_file``); None when it
+    logged none."""
+    path = metrics_file(Path(run_dir))
+    return None if path is None else read_metrics(path)
+
+
 @dataclass
 class RunConfig:
     """One training run, fully resolved."""

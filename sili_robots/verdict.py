@@ -16,9 +16,8 @@ from sili_robots.runs import (
     RunConfig,
     differences,
     kept_fraction,
-    metrics_file,
     read_config,
-    read_metrics,
+    run_metrics,
 )
 from sili_robots.tasks.registry import other_task_arguments
 
@@ -27,10 +26,9 @@ HOLDS = 0.9  # the stability a run needs to count as holding the opponent
 
 def _last(run_dir: Path, window: int) -> pd.DataFrame:
     """The run's last ``window`` rows, from ``metrics.csv`` or a collection's gzipped copy."""
-    path = metrics_file(Path(run_dir))
-    if path is None:
+    rows = run_metrics(run_dir)
+    if rows is None:
         raise ConfigError(f"{run_dir} has no {METRICS} (nor its gzipped copy): it logged nothing")
-    rows = read_metrics(path)
     if rows.empty:
         raise ConfigError(f"{run_dir} has logged no interaction yet")
     return rows.tail(window)

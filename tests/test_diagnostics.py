@@ -6,7 +6,7 @@ import pytest
 
 from sili_robots.diagnostics import (
     change_agreement,
-    change_detection,
+    change_masks,
     filter_corrections,
     foresight_by_exit,
     latent_diagnostics,
@@ -62,6 +62,10 @@ def test_rows_without_a_latent_are_left_out_of_a_mixed_window():
     mixed.loc[2:3, "latent_category"] = -1
     out = latent_diagnostics(mixed, window=100)
     assert out["latent_purity"] == 1.0  # computed on the rows that have a latent
+
+
+def change_detection(df, start=0):
+    return {k: int(v.sum()) for k, v in change_masks(df, start).items()}
 
 
 def test_change_detection_credits_the_latent_that_foresaw_the_change():

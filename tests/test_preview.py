@@ -115,6 +115,8 @@ def test_scene_for_unknown_env_names_the_known_ones():
     [
         ({"policy": "greedy"}, "unknown preview policy 'greedy'; allowed: scripted, random"),
         ({"interactions": 0}, "interactions must be an integer >= 1"),
+        ({"interactions": 2.5}, "interactions must be an integer >= 1, got 2.5"),  # not cut to 2
+        ({"interactions": "x"}, "interactions must be an integer >= 1, got 'x'"),
         ({"checkpoint": "/nonexistent/run"}, "is not a run directory"),
     ],
 )

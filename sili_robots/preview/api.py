@@ -20,7 +20,7 @@ import gymnasium as gym
 import meshcat
 import numpy as np
 
-from sili_robots.errors import ConfigError, check_choice
+from sili_robots.errors import ConfigError, check_choice, check_count
 from sili_robots.preview.browser import Browser
 from sili_robots.preview.build import overlay, populate, world_point
 from sili_robots.preview.html import SceneRecorder, scene_html, write_html
@@ -65,14 +65,13 @@ class Preview:
         live: meshcat.Visualizer | None = None,
     ) -> Preview:
         """Roll ``policy`` out on ``env`` and build the scene (also into ``live`` if given)."""
-        if isinstance(interactions, bool) or int(interactions) < 1:
-            raise ConfigError(f"interactions must be an integer >= 1, got {interactions!r}")
+        interactions = check_count("interactions", interactions)
         scene = scene_for(env)
         rec = record_rollout(
             env,
             policy,
             scene.snapshot,
-            int(interactions),
+            interactions,
             seed=seed,
             task=task or type(env.unwrapped).__name__,
             policy_name=policy_name,
@@ -119,7 +118,9 @@ class Preview:
         f = self.frame(frame)
         return render_html(html_path, f, self.markers(f), browser=browser, evaluate=evaluate)
 
-    def render_live(self, url: str, frame: int | None = None, browser: Browser | None = None):
+    def render_live(
+        self, url: str, frame: int | None = None, browser: Browser | None = None
+    ) -> Rendered:
         """Screenshot ``frame`` of the scene as a live meshcat server shows it at ``url``."""
         f = self.frame(frame)
         return render_html(url, f, self.markers(f), browser=browser, live_fps=self.scene.fps)

@@ -29,7 +29,6 @@ DEFAULT_CELL = 0.004  # m
 class GeomShape:
     """One visual geom ready for meshcat: geometry, colour and pose relative to its body."""
 
-    geom_id: int
     body_id: int
     name: str
     geometry: g.Geometry
@@ -146,7 +145,6 @@ def geom_shape(model: mujoco.MjModel, gid: int, cell: float = DEFAULT_CELL) -> G
     else:
         return None
     return GeomShape(
-        gid,
         int(model.geom_bodyid[gid]),
         model.geom(gid).name or f"geom{gid}",
         geometry,

@@ -28,10 +28,9 @@ from sili_robots.runs import (
     METRIC_COLUMNS,
     SUMMARY,
     kept,
-    metrics_file,
     read_json,
-    read_metrics,
     recorded_task_id,
+    run_metrics,
 )
 from sili_robots.sweep.state import RESULTS, RUNS_DIR, RUNS_TABLE
 from sili_robots.tasks.registry import task_arguments_key, task_defaults
@@ -148,10 +147,9 @@ def results_table(sweep_dir: Path) -> pd.DataFrame:
     """All runs' per-interaction rows in one tidy frame (columns ``RESULT_COLUMNS``)."""
     frames = []
     for run_dir in run_dirs(sweep_dir):
-        path = metrics_file(run_dir)
-        if path is None:
+        df = run_metrics(run_dir)
+        if df is None:
             continue
-        df = read_metrics(path)
         if df.empty:
             continue
         ident, _ = run_identity(run_dir)
@@ -171,9 +169,8 @@ def runs_table(sweep_dir: Path) -> pd.DataFrame:
     for run_dir in run_dirs(sweep_dir):
         ident, cfg = run_identity(run_dir)
         summary_path, error_path = run_dir / SUMMARY, run_dir / ERROR_FILE
-        logged, path = 0, metrics_file(run_dir)
-        if path is not None:
-            logged = len(read_metrics(path))
+        metrics = run_metrics(run_dir)
+        logged = 0 if metrics is None else len(metrics)
         row = {**ident, "interactions": int(cfg["interactions"]), "interactions_logged": logged}
         if summary_path.is_file():
             keys = ("final_task_reward", "final_stability", "wall_time_s")
