@@ -297,12 +297,15 @@ def test_learn_stopped_by_ctrl_c_leaves_the_model_at_its_checkpoint_and_counts_o
     assert model.agent.buffer.n == 6 and SILI.load(run).cfg.interactions == 6
 
 
-def test_a_run_dir_that_cannot_be_made_is_named_before_the_model_changes(tmp_path):
+def test_a_run_dir_that_cannot_be_made_is_named_before_the_model_changes(tmp_path, monkeypatch):
     (tmp_path / "file").write_text("not a folder")
     model = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=tmp_path / "file" / "run")
+    closed = []  # Circle's close frees nothing, so its calls are counted
+    monkeypatch.setattr(model.env.unwrapped, "close", lambda: closed.append(1))
     with pytest.raises(ConfigError, match=r"cannot create the run directory .*; give run_dir a"):
         model.learn(1)
-    obs, _ = model.env.reset(seed=0)  # still the model it was: its task is open
+    assert closed == []  # still the model it was: its task is open
+    obs, _ = model.env.reset(seed=0)
     assert model.predict(obs).shape == (2,)
 
 

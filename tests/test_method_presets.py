@@ -90,6 +90,33 @@ def test_a_continuous_latent_is_the_raw_encoder_output_unless_squashed():
     assert AgentConfig.from_dict(recorded).model.squash is True
 
 
+def test_a_paper_profile_agent_learns_its_continuous_latents_unsquashed():
+    import torch
+
+    from sili_robots.build import build_agent, make_run_config, make_run_env
+
+    models = {}
+    for profile in ("package", "paper"):
+        cfg = make_run_config(
+            "circle-continuous", "sili", 0, 5, profile=profile, settings={"hidden": 16}
+        )
+        env = make_run_env(cfg)
+        models[profile] = build_agent(cfg, env).model
+        env.close()
+    assert models["package"].squash is True and models["paper"].squash is False
+    model = models["paper"]
+    o, a, h = model.out_dim - 1, 2, 6
+    torch.manual_seed(0)
+    prev, obs = torch.randn(4, h, 2 * o + a + 1), torch.randn(4, h + 1, o)
+    act, rew = torch.randn(4, h, a), torch.randn(4, h)
+    with torch.no_grad():
+        model.head.bias.fill_(3.0)  # outputs beyond tanh's range
+        raw = model.loss(prev, obs[:, :-1], act, obs[:, 1:], rew)
+        model.squash = True
+        squashed = model.loss(prev, obs[:, :-1], act, obs[:, 1:], rew)
+    assert not torch.isclose(raw, squashed)  # the objective reads the raw output
+
+
 def test_an_output_directory_that_cannot_be_created_exits_2_naming_it(capsys):
     out = "/proc/forbidden/x"
     args = ["train", "--task", "circle-3", "--interactions", "2", "--out", out]
