@@ -9,11 +9,13 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import functools
 import json
 import os
 import pickle
 import platform
 import shutil
+import subprocess
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -185,14 +187,41 @@ def recorded_task_id(run: dict[str, Any]) -> str | None:
         return None
 
 
-#: the simulators and solvers behind the tasks' dynamics (recorded where installed)
-SIMULATOR_PACKAGES = ("mujoco", "robosuite", "mink", "qpsolvers", "daqp", "libsumo")
+#: the libraries behind the tasks' dynamics and the agent's numbers beyond torch and numpy
+#: (recorded where installed): simulators, solvers, SciPy (category matching, k-means)
+RECORDED_PACKAGES = (
+    "mujoco",
+    "robosuite",
+    "mink",
+    "qpsolvers",
+    "daqp",
+    "libsumo",
+    "eclipse-sumo",
+    "traci",
+    "scipy",
+)
+
+
+@functools.cache
+def code_revision() -> str | None:
+    """This package's git revision (``git describe --dirty``: edited files show) when it runs
+    from a checkout; None when installed otherwise. Its version number alone does not change
+    with every change of its numbers."""
+    root = Path(__file__).resolve().parents[1]
+    if not (root / ".git").exists():
+        return None
+    command = ["git", "-C", str(root), "describe", "--always", "--dirty", "--abbrev=12"]
+    try:
+        done = subprocess.run(command, capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return done.stdout.strip() or None if done.returncode == 0 else None
 
 
 def versions(threads: int = 1) -> dict[str, str]:
     """The software and the processor a run used: seeded runs repeat exactly only on the same
-    kernels, which torch picks by CPU, instruction-set cap and thread count (``machine``), and
-    the same simulators."""
+    code (``sili_robots_revision``), the same kernels, which torch picks by CPU, instruction-set
+    cap and thread count (``machine``), and the same libraries."""
     from importlib.metadata import PackageNotFoundError, version
 
     import gymnasium
@@ -204,12 +233,13 @@ def versions(threads: int = 1) -> dict[str, str]:
     found = {
         "machine": machine_key(threads),
         "sili_robots": sili_robots.__version__,
+        **({"sili_robots_revision": code_revision()} if code_revision() else {}),
         "torch": torch.__version__,
         "numpy": numpy.__version__,
         "gymnasium": gymnasium.__version__,
         "python": platform.python_version(),
     }
-    for name in SIMULATOR_PACKAGES:
+    for name in RECORDED_PACKAGES:
         with contextlib.suppress(PackageNotFoundError):
             found[name] = version(name)
     return found

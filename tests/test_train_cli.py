@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import shutil
 import signal
 import socket
@@ -21,7 +22,7 @@ from sili_robots import training
 from sili_robots.addons import LatentFilter
 from sili_robots.cli import main
 from sili_robots.evaluation import AgentFeedback, evaluate, load_trained
-from sili_robots.runs import load_checkpoint, save_checkpoint, set_target
+from sili_robots.runs import code_revision, load_checkpoint, save_checkpoint, set_target
 from sili_robots.sweep.state import run_state
 from sili_robots.training import extend, resume, write_summary
 
@@ -56,6 +57,12 @@ def test_train_writes_a_complete_run_and_eval_reads_it(tmp_path):
     assert "torch" in cfg["versions"]
     assert cfg["versions"]["mujoco"].startswith("3.3.") and cfg["versions"]["mink"] == "0.0.5"
     assert cfg["versions"]["machine"].endswith("| 1 thread")  # the CPU the kernels ran on
+    assert "scipy" in cfg["versions"]  # category matching, k-means
+    checkout = (Path(__file__).resolve().parents[1] / ".git").exists()
+    revision = cfg["versions"].get("sili_robots_revision")  # the code, not only its version
+    assert (revision is not None) == checkout and revision == code_revision()
+    described = r"([0-9a-f]{12}|.*-g[0-9a-f]{12})(-dirty)?"  # git describe --always --dirty
+    assert not checkout or re.fullmatch(described, revision)
     df = pd.read_csv(out / "metrics.csv")
     assert list(df["interaction"]) == list(range(12))
     for col in (
