@@ -10,6 +10,7 @@ from __future__ import annotations
 import contextlib
 import csv
 import functools
+import hashlib
 import json
 import os
 import pickle
@@ -202,21 +203,34 @@ RECORDED_PACKAGES = (
 )
 
 
+#: ``versions`` key of the code's git revision (``code_revision``)
+REVISION = "sili_robots_revision"
+
+
+#: the checkout this package runs from, if it does
+CHECKOUT = Path(__file__).resolve().parents[1]
+
+
 @functools.cache
-def code_revision() -> str | None:
-    """This package's git revision (``git describe --dirty``: edited files show) when it runs
-    from a checkout; None when installed otherwise. Its version number alone does not change
-    with every change of its numbers."""
-    root = Path(__file__).resolve().parents[1]
+def code_revision(root: Path = CHECKOUT) -> str | None:
+    """This package's git commit when it runs from a checkout, ``+`` a digest of its local
+    changes to the package's code when there are any (edits elsewhere, e.g. to results or
+    docs, do not count); None when installed otherwise or git cannot tell. Its version number
+    alone does not change with every change of its numbers."""
     if not (root / ".git").exists():
         return None
-    command = ["git", "-C", str(root), "--no-optional-locks"]  # sweep workers ask at once
-    command += ["describe", "--always", "--dirty", "--abbrev=12"]
-    try:
-        done = subprocess.run(command, capture_output=True, text=True, timeout=30)
+    git = ["git", "-C", str(root), "-c", f"safe.directory={root}", "--no-optional-locks"]
+    try:  # (no index lock: a sweep's workers ask at once)
+        commit = subprocess.run([*git, "rev-parse", "HEAD"], capture_output=True, timeout=30)
+        diff = subprocess.run(
+            [*git, "diff", "HEAD", "--", "sili_robots"], capture_output=True, timeout=30
+        )
     except (OSError, subprocess.SubprocessError):
         return None
-    return done.stdout.strip() or None if done.returncode == 0 else None
+    if commit.returncode or diff.returncode:
+        return None
+    local = f"+{hashlib.sha256(diff.stdout).hexdigest()[:12]}" if diff.stdout else ""
+    return commit.stdout.decode().strip()[:12] + local
 
 
 def versions(threads: int = 1) -> dict[str, str]:
@@ -234,7 +248,7 @@ def versions(threads: int = 1) -> dict[str, str]:
     found = {
         "machine": machine_key(threads),
         "sili_robots": sili_robots.__version__,
-        **({"sili_robots_revision": code_revision()} if code_revision() else {}),
+        **({REVISION: code_revision()} if code_revision() else {}),
         "torch": torch.__version__,
         "numpy": numpy.__version__,
         "gymnasium": gymnasium.__version__,
@@ -358,7 +372,9 @@ def record_continuation(run_dir: Path, threads: int, interaction: int) -> None:
     path = Path(run_dir) / CONFIG
     record = read_json(path, DAMAGED_CONFIG, "run")
     now = versions(threads)
-    last = (record.get("continued") or [record])[-1].get("versions")
+    last = (record.get("continued") or [record])[-1].get("versions") or {}
+    if REVISION not in now or REVISION not in last:  # unknown on one side: not a difference
+        now, last = ({k: v for k, v in d.items() if k != REVISION} for d in (now, last))
     if now != last:
         record.setdefault("continued", []).append(
             {"from_interaction": interaction, "versions": now}

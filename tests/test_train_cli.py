@@ -22,7 +22,13 @@ from sili_robots import training
 from sili_robots.addons import LatentFilter
 from sili_robots.cli import main
 from sili_robots.evaluation import AgentFeedback, evaluate, load_trained
-from sili_robots.runs import code_revision, load_checkpoint, save_checkpoint, set_target
+from sili_robots.runs import (
+    code_revision,
+    load_checkpoint,
+    record_continuation,
+    save_checkpoint,
+    set_target,
+)
 from sili_robots.sweep.state import run_state
 from sili_robots.training import extend, resume, write_summary
 
@@ -58,11 +64,9 @@ def test_train_writes_a_complete_run_and_eval_reads_it(tmp_path):
     assert cfg["versions"]["mujoco"].startswith("3.3.") and cfg["versions"]["mink"] == "0.0.5"
     assert cfg["versions"]["machine"].endswith("| 1 thread")  # the CPU the kernels ran on
     assert "scipy" in cfg["versions"]  # category matching, k-means
-    checkout = (Path(__file__).resolve().parents[1] / ".git").exists()
     revision = cfg["versions"].get("sili_robots_revision")  # the code, not only its version
-    assert (revision is not None) == checkout and revision == code_revision()
-    described = r"([0-9a-f]{12}|.*-g[0-9a-f]{12})(-dirty)?"  # git describe --always --dirty
-    assert not checkout or re.fullmatch(described, revision)
+    assert revision == code_revision()  # None: not run from a checkout git can read
+    assert revision is None or re.fullmatch(r"[0-9a-f]{12}(\+[0-9a-f]{12})?", revision)
     df = pd.read_csv(out / "metrics.csv")
     assert list(df["interaction"]) == list(range(12))
     for col in (
@@ -111,6 +115,45 @@ def test_train_writes_a_complete_run_and_eval_reads_it(tmp_path):
     assert note.returncode == 0
     assert "is unfinished: this evaluates its checkpoint at interaction 12 of 20" in note.stderr
     assert json.loads(note.stdout)["fraction_strategy_unchanged"] is None  # none after the first
+
+
+def test_the_recorded_revision_is_the_commit_and_a_digest_of_code_edits_alone(tmp_path):
+    root = Path(__file__).resolve().parents[1]
+    if code_revision(root) is None:
+        pytest.skip("not a checkout git can read")
+    clone = tmp_path / "clone"
+    subprocess.run(["git", "clone", "-q", str(root), str(clone)], check=True)
+    head = subprocess.run(
+        ["git", "-C", str(clone), "rev-parse", "HEAD"], capture_output=True, text=True, check=True
+    ).stdout.strip()
+    assert code_revision(clone) == head[:12]  # a commit, never a tag name
+    (clone / "README.md").write_text("edited")  # not the package's code
+    code_revision.cache_clear()
+    assert code_revision(clone) == head[:12]
+    (clone / "sili_robots" / "verdict.py").write_text("HOLDS = 0.8\n")
+    code_revision.cache_clear()
+    edited = code_revision(clone)
+    assert re.fullmatch(rf"{head[:12]}\+[0-9a-f]{{12}}", edited)
+    (clone / "sili_robots" / "verdict.py").write_text("HOLDS = 0.7\n")
+    code_revision.cache_clear()
+    assert code_revision(clone) not in (edited, head[:12])  # another edit, another digest
+    code_revision.cache_clear()
+
+
+def test_a_revision_unknown_on_one_side_is_no_continuation(tmp_path):
+    args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "1", *FAST]
+    run = tmp_path / "run"
+    assert main([*args, "--out", str(run)]) == 0
+    record = json.loads((run / "config.json").read_text())
+    record["versions"].pop("sili_robots_revision", None)  # an installed package wrote it
+    (run / "config.json").write_text(json.dumps(record))
+    record_continuation(run, 1, 1)
+    assert "continued" not in json.loads((run / "config.json").read_text())
+    record["versions"]["sili_robots_revision"] = "0123456789ab"
+    record["versions"]["torch"] = "0.0-recorded"  # other software: noted
+    (run / "config.json").write_text(json.dumps(record))
+    record_continuation(run, 1, 1)
+    assert json.loads((run / "config.json").read_text())["continued"][0]["from_interaction"] == 1
 
 
 def test_the_first_interactions_are_random_and_learning_starts_after_them(tmp_path, monkeypatch):
