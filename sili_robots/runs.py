@@ -220,17 +220,23 @@ def code_revision(root: Path = CHECKOUT) -> str | None:
     if not (root / ".git").exists():
         return None
     git = ["git", "-C", str(root), "-c", f"safe.directory={root}", "--no-optional-locks"]
-    try:  # (no index lock: a sweep's workers ask at once)
-        commit = subprocess.run([*git, "rev-parse", "HEAD"], capture_output=True, timeout=30)
-        diff = subprocess.run(
-            [*git, "diff", "HEAD", "--", "sili_robots"], capture_output=True, timeout=30
+    asks = (  # (no index lock: a sweep's workers ask at once)
+        ["rev-parse", "HEAD"],
+        ["diff", "HEAD", "--", "sili_robots"],  # edits to tracked files
+        ["ls-files", "-z", "--others", "--exclude-standard", "--", "sili_robots"],  # new ones
+    )
+    try:
+        commit, diff, new = (
+            subprocess.run([*git, *ask], capture_output=True, timeout=30, check=True).stdout
+            for ask in asks
+        )
+        local = diff + b"".join(
+            name + (root / name.decode()).read_bytes() for name in new.split(b"\0") if name
         )
     except (OSError, subprocess.SubprocessError):
         return None
-    if commit.returncode or diff.returncode:
-        return None
-    local = f"+{hashlib.sha256(diff.stdout).hexdigest()[:12]}" if diff.stdout else ""
-    return commit.stdout.decode().strip()[:12] + local
+    digest = f"+{hashlib.sha256(local).hexdigest()[:12]}" if local else ""
+    return commit.decode().strip()[:12] + digest
 
 
 def versions(threads: int = 1) -> dict[str, str]:

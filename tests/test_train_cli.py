@@ -137,6 +137,10 @@ def test_the_recorded_revision_is_the_commit_and_a_digest_of_code_edits_alone(tm
     (clone / "sili_robots" / "verdict.py").write_text("HOLDS = 0.7\n")
     code_revision.cache_clear()
     assert code_revision(clone) not in (edited, head[:12])  # another edit, another digest
+    (clone / "sili_robots" / "verdict.py").write_text("HOLDS = 0.8\n")
+    (clone / "sili_robots" / "mine.py").write_text("A = 1\n")  # a new module counts too
+    code_revision.cache_clear()
+    assert code_revision(clone) not in (edited, head[:12])
     code_revision.cache_clear()
 
 
