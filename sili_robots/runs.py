@@ -215,28 +215,48 @@ CHECKOUT = Path(__file__).resolve().parents[1]
 def code_revision(root: Path = CHECKOUT) -> str | None:
     """This package's git commit when it runs from a checkout, ``+`` a digest of its local
     changes to the package's code when there are any (edits elsewhere, e.g. to results or
-    docs, do not count); None when installed otherwise or git cannot tell. Its version number
-    alone does not change with every change of its numbers."""
+    docs, do not count; nor do untracked files but Python modules, such as an editor's); None
+    when installed otherwise or git cannot tell. Its version number alone does not change with
+    every change of its numbers."""
     if not (root / ".git").exists():
         return None
     git = ["git", "-C", str(root), "-c", f"safe.directory={root}", "--no-optional-locks"]
-    asks = (  # (no index lock: a sweep's workers ask at once)
-        ["rev-parse", "HEAD"],
-        ["diff", "HEAD", "--", "sili_robots"],  # edits to tracked files
-        ["ls-files", "-z", "--others", "--exclude-standard", "--", "sili_robots"],  # new ones
-    )
-    try:
-        commit, diff, new = (
+    status = ["status", "--porcelain=v1", "-z", "--no-renames", "--untracked-files=all"]
+    try:  # (no index lock: a sweep's workers ask at once)
+        commit, changes = (
             subprocess.run([*git, *ask], capture_output=True, timeout=30, check=True).stdout
-            for ask in asks
-        )
-        local = diff + b"".join(
-            name + (root / name.decode()).read_bytes() for name in new.split(b"\0") if name
+            for ask in (["rev-parse", "HEAD"], [*status, "--", "sili_robots"])
         )
     except (OSError, subprocess.SubprocessError):
         return None
-    digest = f"+{hashlib.sha256(local).hexdigest()[:12]}" if local else ""
-    return commit.decode().strip()[:12] + digest
+    changed = sorted(
+        entry[3:]
+        for entry in changes.split(b"\0")
+        if entry and (not entry.startswith(b"??") or entry.endswith(b".py"))
+    )
+    if not changed:
+        return commit.decode().strip()[:12]
+    return f"{commit.decode().strip()[:12]}+{_digest(root, changed)}"
+
+
+def _digest(root: Path, names: list[bytes]) -> str:
+    """12 hex digits of the files' names and contents as they are now (a removed or unreadable
+    one by its name and state), read in chunks."""
+    digest = hashlib.sha256()
+    for name in names:
+        path = root / os.fsdecode(name)
+        digest.update(name + b"\0")
+        try:
+            if path.is_symlink():
+                digest.update(os.fsencode(os.readlink(path)))
+            elif path.is_file():
+                with path.open("rb") as f:
+                    digest.update(hashlib.file_digest(f, "sha256").digest())
+            else:
+                digest.update(b"absent")
+        except OSError:
+            digest.update(b"unreadable")
+    return digest.hexdigest()[:12]
 
 
 def versions(threads: int = 1) -> dict[str, str]:

@@ -125,22 +125,35 @@ def test_the_recorded_revision_is_the_commit_and_a_digest_of_code_edits_alone(tm
     subprocess.run(["git", "clone", "-q", str(root), str(clone)], check=True)
     head = subprocess.run(
         ["git", "-C", str(clone), "rev-parse", "HEAD"], capture_output=True, text=True, check=True
-    ).stdout.strip()
-    assert code_revision(clone) == head[:12]  # a commit, never a tag name
+    ).stdout.strip()[:12]
+
+    def revision(**git_env: str) -> str | None:
+        code_revision.cache_clear()
+        with pytest.MonkeyPatch.context() as patch:
+            for key, value in git_env.items():
+                patch.setenv(key, value)
+            return code_revision(clone)
+
+    package = clone / "sili_robots"
+    assert revision() == head  # a commit, never a tag name
     (clone / "README.md").write_text("edited")  # not the package's code
-    code_revision.cache_clear()
-    assert code_revision(clone) == head[:12]
-    (clone / "sili_robots" / "verdict.py").write_text("HOLDS = 0.8\n")
-    code_revision.cache_clear()
-    edited = code_revision(clone)
-    assert re.fullmatch(rf"{head[:12]}\+[0-9a-f]{{12}}", edited)
-    (clone / "sili_robots" / "verdict.py").write_text("HOLDS = 0.7\n")
-    code_revision.cache_clear()
-    assert code_revision(clone) not in (edited, head[:12])  # another edit, another digest
-    (clone / "sili_robots" / "verdict.py").write_text("HOLDS = 0.8\n")
-    (clone / "sili_robots" / "mine.py").write_text("A = 1\n")  # a new module counts too
-    code_revision.cache_clear()
-    assert code_revision(clone) not in (edited, head[:12])
+    (package / ".verdict.py.swp").write_bytes(b"an editor's")  # nor an editor's file
+    assert revision() == head
+    (package / "verdict.py").write_text("HOLDS = 0.8\n")
+    edited = revision()
+    assert re.fullmatch(rf"{head}\+[0-9a-f]{{12}}", edited)
+    # the same code, whatever git's settings for showing diffs: external, colour, prefixes
+    for key, value in (("diff.external", "true"), ("color.diff", "always")):
+        assert (
+            revision(GIT_CONFIG_COUNT="1", GIT_CONFIG_KEY_0=key, GIT_CONFIG_VALUE_0=value) == edited
+        )
+    subprocess.run(["git", "-C", str(clone), "add", "sili_robots/verdict.py"], check=True)
+    assert revision() == edited  # staged: the same
+    (package / "verdict.py").write_text("HOLDS = 0.7\n")
+    assert revision() not in (edited, head)  # another edit, another digest
+    (package / "verdict.py").write_text("HOLDS = 0.8\n")
+    (package / os.fsdecode(b"caf\xe9.py")).write_text("A = 1\n")  # a new module counts too
+    assert revision() not in (edited, head)
     code_revision.cache_clear()
 
 
@@ -149,15 +162,19 @@ def test_a_revision_unknown_on_one_side_is_no_continuation(tmp_path):
     run = tmp_path / "run"
     assert main([*args, "--out", str(run)]) == 0
     record = json.loads((run / "config.json").read_text())
+    now = record["versions"].get("sili_robots_revision")
     record["versions"].pop("sili_robots_revision", None)  # an installed package wrote it
     (run / "config.json").write_text(json.dumps(record))
     record_continuation(run, 1, 1)
     assert "continued" not in json.loads((run / "config.json").read_text())
-    record["versions"]["sili_robots_revision"] = "0123456789ab"
-    record["versions"]["torch"] = "0.0-recorded"  # other software: noted
+    if now is None:
+        return  # not run from a checkout: nothing to tell apart
+    record["versions"]["sili_robots_revision"] = "0123456789ab"  # other code, alone
     (run / "config.json").write_text(json.dumps(record))
     record_continuation(run, 1, 1)
-    assert json.loads((run / "config.json").read_text())["continued"][0]["from_interaction"] == 1
+    (continued,) = json.loads((run / "config.json").read_text())["continued"]
+    assert continued["from_interaction"] == 1
+    assert continued["versions"]["sili_robots_revision"] == now
 
 
 def test_the_first_interactions_are_random_and_learning_starts_after_them(tmp_path, monkeypatch):
