@@ -87,7 +87,7 @@ def run_finals(df: pd.DataFrame, upto: dict[str, int] | None = None) -> pd.DataF
                 "config_beta": float(first["config_beta"]),
                 "seed": int(first["seed"]),
                 "task_id": str(first["task_id"]),
-                "task_args": _text(first.get("task_args")),
+                "task_args": "" if pd.isna(first.get("task_args")) else str(first["task_args"]),
                 "logged": len(g),
                 "task_reward": reward,
                 "stability": float(tail["true_stability"].mean()),
@@ -96,11 +96,6 @@ def run_finals(df: pd.DataFrame, upto: dict[str, int] | None = None) -> pd.DataF
             }
         )
     return pd.DataFrame(rows)
-
-
-def _text(value: object) -> str:
-    """A table's string cell; "" for a missing one (NaN in a CSV, absent in older tables)."""
-    return "" if value is None or (isinstance(value, float) and np.isnan(value)) else str(value)
 
 
 def score(task_reward: float, task_id: str) -> float:
@@ -369,8 +364,9 @@ def claims_table(df: pd.DataFrame) -> list[Claim]:
 def other_dynamics(df: pd.DataFrame) -> list[str]:
     """The runs no claim counts because they ran with other task arguments than their task's
     registered version (the grid runs none)."""
-    finals = run_finals(df)
-    return sorted(finals.loc[finals.task_args != "", "run"])
+    if "task_args" not in df:  # a table from before task arguments were told apart
+        return []
+    return sorted(df.loc[df.task_args.fillna("") != "", "run"].unique())
 
 
 def markdown(claims: list[Claim]) -> str:

@@ -46,15 +46,14 @@ def change_masks(df: pd.DataFrame, start: int = 0) -> dict[str, np.ndarray]:
     n = len(df)
     keys = ("true_changes", "latent_changes", "foreseen", "late", "false_alarms")
     out = {k: np.zeros(n, bool) for k in keys}
-    if n < 3:
-        return {k: v[start:] for k, v in out.items()}
-    true = np.r_[False, sid[1:] != sid[:-1]]
-    latent = np.r_[False, False, cat[1:-1] != cat[:-2]]  # z^j differs from z^{j-1}
-    late = np.r_[False, cat[1:] != cat[:-1]]  # z^{j+1} differs from z^j
-    out["true_changes"], out["latent_changes"] = true, latent
-    out["foreseen"] = true & latent
-    out["late"] = true & late & ~latent
-    out["false_alarms"] = latent & ~true & ~np.r_[False, true[:-1]]
+    if n >= 3:
+        true = np.r_[False, sid[1:] != sid[:-1]]
+        latent = np.r_[False, False, cat[1:-1] != cat[:-2]]  # z^j differs from z^{j-1}
+        late = np.r_[False, cat[1:] != cat[:-1]]  # z^{j+1} differs from z^j
+        out["true_changes"], out["latent_changes"] = true, latent
+        out["foreseen"] = true & latent
+        out["late"] = true & late & ~latent
+        out["false_alarms"] = latent & ~true & ~np.r_[False, true[:-1]]
     return {k: v[start:] for k, v in out.items()}
 
 

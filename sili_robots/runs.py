@@ -234,9 +234,8 @@ def code_revision(root: Path = CHECKOUT) -> str | None:
         for entry in changes.split(b"\0")
         if entry and (not entry.startswith(b"??") or entry.endswith(b".py"))
     )
-    if not changed:
-        return commit.decode().strip()[:12]
-    return f"{commit.decode().strip()[:12]}+{_digest(root, changed)}"
+    head = commit.decode().strip()[:12]
+    return f"{head}+{_digest(root, changed)}" if changed else head
 
 
 def _digest(root: Path, names: list[bytes]) -> str:
