@@ -24,10 +24,12 @@ def check_seed(seed: object) -> int:
     return int(seed)
 
 
-def check_count(name: str, value: object, low: int = 1) -> int:
-    """``value`` as an int (numpy's integers too) of at least ``low``, or ``ConfigError``."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
-        raise ConfigError(f"{name} must be an integer >= {low}, got {value!r}")
+def check_count(name: str, value: object, low: int = 1, high: int | None = None) -> int:
+    """``value`` as an int (numpy's integers too) in [``low``, ``high``], or ``ConfigError``."""
+    whole = not isinstance(value, bool) and isinstance(value, numbers.Integral)
+    if not (whole and low <= value and (high is None or value <= high)):
+        allowed = f">= {low}" if high is None else f"in [{low}, {high}]"
+        raise ConfigError(f"{name} must be an integer {allowed}, got {value!r}")
     return int(value)
 
 

@@ -26,7 +26,7 @@ import torch
 from sili_robots.addons.config import AddonsConfig
 from sili_robots.agent.config import AgentConfig, set_path
 from sili_robots.atomic import replacing, write_text
-from sili_robots.errors import ConfigError, check_seed
+from sili_robots.errors import ConfigError, check_count, check_seed
 from sili_robots.migrations import migrate_agent_state, migrate_run, setting_path
 
 CONFIG, METRICS, CHECKPOINT, SUMMARY = "config.json", "metrics.csv", "checkpoint.pt", "summary.json"
@@ -132,9 +132,7 @@ class RunConfig:
 
         self.seed = check_seed(self.seed)
         for name, low in (("interactions", 0), ("checkpoint_every", 1), ("threads", 1)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise ConfigError(f"{name} must be an integer >= {low}, got {value!r}")
+            setattr(self, name, check_count(name, getattr(self, name), low))
         if self.method not in PRESETS:
             raise ConfigError(f"unknown method {self.method!r}; allowed: {', '.join(PRESETS)}")
         if not isinstance(self.env_kwargs, dict) or not isinstance(self.task, str):

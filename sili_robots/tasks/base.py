@@ -26,7 +26,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, check_count
 
 StrategyId = int | float
 #: what ``reset(options=...)`` takes: restart the game, restore a saved one, start from z
@@ -64,12 +64,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         return env
 
     def __init__(self, horizon: int) -> None:
-        whole = not isinstance(horizon, bool) and isinstance(horizon, (int, np.integer))
-        if not (whole and 1 <= horizon <= LONGEST_HORIZON):
-            raise ConfigError(
-                f"horizon must be an integer in [1, {LONGEST_HORIZON}], got {horizon!r}"
-            )
-        self.horizon = int(horizon)
+        self.horizon = check_count("horizon", horizon, 1, LONGEST_HORIZON)
         self.interaction = -1  # index of the current interaction; -1 before the first reset
         self.t = 0
         self._trajectory: list[dict[str, Any]] = []
