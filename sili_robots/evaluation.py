@@ -25,7 +25,8 @@ class AgentFeedback(gym.Wrapper):
 
     The first ``reset`` continues the checkpointed game (whatever its seed: evaluations and
     previews pass one), unless its ``options`` ask for another game (``restart``, ``strategy``,
-    ``restore``).
+    ``restore``). In another game the agent starts as in a run's first interaction, with no
+    history: the interactions of the game before are not its history.
     """
 
     def __init__(self, env: gym.Env, agent: SILIAgent, game_state: dict[str, Any]) -> None:
@@ -47,7 +48,10 @@ class AgentFeedback(gym.Wrapper):
         else:
             obs, info = self.env.reset(**kwargs)
             self._game_state = None  # only once reset took it: a refused one keeps the game
-            if self._first_obs is not None and len(self._steps) == self.env.unwrapped.horizon:
+            goes_on = info["interaction"] == self._first_info.get("interaction", -2) + 1
+            if not goes_on:  # another game (restart, strategy, seed, restore): no history
+                self.agent.begin_game(info)
+            elif len(self._steps) == self.env.unwrapped.horizon:
                 o = np.stack([self._first_obs, *[s[0] for s in self._steps]])
                 a = np.stack([s[1] for s in self._steps])
                 r = np.array([s[2] for s in self._steps], np.float32)

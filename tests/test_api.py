@@ -456,3 +456,29 @@ def test_learn_marks_the_run_it_trains_also_when_it_replaces_one(tmp_path, monke
     SILI("circle-3", settings=FAST_AGENT, run_dir=tmp_path / "run", overwrite=True).learn(2)
     assert claimed == [True, True]  # a sweep or `sili train --resume` would refuse the run
     assert not (tmp_path / "run" / "worker.json").exists()  # and it is given back
+
+
+def test_another_game_on_model_env_starts_the_agent_with_no_history(tmp_path):
+    """The latents carried over from the trained game are not the history of a restarted one:
+    the true-latent mode acts on the new game's strategy, SILI on "no history" (as in a run's
+    first interaction), and the interaction before the restart is not fed to the agent."""
+
+    def play_one(model: SILI, obs: np.ndarray) -> None:
+        for _ in range(model.env.unwrapped.horizon):
+            obs = model.env.step(model.predict(obs))[0]
+
+    true = tmp_path / "true"
+    SILI("circle-3", method="sili", latent="true", settings=FAST_AGENT, run_dir=true).learn(2)
+    for strategy in range(3):  # the trained game's next strategy is one of them
+        model = SILI.load(true)
+        obs, info = model.env.reset(options={"strategy": strategy})
+        z = model.agent.policy_input(obs)[len(obs) :]
+        np.testing.assert_array_equal(z, np.concatenate([info["strategy"], [0, 0]]))
+    model = SILI("circle-3", method="sili", settings=FAST_AGENT, run_dir=tmp_path / "s").learn(2)
+    play_one(model, model.env.reset()[0])  # the trained game goes on
+    obs, _ = model.env.reset()  # interaction 2 fed: z^3 inferred from it
+    assert model.agent.buffer.n == 3 and np.abs(model.agent.policy_input(obs)[len(obs) :]).sum()
+    play_one(model, obs)
+    obs, info = model.env.reset(seed=7)  # a seed after the first reset: another game
+    assert info["interaction"] == 0 and model.agent.buffer.n == 3
+    np.testing.assert_array_equal(model.agent.policy_input(obs)[len(obs) :], 0.0)

@@ -108,6 +108,7 @@ class SILIAgent:
         self.beta = float(value_at(cfg.sili.beta, 0))  # b now (the schedules add-on moves it)
         self.stability_scale = float(horizon if cfg.sili.scale is None else cfg.sili.scale)
         self._update_credit = 0.0
+        self.game_start = 0  # the first stored interaction of the game being played
         for addon in self.addons:
             addon.attach(self)
         self.begin_interaction()
@@ -154,7 +155,8 @@ class SILIAgent:
                     z = z if acted is None else acted
             parts.append(z)
         if self.n_latents == 2:
-            parts.append(self.Z[j - 1] if j >= 1 else np.zeros(self.zdim, np.float32))
+            earlier = j > self.game_start  # z^{j-1} of this game
+            parts.append(self.Z[j - 1] if earlier else np.zeros(self.zdim, np.float32))
         return np.concatenate(parts)
 
     def act(self, obs: np.ndarray, deterministic: bool = False) -> np.ndarray:
@@ -177,9 +179,13 @@ class SILIAgent:
             addon.observe_step(obs, act, rew, next_obs)
 
     def begin_game(self, info: dict[str, Any]) -> None:
-        """A (re)started repeated game: z^0 is "no history"; the true mode knows z^0 already."""
-        if self.cfg.latent == "true" and self.buffer.n == 0:
-            self.Z[0] = info["strategy"]
+        """A (re)started repeated game: the interaction about to be played has no history, so it
+        is acted on as a run's first one (z^j "no history", or the true strategy in the true
+        mode; no z^{j-1}). Training plays one game; evaluations and the API may start others."""
+        j = self.buffer.n
+        self.Z[j] = info["strategy"] if self.cfg.latent == "true" else 0.0
+        self.game_start = j
+        self.begin_interaction()
 
     def begin_interaction(self) -> None:
         """A new interaction starts (the add-ons that follow one reset their state)."""
