@@ -81,3 +81,20 @@ def test_a_capped_instruction_set_is_timed_apart_from_the_full_one(cache, monkey
     monkeypatch.delenv("ONEDNN_MAX_CPU_ISA")
     monkeypatch.setattr(matmul, "time_matmuls", lambda: {"onednn": 1e-3, "aten": 2e-3})
     assert matmul.default_matmul() == "onednn"  # not the capped run's cached choice
+
+
+def test_two_cpu_generations_under_one_name_are_timed_apart():
+    """A virtual machine names Zen 4 and Zen 5 both "AMD EPYC": the family and model tell them
+    apart, so one's cached kernel choice is not taken on the other."""
+    zen4 = (
+        "processor\t: 0\ncpu family\t: 25\nmodel\t\t: 17\nmodel name\t: AMD EPYC\nstepping\t: 1\n"
+    )
+    flags = "flags\t\t: fpu avx2 avx512f sse\n"
+    zen5 = zen4.replace(": 25", ": 26").replace(": 17", ": 2")
+    second = "\n\nprocessor\t: 1\nmodel name\t: other\n"
+    assert matmul.cpu_of(zen4 + flags + second) == (
+        "AMD EPYC (cpu family 25, model 17, stepping 1)",
+        "avx2 avx512f",
+    )
+    assert matmul.cpu_of(zen5 + flags)[0] == "AMD EPYC (cpu family 26, model 2, stepping 1)"
+    assert matmul.cpu_of("model name\t: Apple M2\n") == ("Apple M2", "")

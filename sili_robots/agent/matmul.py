@@ -73,21 +73,27 @@ def isa_caps() -> dict[str, str]:
     return {v: os.environ[v] for v in ISA_CAPS if os.environ.get(v)}
 
 
+def cpu_of(cpuinfo: str) -> tuple[str, str]:
+    """(model, vector flags) of the first processor in ``/proc/cpuinfo``'s text. The model
+    names its family, model and stepping: a virtual machine may name two generations alike
+    ("AMD EPYC"), and a kernel choice of one does not hold for the other."""
+    cpu: dict[str, str] = {}
+    for line in cpuinfo.split("\n\n")[0].splitlines():  # every core reads alike
+        key, _, value = line.partition(":")
+        cpu[key.strip()] = value.strip()
+    model = cpu.get("model name") or platform.processor()
+    generation = ", ".join(f"{k} {cpu[k]}" for k in ("cpu family", "model", "stepping") if k in cpu)
+    flags = sorted(f for f in cpu.get("flags", "").split() if f.startswith(("avx", "amx")))
+    return model + (f" ({generation})" if generation else ""), " ".join(flags)
+
+
 def machine_key(threads: int = 1) -> str:
     """What a kernel timing depends on: CPU model and flags, any instruction-set cap, torch
     version and thread count (timings run on one thread, as training does by default)."""
-    model, flags = platform.processor(), ""
     try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            key, _, value = line.partition(":")
-            if key.strip() == "model name":
-                model = value.strip()
-            elif key.strip() == "flags":
-                flags = " ".join(sorted(f for f in value.split() if f.startswith(("avx", "amx"))))
-            if model and flags:
-                break
+        model, flags = cpu_of(Path("/proc/cpuinfo").read_text())
     except OSError:
-        pass
+        model, flags = platform.processor(), ""
     caps = "".join(f" | {v}={value}" for v, value in isa_caps().items())
     count = f"{threads} thread" + ("s" if threads > 1 else "")
     return f"{model} | {flags}{caps} | torch {torch.__version__} | {count}"
