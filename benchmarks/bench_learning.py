@@ -31,7 +31,6 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pandas as pd
 
 from sili_robots.build import make_run_config
@@ -39,7 +38,7 @@ from sili_robots.commands.common import parse_settings, positive_int, task_name
 from sili_robots.diagnostics import latent_diagnostics
 from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.migrations import migrate_run, setting_path
-from sili_robots.runs import kept, kept_fraction, run_metrics
+from sili_robots.runs import HOLDING, first_stable, kept, kept_fraction, run_metrics
 from sili_robots.sweep import parse_seeds
 
 MARKS = {True: "MET    ", False: "NOT MET", None: "N/A    "}
@@ -75,10 +74,10 @@ def run_one(task: str, method: str, seed: int, args: argparse.Namespace) -> Path
     return out
 
 
-def first_stable(df: pd.DataFrame, window: int, level: float = 0.9) -> float:
-    stable = kept(df).rolling(window).mean()
-    hit = np.flatnonzero(stable.to_numpy() >= level)
-    return float(df["interaction"].iloc[hit[0]]) if hit.size else float("nan")
+def stable_by(df: pd.DataFrame, window: int) -> float:
+    """The interaction that ends the first ``window`` of true stability >= 0.9 (NaN: never)."""
+    start = first_stable(kept(df).to_numpy(), window)
+    return float("nan") if start is None else float(df["interaction"].iloc[start + window - 1])
 
 
 #: recorded settings that pick kernels or bookkeeping for a machine, not the configuration
@@ -118,7 +117,7 @@ def table(run_dirs: list[Path], window: int) -> pd.DataFrame:
                 "interactions": len(df),
                 "final_task_reward": df["task_reward"].tail(window).mean(),
                 "final_stability": kept_fraction(df.tail(window)),
-                "first_stable_0.9": first_stable(df, window),
+                "first_stable_0.9": stable_by(df, window),
                 "latent_purity": latent_diagnostics(df, window).get("latent_purity", float("nan")),
                 "wall_min": summary["wall_time_s"] / 60,
                 "variant": variant_of(cfg),
@@ -152,7 +151,7 @@ def check_targets(df: pd.DataFrame) -> list[tuple[str, bool | None, str]]:
 def task_targets(task: str, df: pd.DataFrame) -> list[tuple[str, bool | None, str]]:
     mean = df.groupby("method")["final_task_reward"].mean()
     sili = df[df["method"] == "sili"]
-    held = int((sili["final_stability"] >= 0.9).sum())
+    held = int((sili["final_stability"] >= HOLDING).sum())
     need = -(-2 * len(sili) // 3)  # at least two thirds of the seeds: 2 of 3, 4 of 5
     out: list[tuple[str, bool | None, str]] = [
         (

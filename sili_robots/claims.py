@@ -47,12 +47,12 @@ import pandas as pd
 
 from sili_robots.bounds import stored_bounds
 from sili_robots.paper_grid import SWEEP_BETAS, TASKS, Block, block
+from sili_robots.runs import HOLDING, first_stable
 from sili_robots.tasks import task_spec
 
 WINDOW = 100
 COMPARABLE, COMPARABLE_PART = 0.1, 0.25
 ABOVE = 0.05
-STABLE = 0.9
 STABLE_BY = 350
 NO_COLLISIONS = 0.01
 SWEET_SPOT = (0.4, 0.8)
@@ -107,15 +107,6 @@ def score(task_reward: float, task_id: str) -> float:
     if best == still:  # no range to score in
         return float("nan")
     return (task_reward - still) / (best - still)
-
-
-def first_stable(stability: np.ndarray, window: int = 50) -> int | None:
-    """Where the first ``window``-interaction window with mean stability >= 0.9 starts."""
-    if len(stability) < window:
-        return None
-    means = np.convolve(stability, np.ones(window) / window, mode="valid")
-    hits = np.flatnonzero(means >= STABLE)
-    return int(hits[0]) if len(hits) else None
 
 
 def _block_runs(finals: pd.DataFrame, b: Block, task: str, method: str) -> pd.DataFrame:
@@ -255,7 +246,7 @@ def _stable(task: str, sili: pd.DataFrame, stable: pd.DataFrame, df: pd.DataFram
     if missing:
         return Claim(name, task, "", missing)
     st, sc, s = _mean(stable, "stability"), _mean(stable, "score"), _same_window(sili, stable, df)
-    ok = (st >= STABLE) + (sc < s - COMPARABLE)
+    ok = (st >= HOLDING) + (sc < s - COMPARABLE)
     measured = f"Stable: stability {st:.2f}, score {sc:.2f} (SILI {s:.2f})"
     return Claim(name, task, measured, HOLDS if ok == 2 else PART if ok else NO)
 

@@ -76,6 +76,23 @@ def kept_fraction(rows: Any) -> float | None:
     return float(stayed.mean()) if len(stayed) else None
 
 
+#: the true stability at which a run holds the opponent (verdicts, claims and benchmarks)
+HOLDING = 0.9
+
+
+def first_stable(stability: Any, window: int = 50) -> int | None:
+    """Where the first ``window``-interaction window of ``stability`` (an array, one value per
+    interaction; a NaN spoils its windows) with mean >= ``HOLDING`` starts; None: none does."""
+    import numpy as np
+
+    stability = np.asarray(stability, float)
+    if len(stability) < window:
+        return None
+    means = np.convolve(stability, np.ones(window) / window, mode="valid")
+    hits = np.flatnonzero(means >= HOLDING)
+    return int(hits[0]) if len(hits) else None
+
+
 def read_metrics(path: Path) -> Any:
     """A run's per-interaction rows (``metrics.csv`` or its gzipped copy) as a DataFrame;
     ConfigError naming the file when it is damaged (cut, overwritten, not a run's history)."""

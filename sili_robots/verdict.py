@@ -12,6 +12,7 @@ from sili_robots.bounds import stored_bounds
 from sili_robots.errors import ConfigError
 from sili_robots.labels import METHOD_NAMES
 from sili_robots.runs import (
+    HOLDING,
     METRICS,
     RunConfig,
     differences,
@@ -20,8 +21,6 @@ from sili_robots.runs import (
     run_metrics,
 )
 from sili_robots.tasks.registry import other_task_arguments
-
-HOLDS = 0.9  # the stability a run needs to count as holding the opponent
 
 
 def _last(run_dir: Path, window: int) -> pd.DataFrame:
@@ -52,7 +51,7 @@ def held(run_dir: Path, window: int = 50) -> bool:
 
 def _held(tail: pd.DataFrame, window: int) -> bool:
     stability = kept_fraction(tail)
-    return len(tail) == window and stability is not None and stability >= HOLDS
+    return len(tail) == window and stability is not None and stability >= HOLDING
 
 
 def worked(run_dir: Path, window: int = 50) -> bool:
@@ -86,11 +85,11 @@ def verdict(run_dir: Path, window: int = 50) -> str:
                 line += f" (standing still: {still['stability']:.0%})"
     else:
         kept = f"kept its strategy in {stability:.0%} of its last {len(tail)} interactions"
-        if stability < HOLDS:
-            kept += f", {HOLDS:.0%} needed"
+        if stability < HOLDING:
+            kept += f", {HOLDING:.0%} needed"
         if still:
             kept += f"; standing still: {still['stability']:.0%}"
-        outcome = "held" if stability >= HOLDS else "did not hold"
+        outcome = "held" if stability >= HOLDING else "did not hold"
         line = f"{name} {outcome} the opponent ({kept})"
     line += f" and earned {reward:.1f} per interaction"
     refs = []
@@ -135,7 +134,7 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
         said += f"; {len(tail)} interactions, too few to tell)" if len(tail) < window else ")"
         judged.append((_worked(tail, still, window), reward, said, run_dir))
     good = [j for j in judged if j[0]]
-    rule = f"held the opponent in {HOLDS:.0%} or more of its last {window} interactions"
+    rule = f"held the opponent in {HOLDING:.0%} or more of its last {window} interactions"
     rule += (
         f" and earned more than standing still's {still['task_reward']:.1f}"
         if still

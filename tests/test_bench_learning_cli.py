@@ -8,6 +8,7 @@ import sys
 from argparse import Namespace
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 from benchmark_scripts import load_script
 from fast_settings import FAST_AGENT
@@ -86,3 +87,15 @@ def test_two_thirds_of_the_seeds_must_hold() -> None:
     seeds = [("c", "sili", -5.0, s, "a") for s in (1.0, 1.0, 0.2, 0.1, 1.0)]
     (held,) = check(_rows(*seeds))
     assert held[1] is False and "3 of 5" in held[2] and "(4 of 5)" in held[0]
+
+
+def test_stable_by_is_the_interaction_ending_the_first_held_window() -> None:
+    """The game's first interaction (no strategy before it to keep) is in no window."""
+    bench = load_script("bench_learning")
+    changed = [0] * 30 + [1] + [0] * 99
+    df = pd.DataFrame({"interaction": range(130), "strategy_changed": changed})
+    assert bench.stable_by(df, 10) == 10  # interactions 1..10
+    assert bench.stable_by(df, 100) == 100  # 99 of interactions 1..100 kept
+    assert bench.stable_by(df[:100], 100) != bench.stable_by(df[:100], 100)  # 0 is in no window
+    df["strategy_changed"] = [i % 5 == 0 for i in range(130)]  # 80% kept
+    assert np.isnan(bench.stable_by(df, 10))
