@@ -255,7 +255,7 @@ def code_revision(root: Path = CHECKOUT) -> str | None:
 
 def _digest(root: Path, names: list[bytes]) -> str:
     """12 hex digits of the files' names and contents as they are now (a removed or unreadable
-    one by its name and state), read in chunks."""
+    one by its name and state)."""
     digest = hashlib.sha256()
     for name in names:
         path = root / os.fsdecode(name)
@@ -264,8 +264,7 @@ def _digest(root: Path, names: list[bytes]) -> str:
             if path.is_symlink():
                 digest.update(os.fsencode(os.readlink(path)))
             elif path.is_file():
-                with path.open("rb") as f:
-                    digest.update(hashlib.file_digest(f, "sha256").digest())
+                digest.update(hashlib.sha256(path.read_bytes()).digest())  # package files: small
             else:
                 digest.update(b"absent")
         except OSError:

@@ -870,3 +870,36 @@ def test_a_worker_past_its_grace_is_stopped_at_once_with_its_finally_blocks(
             worker.process.kill()
         alive_r.close()
         alive_w.close()
+
+
+def test_a_worker_refuses_a_run_another_live_process_claimed_and_leaves_its_claim(tmp_path):
+    """A `sili train --resume` started on a queued run of a sweep trains it; the sweep's worker,
+    reaching it later, fails it with the reason instead of training beside (two writers of one
+    checkpoint) and deleting the other process's claim. One process cannot claim a run twice."""
+    from sili_robots.build import make_run_config
+    from sili_robots.errors import ConfigError
+    from sili_robots.sweep.state import process_started, training_claim
+    from sili_robots.sweep.worker import Job, run_job
+
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    other = subprocess.Popen(["sleep", "60"])
+    try:
+        claim = {"pid": other.pid, "host": socket.gethostname()}
+        claim["started"] = process_started(other.pid)
+        (run_dir / "worker.json").write_text(json.dumps(claim))
+        cfg = make_run_config("circle-3", "sac", 0, 2, settings=FAST)
+        outcome = run_job(Job("run", cfg.to_dict(), str(run_dir)))
+        assert outcome.status == "failed"
+        assert f"being trained by process {other.pid}" in outcome.error
+        assert json.loads((run_dir / "worker.json").read_text()) == claim
+        assert not (run_dir / "metrics.csv").exists()
+    finally:
+        other.kill()
+        other.wait()
+    with training_claim(run_dir):  # the other process is gone: its claim is stale, taken over
+        refused = pytest.raises(ConfigError, match=f"being trained by process {os.getpid()}")
+        with refused, training_claim(run_dir):
+            pass
+        assert json.loads((run_dir / "worker.json").read_text())["pid"] == os.getpid()
+    assert not (run_dir / "worker.json").exists()

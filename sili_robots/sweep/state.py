@@ -130,11 +130,21 @@ def process_started(pid: int) -> str | None:
 @contextlib.contextmanager
 def training_claim(run_dir: Path) -> Iterator[None]:
     """Mark ``run_dir`` as trained by this process while the block runs, so that a sweep or a
-    second ``sili train --resume`` refuses it (``training_worker``) instead of training beside."""
+    second ``sili train --resume`` refuses it (``training_worker``) instead of training beside;
+    ConfigError when another live process has claimed it. The check and the claim are one step
+    (under a lock on the folder): of two trainers started together, one trains."""
+    import fcntl
+
     path = Path(run_dir) / RUNNING_FILE
     pid = os.getpid()
     claim = {"pid": pid, "host": socket.gethostname(), "started": process_started(pid)}
-    write_text(path, json.dumps(claim))
+    folder = os.open(run_dir, os.O_RDONLY)
+    try:
+        fcntl.flock(folder, fcntl.LOCK_EX)  # released with the descriptor, also on a kill
+        check_not_trained(run_dir)
+        write_text(path, json.dumps(claim))
+    finally:
+        os.close(folder)
     try:
         yield
     finally:  # the claim, unless another process has since claimed the folder
