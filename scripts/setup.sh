@@ -6,8 +6,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=${SILI_VENV:-.venv}
 PY=${PYTHON:-python3}
-if [ ! -x "$VENV/bin/python" ]; then
-    "$PY" -m venv "$VENV"
+if ! "$VENV/bin/python" -m pip --version >/dev/null 2>&1; then
+    # missing, or broken (its interpreter gone with an upgrade, or made without pip): anew
+    "$PY" -m venv --clear "$VENV"
 fi
 hash=$(sha256sum pyproject.toml | cut -d' ' -f1)
 stamp="$VENV/.sili-installed"  # the pyproject hash, then the groups installed with it

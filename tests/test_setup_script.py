@@ -58,3 +58,26 @@ def test_a_changed_pyproject_installs_again(tmp_path):
         f.write("\n# changed\n")
     _setup(repo)
     assert _installs(log) == [".[dev]", "."]
+
+
+def test_a_broken_environment_is_made_anew(tmp_path):
+    """A .venv whose interpreter went with an upgrade, or made without pip, fails every pip
+    call: it is cleared and made again, and everything is installed into it."""
+    repo, log = _checkout(tmp_path)
+    working = (repo / "venv" / "bin" / "python").read_text()
+    _setup(repo, "dev")
+    (repo / "venv" / "bin" / "python").write_text("#!/usr/bin/env bash\nexit 1\n")
+    system = tmp_path / "python3"  # as `python3 -m venv --clear venv` would, a working one
+    system.write_text(
+        f"#!/usr/bin/env bash\necho \"$*\" >> {log}\nrm -rf venv && mkdir -p venv/bin\n"
+        f"printf '%s' '{working}' > venv/bin/python && chmod +x venv/bin/python\n"
+    )
+    system.chmod(0o755)
+    subprocess.run(
+        ["bash", "scripts/setup.sh", "dev"],
+        cwd=repo,
+        env={"PATH": "/usr/bin:/bin", "SILI_VENV": "venv", "PYTHON": str(system)},
+        check=True,
+    )
+    assert "-m venv --clear venv" in log.read_text()
+    assert _installs(log) == [".[dev]", ".[dev]"]
