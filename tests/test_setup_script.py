@@ -69,7 +69,7 @@ def test_a_broken_environment_is_made_anew(tmp_path):
     (repo / "venv" / "bin" / "python").write_text("#!/usr/bin/env bash\nexit 1\n")
     system = tmp_path / "python3"  # as `python3 -m venv --clear venv` would, a working one
     system.write_text(
-        f"#!/usr/bin/env bash\necho \"$*\" >> {log}\nrm -rf venv && mkdir -p venv/bin\n"
+        f'#!/usr/bin/env bash\necho "$*" >> {log}\nrm -rf venv && mkdir -p venv/bin\n'
         f"printf '%s' '{working}' > venv/bin/python && chmod +x venv/bin/python\n"
     )
     system.chmod(0o755)

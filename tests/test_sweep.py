@@ -827,15 +827,24 @@ def test_a_sweeps_run_extended_by_hand_updates_the_sweeps_tables(tmp_path, capsy
     assert len(pd.read_csv(out / "results.csv")) == 5
 
 
-def test_a_ray_address_is_probed_where_its_port_can_be_told():
+def test_a_ray_address_is_probed_where_its_port_can_be_told(monkeypatch):
+    import ray._private.services
+
     from sili_robots.errors import ConfigError
     from sili_robots.sweep.ray_backend import check_reachable
 
     for nothing_there in ("127.0.0.1:1", "[::1]:1", "ray://127.0.0.1:1", "localhost:1"):
         with pytest.raises(ConfigError, match=r"cannot connect to Ray at .*: Connection refused"):
             check_reachable(nothing_there)
-    for not_probed in ("auto", "::1", "fe80::1%eth0"):  # ray.init reads these itself
+    for not_probed in ("::1", "fe80::1%eth0"):  # ray.init reads these itself
         check_reachable(not_probed)
+    monkeypatch.setenv("RAY_ADDRESS", "127.0.0.1:1")  # what auto stands for, as ray.init reads it
+    with pytest.raises(ConfigError, match=r":1' \(--ray-address auto\): Connection refused"):
+        check_reachable("auto")
+    monkeypatch.delenv("RAY_ADDRESS")  # and no cluster started on this machine:
+    monkeypatch.setattr(ray._private.services, "canonicalize_bootstrap_address", lambda a: None)
+    with pytest.raises(ConfigError, match="auto finds no running Ray cluster"):
+        check_reachable("auto")
 
 
 @pytest.mark.parametrize("group_sigterm", [False, True])

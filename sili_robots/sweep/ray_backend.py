@@ -137,8 +137,12 @@ class RayBackend:
 
 
 def check_reachable(address: str, timeout: float = 5.0) -> None:
-    """ConfigError when nothing listens at a Ray cluster's ``host:port`` (``ray://`` too):
-    ``ray.init`` would retry its connection forever, printing Ray's log lines."""
+    """ConfigError when nothing listens at a Ray cluster's ``host:port`` (``ray://`` too), or
+    ``auto`` finds no running cluster: ``ray.init`` would retry its connection forever,
+    printing Ray's log lines, or fail once the sweep is written."""
+    given = address
+    if address == "auto":
+        address = _running_cluster()
     hostport = address.split("://", 1)[-1]
     host, _, port = hostport.rpartition(":")
     if host.startswith("[") and host.endswith("]"):
@@ -151,9 +155,31 @@ def check_reachable(address: str, timeout: float = 5.0) -> None:
         socket.create_connection((host, int(port)), timeout=timeout).close()
     except OSError as err:
         raise ConfigError(
-            f"cannot connect to Ray at {address!r}: {err.strerror or err}; is a Ray cluster's "
+            f"cannot connect to Ray at {address!r}"
+            + (f" (--ray-address {given})" if given != address else "")
+            + f": {err.strerror or err}; is a Ray cluster's "
             "head (`ray start --head`) running there?"
         ) from None
+
+
+def _running_cluster() -> str:
+    """The address ``auto`` stands for, as ``ray.init`` finds it (``RAY_ADDRESS``, else the
+    cluster last started on this machine); ConfigError when there is none."""
+    try:
+        from ray._private.services import canonicalize_bootstrap_address
+    except ImportError:  # another Ray: ray.init alone tells
+        return "auto"
+    try:
+        found = canonicalize_bootstrap_address("auto")
+    except (ConnectionError, ValueError):
+        found = None
+    if found is None:
+        raise ConfigError(
+            "--ray-address auto finds no running Ray cluster (none started on this machine with "
+            "`ray start --head`, and RAY_ADDRESS is not set): start one, give a cluster's "
+            "host:port, or leave --ray-address out to start Ray here for this sweep"
+        )
+    return found
 
 
 @contextlib.contextmanager
