@@ -299,3 +299,35 @@ def test_bounds_of_another_controller_are_its_own_and_never_stored(tmp_path):
         done = sili_in_process("bounds", *args)
         assert done.returncode == 2 and said in done.stderr, done.stderr
     assert not (tmp_path / "b.json").exists()
+
+
+def test_bounds_all_write_keeps_the_tasks_done_when_stopped(tmp_path, monkeypatch):
+    """`sili bounds --all --write` takes minutes: a Ctrl-C on a late task keeps the earlier ones."""
+    import sili_robots.bounds as bounds
+
+    measured = []
+
+    def stopped_on_the_third(task_id, *args, **kwargs):
+        if len(measured) == 2:
+            raise KeyboardInterrupt
+        measured.append(task_id)
+        return real(task_id, *args, **kwargs)
+
+    real = bounds.compute_bounds
+    monkeypatch.setattr(bounds, "compute_bounds", stopped_on_the_third)
+    path = tmp_path / "b.json"
+    args = ["bounds", "--all", "--interactions", "2", "--games", "1", "--write", str(path)]
+    assert main(args) == 130
+    assert sorted(json.loads(path.read_text())["tasks"]) == sorted(measured)
+
+
+def test_a_task_taken_by_write_as_its_file_is_named(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    for args, said in (
+        (["--write", "circle-3"], "--write took 'circle-3' as its FILE: give TASK before --write"),
+        (["--write"], "or --all, not both or neither\n"),
+        (["circle-3", "--all"], "or --all, not both or neither\n"),
+    ):
+        done = sili_in_process("bounds", *args)
+        assert done.returncode == 2 and said in done.stderr, done.stderr
+    assert not (tmp_path / "circle-3").exists()

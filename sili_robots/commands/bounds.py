@@ -89,6 +89,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.bounds import (
+        BOUNDS_FILE,
         check_counts,
         compute_bounds,
         default_interactions,
@@ -99,27 +100,30 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.tasks import task_spec
     from sili_robots.tasks.registry import all_versions
 
+    if args.all == (args.task is not None):
+        took = ""  # `--write circle-3`: the optional FILE took the task's name
+        if args.task is None and args.write and Path(args.write) != BOUNDS_FILE:
+            took = f" (--write took '{args.write}' as its FILE: give TASK before --write)"
+        raise ConfigError(f"give either a TASK (e.g. circle-3) or --all, not both or neither{took}")
     if args.write:  # before minutes of games, not after
         read_bounds_file(writable_file(Path(args.write), "--write"))
-    if args.all == (args.task is not None):
-        raise ConfigError("give either a TASK (e.g. circle-3) or --all, not both or neither")
     specs = all_versions() if args.all else [task_spec(args.task)]
     env_kwargs = _task_arguments(args, specs)
     for spec in specs:  # the counts checked before anything runs
         check_counts(args.interactions or default_interactions(spec.name), args.games)
     if args.write:
         _check_packaged_counts(args, [default_interactions(s.name) for s in specs])
-    results = []
     for spec in specs:
         result = compute_bounds(spec.gym_id, args.interactions, args.seed, args.games, env_kwargs)
-        results.append(result)
         if args.json:
             keys = ("task", "task_id", "task_args", "interactions", "games", "seed", "bounds")
-            print(json.dumps({k: result[k] for k in keys if k in result}))
+            print(json.dumps({k: result[k] for k in keys if k in result}), flush=True)
         else:
             print(format_table(result), flush=True)
+        if args.write:  # as each task ends: a stop or a failure keeps the tasks done
+            written = write_bounds_file([result], Path(args.write), _command(args))
     if args.write:
-        print(f"wrote {write_bounds_file(results, Path(args.write), _command(args))}")
+        print(f"wrote {written}")
     return 0
 
 
