@@ -37,13 +37,11 @@ from sili_robots.build import (
     make_run_env,
     observed_as,
     same_task_arguments,
-    same_task_version,
     task_kwargs_of,
     task_name_of,
-    task_version_of,
 )
 from sili_robots.errors import ConfigError, check_count
-from sili_robots.evaluation import AgentFeedback, evaluate
+from sili_robots.evaluation import AgentFeedback, check_same_task, evaluate, fitting
 from sili_robots.runs import (
     CHECKPOINT,
     COMPRESSED_METRICS,
@@ -172,26 +170,13 @@ class SILI:
         path = Path(path)
         cfg = read_run_config(path)
         state = require_checkpoint(path)
-        recorded = cfg.task_id or cfg.task
-        if env is not None and not same_task_version(recorded, task_version_of(env)):
-            raise ConfigError(
-                f"env is {task_version_of(env)}; the run in {path} was trained on {recorded}: "
-                "give an instance of that task (its arguments, such as the controller, may "
-                "differ)"
-            )
+        if env is not None:
+            check_same_task(path, cfg, env)
         model = cls.__new__(cls)
         model.cfg, model.run_dir, model._task_env, model._overwrite = cfg, path, env, False
         model._saved = {}
-        try:
+        with fitting(path, cfg, env):
             model._setup(state)
-        except (RuntimeError, ValueError) as err:  # networks or stored interactions of a
-            if env is None:  # task of other sizes (observation, action, horizon)
-                raise
-            given = f"{task_name_of(env)} with {task_kwargs_of(env)}"
-            raise ConfigError(
-                f"env does not fit the run in {path}, trained on {cfg.task} with "
-                f"{cfg.env_kwargs}; env is {given} ({str(err).splitlines()[0]})"
-            ) from None
         _keep_temporary(path)  # another model's temporary run, now the user's to keep
         return model
 

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from sili_robots.atomic import write_text
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, check_seed
 from sili_robots.policies.scripted import KIND_DESCRIPTIONS, available_kinds, scripted_policy
 from sili_robots.rollout import run_interactions
 from sili_robots.tasks import make_task, task_spec
@@ -96,7 +96,7 @@ def compute_bounds(
     """``{"task", "task_id", "task_args", "interactions", "games", "seed", "bounds": {kind:
     {task_reward, stability}}}`` for one task version (a CLI name or a gymnasium id), built
     with ``env_kwargs`` (e.g. another controller: the references of an ablation)."""
-    spec = task_spec(task)
+    spec, seed = task_spec(task), check_seed(seed)
     env_kwargs = dict(env_kwargs or {})
     env = make_task(spec.gym_id, **env_kwargs)
     try:
@@ -112,7 +112,7 @@ def compute_bounds(
             for i, length in enumerate(lengths):
                 policy = scripted_policy(env, kind)
                 first = {"strategy": choices[i % len(choices)]} if choices else None
-                summary = run_interactions(env, policy, length, int(seed) + i, options=first)[1:]
+                summary = run_interactions(env, policy, length, seed + i, options=first)[1:]
                 rewards += [s.task_reward for s in summary]
                 stayed += [not s.strategy_changed for s in summary]
             bounds[kind] = {
@@ -127,7 +127,7 @@ def compute_bounds(
         **({"task_args": env_kwargs} if env_kwargs else {}),
         "interactions": n,
         "games": g,
-        "seed": int(seed),
+        "seed": seed,
         "bounds": bounds,
     }
 

@@ -6,7 +6,8 @@ so its latents and the opponent's strategy carry on where training left them.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +15,16 @@ import gymnasium as gym
 import numpy as np
 
 from sili_robots.agent import SILIAgent
-from sili_robots.build import build_agent, make_run_env, observed_as
+from sili_robots.build import (
+    build_agent,
+    make_run_env,
+    observed_as,
+    same_task_version,
+    task_kwargs_of,
+    task_name_of,
+    task_version_of,
+)
+from sili_robots.errors import ConfigError, check_count
 from sili_robots.rollout import run_interactions
 from sili_robots.runs import RunConfig, read_config, require_checkpoint
 from sili_robots.tasks.base import RESET_OPTIONS, resume_game
@@ -77,16 +87,46 @@ class AgentFeedback(gym.Wrapper):
         return obs, r, term, trunc, info
 
 
+def check_same_task(run_dir: Path, cfg: RunConfig, env: gym.Env) -> None:
+    """ConfigError when the task instance ``env`` is another task (version) than the run's: the
+    run's game and agent are that task's (its arguments, such as the controller, may differ)."""
+    recorded = cfg.task_id or cfg.task
+    if not same_task_version(recorded, task_version_of(env)):
+        raise ConfigError(
+            f"env is {task_version_of(env)}; the run in {run_dir} was trained on {recorded}: "
+            "give an instance of that task (its arguments, such as the controller, may differ)"
+        )
+
+
+@contextlib.contextmanager
+def fitting(run_dir: Path, cfg: RunConfig, env: gym.Env | None) -> Iterator[None]:
+    """Name both sides when the run's networks or stored interactions do not fit ``env``, a
+    task instance of other sizes (observation, action, horizon); ``None``: the run's own."""
+    try:
+        yield
+    except (RuntimeError, ValueError) as err:
+        if env is None:
+            raise
+        given = f"{task_name_of(env)} with {task_kwargs_of(env)}"
+        raise ConfigError(
+            f"env does not fit the run in {run_dir}, trained on {cfg.task} with "
+            f"{cfg.env_kwargs}; env is {given} ({str(err).splitlines()[0]})"
+        ) from None
+
+
 def load_trained(
     run_dir: Path, task_env: gym.Env | None = None
 ) -> tuple[RunConfig, gym.Env, SILIAgent, dict[str, Any]]:
-    """Rebuild a run's env (or observe ``task_env``, the task instance) and agent from its config
-    and last checkpoint (returned too: its ``game`` and ``interaction``)."""
+    """Rebuild a run's env (or observe ``task_env``, the task instance, of the run's task) and
+    agent from its config and last checkpoint (returned too: its ``game`` and ``interaction``)."""
     cfg = read_config(run_dir)
     state = require_checkpoint(run_dir)
-    env = make_run_env(cfg) if task_env is None else observed_as(task_env, cfg)
-    agent = build_agent(cfg, env)
-    agent.load_state_dict(state["agent"])
+    if task_env is not None:
+        check_same_task(run_dir, cfg, task_env)
+    with fitting(run_dir, cfg, task_env):
+        env = make_run_env(cfg) if task_env is None else observed_as(task_env, cfg)
+        agent = build_agent(cfg, env)
+        agent.load_state_dict(state["agent"])
     return cfg, env, agent, state
 
 
@@ -112,6 +152,7 @@ def evaluate(run_dir: Path, interactions: int, task_env: gym.Env | None = None) 
     the first, whose change training's last interaction caused; None for one interaction),
     acting deterministically (no exploration, no learning), from the checkpoint's interaction
     (``trained_interactions``); on ``task_env``, the task instance, when given (left open)."""
+    interactions = check_count("interactions", interactions)
     _, env, agent, state = load_trained(run_dir, task_env)
     wrapped = AgentFeedback(env, agent, state["game"])
     try:

@@ -482,3 +482,23 @@ def test_another_game_on_model_env_starts_the_agent_with_no_history(tmp_path):
     obs, info = model.env.reset(seed=7)  # a seed after the first reset: another game
     assert info["interaction"] == 0 and model.agent.buffer.n == 3
     np.testing.assert_array_equal(model.agent.policy_input(obs)[len(obs) :], 0.0)
+
+
+def test_evaluate_on_a_task_instance_refuses_another_task_as_load_does(tmp_path):
+    """evaluation.evaluate restored a Circle (3 Goals) game into Circle (8 Goals) and returned
+    its numbers; a task of other sizes raised numpy's or torch's error."""
+    from sili_robots.evaluation import evaluate
+
+    run = tmp_path / "run"
+    SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run).learn(2)
+    for task, said in (
+        (make_task("circle-8"), r"env is sili/Circle8-v1; the run in .* was trained on"),
+        (make_task("circle-3", horizon=10), r"env does not fit the run in .*'horizon': 10"),
+        (make_task("speaker-listener"), r"env is sili/SpeakerListener-v1; the run in"),
+    ):
+        with pytest.raises(ConfigError, match=said):
+            evaluate(run, 2, task)
+        task.close()
+    with pytest.raises(ConfigError, match="interactions must be an integer >= 1, got 0"):
+        evaluate(run, 0)
+    assert evaluate(run, 2, make_task("circle-3", outside_margin=0.3))["interactions"] == 2

@@ -331,3 +331,13 @@ def test_a_task_taken_by_write_as_its_file_is_named(tmp_path, monkeypatch):
         done = sili_in_process("bounds", *args)
         assert done.returncode == 2 and said in done.stderr, done.stderr
     assert not (tmp_path / "circle-3").exists()
+
+
+@pytest.mark.parametrize(
+    ("seed", "said"), [(-1, "seed -1 is not allowed"), (1.5, "seed 1.5 is not")]
+)
+def test_compute_bounds_checks_its_seed_as_the_cli_does(seed, said):
+    from sili_robots.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=said):  # 1.5 was taken as 1
+        compute_bounds("circle-3", 2, seed, 1)

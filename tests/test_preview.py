@@ -118,6 +118,9 @@ def test_scene_for_unknown_env_names_the_known_ones():
         ({"interactions": 2.5}, "interactions must be an integer >= 1, got 2.5"),  # not cut to 2
         ({"interactions": "x"}, "interactions must be an integer >= 1, got 'x'"),
         ({"checkpoint": "/nonexistent/run"}, "is not a run directory"),
+        ({"seed": -1}, "seed -1 is not allowed: give an integer in [0,"),
+        ({"seed": 1.5}, "seed 1.5 is not an integer"),
+        ({"policy": "random", "checkpoint": "/x"}, "'/x': a preview plays one of them"),
     ],
 )
 def test_bad_preview_arguments_raise_config_error(kwargs, message, tmp_path):

@@ -21,7 +21,8 @@ import pytest
 import umsgpack
 from PIL import Image
 
-from sili_robots.preview import Browser, BrowserError, Preview, make_env_and_policy
+from sili_robots.errors import ConfigError
+from sili_robots.preview import Browser, BrowserError, Preview, make_env_and_policy, preview
 from sili_robots.preview.build import populate
 from sili_robots.preview.html import SceneRecorder
 from sili_robots.preview.render import render_html
@@ -208,28 +209,36 @@ def test_broken_page_fails_the_same_check(browser, tmp_path):
         prev.render(html, browser=browser)
 
 
-def test_cli_png(tmp_path):
-    out = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "sili_robots.cli",
+def test_cli_png_replaces_a_previews_picture_and_no_other(tmp_path):
+    def cli_png(png: Path) -> subprocess.CompletedProcess:
+        args = [
             "preview",
             "speaker-listener",
             "--interactions",
             "2",
             "--out",
             str(tmp_path / "s.html"),
-            "--png",
-            str(tmp_path / "s.png"),
-        ],
-        capture_output=True,
-        text=True,
-        timeout=180,
-    )
-    assert out.returncode == 0, out.stderr
-    assert "picture check: ok" in out.stdout
-    assert Image.open(tmp_path / "s.png").size == (640, 480)
+        ]
+        return subprocess.run(
+            [sys.executable, "-m", "sili_robots.cli", *args, "--png", str(png)],
+            capture_output=True,
+            text=True,
+            timeout=180,
+        )
+
+    for _ in range(2):  # the second replaces the first's picture
+        out = cli_png(tmp_path / "s.png")
+        assert out.returncode == 0, out.stderr
+        assert "picture check: ok" in out.stdout
+        assert Image.open(tmp_path / "s.png").size == (640, 480)
+    mine = tmp_path / "mine.png"
+    Image.open(tmp_path / "s.png").save(mine)  # a picture of the user's: no preview's mark
+    out = cli_png(mine)
+    assert out.returncode == 2 and f"--png {mine} exists and is not a preview" in out.stderr
+    (tmp_path / "notes.html").write_text("<html>mine</html>")
+    with pytest.raises(ConfigError, match=r"out .*notes\.html exists and is not a preview"):
+        preview("circle-3", out=tmp_path / "notes.html")  # the Python API keeps it too
+    assert (tmp_path / "notes.html").read_text() == "<html>mine</html>"
 
 
 def _alive_with(text):

@@ -23,7 +23,6 @@ from sili_robots.commands.common import (
     task_arguments_given,
     writable_file,
 )
-from sili_robots.errors import ConfigError
 
 if TYPE_CHECKING:
     from sili_robots.preview import PreviewResult
@@ -47,7 +46,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     who = p.add_mutually_exclusive_group()
     who.add_argument(
         "--policy",
-        default="scripted",
         choices=("scripted", "random"),
         help="scripted = the task's stabilizing reference policy (default)",
     )
@@ -81,6 +79,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.preview import BrowserError, preview
+    from sili_robots.preview.api import check_output
     from sili_robots.preview.server import ServerError
 
     reported: list[int] = []
@@ -94,10 +93,9 @@ def run(args: argparse.Namespace) -> int:
         from sili_robots.build import check_task_builds
 
         check_task_builds(args.task, env_kwargs, "--controller, --env-kwarg")
-    if args.out is not None:
-        _check_output(writable_file(Path(args.out), "--out"), (".html", ".htm"), "--out")
-    if args.png is not None:
-        _check_output(writable_file(Path(args.png), "--png"), (".png",), "--png")
+    for path, option in ((args.out, "--out"), (args.png, "--png")):
+        if path is not None:
+            check_output(writable_file(Path(path), option), option)
     try:
         result = preview(
             args.task,
@@ -132,21 +130,3 @@ def _report(result: PreviewResult) -> int:
         print(f"picture check: ok ({result.rendered.seen_summary()})")
     print("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.seconds.items()), flush=True)
     return 0
-
-
-def _check_output(path: Path, suffixes: tuple[str, ...], option: str) -> None:
-    """An output a preview may write: a name ending in ``suffixes`` (Chromium opens a page by
-    its suffix), and an existing HTML file only if a preview wrote it: a run's or a user's file
-    is never replaced."""
-    from sili_robots.preview.html import PREVIEW_MARK
-
-    if path.suffix.lower() not in suffixes:
-        raise ConfigError(f"{option} {path}: give a file name ending in {' or '.join(suffixes)}")
-    if ".html" in suffixes and path.is_file() and PREVIEW_MARK not in _tail(path):
-        raise ConfigError(f"{option} {path} exists and is not a preview; give another file name")
-
-
-def _tail(path: Path, size: int = 1 << 16) -> str:
-    with path.open("rb") as f:
-        f.seek(max(path.stat().st_size - size, 0))
-        return f.read().decode("utf-8", "replace")

@@ -11,6 +11,7 @@ trained agent (``checkpoint=RUN_DIR``, through ``sili_robots.evaluation.policy_f
 from __future__ import annotations
 
 import time
+import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -20,10 +21,10 @@ import gymnasium as gym
 import meshcat
 import numpy as np
 
-from sili_robots.errors import ConfigError, check_choice, check_count
+from sili_robots.errors import ConfigError, check_choice, check_count, check_seed
 from sili_robots.preview.browser import Browser
 from sili_robots.preview.build import overlay, populate, world_point
-from sili_robots.preview.html import SceneRecorder, scene_html, write_html
+from sili_robots.preview.html import PREVIEW_MARK, SceneRecorder, scene_html, write_html
 from sili_robots.preview.recording import Recording, record_rollout
 from sili_robots.preview.render import Rendered, render_html
 from sili_robots.preview.scenes import TaskScene, scene_for
@@ -65,7 +66,7 @@ class Preview:
         live: meshcat.Visualizer | None = None,
     ) -> Preview:
         """Roll ``policy`` out on ``env`` and build the scene (also into ``live`` if given)."""
-        interactions = check_count("interactions", interactions)
+        interactions, seed = check_count("interactions", interactions), check_seed(seed)
         scene = scene_for(env)
         rec = record_rollout(
             env,
@@ -128,11 +129,12 @@ class Preview:
 
 def make_env_and_policy(
     task: str,
-    policy: str = "scripted",
+    policy: str | None = None,
     checkpoint: str | Path | None = None,
     env_kwargs: dict[str, Any] | None = None,
 ) -> tuple[str, gym.Env, Callable, str]:
-    """(task name, env to step, policy, policy label) for a scripted policy or a trained run;
+    """(task name, env to step, policy, policy label) for a scripted policy (``policy``:
+    scripted, the default, or random) or a trained run (``checkpoint``), one of them;
     ``env_kwargs`` build the task for a scripted policy (a trained run's are its own)."""
     from sili_robots.policies import scripted_policy
     from sili_robots.tasks import make_task, task_spec
@@ -144,7 +146,13 @@ def make_env_and_policy(
             f"a trained run is previewed on its own task arguments (its config.json's), got "
             f"{given}: drop them, or preview a scripted policy on them"
         )
+    if checkpoint is not None and policy is not None:
+        raise ConfigError(
+            f"policy {policy!r} and checkpoint {str(checkpoint)!r}: a preview plays one of them "
+            "(a scripted or random policy, or the run's agent)"
+        )
     if checkpoint is None:
+        policy = "scripted" if policy is None else policy
         check_choice("preview policy", policy, POLICIES)
         env = make_task(name, **(env_kwargs or {}))
         try:
@@ -215,7 +223,7 @@ class PreviewResult:
 def preview(
     task: str,
     *,
-    policy: str = "scripted",
+    policy: str | None = None,
     checkpoint: str | Path | None = None,
     interactions: int = 3,
     seed: int = 0,
@@ -237,6 +245,9 @@ def preview(
     """
     from sili_robots.preview.server import LiveServer
 
+    for path, option in ((out, "out"), (png, "png")):
+        if path is not None:
+            check_output(path, option)
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
     name, env, pol, label = make_env_and_policy(task, policy, checkpoint, env_kwargs)
@@ -266,7 +277,7 @@ def preview(
             result.rendered = prev.render(result.html)
             result.png = Path(png)
             result.png.parent.mkdir(parents=True, exist_ok=True)
-            result.png.write_bytes(result.rendered.png)
+            result.png.write_bytes(marked_png(result.rendered.png))
             seconds["png"] = time.perf_counter() - t2
         if temporary is not None:
             temporary.unlink(missing_ok=True)
@@ -283,6 +294,38 @@ def preview(
         if server is not None:
             server.stop()
         env.close()
+
+
+#: a PNG text chunk (keyword, NUL, text) naming what wrote the picture
+PNG_MARK = b"Software\0sili-robots preview"
+PNG_HEADER = 8 + 25  # the signature and the IHDR chunk, which must come first
+
+
+def marked_png(png: bytes) -> bytes:
+    """``png`` with ``PNG_MARK`` in a text chunk, so a later preview knows it may replace it."""
+    chunk = b"tEXt" + PNG_MARK
+    mark = len(PNG_MARK).to_bytes(4, "big") + chunk + zlib.crc32(chunk).to_bytes(4, "big")
+    return png[:PNG_HEADER] + mark + png[PNG_HEADER:]
+
+
+def check_output(path: str | Path, option: str) -> None:
+    """An output a preview may write (``option``: how the caller names it): an HTML or PNG
+    name (Chromium opens a page by its suffix), and an existing file only if a preview wrote
+    it: a run's or a user's file is never replaced."""
+    path = Path(path)
+    suffixes = (".png",) if option.endswith("png") else (".html", ".htm")
+    if path.suffix.lower() not in suffixes:
+        raise ConfigError(f"{option} {path}: give a file name ending in {' or '.join(suffixes)}")
+    if path.is_file() and not _written_by_a_preview(path):
+        raise ConfigError(f"{option} {path} exists and is not a preview; give another file name")
+
+
+def _written_by_a_preview(path: Path) -> bool:
+    with path.open("rb") as f:
+        if path.suffix.lower() == ".png":
+            return PNG_MARK in f.read(PNG_HEADER + 64)
+        f.seek(max(path.stat().st_size - (1 << 16), 0))  # the mark is in the page's last script
+        return PREVIEW_MARK in f.read().decode("utf-8", "replace")
 
 
 def _write(prev: Preview, out: str | Path | None) -> Path:
