@@ -10,6 +10,7 @@ import pytest
 from fast_settings import FAST_ARGS
 
 from sili_robots.agent import method_config
+from sili_robots.agent.schedule import Schedule
 from sili_robots.cli import main
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import load_trained
@@ -194,6 +195,16 @@ def test_a_setting_the_method_never_reads_is_recorded_with_a_note(tmp_path, caps
     floor = ["sili.smirl_std_floor"]
     assert "sili.smirl_std_floor" in unused_settings(method_config("lili"), floor)
     assert unused_settings(method_config("smirl"), floor) == {}
+    credit = ["sili.scale", "sili.credit"]
+    for method in ("lili", "sac", "oracle"):  # b = 0: no stability term to scale
+        assert set(unused_settings(method_config(method), credit)) == set(credit)
+    never = method_config("sili", overrides={"sili.beta": Schedule(((0, 0), (10, 0)))})
+    assert set(unused_settings(never, credit)) == set(credit)
+    assert unused_settings(method_config("smirl"), credit)
+    for method in ("sili", "stable"):
+        assert unused_settings(method_config(method), credit) == {}
+    delayed = method_config("sili", overrides={"sili.beta": Schedule(((0, 0), (10, 0.5)))})
+    assert unused_settings(delayed, credit) == {}
     out = tmp_path / "sac"
     args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "1", *FAST_ARGS]
     assert main([*args, "--set", "model.dim=4", "--out", str(out), "--no-progress"]) == 0

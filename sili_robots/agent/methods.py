@@ -157,4 +157,18 @@ def unused_settings(cfg: AgentConfig, given: Iterable[str]) -> dict[str, str]:
             out[path] = f"it learns no latent model (latent {cfg.latent!r})"
         elif path == "sili.smirl_std_floor" and cfg.method != "smirl":
             out[path] = "only SMiRL's state density reads it"
+        elif path in ("sili.scale", "sili.credit") and _unscaled(cfg):
+            out[path] = _unscaled(cfg)
     return out
+
+
+def _unscaled(cfg: AgentConfig) -> str:
+    """Why the stability term's scale and credit are never read ('' when they are)."""
+    if cfg.method == "smirl":
+        return "SMiRL's term is its state density's log-likelihood"
+    if cfg.latent == "partial":
+        return "the partial latent's term is read off each state"
+    beta = cfg.sili.beta
+    if all(v == 0 for _, v in beta.points) if isinstance(beta, Schedule) else beta == 0:
+        return "b is 0 throughout: no stability term"
+    return ""
