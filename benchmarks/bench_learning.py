@@ -155,7 +155,7 @@ def task_targets(task: str, df: pd.DataFrame) -> list[tuple[str, bool | None, st
     need = -(-2 * len(sili) // 3)  # at least two thirds of the seeds: 2 of 3, 4 of 5
     out: list[tuple[str, bool | None, str]] = [
         (
-            f"{task}: SILI stability >= 0.9 in at least 2 of 3 seeds ({need} of {len(sili)})",
+            f"{task}: SILI stability >= {HOLDING} in at least 2 of 3 seeds ({need} of {len(sili)})",
             held >= need,
             f"{held} of {len(sili)} seeds ({', '.join(f'{x:.2f}' for x in sili.final_stability)})",
         )

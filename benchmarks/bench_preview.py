@@ -25,6 +25,7 @@ from sili_robots.commands.common import seed as seed_number
 from sili_robots.errors import one_line_errors
 from sili_robots.policies import scripted_policy
 from sili_robots.preview import Browser, Preview, make_env_and_policy
+from sili_robots.preview.api import marked_png
 from sili_robots.rollout import run_interactions
 from sili_robots.tasks import make_task
 from sili_robots.tasks.registry import TASKS
@@ -67,7 +68,7 @@ def preview_times(
         raise SystemExit(f"{task}: the picture failed its checks: {problems}")
     if docs is not None:
         docs.mkdir(parents=True, exist_ok=True)
-        (docs / f"preview-{task}.png").write_bytes(shot.png)
+        (docs / f"preview-{task}.png").write_bytes(marked_png(shot.png))  # sili preview's own
     return {
         "frames": len(prev.recording),
         "env": t1 - t0,

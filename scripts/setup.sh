@@ -6,8 +6,13 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=${SILI_VENV:-.venv}
 PY=${PYTHON:-python3}
-if ! "$VENV/bin/python" -m pip --version >/dev/null 2>&1; then
-    # missing, or broken (its interpreter gone with an upgrade, or made without pip): anew
+if ! "$VENV/bin/python" -m pip --version >/dev/null 2>&1 &&
+    ! "$VENV/bin/python" -m ensurepip -q >/dev/null 2>&1; then
+    # missing, or broken (its interpreter gone with an upgrade): anew, if it is an environment
+    if [ -n "$(ls -A "$VENV" 2>/dev/null)" ] && [ ! -f "$VENV/pyvenv.cfg" ]; then
+        echo "setup: $VENV is a folder, not a virtual environment; give SILI_VENV another" >&2
+        exit 2
+    fi
     "$PY" -m venv --clear "$VENV"
 fi
 hash=$(sha256sum pyproject.toml | cut -d' ' -f1)

@@ -88,8 +88,8 @@ def first_stable(stability: Any, window: int = 50) -> int | None:
     stability = np.asarray(stability, float)
     if len(stability) < window:
         return None
-    means = np.convolve(stability, np.ones(window) / window, mode="valid")
-    hits = np.flatnonzero(means >= HOLDING)
+    sums = np.convolve(stability, np.ones(window), mode="valid")  # whole counts: 90 of 100
+    hits = np.flatnonzero(sums >= HOLDING * window - 1e-9)  # holds, as kept_fraction says
     return int(hits[0]) if len(hits) else None
 
 

@@ -67,6 +67,7 @@ def test_a_broken_environment_is_made_anew(tmp_path):
     working = (repo / "venv" / "bin" / "python").read_text()
     _setup(repo, "dev")
     (repo / "venv" / "bin" / "python").write_text("#!/usr/bin/env bash\nexit 1\n")
+    (repo / "venv" / "pyvenv.cfg").write_text("home = /gone\n")
     system = tmp_path / "python3"  # as `python3 -m venv --clear venv` would, a working one
     system.write_text(
         f'#!/usr/bin/env bash\necho "$*" >> {log}\nrm -rf venv && mkdir -p venv/bin\n'
@@ -81,3 +82,19 @@ def test_a_broken_environment_is_made_anew(tmp_path):
     )
     assert "-m venv --clear venv" in log.read_text()
     assert _installs(log) == [".[dev]", ".[dev]"]
+
+
+def test_a_folder_that_is_not_an_environment_is_never_cleared(tmp_path):
+    repo, _ = _checkout(tmp_path)
+    mine = repo / "mine"
+    (mine / "project").mkdir(parents=True)
+    (mine / "project" / "data.csv").write_text("1,2\n")
+    done = subprocess.run(
+        ["bash", "scripts/setup.sh"],
+        cwd=repo,
+        env={"PATH": "/usr/bin:/bin", "SILI_VENV": "mine"},
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 2 and "mine is a folder, not a virtual environment" in done.stderr
+    assert (mine / "project" / "data.csv").read_text() == "1,2\n"

@@ -838,9 +838,11 @@ def test_a_ray_address_is_probed_where_its_port_can_be_told(monkeypatch):
             check_reachable(nothing_there)
     for not_probed in ("::1", "fe80::1%eth0"):  # ray.init reads these itself
         check_reachable(not_probed)
-    monkeypatch.setenv("RAY_ADDRESS", "127.0.0.1:1")  # what auto stands for, as ray.init reads it
-    with pytest.raises(ConfigError, match=r":1' \(--ray-address auto\): Connection refused"):
-        check_reachable("auto")
+    for given in ("127.0.0.1:1", "ray://127.0.0.1:1"):  # what auto stands for, as ray.init reads
+        monkeypatch.setenv("RAY_ADDRESS", given)
+        said = rf"at '{given}' \(--ray-address auto\): Connection refused"
+        with pytest.raises(ConfigError, match=said):
+            check_reachable("auto")
     monkeypatch.delenv("RAY_ADDRESS")  # and no cluster started on this machine:
     monkeypatch.setattr(ray._private.services, "canonicalize_bootstrap_address", lambda a: None)
     with pytest.raises(ConfigError, match="auto finds no running Ray cluster"):

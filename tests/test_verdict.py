@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pandas as pd
 from fast_settings import FAST_ARGS
 
@@ -160,3 +161,17 @@ def test_the_line_across_seeds_counts_the_runs_that_worked_and_picks_the_best(tm
     assert "give the run directories to judge together" in capsys.readouterr().err
     assert verdict_main([str(tmp_path)]) == 2
     assert "is not a run directory" in capsys.readouterr().err
+
+
+def test_a_window_of_exactly_90_percent_holds_wherever_its_changes_fall():
+    """The verdicts' plain mean and first_stable's windows agree at the threshold: 9 kept of 10
+    (or 90 of 100) holds, however floating point would sum the window's fractions."""
+    from sili_robots.runs import first_stable
+
+    rng = np.random.default_rng(0)
+    for window in (10, 50, 100):
+        for _ in range(50):
+            stability = np.ones(window)
+            stability[rng.choice(window, window // 10, replace=False)] = 0.0
+            assert first_stable(stability, window) == 0, stability
+    assert first_stable(np.r_[np.zeros(2), np.ones(8)], 10) is None  # 80%

@@ -317,7 +317,12 @@ def check_output(path: str | Path, option: str) -> None:
     if path.suffix.lower() not in suffixes:
         raise ConfigError(f"{option} {path}: give a file name ending in {' or '.join(suffixes)}")
     if path.is_file() and not _written_by_a_preview(path):
-        raise ConfigError(f"{option} {path} exists and is not a preview; give another file name")
+        raise ConfigError(
+            f"{option} {path} exists and is not a preview (or a picture of a version that did "
+            "not mark its own); remove it or give another file name"
+            if path.suffix.lower() == ".png"
+            else f"{option} {path} exists and is not a preview; give another file name"
+        )
 
 
 def _written_by_a_preview(path: Path) -> bool:

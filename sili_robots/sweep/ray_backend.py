@@ -165,6 +165,8 @@ def check_reachable(address: str, timeout: float = 5.0) -> None:
 def _running_cluster() -> str:
     """The address ``auto`` stands for, as ``ray.init`` finds it (``RAY_ADDRESS``, else the
     cluster last started on this machine); ConfigError when there is none."""
+    if os.environ.get("RAY_ADDRESS"):
+        return os.environ["RAY_ADDRESS"]  # as given (ray:// too), probed as such
     try:
         from ray._private.services import canonicalize_bootstrap_address
     except ImportError:  # another Ray: ray.init alone tells

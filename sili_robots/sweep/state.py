@@ -140,7 +140,8 @@ def training_claim(run_dir: Path) -> Iterator[None]:
     claim = {"pid": pid, "host": socket.gethostname(), "started": process_started(pid)}
     folder = os.open(run_dir, os.O_RDONLY)
     try:
-        fcntl.flock(folder, fcntl.LOCK_EX)  # released with the descriptor, also on a kill
+        with contextlib.suppress(OSError):  # NFS may refuse to lock a folder: the check alone
+            fcntl.flock(folder, fcntl.LOCK_EX)  # released with the descriptor, also on a kill
         check_not_trained(run_dir)
         write_text(path, json.dumps(claim))
     finally:
