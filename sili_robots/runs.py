@@ -592,7 +592,7 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
         state["agent"] = migrate_agent_state(state["agent"])
     except (pickle.UnpicklingError, RuntimeError, EOFError, ValueError, KeyError, TypeError) as err:
         raise ConfigError(
-            f"{path} is damaged ({_first_line(err)}); it cannot be resumed: train the run again "
-            "(sili train ... --overwrite)"
+            f"{path} is damaged ({_first_line(err)}); the run can be neither resumed nor "
+            "played from it: train it again (sili train ... --overwrite)"
         ) from None
     return state

@@ -415,6 +415,8 @@ def test_a_damaged_checkpoint_or_config_exits_2_naming_the_file(tmp_path):
     # refused before the run changed: still a finished run of 2
     assert json.loads((run / "config.json").read_text())["run"]["interactions"] == 2
     assert run_state(run) == "done"
+    res = _sili("eval", run, "--interactions", 1)
+    assert res.returncode == 2 and "can be neither resumed nor played from it" in res.stderr
     (run / "config.json").write_text("{not json")
     res = _sili("eval", run, "--interactions", 1)
     assert res.returncode == 2 and f"{run / 'config.json'} is damaged" in res.stderr
