@@ -17,6 +17,7 @@ import pickle
 import platform
 import shutil
 import subprocess
+from collections.abc import Collection
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -180,6 +181,14 @@ class RunConfig:
         if d.get("task_id") is None:
             d["task_id"] = recorded_task_id(d)
         return cls(**d)
+
+    def unread_settings(self, given: Collection[str]) -> dict[str, str]:
+        """The settings among ``given`` (dotted paths) this run never reads or that do nothing
+        here, and why: recorded all the same, so a reader is told (a sweep gives its settings
+        to every method, so they are not refused)."""
+        from sili_robots.agent.methods import unused_settings
+
+        return {**unused_settings(self.agent, given), **self.addons.unread(given, self.agent)}
 
     def set(self, name: str, value: Any) -> None:
         """Set an agent or add-on setting by dotted path (or an earlier flat name)."""

@@ -219,3 +219,44 @@ def test_a_setting_the_method_never_reads_is_recorded_with_a_note(tmp_path, caps
     assert main([*two, "--set", "model.dim=4", "--out", str(tmp_path / "t"), "--dry-run"]) == 0
     err = capsys.readouterr().err  # SILI learns none on Speaker-Listener alone (partial)
     assert "note: --set model.dim does nothing for sili on speaker-listener: it learns" in err
+
+
+def test_an_addon_setting_that_does_nothing_is_noted_and_its_addon_not_built(capsys, tmp_path):
+    """Settings of a switched-off add-on, a fraction of a batch that rounds to no draw, and a
+    stability distance where there is no stability term were silently ignored (the last one
+    computing hindsight posteriors on every interaction all the same)."""
+    from sili_robots.addons import build_addons
+    from sili_robots.build import make_run_config
+
+    def notes(method: str, **settings) -> dict[str, str]:
+        cfg = make_run_config("circle-3", method, 0, 10, settings=settings)
+        return cfg.unread_settings(settings)
+
+    assert notes("sili", **{"addons.filter.noise": 0.5, "addons.recent.interactions": 5}) == {
+        "addons.filter.noise": "the latent filter is off (addons.filter.eps 0)",
+        "addons.recent.interactions": "recent batches are off (addons.recent.fraction 0)",
+    }
+    assert notes("sili", **{"addons.filter.eps": 0.1, "addons.filter.noise": 0.5}) == {}
+    small = {"addons.recent.fraction": 0.03, "addons.change_fraction": 0.01}
+    assert notes("sili", **small) == {
+        "addons.recent.fraction": "0.03 of a batch of 16 rounds to no draw",
+        "addons.change_fraction": "0.01 of a batch of 32 rounds to no draw",
+    }
+    assert notes("sili", **{"addons.recent.fraction": 0.25}) == {}
+    hindsight = {"addons.stability_distance": "hindsight"}
+    assert notes("lili", **hindsight) == {
+        "addons.stability_distance": "b is 0 throughout: no stability term"
+    }
+    assert notes("sili", **hindsight) == {}
+    lili = make_run_config("circle-3", "lili", 0, 10, settings=hindsight)
+    assert build_addons(lili.addons, lili.agent) == []  # nothing it would compute is read
+    both = make_run_config(
+        "circle-3", "lili", 0, 10, settings={**hindsight, "addons.change_fraction": 0.25}
+    )
+    assert [a.name for a in build_addons(both.addons, both.agent)] == ["posteriors"]
+    args = ["train", "--task", "circle-3", "--method", "sili", "--interactions", "1", *FAST_ARGS]
+    out = str(tmp_path / "r")
+    assert main([*args, "--set", "addons.filter.noise=0.5", "--out", out, "--no-progress"]) == 0
+    assert "note: --set addons.filter.noise does nothing here: the latent filter is off" in (
+        capsys.readouterr().err
+    )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -56,6 +57,29 @@ class AddonsConfig:
         if self.filter.eps > 0:
             on.append("latent_filter")
         return on
+
+    def unread(self, given: Collection[str], agent: AgentConfig) -> dict[str, str]:
+        """The settings among ``given`` (dotted paths) that no add-on of this configuration
+        reads or that do nothing, and why (noted, not refused, as ``unused_settings``)."""
+        from sili_robots.agent.methods import no_stability_term
+
+        out = {}
+        for path in given:
+            if path.startswith("addons.filter.") and path != "addons.filter.eps":
+                if not self.filter.eps:
+                    out[path] = "the latent filter is off (addons.filter.eps 0)"
+            elif path == "addons.recent.interactions" and not self.recent.fraction:
+                out[path] = "recent batches are off (addons.recent.fraction 0)"
+            elif path == "addons.stability_distance" and no_stability_term(agent):
+                out[path] = no_stability_term(agent)
+        draws = (  # a fraction of a batch that rounds to no draw
+            ("addons.recent.fraction", self.recent.fraction, agent.sac.batch_interactions),
+            ("addons.change_fraction", self.change_fraction, agent.model.batch),
+        )
+        for path, fraction, batch in draws:
+            if path in given and fraction and not round(fraction * batch):
+                out[path] = f"{fraction:g} of a batch of {batch} rounds to no draw"
+        return out
 
     def to_dict(self) -> dict[str, Any]:
         return to_plain(self)

@@ -157,13 +157,13 @@ def unused_settings(cfg: AgentConfig, given: Iterable[str]) -> dict[str, str]:
             out[path] = f"it learns no latent model (latent {cfg.latent!r})"
         elif path == "sili.smirl_std_floor" and cfg.method != "smirl":
             out[path] = "only SMiRL's state density reads it"
-        elif path in ("sili.scale", "sili.credit") and _unscaled(cfg):
-            out[path] = _unscaled(cfg)
+        elif path in ("sili.scale", "sili.credit") and no_stability_term(cfg):
+            out[path] = no_stability_term(cfg)
     return out
 
 
-def _unscaled(cfg: AgentConfig) -> str:
-    """Why the stability term's scale and credit are never read ('' when they are)."""
+def no_stability_term(cfg: AgentConfig) -> str:
+    """Why ``cfg`` has no stability term to scale or count changes for ('' when it has one)."""
     if cfg.method == "smirl":
         return "SMiRL's term is its state density's log-likelihood"
     if cfg.latent == "partial":

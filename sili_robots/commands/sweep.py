@@ -194,13 +194,12 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
 def _note_unused_settings(spec: SweepSpec, given: dict[str, Any]) -> None:
     """A note per ``--set`` setting some of the sweep's methods never read (every run records
     it; a sweep gives its settings to all its methods, so it is not refused)."""
-    from sili_robots.agent.methods import unused_settings
     from sili_robots.sweep import expand
 
     paths = {setting_path(name): name for name in given}
     unread: dict[tuple[str, str], dict[str, list[str]]] = {}  # (name, why) -> method -> tasks
     for run in expand(spec):
-        for path, why in unused_settings(run.config.agent, paths).items():
+        for path, why in run.config.unread_settings(paths).items():
             tasks = unread.setdefault((paths[path], why), {}).setdefault(run.config.method, [])
             tasks += [run.config.task] if run.config.task not in tasks else []
     for (name, why), methods in unread.items():

@@ -11,7 +11,6 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from sili_robots.agent import BETA_METHODS, LATENT_CHOICES, METHODS, PROFILES, Schedule
-from sili_robots.agent.methods import unused_settings
 from sili_robots.build import make_run_config
 from sili_robots.commands.common import (
     CONTROLLERS_HELP,
@@ -161,7 +160,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
         checkpoint_every=args.checkpoint_every,
         threads=args.threads,
     )
-    for path, why in unused_settings(cfg.agent, given).items():
+    for path, why in cfg.unread_settings(given).items():
         print(f"sili train: note: --set {given[path]} does nothing here: {why}", file=sys.stderr)
     return cfg
 
