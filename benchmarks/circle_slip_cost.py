@@ -56,8 +56,7 @@ def with_filter(agent: SILIAgent, eps: float, noise: float) -> SILIAgent:
     """The agent with the filter running from now on (eps, noise), on its current model."""
     agent.detach_addon(LatentFilter)
     latent_filter = LatentFilter(eps, start=0, noise=noise)
-    agent.attach_addon(latent_filter)
-    latent_filter.load_state_dict({})  # no saved state: starts as a run with it would now
+    agent.attach_addon(latent_filter)  # no saved state: starts as a run with it would now
     return agent
 
 

@@ -339,3 +339,21 @@ def test_a_broader_noise_scale_needs_more_steps_of_evidence():
     assert switch == 2  # one step with the residual scale (the test above), two here
     np.testing.assert_array_equal(f.ZF[1], [-1] * switch + [1] * (H + 1 - switch))
     np.testing.assert_array_equal(f.ZF[3], [-1] * (H + 1))
+
+
+def test_addons_wired_into_a_trained_agent_start_from_its_stored_interactions():
+    """attach_addon on an agent that has played: the filter and the hindsight posteriors build
+    their state for the stored interactions (they failed on the next one with an IndexError)."""
+    from sili_robots.addons.posteriors import HindsightPosteriors
+
+    agent = _agent(latent_filter=0.0)
+    for r in range(6):
+        _store(agent, float(r))
+    agent.refresh_latents()
+    agent.attach_addon(LatentFilter(EPS))
+    agent.attach_addon(HindsightPosteriors("hindsight", 0.5))
+    assert _filter(agent).ZF.shape == (6, H + 1) and _filter(agent).scale is not None
+    assert agent.addon(HindsightPosteriors).P.shape == (6, agent.zdim)
+    _store(agent, 1.0)
+    agent.update(7)
+    assert _filter(agent).ZF.shape[0] == agent.addon(HindsightPosteriors).P.shape[0] == 7

@@ -104,3 +104,5 @@ class HindsightPosteriors(AgentAddon):
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         self.P = np.asarray(state.get("P", np.zeros((0, self.agent.zdim))), np.float32)
+        if len(self.P) != self.agent.buffer.n:  # saved without the add-on: P of every one
+            self.latents_refreshed()

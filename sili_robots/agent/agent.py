@@ -124,10 +124,13 @@ class SILIAgent:
 
     def attach_addon(self, addon: AgentAddon) -> None:
         """Wire in an add-on after construction (e.g. a filter on a trained agent); its
-        ``encoder_readouts`` cannot change a model that is already built."""
+        ``encoder_readouts`` cannot change a model that is already built. With interactions
+        stored, it starts as from a checkpoint saved without it (its state built for them)."""
         self.addons.append(addon)
         self.hooks = {h: overriding(self.addons, h) for h in HOOKS}
         addon.attach(self)
+        if self.buffer.n:
+            addon.load_state_dict({})
 
     def detach_addon(self, kind: type[AgentAddon]) -> None:
         """Unwire the add-ons of type ``kind``."""
