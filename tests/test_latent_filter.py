@@ -357,3 +357,24 @@ def test_addons_wired_into_a_trained_agent_start_from_its_stored_interactions():
     _store(agent, 1.0)
     agent.update(7)
     assert _filter(agent).ZF.shape[0] == agent.addon(HindsightPosteriors).P.shape[0] == 7
+
+
+def test_the_filter_keeps_the_no_history_latent_until_evidence_tells_the_options_apart():
+    """At a game's start z^j is all zeros, a uniform prior over the categories in use: the
+    filter acted on the lowest-numbered one before any step, a strategy it had no reason for."""
+    from sili_robots.addons.filter_math import decided, log_prior
+
+    assert decided(log_prior(np.zeros((1, 4)), np.array([1, 3]), EPS)).tolist() == [-1]
+    assert decided(log_prior(np.eye(4)[[3]], np.array([1, 3]), EPS)).tolist() == [3]
+    agent = _agent()
+    _constant_heads(agent)
+    for r in (0.0, 5.0, 10.0, 15.0) * 2:
+        _store(agent, r)
+    agent.refresh_latents()
+    assert _filter(agent).scale is not None  # running
+    agent.begin_game({"strategy": np.zeros(2, np.float32)})
+    assert _filter(agent).acted == [-1]  # no evidence yet: the encoder's "no history"
+    obs = np.ones(3, np.float32)
+    agent.observe_step(obs, np.zeros(2, np.float32), 10.0, obs)  # evidence: a category in use
+    assert _filter(agent).acted[0] == -1 and _filter(agent).acted[1] in _filter(agent).in_use
+    assert _filter(agent)._rows(np.array([0]))[0, 0] == -1  # the game's first, as replayed

@@ -113,12 +113,20 @@ def log_prior(prior: np.ndarray, in_use: np.ndarray, eps: float) -> np.ndarray:
         return np.log(p)
 
 
+def decided(log_posterior: np.ndarray) -> np.ndarray:
+    """The argmax over the last axis, -1 where the maximum is shared: between tied options
+    (a "no history" prior before any evidence) the policy keeps the encoder's latent."""
+    best = log_posterior.max(-1, keepdims=True)
+    tied = (log_posterior == best).sum(-1) > 1
+    return np.where(tied, -1, log_posterior.argmax(-1))
+
+
 def filtered_categories(logp: np.ndarray, ll: np.ndarray) -> np.ndarray:
-    """[N, T+1] int: the posterior's argmax before each of T steps and after the last one,
-    from log priors ``logp`` [N, k] and per-step log-likelihoods ``ll`` [N, T, k]."""
+    """[N, T+1] int: the posterior's argmax (``decided``) before each of T steps and after the
+    last one, from log priors ``logp`` [N, k] and per-step log-likelihoods ``ll`` [N, T, k]."""
     n, _, k = ll.shape
     cum = np.concatenate([np.zeros((n, 1, k)), np.cumsum(ll, axis=1)], axis=1)
-    return (logp[:, None, :] + cum).argmax(-1)
+    return decided(logp[:, None, :] + cum)
 
 
 def first_departure(cats: np.ndarray) -> int:

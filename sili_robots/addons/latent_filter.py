@@ -8,7 +8,8 @@ step or two. The mathematics (priors, likelihoods, candidates) is in ``filter_ma
 
 At each step the policy acts on the posterior's argmax: a category for discrete latents; for
 continuous ones the encoder's z^j or one of the candidate latents (medoids of the cached
-latents). The choice is kept per step in ``ZF`` (-1: the encoder's z^j); RL batches put
+latents). Where options tie (a "no history" z^j before any evidence) it keeps the encoder's.
+The choice is kept per step in ``ZF`` (-1: the encoder's z^j); RL batches put
 ZF[j, t] in the z^j slot and ZF[j, t+1] in the successor's (at the boundary the successor's
 latent is the encoder's z^{j+1}, which no step of j+1 has corrected yet). z^{j-1} and the
 stability reward stay the encoder's. The filter starts at the first latent refresh from
@@ -26,6 +27,7 @@ from sili_robots.addons.filter_math import (
     FILTER_CANDIDATES,
     continuous_residual_scale,
     continuous_step_logliks,
+    decided,
     filtered_categories,
     first_departure,
     log_prior,
@@ -84,8 +86,8 @@ class LatentFilter(AgentAddon):
     def _current(self) -> int:
         if self._logp is None:
             return -1
-        best = int((self._logp + self._ll).argmax())
-        return best - 1 if self.continuous else best  # option 0: the encoder's z^j
+        best = int(decided(self._logp + self._ll))
+        return max(best - 1, -1) if self.continuous else best  # option 0: the encoder's z^j
 
     @property
     def acted(self) -> list[int]:
@@ -150,7 +152,7 @@ class LatentFilter(AgentAddon):
             ll = continuous_step_logliks(model, prev, act, nxt, rew, opts, self.scale, self.norm)
             logp = option_log_prior(len(self.candidates), self.eps)
             logp = np.broadcast_to(logp, (len(idx), len(logp)))
-            return (filtered_categories(logp, ll) - 1).astype(np.int16)
+            return np.maximum(filtered_categories(logp, ll) - 1, -1).astype(np.int16)
         ll = step_logliks(model, prev, act, nxt, rew, self.scale)
         logp = log_prior(self.agent.Z[idx], self.in_use, self.eps)
         return filtered_categories(logp, ll).astype(np.int16)
