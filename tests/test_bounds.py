@@ -327,6 +327,7 @@ def test_a_task_taken_by_write_as_its_file_is_named(tmp_path, monkeypatch):
         (["--write", "circle-3"], "--write took 'circle-3' as its FILE: give TASK before --write"),
         (["--write"], "or --all, not both or neither\n"),
         (["circle-3", "--all"], "or --all, not both or neither\n"),
+        (["--all", "--games", "600"], "got 1000 (circle-3's default); give --interactions\n"),
     ):
         done = sili_in_process("bounds", *args)
         assert done.returncode == 2 and said in done.stderr, done.stderr

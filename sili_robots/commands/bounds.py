@@ -110,7 +110,12 @@ def run(args: argparse.Namespace) -> int:
     specs = all_versions() if args.all else [task_spec(args.task)]
     env_kwargs = _task_arguments(args, specs)
     for spec in specs:  # the counts checked before anything runs
-        check_counts(args.interactions or default_interactions(spec.name), args.games)
+        try:
+            check_counts(args.interactions or default_interactions(spec.name), args.games)
+        except ConfigError as err:
+            if args.interactions is not None:
+                raise
+            raise ConfigError(f"{err} ({spec.name}'s default); give --interactions") from None
     if args.write:
         _check_packaged_counts(args, [default_interactions(s.name) for s in specs])
     for spec in specs:
