@@ -83,6 +83,8 @@ def train(
         watch = lambda s, a, r, s2, _info: agent.observe_step(s, a, r, s2)  # noqa: E731
     try:
         with StopBetweenInteractions() as stop:
+            if stop_file is not None and stop_file.exists():  # asked while the run was set up
+                raise KeyboardInterrupt(f"{stop_file} asked the run to stop")
             for j in range(start, cfg.interactions):
                 if j < cfg.agent.sac.random_interactions:
                     policy = lambda _o: agent.random_action()  # noqa: E731

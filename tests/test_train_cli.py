@@ -982,8 +982,9 @@ def test_a_record_or_history_damaged_in_its_content_exits_2_naming_the_file(tmp_
             assert res.returncode == 2 and f"{run / 'metrics.csv'} is damaged" in res.stderr
 
 
-def test_a_stop_file_stops_the_run_once_its_interaction_is_saved(tmp_path):
-    """How a Ray sweep stops its runs: the interaction under way is logged and checkpointed."""
+def test_a_stop_file_stops_the_run_once_its_interaction_is_saved(tmp_path, monkeypatch):
+    """How a sweep stops its runs: the interaction under way is logged and checkpointed; a
+    stop asked while the run was set up plays none."""
     from sili_robots.build import make_run_config
 
     cfg = make_run_config("circle-3", "sac", 0, 5, settings=FAST_AGENT)
@@ -991,6 +992,19 @@ def test_a_stop_file_stops_the_run_once_its_interaction_is_saved(tmp_path):
     stop.touch()
     with pytest.raises(KeyboardInterrupt, match="asked the run to stop"):
         training.train(cfg, tmp_path / "run", progress=False, stop_file=stop)
+    assert load_checkpoint(tmp_path / "run") is None
+    assert len(pd.read_csv(tmp_path / "run" / "metrics.csv")) == 0
+    stop.unlink()
+    play = training.play_interaction
+
+    def asked_during_the_first(*args, **kwargs):
+        stop.touch()  # as the sweep does while the interaction is played
+        return play(*args, **kwargs)
+
+    monkeypatch.setattr(training, "play_interaction", asked_during_the_first)
+    with pytest.raises(KeyboardInterrupt, match="asked the run to stop"):
+        training.train(cfg, tmp_path / "run", progress=False, stop_file=stop)
+    monkeypatch.setattr(training, "play_interaction", play)
     assert load_checkpoint(tmp_path / "run")["interaction"] == 1
     assert len(pd.read_csv(tmp_path / "run" / "metrics.csv")) == 1
     stop.unlink()
