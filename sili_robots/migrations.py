@@ -84,8 +84,13 @@ def _nested(run: dict[str, Any]) -> dict[str, Any]:
     """A run saved with flat settings, nested by section."""
     flat = dict(run["agent"])
     flat.pop("extra", None)
-    flat.setdefault("latent_preact_penalty", 0.0)  # saved before it existed: trained without
-    flat.setdefault("matmul", "aten")  # likewise: trained on PyTorch's default kernels
+    # each setting saved before it existed: what the run trained with then
+    flat.setdefault("latent_preact_penalty", 0.0)  # none
+    flat.setdefault("matmul", "aten")  # PyTorch's default kernels
+    flat.setdefault("precision", "float32")  # float32 products (not today's timed choice)
+    flat.setdefault("latent_merge_threshold", 0.0)  # no categories merged
+    if "latent_estimator" not in flat:  # the first latent model: straight-through Gumbel
+        flat.update(latent_estimator="gumbel", latent_usage_bonus=0.0)
     nested: dict[str, Any] = {}
     for name, value in flat.items():
         unset_schedule = name.endswith("_schedule") and value is None

@@ -57,3 +57,19 @@ def test_a_run_saved_in_the_earlier_layout_resumes_exactly(tmp_path):
     resumed = json.loads((part / "config.json").read_text())["run"]
     assert resumed["task_id"] == "sili/Circle3-v0"  # the earlier layout ran the first version
     assert resumed["addons"]["filter"]["eps"] == 0.2 and resumed["agent"]["sac"]["lr"] == 3e-4
+
+
+def test_a_setting_saved_before_it_existed_reads_as_what_the_run_trained_with():
+    """The earliest flat configs lack settings added later; today's defaults are not what
+    those runs trained with (bfloat16 where the machine times it faster, merged categories)."""
+    from sili_robots.build import make_run_config
+    from sili_robots.runs import RunConfig
+
+    run = flat_layout(make_run_config("circle-3", "sili", 0, 10).to_dict())
+    for added in ("precision", "latent_merge_threshold", "latent_estimator", "latent_usage_bonus"):
+        del run["agent"][added]
+    agent = RunConfig.from_dict(run).agent
+    assert agent.sac.precision == "float32" and agent.model.merge_threshold == 0.0
+    assert (agent.model.estimator, agent.model.usage_bonus) == ("gumbel", 0.0)
+    recorded = make_run_config("circle-3", "sili", 0, 10, settings={"sac.precision": "bfloat16"})
+    assert RunConfig.from_dict(flat_layout(recorded.to_dict())).agent.sac.precision == "bfloat16"

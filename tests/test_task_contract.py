@@ -271,3 +271,22 @@ def test_game_state_resumes_the_repeated_game(name):
     for (oa, ra), (ob, rb) in zip(tail_a, tail_b, strict=True):
         np.testing.assert_array_equal(oa, ob)
         assert ra == rb
+
+
+def test_render_mode_none_is_taken_and_any_mode_refused_by_every_task():
+    """Training scripts pass render_mode=None (or their flag's value) to gym.make as a matter
+    of course: it was a TypeError on every task."""
+    for name in TASKS:
+        if name == "driving":
+            continue  # one libsumo simulation per process: built below, once
+        env = gym.make(TASKS[name].gym_id, render_mode=None)
+        assert env.reset(seed=0)[0].shape == env.observation_space.shape
+        with pytest.raises(NotImplementedError, match="sili preview"):
+            env.unwrapped.render()
+        env.close()
+    vec = gym.make_vec("sili/Circle3-v1", 2, render_mode=None)
+    assert vec.reset(seed=0)[0].shape == (2, 3)
+    vec.close()
+    with pytest.raises(ConfigError, match="render_mode 'rgb_array' is not offered: the tasks"):
+        gym.make("sili/Driving-v0", render_mode="rgb_array")
+    assert TwoDoorsEnv(render_mode=None).init_kwargs == {}  # a user's task class too

@@ -19,7 +19,7 @@ changed since the last step".
 from __future__ import annotations
 
 import inspect
-from abc import ABC, abstractmethod
+from abc import ABC, ABCMeta, abstractmethod
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -36,7 +36,25 @@ RESET_OPTIONS = ("restart", "restore", "strategy")
 LONGEST_HORIZON = 10_000
 
 
-class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
+NO_FRAMES = "the tasks draw no frames; a task's scene is previewed with `sili preview TASK`"
+
+
+class TaskMeta(ABCMeta):
+    """Takes gymnasium's ``render_mode`` for every task class: None (what many scripts pass)
+    is dropped, any mode refused, as the tasks draw no frames; a subclass that declares render
+    modes in its ``metadata`` gets the argument itself."""
+
+    def __call__(cls, *args: Any, **kwargs: Any) -> Any:
+        if "render_mode" in kwargs and not cls.metadata.get("render_modes"):
+            mode = kwargs.pop("render_mode")
+            if mode is not None:
+                raise ConfigError(
+                    f"render_mode {mode!r} is not offered: {NO_FRAMES}; allowed: None"
+                )
+        return super().__call__(*args, **kwargs)
+
+
+class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC, metaclass=TaskMeta):
     """Base class: subclasses describe one interaction; this class runs the repeated game."""
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
@@ -244,6 +262,10 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         self._changed_since_last_step = prev is not None and not _same(sid, prev)
         self._last_strategy_id = sid
         return self._observation(), self._info()
+
+    def render(self) -> None:
+        """No frames (gymnasium's ``render``): ``sili_robots.preview`` records a task's scene."""
+        raise NotImplementedError(NO_FRAMES)
 
     # ----------------------------------------------------------------- helpers
     def _validate_action(self, action: Any) -> np.ndarray:
