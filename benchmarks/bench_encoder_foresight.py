@@ -28,6 +28,7 @@ import torch
 
 from sili_robots.addons import build_addons
 from sili_robots.agent import SILIAgent
+from sili_robots.agent.matmul import machine_key
 from sili_robots.build import make_run_config
 from sili_robots.commands.common import positive_int
 from sili_robots.diagnostics import foresight_by_exit
@@ -113,6 +114,7 @@ def main() -> None:
     p.add_argument("--updates", type=positive_int, default=5, help="latent updates per interaction")
     args = p.parse_args()
     torch.set_num_threads(1)
+    print(f"machine: {machine_key()}", flush=True)  # the seconds' CPU
     seeds = parse_seeds(args.seeds)
     totals: dict[str, dict[str, dict[str, int]]] = {}
     for seed in seeds:

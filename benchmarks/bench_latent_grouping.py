@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from sili_robots.agent.matmul import machine_key
 from sili_robots.build import build_agent, make_run_env
 from sili_robots.commands.common import positive_int
 from sili_robots.diagnostics import change_agreement, purity
@@ -56,6 +57,7 @@ def main() -> None:
     parser.add_argument("--threshold", type=float, default=0.5)
     args = parser.parse_args()
     torch.set_num_threads(1)
+    print(f"machine: {machine_key()}", flush=True)  # the seconds' CPU
     cfg = read_config(args.run_dir)
     if cfg.agent.latent != "discrete":
         raise SystemExit(f"{args.run_dir} has {cfg.agent.latent!r} latents; need discrete")

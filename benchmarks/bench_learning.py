@@ -33,6 +33,8 @@ from typing import Any
 
 import pandas as pd
 
+from sili_robots.agent.matmul import machine_key
+from sili_robots.agent.methods import LATENT_METHODS
 from sili_robots.build import make_run_config
 from sili_robots.commands.common import parse_settings, positive_int, task_name
 from sili_robots.diagnostics import latent_diagnostics
@@ -44,10 +46,6 @@ from sili_robots.sweep import parse_seeds
 MARKS = {True: "MET    ", False: "NOT MET", None: "N/A    "}
 #: the methods the targets compare
 TARGET_METHODS = ("sili", "oracle", "lili", "sac")
-
-
-#: the methods ``--latent`` is passed on to
-LATENT_ARG_METHODS = ("sili", "stable")
 
 
 def run_one(task: str, method: str, seed: int, args: argparse.Namespace) -> Path:
@@ -63,7 +61,7 @@ def run_one(task: str, method: str, seed: int, args: argparse.Namespace) -> Path
     else:
         cmd = [*cli, "--task", task, "--method", method, "--seed", str(seed), "--out", str(out)]
         cmd += ["--interactions", str(args.interactions)]
-        if args.latent and method in LATENT_ARG_METHODS:
+        if args.latent and method in LATENT_METHODS:
             cmd += ["--latent", args.latent]
         for item in args.set:
             cmd += ["--set", item]
@@ -197,7 +195,7 @@ def main() -> None:
     p.add_argument("--methods", default="sili,lili,sac,oracle,stable,smirl")
     p.add_argument("--seeds", default="0,1,2", help="e.g. 0-2 or 0,2,7")
     p.add_argument("--interactions", type=positive_int, default=3000)
-    p.add_argument("--latent", default=None, help="latent kind for sili/stable")
+    p.add_argument("--latent", default=None, help="latent kind for sili, lili and stable")
     p.add_argument("--set", action="append", default=[], help="agent override KEY=VALUE")
     p.add_argument("--window", type=positive_int, default=100)
     p.add_argument("--workers", type=positive_int, default=2)
@@ -205,6 +203,7 @@ def main() -> None:
     p.add_argument("--from-runs", type=Path, help="only tabulate the finished runs in this folder")
     args = p.parse_args()
     t0 = time.perf_counter()
+    print(f"machine: {machine_key(args.workers)}", flush=True)  # the wall times' CPU
     if args.from_runs is not None:
         if not args.from_runs.is_dir():
             p.error(f"--from-runs {args.from_runs}: not a folder")
@@ -255,7 +254,7 @@ def checked_jobs(p: argparse.ArgumentParser, args: argparse.Namespace) -> tuple[
         p.error("give one of --latent and --set latent, not both")  # as sili train says
     methods = [m.strip() for m in args.methods.split(",")]
     for m in methods:
-        latent = args.latent if m in LATENT_ARG_METHODS else None  # as run_one passes it on
+        latent = args.latent if m in LATENT_METHODS else None  # as run_one passes it on
         given = [f"--set {' '.join(args.set)}"] if args.set else []
         given += [f"--latent {latent}"] if latent else []
         option = f"--methods {m}" + (f" with {' and '.join(given)}" if given else "")

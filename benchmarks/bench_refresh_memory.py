@@ -7,7 +7,8 @@ over the replay in chunks of 512 interactions; the last chunk's size changes at 
 Each new batch shape leaves memory behind in the process, so this measures what a real
 agent holds after N interactions of a run, refreshing every 10 as in training. The stored
 interactions are random (memory does not depend on their values) and no SAC update runs (its
-batches have one fixed shape). Both variants must produce the same latents; the script checks.
+batches have one fixed shape). Both variants must produce the same latents, bit for bit; the
+script fails otherwise.
 
     python benchmarks/bench_refresh_memory.py [--interactions 1500] [--configs continuous,filter]
                                               [--matmul aten|onednn]
@@ -117,8 +118,11 @@ def main() -> None:
         same_zf = ref["ZF"] == new["ZF"]
         print(
             f"  time {ref['seconds']:.0f} s -> {new['seconds']:.0f} s; latents max difference "
-            f"{dz:.1e}; filtered categories identical: {same_zf}"
+            f"{dz:.1e}; filtered categories identical: {same_zf}",
+            flush=True,
         )
+        if dz > 0 or not same_zf:  # the padding must not change what the agent computes
+            raise SystemExit(f"{config}: padded chunks changed the latents or the categories")
 
 
 if __name__ == "__main__":

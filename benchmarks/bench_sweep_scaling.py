@@ -41,8 +41,7 @@ def main() -> None:
     ap.add_argument("--runs", type=positive_int, default=2)
     ap.add_argument("--interactions", type=positive_int, default=30)
     args = ap.parse_args()
-    model, flags, *_ = machine_key().split(" | ")
-    print(f"machine: {model}; {flags}")
+    print(f"machine: {machine_key()}", flush=True)  # its instruction-set caps too
     rates: dict[int, list[float]] = {1: [], 2: []}
     with tempfile.TemporaryDirectory() as tmp:
         # untimed: the process that starts workers (preloading torch) starts once, for both
