@@ -290,3 +290,12 @@ def test_render_mode_none_is_taken_and_any_mode_refused_by_every_task():
     with pytest.raises(ConfigError, match="render_mode 'rgb_array' is not offered: the tasks"):
         gym.make("sili/Driving-v0", render_mode="rgb_array")
     assert TwoDoorsEnv(render_mode=None).init_kwargs == {}  # a user's task class too
+
+
+def test_gym_make_cannot_build_another_task_under_an_id():
+    """gym.make("sili/Circle3-v1", variant="8") built Circle (8 Goals) whose spec said Circle
+    (3 Goals); refused at its first reset, as make_task refuses it at once."""
+    env = gym.make("sili/Circle3-v1", variant="8")
+    with pytest.raises(ConfigError, match=r"circle-3 fixes variant='3'.*circle-8"):
+        env.reset(seed=0)
+    assert gym.make("sili/Circle3-v1", variant="3").reset(seed=0)[0].shape == (3,)

@@ -176,6 +176,10 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC, metaclass=Tas
             )
         if "strategy" in options:
             self._check_start(options["strategy"])
+        if not self._started and self.spec is not None and self.spec.id.startswith("sili/"):
+            from sili_robots.tasks.registry import check_identity
+
+            check_identity(self.spec.id, self.spec.kwargs)  # gym.make(id, variant=another)
         super().reset(seed=seed)
         if options.get("restore") is not None:
             return self.restore_game_state(options["restore"])

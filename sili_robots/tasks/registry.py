@@ -169,8 +169,9 @@ def identity_conflict(name: str, kwargs: dict[str, Any]) -> str | None:
     )
 
 
-def make_task(name: str, **kwargs: Any) -> gym.Env:
-    """Build a task by CLI name or gymnasium id; ``kwargs`` go to the task's constructor."""
+def check_identity(name: str, kwargs: dict[str, Any]) -> None:
+    """ConfigError when ``kwargs`` would build another task under ``name`` (``identity_conflict``),
+    naming the names that build it."""
     spec = task_spec(name)
     key = identity_conflict(spec.gym_id, kwargs)
     if key is not None:
@@ -184,6 +185,12 @@ def make_task(name: str, **kwargs: Any) -> gym.Env:
             f"{key}={kwargs[key]!r} is not allowed; drop it, or build another {key} by its "
             f"name: {', '.join(others)}"
         )
+
+
+def make_task(name: str, **kwargs: Any) -> gym.Env:
+    """Build a task by CLI name or gymnasium id; ``kwargs`` go to the task's constructor."""
+    spec = task_spec(name)
+    check_identity(spec.gym_id, kwargs)
     with warnings.catch_warnings():
         if spec.name in EARLIER_VERSIONS:  # asked for by its version: no "out of date" warning
             warnings.filterwarnings("ignore", ".*The environment .* is out of date", Warning)
