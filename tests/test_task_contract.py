@@ -287,7 +287,7 @@ def test_render_mode_none_is_taken_and_any_mode_refused_by_every_task():
     vec = gym.make_vec("sili/Circle3-v1", 2, render_mode=None)
     assert vec.reset(seed=0)[0].shape == (2, 3)
     vec.close()
-    with pytest.raises(ConfigError, match="render_mode 'rgb_array' is not offered: the tasks"):
+    with pytest.raises(ConfigError, match="render_mode 'rgb_array': the tasks draw no frames"):
         gym.make("sili/Driving-v0", render_mode="rgb_array")
     assert TwoDoorsEnv(render_mode=None).init_kwargs == {}  # a user's task class too
 

@@ -18,8 +18,9 @@ changed since the last step".
 
 from __future__ import annotations
 
+import functools
 import inspect
-from abc import ABC, ABCMeta, abstractmethod
+from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -39,22 +40,7 @@ LONGEST_HORIZON = 10_000
 NO_FRAMES = "the tasks draw no frames; a task's scene is previewed with `sili preview TASK`"
 
 
-class TaskMeta(ABCMeta):
-    """Takes gymnasium's ``render_mode`` for every task class: None (what many scripts pass)
-    is dropped, any mode refused, as the tasks draw no frames; a subclass that declares render
-    modes in its ``metadata`` gets the argument itself."""
-
-    def __call__(cls, *args: Any, **kwargs: Any) -> Any:
-        if "render_mode" in kwargs and not cls.metadata.get("render_modes"):
-            mode = kwargs.pop("render_mode")
-            if mode is not None:
-                raise ConfigError(
-                    f"render_mode {mode!r} is not offered: {NO_FRAMES}; allowed: None"
-                )
-        return super().__call__(*args, **kwargs)
-
-
-class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC, metaclass=TaskMeta):
+class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     """Base class: subclasses describe one interaction; this class runs the repeated game."""
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
@@ -78,8 +64,16 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC, metaclass=Tas
 
     def __new__(cls, *args: Any, **kwargs: Any) -> RepeatedInteractionEnv:
         env = super().__new__(cls)
+        if not cls.metadata.get("render_modes"):
+            kwargs.pop("render_mode", None)  # taken by ``_taking_render_mode``, not recorded
         env.init_kwargs = _named_arguments(cls, args, kwargs)
         return env
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        init = cls.__dict__.get("__init__")
+        if init is not None and not cls.metadata.get("render_modes"):
+            cls.__init__ = _taking_render_mode(init)  # type: ignore[method-assign]
 
     def __init__(self, horizon: int) -> None:
         self.horizon = check_count("horizon", horizon, 1, LONGEST_HORIZON)
@@ -341,6 +335,20 @@ def resume_game(env: gym.Env, state: dict[str, Any]) -> tuple[np.ndarray, dict[s
     """Restore a saved game through any wrappers (each sees a reset, as they require, and
     shapes the restored observation as it shapes any other)."""
     return env.reset(options={"restore": state})
+
+
+def _taking_render_mode(init: Any) -> Any:
+    """``init`` that also takes gymnasium's ``render_mode``: None (what many scripts pass) is
+    dropped, any mode refused, as the tasks draw no frames; a task class that declares render
+    modes in its ``metadata`` takes the argument itself."""
+
+    @functools.wraps(init)  # its signature stays the class's (inspect follows __wrapped__)
+    def __init__(self: Any, *args: Any, render_mode: str | None = None, **kwargs: Any) -> None:
+        if render_mode is not None:
+            raise ConfigError(f"render_mode {render_mode!r}: {NO_FRAMES}; allowed: None")
+        init(self, *args, **kwargs)
+
+    return __init__
 
 
 def _named_arguments(cls: type, args: tuple, kwargs: dict[str, Any]) -> dict[str, Any] | None:
