@@ -77,7 +77,8 @@ def verdict(run_dir: Path, window: int = 50) -> str:
     still, stab = bounds.get("still"), bounds.get("stabilizing")
     name = METHOD_NAMES.get(cfg.method, cfg.method)
     if len(tail) < window or stability is None:  # its first interactions say little
-        line = f"{name} ran {len(tail)} interactions, too few to tell whether it holds the opponent"
+        ran = f"{len(tail)} interaction" + ("s" if len(tail) != 1 else "")
+        line = f"{name} ran {ran}, too few to tell whether it holds the opponent"
         line += f" (the verdict reads the last {window})"
         if stability is not None:  # the game's first interaction has no strategy to keep
             line += f": the opponent kept its strategy in {stability:.0%} of those after the first"

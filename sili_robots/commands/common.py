@@ -274,7 +274,7 @@ def add_override_args(p: argparse.ArgumentParser, scope: str) -> None:
         metavar="KEY=VALUE",
         dest="agent_set",
         help=f"override an agent setting{scope} (JSON value), repeatable, "
-        "e.g. --set updates_per_step=0.5",
+        "e.g. --set sac.updates_per_step=0.5",
     )
     add_env_kwarg_arg(p, scope)
 

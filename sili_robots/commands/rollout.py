@@ -17,6 +17,7 @@ from sili_robots.commands.common import (
     task_name,
 )
 from sili_robots.policies import SCRIPTED_KINDS, scripted_policy
+from sili_robots.policies.scripted import KIND_DESCRIPTIONS
 from sili_robots.rollout import run_interactions
 
 
@@ -27,7 +28,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=task_name,
         help="task name, e.g. circle-3, or package.module:ClassName (random and still policies)",
     )
-    p.add_argument("--policy", default="stabilizing", choices=SCRIPTED_KINDS)
+    p.add_argument(
+        "--policy",
+        default="stabilizing",
+        choices=SCRIPTED_KINDS,
+        help="the scripted policy (default stabilizing): "
+        + "; ".join(f"{k}: {d}" for k, d in KIND_DESCRIPTIONS.items()),
+    )
     p.add_argument(
         "--interactions", type=positive_int, default=20, help="interactions to play (default 20)"
     )
