@@ -279,3 +279,16 @@ def test_game_state_resumes_in_a_fresh_environment(make_env):
         np.testing.assert_array_equal(oa, ob)
         assert ra == rb
     assert any(r < 0 for _, r in expected) and any(r == 0 for _, r in expected)
+
+
+def test_a_running_simulation_is_not_copied_and_says_how_to_save_the_game():
+    import copy
+
+    env = make_task("driving")
+    try:
+        copy.deepcopy(env).close()  # before the first reset: no simulation yet
+        env.reset(seed=0)
+        with pytest.raises(TypeError, match=r"running SUMO simulation cannot be.*game_state"):
+            copy.deepcopy(env)  # was "cannot pickle 'module' object"
+    finally:
+        env.close()

@@ -246,6 +246,17 @@ class DrivingEnv(RepeatedInteractionEnv):
         info["ego_lane"] = lane_of(self.ego_y)
         return info
 
+    def __getstate__(self) -> dict[str, Any]:
+        """A copy or pickle of the task before its first reset (the simulation is a process's
+        own: a running one cannot be copied; ``game_state()`` saves the game instead)."""
+        if getattr(self, "session", None) is not None:
+            raise TypeError(
+                "a Driving task with a running SUMO simulation cannot be copied or pickled: copy "
+                "it before its first reset, or save the game with game_state() and restore it "
+                "into another task (reset(options={'restore': state}))"
+            )
+        return self.__dict__
+
     def close(self) -> None:
         """Stop SUMO and release this process's libsumo simulation for a later environment."""
         self._closed = True
