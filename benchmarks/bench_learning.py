@@ -203,7 +203,6 @@ def main() -> None:
     p.add_argument("--from-runs", type=Path, help="only tabulate the finished runs in this folder")
     args = p.parse_args()
     t0 = time.perf_counter()
-    print(f"machine: {machine_key(args.workers)}", flush=True)  # the wall times' CPU
     if args.from_runs is not None:
         if not args.from_runs.is_dir():
             p.error(f"--from-runs {args.from_runs}: not a folder")
@@ -224,6 +223,7 @@ def main() -> None:
                         f"--interactions {args.interactions}: {config.parent} is set to "
                         f"{recorded}; give at least that, or another --out"
                     )
+        print(f"machine: {machine_key()} each", flush=True)  # what the runs trained now ran on
         with ThreadPoolExecutor(args.workers) as pool:
             dirs = list(pool.map(lambda j: run_one(*j, args), jobs))
     df = table(dirs, args.window)

@@ -244,10 +244,13 @@ def test_an_addon_setting_that_does_nothing_is_noted_and_its_addon_not_built(cap
     }
     assert notes("sili", **{"addons.recent.fraction": 0.25}) == {}
     hindsight = {"addons.stability_distance": "hindsight"}
-    assert notes("lili", **hindsight) == {
-        "addons.stability_distance": "b is 0 throughout: no stability term"
-    }
+    lili_note = "LILI has no stability reward (b = 0) to count changes for"
+    assert notes("lili", **hindsight) == {"addons.stability_distance": lili_note}
     assert notes("sili", **hindsight) == {}
+    b0 = {**hindsight, "sili.beta": 0.0}  # its metrics' stability column reads the distance
+    assert notes("sili", **b0) == {}
+    sili_b0 = make_run_config("circle-3", "sili", 0, 10, settings=b0)
+    assert [a.name for a in build_addons(sili_b0.addons, sili_b0.agent)] == ["posteriors"]
     lili = make_run_config("circle-3", "lili", 0, 10, settings=hindsight)
     assert build_addons(lili.addons, lili.agent) == []  # nothing it would compute is read
     both = make_run_config(

@@ -1,5 +1,7 @@
 """The shared task contract, checked on every registered task."""
 
+from typing import ClassVar
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -290,6 +292,13 @@ def test_render_mode_none_is_taken_and_any_mode_refused_by_every_task():
     with pytest.raises(ConfigError, match="render_mode 'rgb_array': the tasks draw no frames"):
         gym.make("sili/Driving-v0", render_mode="rgb_array")
     assert TwoDoorsEnv(render_mode=None).init_kwargs == {}  # a user's task class too
+
+    class Drawn(TwoDoorsEnv):  # declares a mode, with the constructor it inherits
+        metadata: ClassVar[dict] = {"render_modes": ["rgb_array"]}
+
+    assert Drawn(render_mode="rgb_array").render_mode == "rgb_array"
+    with pytest.raises(ConfigError, match="render_mode 'human': allowed: None, 'rgb_array'"):
+        Drawn(render_mode="human")
 
 
 def test_gym_make_cannot_build_another_task_under_an_id():

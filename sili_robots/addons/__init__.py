@@ -22,7 +22,6 @@ from sili_robots.addons.recent import RecentBatches
 from sili_robots.addons.schedules import Schedules
 from sili_robots.agent.addon import AgentAddon
 from sili_robots.agent.config import AgentConfig, scheduled_paths
-from sili_robots.agent.methods import no_stability_term
 
 
 def build_addons(addons: AddonsConfig, agent: AgentConfig) -> list[AgentAddon]:
@@ -33,7 +32,7 @@ def build_addons(addons: AddonsConfig, agent: AgentConfig) -> list[AgentAddon]:
     active = addons.validate(agent).active()
     if "last_step" in active:
         out.append(LastStep())
-    if "posteriors" in active and (addons.change_fraction or not no_stability_term(agent)):
+    if "posteriors" in active and (addons.change_fraction or agent.method != "lili"):
         out.append(HindsightPosteriors(addons.stability_distance, addons.change_fraction))
     if "recent" in active:
         out.append(RecentBatches(addons.recent.fraction, addons.recent.interactions))

@@ -61,8 +61,6 @@ class AddonsConfig:
     def unread(self, given: Collection[str], agent: AgentConfig) -> dict[str, str]:
         """The settings among ``given`` (dotted paths) that no add-on of this configuration
         reads or that do nothing, and why (noted, not refused, as ``unused_settings``)."""
-        from sili_robots.agent.methods import no_stability_term
-
         out = {}
         for path in given:
             if path.startswith("addons.filter.") and path != "addons.filter.eps":
@@ -70,8 +68,8 @@ class AddonsConfig:
                     out[path] = "the latent filter is off (addons.filter.eps 0)"
             elif path == "addons.recent.interactions" and not self.recent.fraction:
                 out[path] = "recent batches are off (addons.recent.fraction 0)"
-            elif path == "addons.stability_distance" and no_stability_term(agent):
-                out[path] = no_stability_term(agent)
+            elif path == "addons.stability_distance" and agent.method == "lili":
+                out[path] = "LILI has no stability reward (b = 0) to count changes for"
         draws = (  # a fraction of a batch that rounds to no draw
             ("addons.recent.fraction", self.recent.fraction, agent.sac.batch_interactions),
             ("addons.change_fraction", self.change_fraction, agent.model.batch),

@@ -39,7 +39,8 @@ class HindsightPosteriors(AgentAddon):
     def attach(self, agent: Any) -> None:
         super().attach(agent)
         self.P = np.zeros((0, agent.zdim), np.float32)
-        #: LILI has no stability reward to replace
+        #: LILI has no stability reward to replace (nor a column of it: build_addons leaves
+        #: the add-on out there unless change_fraction draws batches)
         self.replaces_distance = self.distance != "latents" and agent.cfg.method != "lili"
 
     def interaction_stored(self, j: int) -> dict[str, float]:

@@ -64,8 +64,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
 
     def __new__(cls, *args: Any, **kwargs: Any) -> RepeatedInteractionEnv:
         env = super().__new__(cls)
-        if not cls.metadata.get("render_modes"):
-            kwargs.pop("render_mode", None)  # taken by ``_taking_render_mode``, not recorded
+        kwargs.pop("render_mode", None)  # how it is shown, not which task: not recorded
         env.init_kwargs = _named_arguments(cls, args, kwargs)
         return env
 
@@ -338,17 +337,24 @@ def resume_game(env: gym.Env, state: dict[str, Any]) -> tuple[np.ndarray, dict[s
 
 
 def _taking_render_mode(init: Any) -> Any:
-    """``init`` that also takes gymnasium's ``render_mode``: None (what many scripts pass) is
-    dropped, any mode refused, as the tasks draw no frames; a task class that declares render
-    modes in its ``metadata`` takes the argument itself."""
+    """``init`` that also takes gymnasium's ``render_mode``: None (what many scripts pass) or
+    one of the modes the class's ``metadata`` declares; the tasks here declare none, as they draw
+    no frames. (A class that declares modes and has its own ``__init__`` takes it itself.)"""
 
     @functools.wraps(init)  # its signature stays the class's (inspect follows __wrapped__)
     def __init__(self: Any, *args: Any, render_mode: str | None = None, **kwargs: Any) -> None:
-        if render_mode is not None:
-            raise ConfigError(f"render_mode {render_mode!r}: {NO_FRAMES}; allowed: None")
+        modes = list(type(self).metadata.get("render_modes") or [])
+        if render_mode is not None and render_mode not in modes:
+            why = f"allowed: {', '.join(map(repr, [None, *modes]))}" if modes else NO_FRAMES
+            raise ConfigError(f"render_mode {render_mode!r}: {why}")
         init(self, *args, **kwargs)
+        if render_mode is not None:
+            self.render_mode = render_mode
 
     return __init__
+
+
+RepeatedInteractionEnv.__init__ = _taking_render_mode(RepeatedInteractionEnv.__init__)  # type: ignore[method-assign]
 
 
 def _named_arguments(cls: type, args: tuple, kwargs: dict[str, Any]) -> dict[str, Any] | None:
