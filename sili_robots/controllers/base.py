@@ -5,7 +5,9 @@ step, and turns it into the same target pose: the target position moves by ``vel
 is kept within ``LEASH`` of the measured end effector (so pushing against the table or beyond the
 arm's reach does not wind the target up), the target orientation stays the fixed "gripper
 pointing down" rotation. Controllers differ only in how they track that pose, which makes the
-ablation a comparison of tracking alone. A controller owns physics stepping for its control step
+ablation a comparison of tracking, as long as the leash does not bind: a controller that lags by
+most of it (robosuite's OSC, about 4 cm) gets its full-speed commands shortened, so there an
+action moves the target less. A controller owns physics stepping for its control step
 because some (robosuite's OSC) must recompute torques at every physics substep.
 """
 
