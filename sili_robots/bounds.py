@@ -86,6 +86,23 @@ def _integer(value: Any) -> int | None:
         return None
 
 
+def counts_for(env: Any, task: str, interactions: Any, games: Any) -> tuple[int, int]:
+    """(interactions, games) of ``task``'s bounds on its instance ``env``: its defaults where
+    None (the games cycle through its first strategies, ``check_counts``)."""
+    choices = env.unwrapped.strategy_choices()
+    asked = default_interactions(task) if interactions is None else interactions
+    return check_counts(asked, games, len(choices) if choices else 1)
+
+
+def default_games(task: str, interactions: Any = None) -> int:
+    """How many games ``task``'s bounds play by default (at ``interactions``)."""
+    env = make_task(task)
+    try:
+        return counts_for(env, task, interactions, None)[1]
+    finally:
+        env.close()
+
+
 def compute_bounds(
     task: str,
     interactions: int | None = None,
@@ -101,8 +118,7 @@ def compute_bounds(
     env = make_task(spec.gym_id, **env_kwargs)
     try:
         choices = env.unwrapped.strategy_choices()
-        asked = default_interactions(task) if interactions is None else interactions
-        n, g = check_counts(asked, games, len(choices) if choices else 1)
+        n, g = counts_for(env, task, interactions, games)
         lengths = [n // g + (1 if i < n % g else 0) for i in range(g)]
         kinds = [k for k in BOUND_KINDS if k in available_kinds(env)]
         bounds = {}

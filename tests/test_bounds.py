@@ -124,6 +124,16 @@ def test_write_adds_to_a_bounds_file(tmp_path, capsys):
         err = capsys.readouterr().err
         assert "are measured at the default counts" in err and f"with {' '.join(counts)}" in err
     assert BOUNDS_FILE.read_bytes() == packaged
+    from argparse import Namespace
+
+    from sili_robots.commands.bounds import _check_packaged_counts
+    from sili_robots.errors import ConfigError
+    from sili_robots.tasks import task_spec
+
+    default = Namespace(write=str(BOUNDS_FILE), interactions="1000", games="12", seed=0)
+    _check_packaged_counts(default, [task_spec("circle-3")])  # the defaults, typed: taken
+    with pytest.raises(ConfigError, match="with --games 12 give"):  # Circle 8's is 16
+        _check_packaged_counts(default, [task_spec("circle-8")])
 
 
 # -- the bound lines in the figures -----------------------------------------------------------

@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
                 raise
             raise ConfigError(f"{err} ({spec.name}'s default); give --interactions") from None
     if args.write:
-        _check_packaged_counts(args, [default_interactions(s.name) for s in specs])
+        _check_packaged_counts(args, specs)
     for spec in specs:
         result = compute_bounds(spec.gym_id, args.interactions, args.seed, args.games, env_kwargs)
         if args.json:
@@ -172,24 +172,32 @@ def _task_arguments(args: argparse.Namespace, specs: list) -> dict:
     return env_kwargs
 
 
-def _check_packaged_counts(args: argparse.Namespace, defaults: list[int]) -> None:
-    """The packaged file holds every task at the default counts (``defaults``: the tasks'
-    interactions), the lines `sili plot` draws; an estimate at other counts goes to a file of
-    its own."""
-    from sili_robots.bounds import BOUNDS_FILE, DEFAULT_SEED
+def _check_packaged_counts(args: argparse.Namespace, specs: list) -> None:
+    """The packaged file holds every task at the default counts, the lines `sili plot` draws;
+    an estimate at other counts (a count given equal to a task's default is the default) goes
+    to a file of its own."""
+    from sili_robots.bounds import (
+        BOUNDS_FILE,
+        DEFAULT_SEED,
+        check_counts,
+        default_games,
+        default_interactions,
+    )
 
     if Path(args.write).resolve() != BOUNDS_FILE:
         return
-    given = [
-        f"{flag} {value}"
-        for flag, value, default in (
-            ("--games", args.games, None),
-            ("--seed", args.seed, DEFAULT_SEED),
-        )
-        if value != default
-    ]
-    if args.interactions is not None and {int(args.interactions)} != set(defaults):
-        given.insert(0, f"--interactions {args.interactions}")
+    given = []
+    counts = [(s.name, args.interactions or default_interactions(s.name)) for s in specs]
+    if args.interactions is not None and any(
+        check_counts(n)[0] != default_interactions(t) for t, n in counts
+    ):
+        given.append(f"--interactions {args.interactions}")
+    if args.games is not None and any(
+        check_counts(n, args.games)[1] != default_games(t, n) for t, n in counts
+    ):
+        given.append(f"--games {args.games}")
+    if args.seed != DEFAULT_SEED:
+        given.append(f"--seed {args.seed}")
     if given:
         raise ConfigError(
             f"the packaged bounds ({BOUNDS_FILE}) are measured at the default counts, which "
