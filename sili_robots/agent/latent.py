@@ -169,12 +169,16 @@ class LatentModel(nn.Module):
         parts = [h.mean(1), h.amax(1), *(readout(h) for readout in self.readouts)]
         return self.head(torch.cat(parts, dim=-1))
 
+    def _continuous(self, out: torch.Tensor) -> torch.Tensor:
+        """A continuous z from the raw encoder output: tanh of it, or itself (``squash``)."""
+        return torch.tanh(out) if self.squash else out
+
     def encode(self, traj: torch.Tensor, sample: bool = False) -> torch.Tensor:
         """The latent z; ``sample`` draws a Gumbel-max one-hot instead of the most likely
         category (the z^j acted on and cached, ``model.sample``)."""
         out = self.encode_logits(traj)
         if self.kind == "continuous":
-            return torch.tanh(out) if self.squash else out
+            return self._continuous(out)
         if sample:
             return gumbel_straight_through(out)
         return F.one_hot(out.argmax(-1), self.latent_dim).to(out.dtype)
@@ -214,7 +218,7 @@ class LatentModel(nn.Module):
         target = (target - mean) / scale
         if self.kind == "continuous":
             out = self.encode_logits(prev_traj)
-            pred = self.decode(obs, act, torch.tanh(out) if self.squash else out)
+            pred = self.decode(obs, act, self._continuous(out))
             return F.mse_loss(pred, target) + self.preact_penalty * out.pow(2).mean()
         logits = self.encode_logits(prev_traj)
         heads = (self._heads(obs, act) - mean) / scale  # [B, H, k, out]

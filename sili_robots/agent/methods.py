@@ -157,8 +157,8 @@ def unused_settings(cfg: AgentConfig, given: Iterable[str]) -> dict[str, str]:
             out[path] = f"it learns no latent model (latent {cfg.latent!r})"
         elif path == "sili.smirl_std_floor" and cfg.method != "smirl":
             out[path] = "only SMiRL's state density reads it"
-        elif path in ("sili.scale", "sili.credit") and no_stability_term(cfg):
-            out[path] = no_stability_term(cfg)
+        elif path in ("sili.scale", "sili.credit") and (why := no_stability_term(cfg)):
+            out[path] = why
     return out
 
 
