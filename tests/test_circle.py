@@ -86,6 +86,15 @@ def test_stabilizing_policy_holds_the_opponent(name):
     assert unchanged >= 0.99
 
 
+@pytest.mark.parametrize("kind", ["stabilizing", "blind"])
+def test_scripted_holds_also_hold_with_a_wide_margin(kind):
+    # circle-3's 210 and 330 degree locations lie off the axes and diagonals: stepping out
+    # 0.5 + 0.02 there takes more steps than diagonal moves at full speed would
+    env = make_task("circle-3", outside_margin=0.5)
+    summary = run_interactions(env, scripted_policy(env, kind), 40, seed=0)
+    assert not any(s.strategy_changed for s in summary[1:])
+
+
 @pytest.mark.parametrize("name", ["circle-3", "circle-8", "circle-continuous"])
 def test_oracle_policy_is_near_optimal(name):
     env = make_task(name)

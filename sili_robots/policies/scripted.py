@@ -100,11 +100,28 @@ def _circle_hold(env: RepeatedInteractionEnv, point: np.ndarray) -> np.ndarray:
 
     clearance = env.outside_margin + 0.02
     u = point / np.linalg.norm(point)
-    steps_out = math.ceil(clearance / (STEP * (abs(u[0]) + abs(u[1]))) - 1e-9)
+    out = u * (RADIUS + clearance)
+    # diagonal moves at full speed (the count the packaged bounds were computed with), or more
+    # where clipping the axes one by one makes the way out slower (margins past ~0.3)
+    steps_out = max(
+        math.ceil(clearance / (STEP * (abs(u[0]) + abs(u[1]))) - 1e-9),
+        _steps_to_leave(env, point, out),
+    )
     target = point
     if env.horizon - env.t <= steps_out:
-        target = u * (RADIUS + clearance)
+        target = out
     return _toward(env.position, target, STEP)
+
+
+def _steps_to_leave(env: RepeatedInteractionEnv, start: np.ndarray, out: np.ndarray) -> int:
+    """Steps of ``_toward`` from ``start`` to ``out`` until the task counts the ego outside."""
+    from sili_robots.tasks.circle import ARENA, STEP
+
+    position, steps = start.astype(float), 0
+    while env.ends_inside(position) and steps < env.horizon:
+        position = np.clip(position + STEP * _toward(position, out, STEP), -ARENA, ARENA)
+        steps += 1
+    return steps
 
 
 def circle_oracle(env: RepeatedInteractionEnv, obs: np.ndarray) -> np.ndarray:
