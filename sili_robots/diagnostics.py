@@ -65,7 +65,9 @@ def latent_diagnostics(df: pd.DataFrame, window: int = 100) -> dict[str, float]:
       strategy is their true strategy (1 = every category stands for one strategy).
     - ``latent_change_agreement``: fraction where "my latent changed" equals "the true
       strategy changed".
-    - ``stability_reward_paid``: mean stability reward the agent received per interaction.
+    - ``stability_reward_paid``: mean of the ``stability_reward`` column: -d(z^j, z^{j+1})
+      before b and the credit's scale (the agent is paid scale x that, H by default), or for
+      the partial latent minus the flagged steps (``InteractionStats``).
     """
     out = {"stability_reward_paid": float(df["stability_reward"].tail(window).mean())}
     if len(df) < 2 or (df["latent_category"] < 0).all():

@@ -69,7 +69,7 @@ METHOD_COLORS = {
 CURVE_METRICS = (
     ("task_reward", "task reward"),
     ("true_stability", "true stability\n(1 − P[strategy changed])"),
-    ("stability_reward", "stability reward\n(agent's, per interaction)"),
+    ("stability_reward", "stability term, before b\n(−latent change, or −flagged steps)"),
 )
 FINAL_METRICS = (("task_reward", "final task reward"), ("true_stability", "final true stability"))
 

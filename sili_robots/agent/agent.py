@@ -36,7 +36,9 @@ from sili_robots.agent.smirl import RunningGaussian
 class InteractionStats:
     """What the agent saw of one finished interaction."""
 
-    stability_reward: float  # R_stable as the agent measured it (before weighting by b)
+    #: R_stable of the interaction before b and the credit's scale: -d(z^j, z^{j+1}) (the paid
+    #: term is scale x that, scale H by default); partial: minus the steps whose flag was raised
+    stability_reward: float
     latent_category: int  # argmax of z^{j+1} (-1 when there is no discrete latent)
     #: the agent's own latent changed between j and j+1 (partial: the observed flag was raised)
     latent_changed: bool
