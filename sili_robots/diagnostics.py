@@ -40,6 +40,10 @@ def change_masks(df: pd.DataFrame, start: int = 0) -> dict[str, np.ndarray]:
     the moved opponent (row j against j-1). ``false_alarms``: z^j differs from z^{j-1} with no
     true change at row j, and it is not such a late catch-up either (no true change at row
     j-1). Rows 0 and 1 have no latent change (there is no z^{j-1} to compare).
+
+    Categories are compared as logged: across a refresh of the cached latents (every
+    ``model.refresh_every`` interactions) the two rows come from different encoders, so there
+    a relabelling counts as a change the agent's own ``latent_changed`` does not show.
     """
     sid = df["strategy_id"].to_numpy()
     cat = df["latent_category"].to_numpy()
@@ -119,8 +123,9 @@ def filter_corrections(df: pd.DataFrame, start: int = 0) -> dict[str, float]:
     opponent's moves, from interaction ``start`` on.
 
     Row j was played against a moved opponent when its ``strategy_id`` differs from row j-1's;
-    there a correction (``filter_step`` >= 0) is what the filter is for, unless z^j foresaw the
-    move. On the other rows a correction is a false alarm: the policy left a right z^j.
+    there a correction (``filter_step`` >= 0) is what the filter is for (where z^j foresaw the
+    move none was needed; such rows are not told apart here). On the other rows a correction is
+    a false alarm: the policy left a right z^j.
     """
     sid = df["strategy_id"].to_numpy()
     step = df["filter_step"].to_numpy() if "filter_step" in df else np.full(len(df), -1)
