@@ -40,7 +40,14 @@ from sili_robots.commands.common import parse_settings, positive_int, task_name
 from sili_robots.diagnostics import latent_diagnostics
 from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.migrations import migrate_run, setting_path
-from sili_robots.runs import HOLDING, first_stable, kept, kept_fraction, run_metrics
+from sili_robots.runs import (
+    HOLDING,
+    MACHINE_SETTINGS,
+    first_stable,
+    kept,
+    kept_fraction,
+    run_metrics,
+)
 from sili_robots.sweep import parse_seeds
 
 MARKS = {True: "MET    ", False: "NOT MET", None: "N/A    "}
@@ -78,21 +85,13 @@ def stable_by(df: pd.DataFrame, window: int) -> float:
     return float("nan") if start is None else float(df["interaction"].iloc[start + window - 1])
 
 
-#: recorded settings that pick kernels or bookkeeping for a machine, not the configuration
-MACHINE_SETTINGS = (
-    ("threads",),
-    ("checkpoint_every",),
-    ("agent", "matmul"),
-    ("agent", "sac", "precision"),
-)
-
-
 def variant_of(run: dict) -> str:
     """What one configuration's seeds share: everything recorded (as the current layout reads
     it) but the seed and the per-machine settings."""
     run = copy.deepcopy(migrate_run(run))
     run.pop("seed", None)
-    for *parents, key in MACHINE_SETTINGS:
+    for setting in MACHINE_SETTINGS:
+        *parents, key = setting.split(".")
         node = run
         for name in parents:
             node = node.get(name, {})

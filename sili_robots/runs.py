@@ -474,6 +474,12 @@ def read_config(run_dir: Path) -> RunConfig:
         raise ConfigError(f"{path} is damaged ({_first_line(err)}); {DAMAGED_CONFIG}") from None
 
 
+#: recorded settings (dotted) that pick kernels or bookkeeping for a machine, the same
+#: configuration either way: another thread count or kernel sums in another order, and the
+#: defaults of ``agent.matmul`` and ``agent.sac.precision`` are chosen per machine
+MACHINE_SETTINGS = ("threads", "checkpoint_every", "agent.matmul", "agent.sac.precision")
+
+
 def differences(a: Any, b: Any, prefix: str = "") -> list[tuple[str, Any, Any]]:
     """(dotted key, value in ``a``, value in ``b``) for every leaf two nested dicts (two runs'
     configs) differ in, in key order."""

@@ -13,6 +13,7 @@ from sili_robots.errors import ConfigError
 from sili_robots.labels import METHOD_NAMES
 from sili_robots.runs import (
     HOLDING,
+    MACHINE_SETTINGS,
     METRICS,
     RunConfig,
     differences,
@@ -119,7 +120,8 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
             more = f" and {len(differ) - 4} more" if len(differ) > 4 else ""
             raise ConfigError(
                 f"{run_dir} is not another seed of {runs[0][1]}: {', '.join(named)}{more} differ "
-                "(runs judged together differ only in the seed)"
+                "(runs judged together differ only in the seed and in settings chosen per machine: "
+                f"{', '.join(MACHINE_SETTINGS)})"
             )
     seeds = [seed for seed, _ in runs]
     if len(set(seeds)) < len(seeds):
@@ -156,8 +158,8 @@ NONE_WORKED = 3
 
 def _settings_that_differ(a: RunConfig, b: RunConfig) -> list[tuple[str, Any, Any]]:
     """(dotted name, value in ``a``, in ``b``) of the settings two runs differ in, other than
-    those that leave what they learn alike; the top-level ones (task, method) first."""
-    ignored = {"seed", "threads", "checkpoint_every"}  # none changes what a run learns
+    the seed and the per-machine settings; the top-level ones (task, method) first."""
+    ignored = {"seed", *MACHINE_SETTINGS}
     found = [d for d in differences(a.to_dict(), b.to_dict()) if d[0] not in ignored]
     return sorted(found, key=lambda d: d[0].count("."))
 

@@ -163,6 +163,19 @@ def test_the_line_across_seeds_counts_the_runs_that_worked_and_picks_the_best(tm
     assert "is not a run directory" in capsys.readouterr().err
 
 
+def test_seeds_trained_with_another_machines_kernels_are_judged_together(tmp_path):
+    first, second = _trained(tmp_path, 0, -20.0, changed=0), _trained(tmp_path, 1, -20.0, 0)
+    config = json.loads((second / "config.json").read_text())
+    config["run"]["agent"]["matmul"] = (
+        "onednn" if config["run"]["agent"]["matmul"] == "aten" else "aten"
+    )
+    config["run"]["agent"]["sac"]["precision"] = "bfloat16"
+    config["run"]["threads"] = 2
+    (second / "config.json").write_text(json.dumps(config))
+    line, _ = across_seeds([first, second])
+    assert line.startswith("SILI worked in 2 of 2 seeds")
+
+
 def test_a_window_of_exactly_90_percent_holds_wherever_its_changes_fall():
     """The verdicts' plain mean and first_stable's windows agree at the threshold: 9 kept of 10
     (or 90 of 100) holds, however floating point would sum the window's fractions."""
