@@ -89,8 +89,8 @@ def residual_scale(
     """Per output, the root-mean-square error of the decoder on interactions obs [N, H+1, o]
     (act [N, H, a], rew [N, H]), each under the category in use that explains it best."""
     prev, nxt = obs[:, :-1], obs[:, 1:]
-    ref = target_scale(prev, nxt, rew)
     target = decoder_targets(prev, nxt, rew)
+    ref = target_scale(target)
     heads = model._heads(prev, act)[..., torch.from_numpy(in_use), :]  # [N, H, k', out]
     sq = (heads - target.unsqueeze(-2)).pow(2)
     best = (sq / ref.pow(2)).sum(-1).sum(1).argmin(-1)  # [N]
@@ -163,7 +163,7 @@ def target_norm(obs: torch.Tensor, rew: torch.Tensor) -> TargetNorm:
     replay's statistics turn its output back into (s' - s, r)."""
     prev, nxt = obs[:, :-1], obs[:, 1:]
     target = decoder_targets(prev, nxt, rew)
-    return target.reshape(-1, target.shape[-1]).mean(0), target_scale(prev, nxt, rew)
+    return target.reshape(-1, target.shape[-1]).mean(0), target_scale(target)
 
 
 def continuous_predictions(
@@ -214,8 +214,8 @@ def continuous_residual_scale(
     does not touch (the ego's own motion) far more tightly than under another latent of the
     same strategy; at that scale the filter would leave a right z^j on such noise."""
     prev, nxt = obs[:, :-1], obs[:, 1:]
-    ref = target_scale(prev, nxt, rew)
     target = decoder_targets(prev, nxt, rew)
+    ref = target_scale(target)
     sq = torch.stack(
         [
             (continuous_predictions(model, prev, act, c.expand(len(obs), -1), norm) - target) ** 2

@@ -349,12 +349,9 @@ class SILIAgent:
             return self.buffer.aux[j, t]
         if self.cfg.latent == "partial":
             return stability.partial_reward(s2)
-        credit = self.cfg.sili.credit
-        if credit == "per_step":  # d(z^{j-1}, z^j): the change before interaction j
-            d = np.where(j >= 1, self.change_after(np.maximum(j - 1, 0)), 0.0)
-            return stability.credited(0.0, d, last, credit, self.stability_scale)
-        d = self.change_after(j)
-        return stability.credited(d, 0.0, last, credit, self.stability_scale)
+        if self.cfg.sili.credit == "per_step":  # -d(z^{j-1}, z^j) on every step of j
+            return -np.where(j >= 1, self.change_after(np.maximum(j - 1, 0)), 0.0)
+        return -self.stability_scale * self.change_after(j) * last  # -d(z^j, z^{j+1}), j's last
 
     # ------------------------------------------------------------------ checkpoints
     def state_dict(self) -> dict[str, Any]:

@@ -214,13 +214,12 @@ class LatentModel(nn.Module):
         interaction j given z^j = E(tau^{j-1}): the paper's max-likelihood objective."""
         target = decoder_targets(obs, next_obs, rew)
         mean = target.reshape(-1, target.shape[-1]).mean(0)
-        scale = target_scale(obs, next_obs, rew)
+        scale = target_scale(target)
         target = (target - mean) / scale
-        if self.kind == "continuous":
-            out = self.encode_logits(prev_traj)
-            pred = self.decode(obs, act, self._continuous(out))
-            return F.mse_loss(pred, target) + self.preact_penalty * out.pow(2).mean()
         logits = self.encode_logits(prev_traj)
+        if self.kind == "continuous":
+            pred = self.decode(obs, act, self._continuous(logits))
+            return F.mse_loss(pred, target) + self.preact_penalty * logits.pow(2).mean()
         heads = (self._heads(obs, act) - mean) / scale  # [B, H, k, out]
         err = (heads - target.unsqueeze(-2)).pow(2).mean(-1).mean(1)  # [B, k]
         if self.estimator == "marginal":
@@ -244,9 +243,8 @@ def decoder_targets(obs: torch.Tensor, next_obs: torch.Tensor, rew: torch.Tensor
     return torch.cat([next_obs - obs, rew.unsqueeze(-1)], dim=-1)
 
 
-def target_scale(obs: torch.Tensor, next_obs: torch.Tensor, rew: torch.Tensor) -> torch.Tensor:
-    """Per-output standard deviation of the decoder's targets (1 where constant: left as is)."""
-    target = decoder_targets(obs, next_obs, rew)
+def target_scale(target: torch.Tensor) -> torch.Tensor:
+    """Per-output standard deviation of ``decoder_targets`` (1 where constant: left as is)."""
     std = target.reshape(-1, target.shape[-1]).std(0)
     return torch.where(std > 1e-4, std, torch.ones_like(std))
 

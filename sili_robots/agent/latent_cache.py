@@ -20,7 +20,13 @@ import torch
 from scipy.optimize import linear_sum_assignment
 
 from sili_robots.agent.buffer import InteractionBuffer
-from sili_robots.agent.latent import LatentModel, category_groups, target_scale, transitions
+from sili_robots.agent.latent import (
+    LatentModel,
+    category_groups,
+    decoder_targets,
+    target_scale,
+    transitions,
+)
 
 REFRESH_CHUNK = 512  # interactions per batch when recomputing latents over the replay
 
@@ -51,7 +57,8 @@ def in_chunks(fn: Callable[[np.ndarray], np.ndarray], n: int, width: int) -> np.
 def replay_target_scale(buffer: InteractionBuffer) -> torch.Tensor:
     """Per-output standard deviation of the decoder's targets over the whole replay."""
     obs = torch.from_numpy(buffer.obs[: buffer.n])
-    return target_scale(obs[:, :-1], obs[:, 1:], torch.from_numpy(buffer.rew[: buffer.n]))
+    rew = torch.from_numpy(buffer.rew[: buffer.n])
+    return target_scale(decoder_targets(obs[:, :-1], obs[:, 1:], rew))
 
 
 class LatentCache:
@@ -138,7 +145,7 @@ class LatentCache:
         b = self.buffer
         idx = self.rng.choice(b.n, min(reference, b.n), replace=False)
         obs, act, rew = (torch.from_numpy(x[idx]) for x in (b.obs, b.act, b.rew))
-        scale = target_scale(obs[:, :-1], obs[:, 1:], rew)
+        scale = target_scale(decoder_targets(obs[:, :-1], obs[:, 1:], rew))
         distances = self.model.head_distances(obs[:, :-1], act, scale)
         counts = np.bincount(categories, minlength=self.dim)
         used = [int(c) for c in np.argsort(-counts, kind="stable") if counts[c] > 0]

@@ -34,20 +34,6 @@ def change_after(Z: np.ndarray, j: np.ndarray, kind: str) -> np.ndarray:
     return d if kind == "true" else np.where(j >= 1, d, 0.0).astype(np.float32)
 
 
-def credited(
-    d_after: np.ndarray,
-    d_before: np.ndarray,
-    last: np.ndarray,
-    credit: str,
-    scale: float,
-) -> np.ndarray:
-    """R_stable of each sampled step: ``d_after`` = d(z^j, z^{j+1}), ``d_before`` =
-    d(z^{j-1}, z^j) of its interaction, ``last`` = the step is the interaction's last."""
-    if credit == "per_step":
-        return -d_before
-    return -scale * d_after * last
-
-
 def partial_reward(next_obs: np.ndarray) -> np.ndarray:
     """Partial observation: -flag of each next observation ("the strategy changed")."""
     return -next_obs[..., -1]
