@@ -1,4 +1,4 @@
-"""The paper's experiment grid: every method on all seven tasks at the paper's budgets.
+"""The paper's experiment grid: every method on all seven tasks, at the budgets below.
 
 The grid is a list of blocks, each a method set run on some tasks at a fraction of each task's
 budget; a block on one task is one sweep invocation. ``sili grid`` runs them in order into one

@@ -79,8 +79,8 @@ class LatentModelConfig:
     usage_bonus: Scheduled = setting(0.1, 0.0)
     #: continuous latents: weight of mean(pre-tanh output^2), keeps z off the tanh corners
     preact_penalty: Scheduled = setting(1e-3, 0.0)
-    #: continuous latents: z = tanh(encoder output), in [-1, 1]; False: the raw output, as the
-    #: original implementation (the paper bounds nothing; the paper profile's choice)
+    #: continuous latents: z = tanh(encoder output), in [-1, 1]; False: the raw output (the
+    #: paper bounds nothing; the paper profile's choice)
     squash: bool = True
     #: discrete latents: heads closer than this (target std units) are one strategy (0 = off)
     merge_threshold: float = setting(0.5, 0.0)

@@ -32,8 +32,8 @@ Training objective for discrete latents (``estimator``):
 * ``gumbel``: the paper's straight-through Gumbel-Softmax (temperature 1): one-hot forward, soft
   gradient backward.
 
-Continuous latents are tanh of the encoder's output (``squash``; the paper profile, as the
-original implementation, takes the raw output: the paper bounds nothing). Nothing in the
+Continuous latents are tanh of the encoder's output (``squash``; the paper profile takes the raw
+output: the paper bounds nothing). Nothing in the
 reconstruction keeps that output small, and once it is large tanh passes no gradient back:
 measured on Circle (3 Goals), one seed's encoder outputs reached |16|-|22| in every dimension,
 so z^j sat at the corners of the box and flipped sign between interactions with no change of

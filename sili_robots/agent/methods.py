@@ -14,7 +14,7 @@ Two profiles give the starting settings: ``package`` (the defaults of ``AgentCon
 Gumbel-Softmax at temperature 1, z^j sampled as its Eq. for z^j says, b = 0.5 constant (the
 package's SILI starts b at 0 and raises it to 0.5 over interactions 250-300), 2 x 256 networks,
 latent dimension 10, R_stable = -d(z^j, z^{j-1}) on every step, no grouping of categories,
-continuous latents the encoder's raw output as in the original implementation).
+continuous latents the encoder's raw output, which the paper does not bound).
 Both keep the model's structure, which the paper leaves open or states loosely (the encoder's
 pooling, a discrete decoder with one head per category; README, "Two profiles").
 """
