@@ -11,6 +11,11 @@ class ConfigError(ValueError):
     """A value given by the user is not allowed; the message names the value and the choices."""
 
 
+class CheckpointMismatch(ConfigError):
+    """A checkpoint's networks or replay do not fit the agent its run's settings build (a
+    checkpoint copied from another run, or settings edited by hand)."""
+
+
 #: seeds are what numpy's legacy seeding, torch and gymnasium all accept: 0 .. 2**32 - 1
 MAX_SEED = 2**32 - 1
 

@@ -24,9 +24,9 @@ from sili_robots.build import (
     task_name_of,
     task_version_of,
 )
-from sili_robots.errors import ConfigError, check_count
+from sili_robots.errors import CheckpointMismatch, ConfigError, check_count
 from sili_robots.rollout import run_interactions
-from sili_robots.runs import RunConfig, read_config, require_checkpoint
+from sili_robots.runs import CHECKPOINT, CONFIG, RunConfig, read_config, require_checkpoint
 from sili_robots.tasks.base import RESET_OPTIONS, resume_game
 
 
@@ -101,10 +101,17 @@ def check_same_task(run_dir: Path, cfg: RunConfig, env: gym.Env) -> None:
 @contextlib.contextmanager
 def fitting(run_dir: Path, cfg: RunConfig, env: gym.Env | None) -> Iterator[None]:
     """Name both sides when the run's networks or stored interactions do not fit ``env``, a
-    task instance of other sizes (observation, action, horizon); ``None``: the run's own."""
+    task instance of other sizes (observation, action, horizon); ``None``: the run's own, which
+    its checkpoint fits unless it came from another run."""
     try:
         yield
     except (RuntimeError, ValueError) as err:
+        if env is None and isinstance(err, CheckpointMismatch):
+            raise ConfigError(
+                f"{run_dir / CHECKPOINT} does not fit the agent {run_dir / CONFIG} describes: "
+                f"{err}; was it copied from another run? Train this run again (sili train ... "
+                "--overwrite)"
+            ) from None
         if env is None:
             raise
         given = f"{task_name_of(env)} with {task_kwargs_of(env)}"

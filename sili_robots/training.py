@@ -12,10 +12,12 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from sili_robots.agent import SILIAgent
 from sili_robots.atomic import write_text
 from sili_robots.build import build_agent, make_run_env
 from sili_robots.diagnostics import latent_diagnostics
 from sili_robots.errors import ConfigError
+from sili_robots.evaluation import fitting
 from sili_robots.progress import TrainingProgress
 from sili_robots.rollout import play_interaction
 from sili_robots.runs import (
@@ -54,23 +56,17 @@ def train(
     state = load_checkpoint(run_dir) if resume else None
     if state is not None:
         check_history(run_dir, int(state["interaction"]))
-        extend(run_dir, cfg.interactions)  # only once the run is known to resume
     torch.set_num_threads(cfg.threads)
     own_env = env is None
     env = make_run_env(cfg) if env is None else env
-    agent = build_agent(cfg, env)
-    (run_dir / SUMMARY).unlink(missing_ok=True)  # unfinished until it writes a new one
-    if state is None:
-        write_config(run_dir, cfg)
-        obs, info = env.reset(seed=cfg.seed)
-        agent.begin_game(info)
-        start, metrics = 0, MetricsWriter(run_dir)
-    else:
-        agent.load_state_dict(state["agent"])
-        obs, info = resume_game(env, state["game"])
-        start = int(state["interaction"])
-        record_continuation(run_dir, cfg.threads, start)
-        metrics = MetricsWriter(run_dir, keep_rows=start)
+    try:
+        agent, obs, info, start, metrics = _start_or_resume(
+            cfg, run_dir, env, state, None if own_env else env
+        )
+    except BaseException:
+        if own_env:
+            env.close()
+        raise
     recent: deque[tuple[float, bool]] = deque(maxlen=100)
     elapsed0 = float(state["wall_time"]) if state else 0.0
     t0 = time.perf_counter()
@@ -152,6 +148,33 @@ def train(
         if own_env:
             env.close()
     return run_dir
+
+
+def _start_or_resume(
+    cfg: RunConfig,
+    run_dir: Path,
+    env: gym.Env,
+    state: dict[str, Any] | None,
+    given_env: gym.Env | None,
+) -> tuple[SILIAgent, Any, dict[str, Any], int, MetricsWriter]:
+    """The agent, the game's current observation and info, the first interaction to play and
+    the metrics writer, from scratch or from ``state``; a resumed run changes only once its
+    checkpoint has loaded (``given_env``: the user's task instance, named if it does not fit)."""
+    agent = build_agent(cfg, env)
+    if state is None:
+        (run_dir / SUMMARY).unlink(missing_ok=True)
+        write_config(run_dir, cfg)
+        obs, info = env.reset(seed=cfg.seed)
+        agent.begin_game(info)
+        return agent, obs, info, 0, MetricsWriter(run_dir)
+    with fitting(run_dir, cfg, given_env):
+        agent.load_state_dict(state["agent"])
+    extend(run_dir, cfg.interactions)
+    (run_dir / SUMMARY).unlink(missing_ok=True)  # unfinished until it writes a new one
+    obs, info = resume_game(env, state["game"])
+    start = int(state["interaction"])
+    record_continuation(run_dir, cfg.threads, start)
+    return agent, obs, info, start, MetricsWriter(run_dir, keep_rows=start)
 
 
 def write_summary(run_dir: Path, window: int = 100) -> dict[str, Any]:

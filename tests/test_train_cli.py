@@ -18,9 +18,10 @@ import torch
 from cli_helpers import sili as _sili
 from fast_settings import FAST_AGENT, FAST_ARGS
 
-from sili_robots import training
+from sili_robots import SILI, training
 from sili_robots.addons import LatentFilter
 from sili_robots.cli import main
+from sili_robots.errors import ConfigError
 from sili_robots.evaluation import AgentFeedback, evaluate, load_trained
 from sili_robots.runs import (
     code_revision,
@@ -420,6 +421,28 @@ def test_a_damaged_checkpoint_or_config_exits_2_naming_the_file(tmp_path):
     (run / "config.json").write_text("{not json")
     res = _sili("eval", run, "--interactions", 1)
     assert res.returncode == 2 and f"{run / 'config.json'} is damaged" in res.stderr
+
+
+def test_a_checkpoint_of_another_run_exits_2_and_leaves_the_run_as_it_was(tmp_path, capsys):
+    run, other = tmp_path / "run", tmp_path / "other"
+    args = ["train", "--task", "circle-3", "--interactions", "2", *FAST]
+    assert main([*args, "--out", str(run)]) == 0
+    assert main([*args, "--method", "sac", "--out", str(other)]) == 0
+    shutil.copy(other / "checkpoint.pt", run / "checkpoint.pt")  # a SAC agent's networks
+    capsys.readouterr()
+    said = f"{run / 'checkpoint.pt'} does not fit the agent {run / 'config.json'} describes"
+    assert main(["train", "--resume", str(run), "--interactions", "3", "--no-progress"]) == 2
+    assert said in capsys.readouterr().err
+    # refused before the run changed: still a finished run of 2
+    assert json.loads((run / "config.json").read_text())["run"]["interactions"] == 2
+    assert run_state(run) == "done"
+    for command in (["eval", str(run), "--interactions", "1"], ["preview", "circle-3"]):
+        if command[0] == "preview":
+            command += ["--checkpoint", str(run), "--out", str(tmp_path / "p.html")]
+        assert main(command) == 2
+        assert said in capsys.readouterr().err
+    with pytest.raises(ConfigError, match="does not fit the agent"):
+        SILI.load(run)
 
 
 def test_resume_after_kill_reproduces_the_uninterrupted_run(tmp_path):
@@ -866,7 +889,7 @@ def test_a_run_being_extended_is_unfinished_until_it_ends(tmp_path, monkeypatch)
     resume(out, progress=False)
     assert json.loads((out / "summary.json").read_text())["interactions"] == 5
     # stopped after the extension was recorded but before it trained: resumable, not done
-    monkeypatch.setattr(training, "make_run_env", killed)
+    monkeypatch.setattr(training, "resume_game", killed)
     with pytest.raises(KeyboardInterrupt):
         resume(out, progress=False, interactions=6)
     assert json.loads((out / "config.json").read_text())["run"]["interactions"] == 6

@@ -30,6 +30,7 @@ from sili_robots.agent.latent_cache import LatentCache
 from sili_robots.agent.sac import SAC
 from sili_robots.agent.schedule import value_at
 from sili_robots.agent.smirl import RunningGaussian
+from sili_robots.errors import CheckpointMismatch
 
 
 @dataclass
@@ -371,6 +372,16 @@ class SILIAgent:
         return state
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Load ``state_dict``'s output; CheckpointMismatch when it is another agent's."""
+        try:
+            self._load_state(state)
+        except (RuntimeError, ValueError, KeyError, IndexError, TypeError) as err:
+            lines = [line.strip() for line in str(err).splitlines() if line.strip()] or [repr(err)]
+            raise CheckpointMismatch(
+                f"it is another agent's state ({' '.join(lines[:2])})"
+            ) from None
+
+    def _load_state(self, state: dict[str, Any]) -> None:
         self.sac.load_state_dict(state["sac"])
         self.buffer.load_state_dict(state["buffer"])
         self.latents.load_state_dict(state["latents"])
