@@ -107,6 +107,24 @@ def test_collect_refuses_a_different_run_of_the_same_name(sweep_and_collection, 
     assert not (run / "runs").exists()
 
 
+def test_grid_refuses_a_sweep_as_its_collection_and_names_a_damaged_collected_config(
+    sweep_and_collection, tmp_path, capsys
+):
+    sweep, collection = sweep_and_collection
+    grid = ["grid", "--tasks", "circle-3", "--blocks", "sili-oracle", "--dry-run"]
+    assert main([*grid, "--sweep-dir", str(tmp_path / "s"), "--into", str(sweep)]) == 2
+    assert (
+        f"--into {sweep} is a sweep; collect into a results collection" in capsys.readouterr().err
+    )
+    damaged = tmp_path / "damaged"
+    shutil.copytree(collection, damaged)
+    config = damaged / "runs" / "circle-3__sili-bschedule__s0" / "config.json"
+    for text in ("{", '{"run": 5}', "[]", "{}"):
+        config.write_text(text)
+        assert main([*grid, "--sweep-dir", str(tmp_path / "s"), "--into", str(damaged)]) == 2
+        assert f"{config} is damaged" in capsys.readouterr().err
+
+
 def test_collect_takes_a_run_extended_or_trained_again_and_refuses_before_copying(
     sweep_and_collection, tmp_path, capsys
 ):
@@ -740,8 +758,14 @@ def test_a_rehearsal_at_a_fraction_of_the_budgets_goes_into_folders_of_its_own(
     monkeypatch.chdir(Path(__file__).resolve().parents[1])  # where the defaults are the grid's
     assert main(["grid", "--fraction", "0.01", "--dry-run"]) == 2
     assert "goes into a --sweep-dir of its own, not sweeps/paper-grid" in capsys.readouterr().err
-    assert main(["grid", "--fraction", "0", "--dry-run", "--sweep-dir", str(tmp_path)]) == 2
-    assert "--fraction 0 trains nothing" in capsys.readouterr().err
+    for bad, said in (
+        ("0", "0.0 is outside the allowed range (0, 1]; 0 trains nothing"),
+        ("-0.5", "-0.5 is outside the allowed range (0, 1]"),
+        ("nan", "nan is outside the allowed range (0, 1]"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main(["grid", "--fraction", bad, "--dry-run", "--sweep-dir", str(tmp_path)])
+        assert exc.value.code == 2 and said in capsys.readouterr().err
     own = ["--sweep-dir", str(tmp_path / "s"), "--into", str(tmp_path / "r")]
     assert main(["grid", "--fraction", "0.01", "--dry-run", "--blocks", "b-sweep", *own]) == 0
     out = capsys.readouterr().out

@@ -29,17 +29,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.sweep.collect import collect
-    from sili_robots.sweep.state import SWEEP_FILE, check_sweep_dir
+    from sili_robots.sweep.state import check_collection_dir
 
     same = [str(src) for src in args.sources if Path(src).resolve() == args.into.resolve()]
     if same:
         raise ConfigError(f"--into {args.into} is also a source ({same[0]}); collect elsewhere")
-    check_sweep_dir(args.into, "--into")  # a run's folder or a user's is refused
-    if (args.into / SWEEP_FILE).exists():  # its runs would be replaced by their small copies
-        raise ConfigError(
-            f"--into {args.into} is a sweep; collect into a results collection or a new or empty "
-            "directory"
-        )
+    check_collection_dir(args.into, "--into")  # a sweep, a run's folder or a user's is refused
     writable_dir(args.into, "--into")
     report = collect(args.sources, args.into)
     print(

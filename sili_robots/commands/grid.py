@@ -7,10 +7,22 @@ import json
 import os
 from pathlib import Path
 
-from sili_robots.commands.common import float_in, path_arg, positive_int
+from sili_robots.commands.common import path_arg, positive_int
 
 #: where the grid at its budgets trains and collects
 SWEEP_DIR, COLLECTION = Path("sweeps/paper-grid"), Path("results/paper-grid")
+
+
+def budget_fraction(text: str) -> float:
+    """``--fraction``: a number in (0, 1] (0 would train nothing)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number in (0, 1]") from None
+    if not 0.0 < value <= 1.0:
+        nothing = "; 0 trains nothing" if value == 0.0 else ""
+        raise argparse.ArgumentTypeError(f"{value} is outside the allowed range (0, 1]{nothing}")
+    return value
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -39,7 +51,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--fraction",
-        type=lambda text: float_in(text, 0.0, 1.0),
+        type=budget_fraction,
         default=1.0,
         help="every budget times this, in (0, 1] (e.g. 0.01: a rehearsal of the whole grid in "
         "minutes), into a --sweep-dir and --into of its own; the claims judge full budgets only",
@@ -56,10 +68,8 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.sweep import LocalBackend, plan, run_sweep
     from sili_robots.sweep.collect import collect
     from sili_robots.sweep.spec import parse_list
-    from sili_robots.sweep.state import check_sweep_dir, run_path
+    from sili_robots.sweep.state import check_collection_dir, check_sweep_dir, run_path
 
-    if args.fraction == 0.0:
-        raise ConfigError("--fraction 0 trains nothing; give a fraction in (0, 1]")
     elsewhere = _default_folders(args)
     if elsewhere and not args.dry_run:  # days of training, not a resume
         raise ConfigError(
@@ -74,8 +84,9 @@ def run(args: argparse.Namespace) -> int:
             f"--sweep-dir and --into are both {args.into}: the grid trains in one and collects "
             "the finished runs into the other; give two folders"
         )
+    check_sweep_dir(args.sweep_dir, "--sweep-dir")  # before any run, in a dry run too
+    check_collection_dir(args.into, "--into")
     for path, option in ((args.sweep_dir, "--sweep-dir"), (args.into, "--into")):
-        check_sweep_dir(path, option)  # before any run, in a dry run too
         if not args.dry_run:  # a listing reads only
             writable_dir(path, option)
     for option, text, allowed in (
@@ -237,14 +248,14 @@ def as_collected(collection: Path, spec):
     from dataclasses import replace
 
     from sili_robots.agent.config import get_path
-    from sili_robots.runs import CONFIG, RunConfig
+    from sili_robots.runs import CONFIG, read_config
     from sili_robots.sweep import plan
     from sili_robots.sweep.state import run_path
 
     for r in plan([spec]):
-        path = run_path(collection, r.name) / CONFIG
-        if path.is_file():
-            config = RunConfig.from_dict(json.loads(path.read_text())["run"])
+        run_dir = run_path(collection, r.name)
+        if (run_dir / CONFIG).is_file():
+            config = read_config(run_dir)  # ConfigError naming a damaged one
             overrides = {k: get_path(config.agent, k) for k in spec.agent_overrides}
             task_ids = {**spec.task_ids, config.task: config.task_id}
             return replace(spec, agent_overrides=overrides, task_ids=task_ids)

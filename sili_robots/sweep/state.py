@@ -69,6 +69,17 @@ def check_sweep_dir(path: Path, option: str) -> None:
             )
 
 
+def check_collection_dir(path: Path, option: str) -> None:
+    """``check_sweep_dir`` for a results collection to copy runs into; a sweep is refused too:
+    its runs would be replaced by their small copies."""
+    check_sweep_dir(path, option)
+    if (Path(path) / SWEEP_FILE).exists():
+        raise ConfigError(
+            f"{option} {path} is a sweep; collect into a results collection or a new or empty "
+            "directory"
+        )
+
+
 def run_path(sweep_dir: Path, name: str) -> Path:
     return Path(sweep_dir) / RUNS_DIR / name
 
