@@ -439,8 +439,13 @@ def test_read_outs_name_a_damaged_summary_and_read_a_sweep_they_cannot_write(tmp
     bad = sili_in_process("runs", collection)
     assert bad.returncode == 2 and "summary.json is damaged (a value of final_task" in bad.stderr
     summary.write_text("[1, 2]")
-    bad = sili_in_process("runs", collection)
-    assert bad.returncode == 2 and "summary.json is damaged (not a JSON object)" in bad.stderr
+    for command in (
+        ["runs"],
+        ["claims"],
+        ["plot", "--out", str(tmp_path / "f"), "--formats", "png"],
+    ):
+        bad = sili_in_process(command[0], collection, *command[1:])
+        assert bad.returncode == 2 and "summary.json is damaged (not a JSON object)" in bad.stderr
     shutil.copy(collection / "runs" / "s2" / "summary.json", summary)
     record = json.loads(summary.read_text())
     summary.write_text(json.dumps({**record, "final_stability": None}))  # a 1-interaction run's

@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
@@ -143,6 +144,27 @@ def _controller(task_id: str | None, env_kwargs: dict) -> str:
         return ""
 
 
+SUMMARY_NUMBERS = ("final_task_reward", "final_stability", "wall_time_s")
+
+
+def finished_summary(run_dir: Path) -> dict[str, Any] | None:
+    """A finished run's ``summary.json`` (None while it trains); ConfigError naming it when it
+    is damaged, so no table counts a run finished on a file it cannot read."""
+    path = run_dir / SUMMARY
+    if not path.is_file():
+        return None
+    summary = read_json(path, DAMAGED_SUMMARY, *SUMMARY_NUMBERS)
+    stability = summary["final_stability"]  # None after one interaction: no change
+    if not (is_number(stability) or stability is None) or not all(
+        is_number(summary[k]) for k in ("final_task_reward", "wall_time_s")
+    ):
+        raise ConfigError(
+            f"{path} is damaged (a value of {', '.join(SUMMARY_NUMBERS)} is not a number); "
+            f"{DAMAGED_SUMMARY}"
+        )
+    return summary
+
+
 def results_table(sweep_dir: Path) -> pd.DataFrame:
     """All runs' per-interaction rows in one tidy frame (columns ``RESULT_COLUMNS``)."""
     frames = []
@@ -156,7 +178,7 @@ def results_table(sweep_dir: Path) -> pd.DataFrame:
         for key, value in ident.items():
             df[key] = value
         df["true_stability"] = kept(df)
-        df["finished"] = (run_dir / SUMMARY).is_file()
+        df["finished"] = finished_summary(run_dir) is not None
         frames.append(df)
     if not frames:
         return pd.DataFrame(columns=list(RESULT_COLUMNS))
@@ -168,22 +190,13 @@ def runs_table(sweep_dir: Path) -> pd.DataFrame:
     rows = []
     for run_dir in run_dirs(sweep_dir):
         ident, cfg = run_identity(run_dir)
-        summary_path, error_path = run_dir / SUMMARY, run_dir / ERROR_FILE
+        error_path = run_dir / ERROR_FILE
         metrics = run_metrics(run_dir)
         logged = 0 if metrics is None else len(metrics)
         row = {**ident, "interactions": int(cfg["interactions"]), "interactions_logged": logged}
-        if summary_path.is_file():
-            keys = ("final_task_reward", "final_stability", "wall_time_s")
-            summary = read_json(summary_path, DAMAGED_SUMMARY, *keys)
-            stability = summary["final_stability"]  # None after one interaction: no change
-            if not (is_number(stability) or stability is None) or not all(
-                is_number(summary[k]) for k in ("final_task_reward", "wall_time_s")
-            ):
-                raise ConfigError(
-                    f"{summary_path} is damaged (a value of {', '.join(keys)} is not a number); "
-                    f"{DAMAGED_SUMMARY}"
-                )
-            row.update(status="done", **{k: summary[k] for k in keys})
+        summary = finished_summary(run_dir)
+        if summary is not None:
+            row.update(status="done", **{k: summary[k] for k in SUMMARY_NUMBERS})
         elif error_path.is_file():
             text = error_path.read_text().strip().splitlines()
             row.update(status="failed", error=text[-1] if text else "")
