@@ -52,6 +52,14 @@ def default_interactions(task: str) -> int:
     return TASK_INTERACTIONS.get(task_spec(task).family, DEFAULT_INTERACTIONS)
 
 
+def check_games(games: Any) -> int:
+    """A count of games as an integer >= 1, or ConfigError naming it."""
+    g = _integer(games)
+    if g is None or g < 1:
+        raise ConfigError(f"--games must be an integer >= 1, got {games!r}")
+    return g
+
+
 def check_counts(interactions: Any, games: Any = None, strategies: int = 1) -> tuple[int, int]:
     """(interactions, games) as integers: at least two interactions per game (a game's first is
     not counted). ``games=None`` takes the smallest multiple of ``strategies`` (how many first
@@ -68,9 +76,7 @@ def check_counts(interactions: Any, games: Any = None, strategies: int = 1) -> t
         while balanced > strategies and 2 * balanced > n:
             balanced -= strategies
         return n, min(balanced, n // 2)
-    g = _integer(games)
-    if g is None or g < 1:
-        raise ConfigError(f"--games must be an integer >= 1, got {games!r}")
+    g = check_games(games)
     if n < 2 * g:
         raise ConfigError(
             f"--interactions must be >= {2 * g} for {g} games (two per game: a game's first "

@@ -35,6 +35,11 @@ from sili_robots.wrappers import OracleObservation, StrategyFlag
 def task_class(path: str) -> type[RepeatedInteractionEnv]:
     """A user's task class from ``package.module:ClassName``."""
     module_name, _, class_name = path.partition(":")
+    if not module_name or not class_name:
+        raise ConfigError(
+            f"task {path!r} names no {'module' if not module_name else 'class'}: give a registered "
+            "task or package.module:ClassName"
+        )
     if os.getcwd() not in sys.path:  # a console script, unlike `python -m`, leaves it out
         sys.path.append(os.getcwd())
     try:

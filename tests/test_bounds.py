@@ -71,6 +71,7 @@ def test_bounds_work_for_driving_in_its_own_process():
         (["circle-3", "--interactions", "0"], "--interactions must be an integer >= 2"),
         (["circle-3", "--interactions", "-3"], "got '-3'"),
         (["circle-3", "--games", "0"], "--games must be an integer >= 1, got '0'"),
+        (["circle-3", "--games", "-1"], "got '-1'\n"),  # the user's count, not the default's
         (["circle-3", "--interactions", "4", "--games", "3"], "must be >= 6 for 3 games"),
         ([], "give either a TASK (e.g. circle-3) or --all"),
     ],

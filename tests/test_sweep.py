@@ -287,6 +287,7 @@ def test_a_second_sweep_on_the_same_directory_is_refused(tmp_path):
         ),
         (["--tasks", "circle-3", "--methods", "sac", "--ray-address", "auto"], "needs --backend"),
         (["--tasks", "no_such_module:Env", "--methods", "sac"], "cannot load task class"),
+        (["--tasks", ":Env", "--methods", "sac"], "task ':Env' names no module"),
         (["--tasks", "", "--methods", "sac"], "no tasks given; allowed: circle-3"),
         (["--tasks", "circle-3", "--methods", "all,sac"], "'all' stands alone"),
         (["--tasks", "sawyer-reach", "--methods", "sac", "--controller", ","], "no controllers"),

@@ -91,6 +91,7 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.bounds import (
         BOUNDS_FILE,
         check_counts,
+        check_games,
         compute_bounds,
         default_interactions,
         format_table,
@@ -109,6 +110,8 @@ def run(args: argparse.Namespace) -> int:
         read_bounds_file(writable_file(Path(args.write), "--write"))
     specs = all_versions() if args.all else [task_spec(args.task)]
     env_kwargs = _task_arguments(args, specs)
+    if args.games is not None:
+        check_games(args.games)  # the user's own count, whatever the interactions
     for spec in specs:  # the counts checked before anything runs
         try:
             check_counts(args.interactions or default_interactions(spec.name), args.games)
