@@ -11,6 +11,10 @@ class ConfigError(ValueError):
     """A value given by the user is not allowed; the message names the value and the choices."""
 
 
+class TrainingDiverged(ConfigError):
+    """A loss became infinite or NaN: settings far outside their usual range."""
+
+
 class CheckpointMismatch(ConfigError):
     """A checkpoint's networks or replay do not fit the agent its run's settings build (a
     checkpoint copied from another run, or settings edited by hand)."""

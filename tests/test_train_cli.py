@@ -445,6 +445,19 @@ def test_a_checkpoint_of_another_run_exits_2_and_leaves_the_run_as_it_was(tmp_pa
         SILI.load(run)
 
 
+def test_training_that_diverges_exits_2_naming_the_losses(tmp_path, capsys):
+    args = ["train", "--task", "circle-3", "--interactions", "2", *FAST]
+    huge = ["--set", "sac.target_entropy=1e300", "--set", "sac.random_interactions=0"]
+    assert main([*args, *huge, "--out", str(tmp_path / "huge")]) == 2
+    err = capsys.readouterr().err
+    assert "training diverged after interaction 0 (critic_loss nan" in err
+    assert "action must be finite" not in err
+    # a latent model given no updates has a NaN loss by design, not a divergence
+    idle = ["--set", "model.updates_per_interaction=0"]
+    assert main([*args, *idle, "--out", str(tmp_path / "idle")]) == 0
+    assert pd.read_csv(tmp_path / "idle" / "metrics.csv")["latent_loss"].isna().all()
+
+
 def test_resume_after_kill_reproduces_the_uninterrupted_run(tmp_path):
     args = [
         "--task",

@@ -15,6 +15,7 @@ Every method of the paper is a configuration (``methods.py``). Research variants
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -30,7 +31,7 @@ from sili_robots.agent.latent_cache import LatentCache
 from sili_robots.agent.sac import SAC
 from sili_robots.agent.schedule import value_at
 from sili_robots.agent.smirl import RunningGaussian
-from sili_robots.errors import CheckpointMismatch
+from sili_robots.errors import CheckpointMismatch, TrainingDiverged
 
 
 @dataclass
@@ -44,6 +45,21 @@ class InteractionStats:
     #: the agent's own latent changed between j and j+1 (partial: the observed flag was raised)
     latent_changed: bool
     extra: dict[str, float] = field(default_factory=dict)  # add-ons' metric columns
+
+
+def check_finite(
+    losses: dict[str, float], interaction: int, unset: tuple[str, ...] = ()
+) -> dict[str, float]:
+    """``losses``, or TrainingDiverged: once a loss is infinite or NaN the networks are too,
+    and the task would refuse the next action without saying why (``unset``: NaN by design)."""
+    bad = [f"{k} {v}" for k, v in losses.items() if not math.isfinite(v) and k not in unset]
+    if bad:
+        raise TrainingDiverged(
+            f"training diverged after interaction {interaction} ({', '.join(bad)}): settings "
+            "far outside their usual range do this (a huge sac.target_entropy, sili.scale or "
+            "learning rate)"
+        )
+    return losses
 
 
 class SILIAgent:
@@ -268,8 +284,9 @@ class SILIAgent:
         if self.model is not None and self.buffer.n >= 2:
             steps = self.cfg.model.updates_per_interaction
             losses["latent_loss"] = self.update_latent_model(steps)
+        unset = () if self.cfg.model.updates_per_interaction else ("latent_loss",)
         if not rl:
-            return losses
+            return check_finite(losses, interaction, unset)
         self._update_credit += self.horizon * value_at(self.cfg.sac.updates_per_step, interaction)
         n_updates = int(self._update_credit)
         self._update_credit -= n_updates
@@ -279,7 +296,7 @@ class SILIAgent:
             losses["critic_loss"] = float(torch.stack([o["critic_loss"] for o in out]).mean())
             losses["actor_loss"] = float(torch.stack([o["actor_loss"] for o in out]).mean())
             losses["alpha"] = self.sac.alpha
-        return losses
+        return check_finite(losses, interaction, unset)
 
     def update_latent_model(self, steps: int) -> float:
         """Max-likelihood steps on random consecutive pairs (tau^{j-1}, tau^j)."""
