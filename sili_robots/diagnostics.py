@@ -70,8 +70,9 @@ def latent_diagnostics(df: pd.DataFrame, window: int = 100) -> dict[str, float]:
     - ``latent_change_agreement``: fraction where "my latent changed" equals "the true
       strategy changed".
     - ``stability_reward_paid``: mean of the ``stability_reward`` column: -d(z^j, z^{j+1})
-      before b and the credit's scale (the agent is paid scale x that, H by default), or for
-      the partial latent minus the flagged steps (``InteractionStats``).
+      before b and the credit (``boundary`` pays scale x that, H by default; ``per_step`` that
+      on every step of the next interaction), or for the partial latent minus the flagged
+      steps (``InteractionStats``).
     """
     out = {"stability_reward_paid": float(df["stability_reward"].tail(window).mean())}
     if len(df) < 2 or (df["latent_category"] < 0).all():

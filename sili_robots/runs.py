@@ -610,4 +610,13 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
             f"{path} is damaged ({_first_line(err)}); the run can be neither resumed nor "
             "played from it: train it again (sili train ... --overwrite)"
         ) from None
+    task = state.get("task")  # recorded since checkpoints name their task
+    if task is not None and ":" not in task:  # a registered task (a user's class may be renamed)
+        cfg = read_config(run_dir)
+        if task != (cfg.task_id or cfg.task):
+            raise ConfigError(
+                f"{path} is a checkpoint of {task}, not of {cfg.task_id or cfg.task}, which the "
+                f"run in {run_dir} trains: was it copied from another run? Train this run again "
+                "(sili train ... --overwrite)"
+            )
     return state

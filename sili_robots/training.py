@@ -130,6 +130,7 @@ def train(
                         run_dir,
                         {
                             "interaction": done,
+                            "task": cfg.task_id or cfg.task,  # a copy into another run is refused
                             "agent": agent.state_dict(),
                             "game": env.unwrapped.game_state(),
                             "wall_time": elapsed0 + time.perf_counter() - t0,
@@ -169,9 +170,9 @@ def _start_or_resume(
         return agent, obs, info, 0, MetricsWriter(run_dir)
     with fitting(run_dir, cfg, given_env):
         agent.load_state_dict(state["agent"])
+    obs, info = resume_game(env, state["game"])
     extend(run_dir, cfg.interactions)
     (run_dir / SUMMARY).unlink(missing_ok=True)  # unfinished until it writes a new one
-    obs, info = resume_game(env, state["game"])
     start = int(state["interaction"])
     record_continuation(run_dir, cfg.threads, start)
     return agent, obs, info, start, MetricsWriter(run_dir, keep_rows=start)

@@ -443,6 +443,19 @@ def test_a_checkpoint_of_another_run_exits_2_and_leaves_the_run_as_it_was(tmp_pa
         assert said in capsys.readouterr().err
     with pytest.raises(ConfigError, match="does not fit the agent"):
         SILI.load(run)
+    # another task's agent of the same sizes: refused by the task its checkpoint names
+    circle8 = tmp_path / "circle8"
+    assert (
+        main(["train", "--task", "circle-8", "--interactions", "2", *FAST, "--out", str(circle8)])
+        == 0
+    )
+    shutil.copy(circle8 / "checkpoint.pt", run / "checkpoint.pt")
+    capsys.readouterr()
+    assert main(["train", "--resume", str(run), "--interactions", "3", "--no-progress"]) == 2
+    said = "checkpoint.pt is a checkpoint of sili/Circle8-v1, not of sili/Circle3-v1"
+    assert said in capsys.readouterr().err
+    assert json.loads((run / "config.json").read_text())["run"]["interactions"] == 2
+    assert run_state(run) == "done"
 
 
 def test_training_that_diverges_exits_2_naming_the_losses(tmp_path, capsys):
@@ -902,7 +915,7 @@ def test_a_run_being_extended_is_unfinished_until_it_ends(tmp_path, monkeypatch)
     resume(out, progress=False)
     assert json.loads((out / "summary.json").read_text())["interactions"] == 5
     # stopped after the extension was recorded but before it trained: resumable, not done
-    monkeypatch.setattr(training, "resume_game", killed)
+    monkeypatch.setattr(training, "record_continuation", killed)
     with pytest.raises(KeyboardInterrupt):
         resume(out, progress=False, interactions=6)
     assert json.loads((out / "config.json").read_text())["run"]["interactions"] == 6

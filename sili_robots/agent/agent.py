@@ -38,8 +38,9 @@ from sili_robots.errors import CheckpointMismatch, TrainingDiverged
 class InteractionStats:
     """What the agent saw of one finished interaction."""
 
-    #: R_stable of the interaction before b and the credit's scale: -d(z^j, z^{j+1}) (the paid
-    #: term is scale x that, scale H by default); partial: minus the steps whose flag was raised
+    #: R_stable of the interaction before b and the credit: -d(z^j, z^{j+1}) (``boundary`` pays
+    #: scale x that, H by default; ``per_step`` that on each step of j+1); partial: minus the
+    #: steps whose flag was raised
     stability_reward: float
     latent_category: int  # argmax of z^{j+1} (-1 when there is no discrete latent)
     #: the agent's own latent changed between j and j+1 (partial: the observed flag was raised)
@@ -391,14 +392,19 @@ class SILIAgent:
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Load ``state_dict``'s output; CheckpointMismatch when it is another agent's."""
         try:
-            self._load_state(state)
+            self._load_learned(state)
         except (RuntimeError, ValueError, KeyError, IndexError, TypeError) as err:
             lines = [line.strip() for line in str(err).splitlines() if line.strip()] or [repr(err)]
             raise CheckpointMismatch(
                 f"it is another agent's state ({' '.join(lines[:2])})"
             ) from None
+        saved = state.get("addons", {})
+        for addon in self.addons:  # their own computations: errors there are not a mismatch
+            addon.load_state_dict(saved.get(addon.name, {}))
+        self.begin_interaction()
 
-    def _load_state(self, state: dict[str, Any]) -> None:
+    def _load_learned(self, state: dict[str, Any]) -> None:
+        """The networks, optimisers, replay and random states (what a mismatch breaks)."""
         self.sac.load_state_dict(state["sac"])
         self.buffer.load_state_dict(state["buffer"])
         self.latents.load_state_dict(state["latents"])
@@ -409,7 +415,3 @@ class SILIAgent:
         if self.model is not None:
             self.model.load_state_dict(state["model"])
             self.model_opt.load_state_dict(state["model_opt"])
-        saved = state.get("addons", {})
-        for addon in self.addons:
-            addon.load_state_dict(saved.get(addon.name, {}))
-        self.begin_interaction()

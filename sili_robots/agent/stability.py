@@ -1,4 +1,5 @@
-"""SILI's stability reward and where it is credited, used by training and metrics alike.
+"""SILI's stability reward, used by training and metrics alike, and where the agent credits it
+(``SILIAgent._stability_rewards``).
 
 R_stable = -d(z^j, z^{j+1}): d is 0/1 on the category for discrete latents, Euclidean for
 continuous ones, "the true strategy changed" for the ``true`` diagnostic. z^0 is "no history",

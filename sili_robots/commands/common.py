@@ -88,10 +88,12 @@ def writable_file(path: Path, option: str) -> Path:
     return path
 
 
-def float_in(text: str, low: float = -math.inf, high: float = math.inf) -> float:
-    """A number in [low, high]; with no bounds, any finite number."""
+def float_in(
+    text: str, low: float = -math.inf, high: float = math.inf, low_open: bool = False
+) -> float:
+    """A number in [low, high] (``low_open``: (low, high]); with no bounds, any finite one."""
     bounded = math.isfinite(low) or math.isfinite(high)
-    span = f"[{low:g}, {high:g}]"
+    span = f"{'(' if low_open else '['}{low:g}, {high:g}]"
     try:
         value = float(text)
     except ValueError:
@@ -100,7 +102,7 @@ def float_in(text: str, low: float = -math.inf, high: float = math.inf) -> float
         ) from None
     if not bounded and not math.isfinite(value):
         raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
-    if not low <= value <= high:
+    if not (low < value <= high if low_open else low <= value <= high):
         raise argparse.ArgumentTypeError(f"{value} is outside the allowed range {span}")
     return value
 

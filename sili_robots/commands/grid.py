@@ -7,22 +7,10 @@ import json
 import os
 from pathlib import Path
 
-from sili_robots.commands.common import path_arg, positive_int
+from sili_robots.commands.common import float_in, path_arg, positive_int
 
 #: where the grid at its budgets trains and collects
 SWEEP_DIR, COLLECTION = Path("sweeps/paper-grid"), Path("results/paper-grid")
-
-
-def budget_fraction(text: str) -> float:
-    """``--fraction``: a number in (0, 1] (0 would train nothing)."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number in (0, 1]") from None
-    if not 0.0 < value <= 1.0:
-        nothing = "; 0 trains nothing" if value == 0.0 else ""
-        raise argparse.ArgumentTypeError(f"{value} is outside the allowed range (0, 1]{nothing}")
-    return value
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -51,7 +39,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--fraction",
-        type=budget_fraction,
+        type=lambda text: float_in(text, 0.0, 1.0, low_open=True),
         default=1.0,
         help="every budget times this, in (0, 1] (e.g. 0.01: a rehearsal of the whole grid in "
         "minutes), into a --sweep-dir and --into of its own; the claims judge full budgets only",

@@ -9,24 +9,15 @@ from typing import Any
 import pandas as pd
 
 from sili_robots.labels import VARIANT_KEYS
-from sili_robots.runs import recorded_run
+from sili_robots.runs import MACHINE_SETTINGS, recorded_run
 from sili_robots.sweep.results import run_dirs, runs_table
 
 #: one row per (task, variant, the other settings its runs differ in)
 INVENTORY_KEYS = ("task", *VARIANT_KEYS, "settings")
 #: recorded settings that are not the configuration: the seed, the budget, the machine's
-#: bookkeeping (how many threads, which float32 library, how often saved), and the task and its
+#: (``runs.MACHINE_SETTINGS``: threads, kernels, precision, how often saved), and the task and its
 #: arguments (the variant's own columns: ``task_args``, ``controller``, ``task_id``)
-NOT_SETTINGS = (
-    "seed",
-    "interactions",
-    "threads",
-    "checkpoint_every",
-    "agent.matmul",
-    "task",
-    "task_id",
-    "env_kwargs",
-)
+NOT_SETTINGS = ("seed", "interactions", *MACHINE_SETTINGS, "task", "task_id", "env_kwargs")
 
 
 def inventory(directory: Path) -> pd.DataFrame:
