@@ -18,6 +18,7 @@ from sili_robots.build import build_agent, make_run_env
 from sili_robots.diagnostics import latent_diagnostics
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import fitting
+from sili_robots.memory import capped_at_available
 from sili_robots.progress import TrainingProgress
 from sili_robots.rollout import play_interaction
 from sili_robots.runs import (
@@ -78,7 +79,7 @@ def train(
     if agent.watches_steps:
         watch = lambda s, a, r, s2, _info: agent.observe_step(s, a, r, s2)  # noqa: E731
     try:
-        with StopBetweenInteractions() as stop:
+        with StopBetweenInteractions() as stop, capped_at_available():
             if stop_file is not None and stop_file.exists():  # asked while the run was set up
                 raise KeyboardInterrupt(f"{stop_file} asked the run to stop")
             for j in range(start, cfg.interactions):
