@@ -11,24 +11,41 @@ from sili_robots import memory
 from sili_robots.cli import main
 
 pytestmark = pytest.mark.skipif(memory.available_memory() is None, reason="needs /proc/meminfo")
+MIB = 2**20
 
 
 def test_the_cap_refuses_more_than_is_available_and_is_lifted_after(monkeypatch):
     before = resource.getrlimit(resource.RLIMIT_DATA)
-    monkeypatch.setattr(memory, "available_memory", lambda: 200 * 2**20)
+    monkeypatch.setattr(memory, "available_memory", lambda: 200 * MIB)
     with memory.capped_at_available():
-        soft, _ = resource.getrlimit(resource.RLIMIT_DATA)
-        assert soft != resource.RLIM_INFINITY
+        assert resource.getrlimit(resource.RLIMIT_DATA)[0] != resource.RLIM_INFINITY
         with pytest.raises(MemoryError):
-            np.ones(400 * 2**20, np.uint8)  # twice what is "available"
-        np.ones(20 * 2**20, np.uint8)  # what fits still does
+            np.empty(memory.HEADROOM + 400 * MIB, np.uint8)  # more than "available"
+        np.ones(20 * MIB, np.uint8)  # what fits still does
+    assert resource.getrlimit(resource.RLIMIT_DATA) == before
+
+
+def test_overlapping_caps_lift_only_when_the_last_ends(monkeypatch):
+    """Trainings in two threads: the first to end must not lift the other's cap, nor the last
+    leave the first's cap behind."""
+    before = resource.getrlimit(resource.RLIMIT_DATA)
+    monkeypatch.setattr(memory, "available_memory", lambda: 200 * MIB)
+    first, second = memory.capped_at_available(), memory.capped_at_available()
+    first.__enter__()
+    capped = resource.getrlimit(resource.RLIMIT_DATA)
+    second.__enter__()
+    first.__exit__(None, None, None)
+    assert resource.getrlimit(resource.RLIMIT_DATA) == capped
+    second.__exit__(None, None, None)
     assert resource.getrlimit(resource.RLIMIT_DATA) == before
 
 
 def test_training_past_the_memory_left_exits_1_with_one_line(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(memory, "available_memory", lambda: 100 * 2**20)
-    # the latent model's batch: 20,000 pairs x 50 steps x 32 units, 128 MB a layer
+    before = resource.getrlimit(resource.RLIMIT_DATA)
+    monkeypatch.setattr(memory, "available_memory", lambda: 100 * MIB)
+    # the latent model's batch: 100,000 pairs x 50 steps x 32 units, 640 MB a layer
     args = ["train", "--task", "circle-3", "--interactions", "3", *FAST_ARGS, "--no-progress"]
-    assert main([*args, "--set", "model.batch=20000", "--out", str(tmp_path / "run")]) == 1
+    assert main([*args, "--set", "model.batch=100000", "--out", str(tmp_path / "run")]) == 1
     err = capsys.readouterr().err
     assert err.startswith("sili train: error: out of memory (") and len(err.splitlines()) == 1
+    assert resource.getrlimit(resource.RLIMIT_DATA) == before

@@ -920,6 +920,11 @@ def test_a_run_being_extended_is_unfinished_until_it_ends(tmp_path, monkeypatch)
         resume(out, progress=False, interactions=6)
     assert json.loads((out / "config.json").read_text())["run"]["interactions"] == 6
     assert run_state(out) == "resumable"
+    # stopped before the game was restored: the run is left as it was
+    monkeypatch.setattr(training, "resume_game", killed)
+    with pytest.raises(KeyboardInterrupt):
+        resume(out, progress=False, interactions=8)
+    assert json.loads((out / "config.json").read_text())["run"]["interactions"] == 6
     # as earlier versions left it (the target raised, the shorter summary kept): not done
     (out / "summary.json").write_text(json.dumps({"interactions": 5}))
     assert run_state(out) == "resumable"
