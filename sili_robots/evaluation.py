@@ -105,15 +105,13 @@ def fitting(run_dir: Path, cfg: RunConfig, env: gym.Env | None) -> Iterator[None
     its checkpoint fits unless it came from another run."""
     try:
         yield
-    except (RuntimeError, ValueError) as err:
-        if env is None and isinstance(err, CheckpointMismatch):
+    except CheckpointMismatch as err:
+        if env is None:
             raise ConfigError(
                 f"{run_dir / CHECKPOINT} does not fit the agent {run_dir / CONFIG} describes: "
                 f"{err}; was it copied from another run? Train this run again (sili train ... "
                 "--overwrite)"
             ) from None
-        if env is None:
-            raise
         given = f"{task_name_of(env)} with {task_kwargs_of(env)}"
         raise ConfigError(
             f"env does not fit the run in {run_dir}, trained on {cfg.task} with "
