@@ -88,13 +88,13 @@ class SILIAgent:
         self.sac = SAC(
             self.in_dim,
             act_dim,
-            cfg.hidden,
-            value_at(cfg.sac.lr, 0),
-            value_at(cfg.sac.gamma, 0),
-            value_at(cfg.sac.tau, 0),
-            cfg.sac.precision,
-            value_at(cfg.sac.target_entropy, 0),
-            cfg.matmul,
+            hidden=cfg.hidden,
+            lr=value_at(cfg.sac.lr, 0),
+            gamma=value_at(cfg.sac.gamma, 0),
+            tau=value_at(cfg.sac.tau, 0),
+            precision=cfg.sac.precision,
+            target_entropy=value_at(cfg.sac.target_entropy, 0),
+            matmul=cfg.matmul,
         )
         self.model: LatentModel | None = None
         if cfg.uses_latent_model:
@@ -102,11 +102,11 @@ class SILIAgent:
             self.model = LatentModel(
                 obs_dim,
                 act_dim,
-                m.dim,
-                cfg.hidden,
-                cfg.latent,
-                m.estimator,
-                value_at(m.usage_bonus, 0),
+                latent_dim=m.dim,
+                hidden=cfg.hidden,
+                kind=cfg.latent,
+                estimator=m.estimator,
+                usage_bonus=value_at(m.usage_bonus, 0),
                 preact_penalty=value_at(m.preact_penalty, 0),
                 squash=m.squash,
                 readouts=[r for a in self.hooks["encoder_readouts"] for r in a.encoder_readouts()],
@@ -117,12 +117,12 @@ class SILIAgent:
         self.latents = LatentCache(
             self.model,
             self.buffer,
-            cfg.latent,
-            self.zdim,
-            self.rng,
-            cfg.model.merge_threshold,
-            cfg.model.sample and cfg.latent == "discrete",
-            self.model_opt if self.model is not None else None,
+            kind=cfg.latent,
+            dim=self.zdim,
+            rng=self.rng,
+            merge_threshold=cfg.model.merge_threshold,
+            sample=cfg.model.sample and cfg.latent == "discrete",
+            optimizer=self.model_opt if self.model is not None else None,
         )
         self.smirl = RunningGaussian(obs_dim, cfg.sili.smirl_std_floor)
         self.beta = float(value_at(cfg.sili.beta, 0))  # b now (the schedules add-on moves it)
