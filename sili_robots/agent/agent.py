@@ -249,7 +249,8 @@ class SILIAgent:
         return self._stats(j, next_first, extra)
 
     def refresh_latents(self) -> None:
-        """Recompute every cached latent with the current encoder (then the add-ons' state)."""
+        """Recompute every cached latent with the current encoder (then the add-ons' state);
+        discrete categories keep their names, the latent model permuted to match (latent_cache)."""
         self.latents.refresh()
         for addon in self.hooks["latents_refreshed"]:
             addon.latents_refreshed()

@@ -9,6 +9,8 @@ Discrete latents: categories whose decoder heads predict the same behaviour are 
 (``merge_threshold``, see ``latent.category_groups``), then renamed to agree as much as possible
 with the cached ones (a maximum matching on the old-by-new confusion matrix): training may
 shuffle which category stands for which strategy, and the policy should not have to relearn it.
+A rename permutes the latent model itself (the encoder's outputs, the decoder's heads and their
+optimiser state), so the encoder gives the new names from then on.
 """
 
 from __future__ import annotations
