@@ -101,16 +101,15 @@ def _circle_hold(env: RepeatedInteractionEnv, point: np.ndarray) -> np.ndarray:
     clearance = env.outside_margin + 0.02
     u = point / np.linalg.norm(point)
     out = u * (RADIUS + clearance)
+    remaining = env.horizon - env.t
     # diagonal moves at full speed (the count the packaged bounds were computed with), or more
     # where clipping the axes one by one makes the way out slower (margins past ~0.3)
-    steps_out = max(
-        math.ceil(clearance / (STEP * (abs(u[0]) + abs(u[1]))) - 1e-9),
-        _steps_to_leave(env, point, out),
-    )
-    target = point
-    if env.horizon - env.t <= steps_out:
-        target = out
-    return _toward(env.position, target, STEP)
+    diagonal = math.ceil(clearance / (STEP * (abs(u[0]) + abs(u[1]))) - 1e-9)
+    reach = math.ceil(clearance * np.abs(u).max() / STEP - 1e-9) + 1  # no way out takes longer
+    if remaining > max(diagonal, reach):  # not yet: the way out is simulated only near the end
+        return _toward(env.position, point, STEP)
+    steps_out = max(diagonal, _steps_to_leave(env, point, out))
+    return _toward(env.position, out if remaining <= steps_out else point, STEP)
 
 
 def _steps_to_leave(env: RepeatedInteractionEnv, start: np.ndarray, out: np.ndarray) -> int:
