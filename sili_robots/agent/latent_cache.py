@@ -56,11 +56,17 @@ def in_chunks(fn: Callable[[np.ndarray], np.ndarray], n: int, width: int) -> np.
     return np.concatenate(parts)
 
 
+def interactions_target_scale(obs: torch.Tensor, rew: torch.Tensor) -> torch.Tensor:
+    """``target_scale`` of stored interactions obs [N, H+1, o] (rew [N, H])."""
+    return target_scale(decoder_targets(obs[:, :-1], obs[:, 1:], rew))
+
+
 def replay_target_scale(buffer: InteractionBuffer) -> torch.Tensor:
     """Per-output standard deviation of the decoder's targets over the whole replay."""
-    obs = torch.from_numpy(buffer.obs[: buffer.n])
-    rew = torch.from_numpy(buffer.rew[: buffer.n])
-    return target_scale(decoder_targets(obs[:, :-1], obs[:, 1:], rew))
+    n = buffer.n
+    return interactions_target_scale(
+        torch.from_numpy(buffer.obs[:n]), torch.from_numpy(buffer.rew[:n])
+    )
 
 
 class LatentCache:
@@ -147,7 +153,7 @@ class LatentCache:
         b = self.buffer
         idx = self.rng.choice(b.n, min(reference, b.n), replace=False)
         obs, act, rew = (torch.from_numpy(x[idx]) for x in (b.obs, b.act, b.rew))
-        scale = target_scale(decoder_targets(obs[:, :-1], obs[:, 1:], rew))
+        scale = interactions_target_scale(obs, rew)
         distances = self.model.head_distances(obs[:, :-1], act, scale)
         counts = np.bincount(categories, minlength=self.dim)
         used = [int(c) for c in np.argsort(-counts, kind="stable") if counts[c] > 0]

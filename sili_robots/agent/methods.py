@@ -169,6 +169,7 @@ def no_stability_term(cfg: AgentConfig) -> str:
     if cfg.latent == "partial":
         return "the partial latent's term is read off each state"
     beta = cfg.sili.beta
-    if all(v == 0 for _, v in beta.points) if isinstance(beta, Schedule) else beta == 0:
+    values = [v for _, v in beta.points] if isinstance(beta, Schedule) else [beta]
+    if not any(values):
         return "b is 0 throughout: no stability term"
     return ""
