@@ -209,6 +209,57 @@ def test_an_observation_of_another_shape_than_the_space_is_named():
         Short().reset(seed=0)
 
 
+def test_a_task_s_own_mistakes_are_named_where_they_are_made():
+    """Non-finite values, a strategy the class does not declare and a missing base ``__init__``
+    are named by the task's method, not met later in the agent or blamed on its settings."""
+
+    class NaNObservation(TwoDoorsEnv):
+        def _base_observation(self):
+            return np.array([np.nan, self.time_fraction])
+
+    class NaNReward(TwoDoorsEnv):
+        def _apply_action(self, action):
+            return float("nan")
+
+    class WideEncoding(TwoDoorsEnv):
+        def strategy_encoding(self):
+            return np.zeros(3, np.float32)  # strategy_dim says 1
+
+    class NamedStrategy(TwoDoorsEnv):
+        def strategy_id(self):
+            return "left"
+
+    class NoBase(TwoDoorsEnv):
+        def __init__(self):
+            self.door = 1.0  # super().__init__ forgotten
+
+    with pytest.raises(ConfigError, match=r"NaNObservation._base_observation\(\) returned \[nan"):
+        NaNObservation().reset(seed=0)
+    env = NaNReward()
+    env.reset(seed=0)
+    with pytest.raises(ConfigError, match=r"returned reward nan \(interaction 0, step 1\)"):
+        env.step(np.zeros(1))
+    with pytest.raises(ConfigError, match=r"returned shape \(3,\); its strategy_dim is 1"):
+        WideEncoding().reset(seed=0)
+    with pytest.raises(ConfigError, match=r"strategy_id\(\) returned 'left'; it must be a number"):
+        NamedStrategy().reset(seed=0)
+    with pytest.raises(ConfigError, match=r"NoBase.__init__ did not call super\(\).__init__"):
+        NoBase()
+
+
+def test_an_observation_outside_the_space_is_clipped_with_a_warning():
+    class Narrow(TwoDoorsEnv):
+        def _base_observation(self):
+            return np.array([2 * self.x, self.time_fraction], np.float32)  # x reaches 2
+
+    env = Narrow()
+    env.reset(seed=0)
+    with pytest.warns(UserWarning, match=r"outside its observation_space .* widen"):
+        for _ in range(8):
+            obs, *_ = env.step(np.ones(1))
+    assert obs[0] == 1.0  # clipped to the space
+
+
 def test_an_action_space_other_than_minus_one_to_one_is_refused():
     """Agents act through tanh in [-1, 1]: a task with other bounds would be mis-scaled."""
 
@@ -273,6 +324,26 @@ def test_game_state_resumes_the_repeated_game(name):
     for (oa, ra), (ob, rb) in zip(tail_a, tail_b, strict=True):
         np.testing.assert_array_equal(oa, ob)
         assert ra == rb
+
+
+def test_a_game_state_without_the_strategy_s_attributes_is_refused_on_restore():
+    """A task that leaves its strategy out of ``game_state_fields`` resumed silently with
+    another opponent; games saved before the strategy was kept still restore."""
+
+    class Forgetful(TwoDoorsEnv):
+        game_state_fields = ()
+
+    env = Forgetful()
+    env.reset(seed=0)
+    for _ in range(env.horizon):
+        env.step(np.zeros(1))  # stays in the middle: the opponent switches doors
+    env.reset()
+    saved = env.game_state()
+    with pytest.raises(ConfigError, match=r"strategy -?1.0 came back as -?1.0; game_state_fields"):
+        Forgetful().restore_game_state(saved)
+    legacy = {k: v for k, v in saved.items() if k != "strategy_id"}
+    _, info = TwoDoorsEnv().restore_game_state({**legacy, "fields": {"door": env.door}})
+    assert info["strategy_id"] == env.door
 
 
 def test_render_mode_none_is_taken_and_any_mode_refused_by_every_task():

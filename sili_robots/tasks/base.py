@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import functools
 import inspect
+import warnings
 from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
@@ -119,7 +120,8 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
 
     @abstractmethod
     def strategy_id(self) -> StrategyId:
-        """A hashable identity of the current true strategy (equal ids = same strategy)."""
+        """A number naming the current true strategy (ids equal within 1e-9 = the same
+        strategy): a category's index, or the continuous strategy itself."""
 
     @abstractmethod
     def strategy_encoding(self) -> np.ndarray:
@@ -196,7 +198,8 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         self.t = 0
         self._boundary_state = self._capture_game_state()
         self._begin_interaction()
-        sid = self.strategy_id()
+        sid = self._checked_strategy()
+        self._boundary_state["strategy_id"] = sid
         self._changed_since_last_step = self._last_strategy_id is not None and not _same(
             sid, self._last_strategy_id
         )
@@ -213,6 +216,11 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
             )
         action = self._validate_action(action)
         reward = float(self._apply_action(action))
+        if not np.isfinite(reward):  # else met as a diverged training, blamed on its settings
+            raise ConfigError(
+                f"{type(self).__name__}._apply_action() returned reward {reward} (interaction "
+                f"{self.interaction}, step {self.t + 1}): a task's rewards must be finite"
+            )
         self.t += 1
         record = {"t": self.t, "reward": reward, **self._step_record()}
         self._trajectory.append(record)
@@ -254,7 +262,15 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         self.t = 0
         self._boundary_state = self._capture_game_state()
         self._begin_interaction()
-        sid = self.strategy_id()
+        sid = self._checked_strategy()
+        saved = state.get("strategy_id")  # absent from games saved before it was kept
+        if saved is not None and not _same(sid, saved):
+            raise ConfigError(
+                f"{type(self).__name__} did not restore its saved game: strategy {saved} came "
+                f"back as {sid}; game_state_fields {self.game_state_fields} must name every "
+                "attribute that holds the opponent's strategy between interactions"
+            )
+        self._boundary_state["strategy_id"] = sid
         prev = state["last_strategy_id"]
         self._changed_since_last_step = prev is not None and not _same(sid, prev)
         self._last_strategy_id = sid
@@ -278,15 +294,42 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         # outside the box: clipped to it, as gymnasium's ClipAction (a policy's noise may cross it)
         return np.clip(arr, self.action_space.low, self.action_space.high)
 
+    def _checked_strategy(self) -> StrategyId:
+        """``strategy_id()``, checked with ``strategy_encoding()`` against what the class
+        declares (a task's own mistake, else met deep in the agent's buffers)."""
+        name, sid = type(self).__name__, self.strategy_id()
+        if isinstance(sid, bool) or not isinstance(sid, (int, float, np.integer, np.floating)):
+            raise ConfigError(f"{name}.strategy_id() returned {sid!r}; it must be a number")
+        shape = np.shape(self.strategy_encoding())
+        if shape != (self.strategy_dim,):
+            raise ConfigError(
+                f"{name}.strategy_encoding() returned shape {shape}; its strategy_dim is "
+                f"{self.strategy_dim}"
+            )
+        return sid
+
     def _observation(self) -> np.ndarray:
         obs = np.asarray(self._base_observation(), np.float32)
-        space = self.observation_space
+        space, name = self.observation_space, type(self).__name__
         if obs.shape != space.shape:  # a task's own mistake: numpy would broadcast or fail
             raise ConfigError(
-                f"{type(self).__name__}._base_observation() returned shape {obs.shape}; its "
+                f"{name}._base_observation() returned shape {obs.shape}; its "
                 f"observation_space has shape {space.shape}"
             )
-        return np.clip(obs, space.low, space.high)
+        if not np.all(np.isfinite(obs)):
+            raise ConfigError(
+                f"{name}._base_observation() returned {obs.tolist()} (interaction "
+                f"{self.interaction}, step {self.t}): a task's observations must be finite"
+            )
+        clipped = np.clip(obs, space.low, space.high)
+        if not np.array_equal(clipped, obs):
+            warnings.warn(  # once per place, as Python shows warnings
+                f"{name}._base_observation() returned {obs.tolist()}, outside its "
+                f"observation_space ({space.low.tolist()} to {space.high.tolist()}); it is "
+                "clipped to the space: widen _base_observation_space if such values are real",
+                stacklevel=2,
+            )
+        return clipped
 
     def _info(self) -> dict[str, Any]:
         return {
@@ -339,7 +382,9 @@ def resume_game(env: gym.Env, state: dict[str, Any]) -> tuple[np.ndarray, dict[s
 def _taking_render_mode(init: Any) -> Any:
     """``init`` that also takes gymnasium's ``render_mode``: None (what many scripts pass) or
     one of the modes the class's ``metadata`` declares; the tasks here declare none, as they draw
-    no frames. (A class that declares modes and has its own ``__init__`` takes it itself.)"""
+    no frames. (A class that declares modes and has its own ``__init__`` takes it itself.)
+    It also names a subclass whose ``__init__`` never called the base's, which sets up the
+    spaces (else an AttributeError far from the cause)."""
 
     @functools.wraps(init)  # its signature stays the class's (inspect follows __wrapped__)
     def __init__(self: Any, *args: Any, render_mode: str | None = None, **kwargs: Any) -> None:
@@ -348,6 +393,11 @@ def _taking_render_mode(init: Any) -> Any:
             why = f"allowed: {', '.join(map(repr, [None, *modes]))}" if modes else NO_FRAMES
             raise ConfigError(f"render_mode {render_mode!r}: {why}")
         init(self, *args, **kwargs)
+        if "horizon" not in vars(self):
+            raise ConfigError(
+                f"{type(self).__name__}.__init__ did not call super().__init__(horizon), "
+                "where a RepeatedInteractionEnv sets up its spaces and its game"
+            )
         if render_mode is not None:
             self.render_mode = render_mode
 
