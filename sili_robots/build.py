@@ -8,11 +8,8 @@ observation (SILI and Stable with ``latent="partial"``) through ``StrategyFlag``
 
 from __future__ import annotations
 
-import importlib
 import inspect
 import json
-import os
-import sys
 from collections.abc import Iterable
 from functools import cache
 from typing import Any
@@ -26,6 +23,7 @@ from sili_robots.agent import SILIAgent, method_config
 from sili_robots.agent.config import AgentConfig, UnknownSetting, paths
 from sili_robots.errors import ConfigError
 from sili_robots.migrations import LEGACY_SETTINGS, setting_path
+from sili_robots.plugins import load_class
 from sili_robots.runs import RunConfig
 from sili_robots.tasks import RepeatedInteractionEnv, make_task, task_spec
 from sili_robots.tasks.registry import identity_conflict, same_argument
@@ -34,49 +32,7 @@ from sili_robots.wrappers import OracleObservation, StrategyFlag
 
 def task_class(path: str) -> type[RepeatedInteractionEnv]:
     """A user's task class from ``package.module:ClassName``."""
-    module_name, _, class_name = path.partition(":")
-    if not module_name or not class_name:
-        raise ConfigError(
-            f"task {path!r} names no {'module' if not module_name else 'class'}: give a registered "
-            "task or package.module:ClassName"
-        )
-    if os.getcwd() not in sys.path:  # a console script, unlike `python -m`, leaves it out
-        sys.path.append(os.getcwd())
-    try:
-        obj: Any = importlib.import_module(module_name)
-    except Exception as err:  # a module that is missing, fails to compile or raises on import
-        found = not (
-            isinstance(err, ModuleNotFoundError) and f"{module_name}.".startswith(f"{err.name}.")
-        )
-        raise ConfigError(_unloadable(path, module_name, err, found)) from None
-    try:
-        for part in class_name.split("."):
-            obj = getattr(obj, part)
-    except AttributeError as err:
-        raise ConfigError(_unloadable(path, module_name, err, found=False)) from None
-    if not (isinstance(obj, type) and issubclass(obj, RepeatedInteractionEnv)):
-        raise ConfigError(f"{path!r} is not a RepeatedInteractionEnv subclass")
-    return obj
-
-
-def _unloadable(path: str, module_name: str, err: Exception, found: bool) -> str:
-    """Why ``path`` did not load, and what to do: a module or class not found is given anew, a
-    module found that failed (``found``) is fixed."""
-    if module_name == "__main__":
-        where = (
-            "a class defined in a script loads only in that script: put it in a module, "
-            "or pass the task instance (SILI.load(path, env=...))"
-        )
-    elif not found:
-        where = (
-            "give a registered task or package.module:ClassName of a "
-            "RepeatedInteractionEnv subclass importable from the current directory (a run of "
-            "one is resumed, evaluated and loaded from a folder its module imports from)"
-        )
-    else:
-        where = f"importing {module_name} failed: fix it, or install what it imports"
-    why = str(err) if isinstance(err, ImportError) else f"{type(err).__name__}: {err}"
-    return f"cannot load task class {path!r} ({why}); {where}"
+    return load_class(path, RepeatedInteractionEnv, "task", instead="a registered task or ")
 
 
 def is_class_path(task: str) -> bool:

@@ -190,6 +190,11 @@ class RunConfig:
 
         return {**unused_settings(self.agent, given), **self.addons.unread(given, self.agent)}
 
+    def metric_columns(self) -> tuple[str, ...]:
+        """``metrics.csv``'s columns: ``METRIC_COLUMNS``, then those its own add-ons declare."""
+        own = [c for cls in self.addons.plugin_classes() for c in cls.metric_columns]
+        return (*METRIC_COLUMNS, *dict.fromkeys(c for c in own if c not in METRIC_COLUMNS))
+
     def set(self, name: str, value: Any) -> None:
         """Set an agent or add-on setting by dotted path (or an earlier flat name)."""
         path = setting_path(name)
@@ -491,9 +496,12 @@ def differences(a: Any, b: Any, prefix: str = "") -> list[tuple[str, Any, Any]]:
     return [] if a == b else [(prefix[:-1], a, b)]
 
 
-def check_history(run_dir: Path, interactions: int) -> None:
+def check_history(
+    run_dir: Path, interactions: int, columns: Collection[str] = METRIC_COLUMNS
+) -> None:
     """Refuse to resume a run whose ``metrics.csv`` lacks rows its checkpoint has trained (the
-    file lost or cut short): the run would go on with a hole in its record."""
+    file lost or cut short): the run would go on with a hole in its record. ``columns``: those
+    the run writes (``RunConfig.metric_columns``)."""
     path = Path(run_dir) / METRICS
     rows = 0
     if path.is_file():
@@ -501,7 +509,7 @@ def check_history(run_dir: Path, interactions: int) -> None:
             with path.open(newline="") as f:
                 reader = csv.DictReader(f)
                 rows = sum(1 for _ in reader)
-                unknown = set(reader.fieldnames or ()) - set(METRIC_COLUMNS)
+                unknown = set(reader.fieldnames or ()) - set(columns)
         except (UnicodeDecodeError, csv.Error) as err:
             unknown = {_first_line(err)}
         if unknown:  # it would not take the run's next rows
@@ -519,10 +527,14 @@ def check_history(run_dir: Path, interactions: int) -> None:
 
 
 class MetricsWriter:
-    """Append-only CSV; on resume, rows past the checkpoint are dropped first."""
+    """Append-only CSV of ``columns`` (``RunConfig.metric_columns``); on resume, rows past the
+    checkpoint are dropped first."""
 
-    def __init__(self, run_dir: Path, keep_rows: int | None = None) -> None:
+    def __init__(
+        self, run_dir: Path, columns: tuple[str, ...] = METRIC_COLUMNS, keep_rows: int | None = None
+    ) -> None:
         self.path = Path(run_dir) / METRICS
+        self.columns = columns
         if keep_rows is not None and self.path.exists():
             with self.path.open() as f:
                 rows = list(csv.DictReader(f))[:keep_rows]
@@ -530,16 +542,16 @@ class MetricsWriter:
         else:
             self._rewrite([])
         self._file = self.path.open("a", newline="")
-        self._writer = csv.DictWriter(self._file, METRIC_COLUMNS)
+        self._writer = csv.DictWriter(self._file, self.columns)
 
     def _rewrite(self, rows: list[dict[str, str]]) -> None:
         with replacing(self.path) as tmp, tmp.open("w", newline="") as f:
-            w = csv.DictWriter(f, METRIC_COLUMNS)
+            w = csv.DictWriter(f, self.columns)
             w.writeheader()
             w.writerows(rows)
 
     def write(self, row: dict[str, Any]) -> None:
-        self._writer.writerow({k: row.get(k, "") for k in METRIC_COLUMNS})
+        self._writer.writerow({k: row.get(k, "") for k in self.columns})
         self._file.flush()
 
     def sync(self) -> None:

@@ -56,7 +56,7 @@ def train(
     run_dir = Path(run_dir)
     state = load_checkpoint(run_dir) if resume else None
     if state is not None:
-        check_history(run_dir, int(state["interaction"]))
+        check_history(run_dir, int(state["interaction"]), cfg.metric_columns())
     torch.set_num_threads(cfg.threads)
     own_env = env is None
     env = make_run_env(cfg) if env is None else env
@@ -111,7 +111,8 @@ def train(
                         "latent_changed": int(stats.latent_changed),
                         "beta": agent.beta,
                         "wall_time": elapsed0 + time.perf_counter() - t0,
-                        "filter_step": stats.extra.get("filter_step", -1),
+                        "filter_step": -1,  # the latent filter's, when it runs
+                        **stats.extra,  # the add-ons' declared columns (metric_columns)
                         **losses,
                     }
                 )
@@ -168,7 +169,7 @@ def _start_or_resume(
         write_config(run_dir, cfg)
         obs, info = env.reset(seed=cfg.seed)
         agent.begin_game(info)
-        return agent, obs, info, 0, MetricsWriter(run_dir)
+        return agent, obs, info, 0, MetricsWriter(run_dir, cfg.metric_columns())
     with fitting(run_dir, cfg, given_env):
         agent.load_state_dict(state["agent"])
     obs, info = resume_game(env, state["game"])
@@ -176,7 +177,7 @@ def _start_or_resume(
     (run_dir / SUMMARY).unlink(missing_ok=True)  # unfinished until it writes a new one
     start = int(state["interaction"])
     record_continuation(run_dir, cfg.threads, start)
-    return agent, obs, info, start, MetricsWriter(run_dir, keep_rows=start)
+    return agent, obs, info, start, MetricsWriter(run_dir, cfg.metric_columns(), keep_rows=start)
 
 
 def write_summary(run_dir: Path, window: int = 100) -> dict[str, Any]:

@@ -10,6 +10,7 @@ the paper's algorithm and runs none of their code.
   hindsight posteriors; latent batches from the pairs across which the strategy changed.
 - ``recent`` (``addons.recent.fraction``): part of each RL batch from the newest interactions.
 - ``latent_filter`` (``addons.filter.eps``): the policy's z^j corrected within the interaction.
+- your own (``addons.plugins``, ``package.module:ClassName``): after these, in the order given.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from sili_robots.addons.recent import RecentBatches
 from sili_robots.addons.schedules import Schedules
 from sili_robots.agent.addon import AgentAddon
 from sili_robots.agent.config import AgentConfig, scheduled_paths
+from sili_robots.errors import ConfigError
 
 
 def build_addons(addons: AddonsConfig, agent: AgentConfig) -> list[AgentAddon]:
@@ -39,6 +41,14 @@ def build_addons(addons: AddonsConfig, agent: AgentConfig) -> list[AgentAddon]:
     if "latent_filter" in active:
         f = addons.filter
         out.append(LatentFilter(f.eps, f.start, f.noise))
+    for cls in addons.plugin_classes():
+        try:
+            out.append(cls())
+        except TypeError as err:  # e.g. a constructor that takes settings
+            raise ConfigError(
+                f"add-on {cls.__module__}:{cls.__qualname__} is built with no arguments ({err}): "
+                "give its settings as class attributes, a subclass per variant"
+            ) from None
     return out
 
 

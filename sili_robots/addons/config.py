@@ -6,8 +6,10 @@ from collections.abc import Collection
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+from sili_robots.agent.addon import AgentAddon
 from sili_robots.agent.config import AgentConfig, check, from_plain, setting, to_plain
 from sili_robots.errors import ConfigError
+from sili_robots.plugins import load_class
 
 StabilityDistance = Literal["latents", "posterior", "hindsight"]
 
@@ -45,6 +47,16 @@ class AddonsConfig:
     stability_distance: StabilityDistance = "latents"
     recent: RecentConfig = field(default_factory=RecentConfig)
     filter: FilterConfig = field(default_factory=FilterConfig)
+    #: your own add-ons: package.module:ClassName of AgentAddon subclasses, comma-separated,
+    #: built with no arguments after the packaged ones (a run records them: resumed with them)
+    plugins: str = ""
+
+    def plugin_classes(self) -> list[type[AgentAddon]]:
+        """The classes ``plugins`` names, imported (also from the current directory)."""
+        if not self.plugins.strip():
+            return []
+        names = [p.strip() for p in self.plugins.split(",") if p.strip()]
+        return [load_class(p, AgentAddon, "add-on") for p in names]
 
     def active(self) -> list[str]:
         on = []
@@ -88,6 +100,7 @@ class AddonsConfig:
 
     def validate(self, agent: AgentConfig) -> AddonsConfig:
         check(self, "addons.")
+        self.plugin_classes()  # each one loads, before a run starts
         learned, active = agent.uses_latent_model, self.active()
         for name in active:
             if name == "recent" or learned:

@@ -48,6 +48,7 @@ def largest_power_of_two(n: int) -> int:
 
 class LatentFilter(AgentAddon):
     name = "latent_filter"
+    metric_columns = ("filter_step",)
 
     def __init__(self, eps: float, start: int = 0, noise: float = 0.0) -> None:
         self.eps, self.start, self.noise = eps, start, noise

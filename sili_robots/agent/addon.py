@@ -3,8 +3,9 @@
 An add-on subclasses ``AgentAddon`` and overrides the hooks it needs. The agent collects, per
 hook, only the add-ons that override it, so a hook nobody overrides costs nothing: with no
 add-ons the agent runs the paper's algorithm and none of their code, per step or per update.
-Add-ons live outside ``sili_robots/agent/`` (in ``sili_robots/addons/``) and are wired in by
-configuration (``sili_robots.addons.build_addons``); they may read the agent's public state
+Add-ons live outside ``sili_robots/agent/`` (in ``sili_robots/addons/``, or a user's own module
+named by the setting ``addons.plugins``) and are wired in by configuration
+(``sili_robots.addons.build_addons``); they may read the agent's public state
 (``buffer``, ``latents``, ``model``, ``cfg``, ``rng``).
 
 Hooks, in the order the agent calls them:
@@ -13,7 +14,8 @@ Hooks, in the order the agent calls them:
 - ``begin_interaction``: a new interaction starts (after construction, each interaction, load).
 - ``acting_latent`` / ``observe_step``: per step, z^j as the policy should act on it now, and
   each step played (the only per-step hooks).
-- ``interaction_stored(j)``: interaction j is stored and z^{j+1} cached; returns metric columns.
+- ``interaction_stored(j)``: interaction j is stored and z^{j+1} cached; returns values for
+  the ``metrics.csv`` columns the class declares in ``metric_columns``.
 - ``latents_refreshed``: the cached latents were recomputed with the current encoder.
 - ``before_update(interaction)``: settings for the updates after ``interaction``.
 - ``latent_pairs`` / ``rl_interactions``: which stored interactions a batch draws.
@@ -52,6 +54,8 @@ class AgentAddon:
     """Base class: every hook is a no-op; override what the add-on changes."""
 
     name: ClassVar[str] = "addon"
+    #: the ``metrics.csv`` columns ``interaction_stored`` fills (written after the usual ones)
+    metric_columns: ClassVar[tuple[str, ...]] = ()
     agent: SILIAgent
 
     def attach(self, agent: SILIAgent) -> None:
@@ -74,6 +78,7 @@ class AgentAddon:
         pass
 
     def interaction_stored(self, j: int) -> dict[str, float]:
+        """Values of ``metric_columns`` for interaction j (others are not written)."""
         return {}
 
     def latents_refreshed(self) -> None:

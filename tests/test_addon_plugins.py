@@ -1,0 +1,79 @@
+"""A user's own add-on (``addons.plugins``): loaded from the working directory, run by the
+agent, its metric columns written, kept through a resume and named when it cannot load."""
+
+from __future__ import annotations
+
+import csv
+import textwrap
+
+import pytest
+from fast_settings import FAST_ARGS
+
+from sili_robots.build import make_run_config
+from sili_robots.cli import main
+from sili_robots.errors import ConfigError
+
+PLUGIN = '''
+import numpy as np
+from sili_robots.agent.addon import AgentAddon
+
+
+class Constant(AgentAddon):
+    """d = 0.37 for every change: R_stable = -0.37 whatever the latents."""
+
+    metric_columns = ("stored",)
+
+    def __init__(self):
+        self.stored = 0
+
+    def interaction_stored(self, j):
+        self.stored += 1
+        return {"stored": self.stored, "not_declared": 1.0}
+
+    def stability_distance(self, j):
+        return np.full(len(j), 0.37)
+
+
+class Configured(AgentAddon):
+    def __init__(self, d):
+        self.d = d
+'''
+
+
+def _rows(run):
+    with (run / "metrics.csv").open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_a_users_addon_runs_writes_its_columns_and_stays_through_a_resume(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "my_addons.py").write_text(textwrap.dedent(PLUGIN))
+    run = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--out", str(run), "--no-progress", *FAST_ARGS]
+    plugin = ["--set", "addons.plugins=my_addons:Constant"]
+    assert main([*args, *plugin, "--interactions", "4"]) == 0
+    assert main(["train", "--resume", str(run), "--interactions", "6", "--no-progress"]) == 0
+    rows = _rows(run)
+    assert [float(r["stability_reward"]) for r in rows] == [-0.37] * 6
+    # the add-on's own count: built anew on resume, as its state is not checkpointed
+    assert [r["stored"] for r in rows] == ["1", "2", "3", "4", "1", "2"]
+    assert "not_declared" not in rows[0]
+
+
+def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "my_addons.py").write_text(textwrap.dedent(PLUGIN))
+    cases = {
+        "no_such_module:X": r"cannot load add-on class 'no_such_module:X' \(No module named",
+        "my_addons:Missing": r"cannot load add-on class 'my_addons:Missing' \(AttributeError",
+        "my_addons:np": r"'my_addons:np' is not a subclass of AgentAddon",
+        "my_addons": r"add-on 'my_addons' names no class",
+    }
+    for path, message in cases.items():
+        with pytest.raises(ConfigError, match=message):
+            make_run_config("circle-3", "sili", settings={"addons.plugins": path})
+    args = ["train", "--task", "circle-3", "--out", str(tmp_path / "r"), "--no-progress"]
+    assert main([*args, "--set", "addons.plugins=my_addons:Configured"]) == 2
+    err = capsys.readouterr().err
+    assert "add-on my_addons:Configured is built with no arguments" in err
+    assert "Traceback" not in err
