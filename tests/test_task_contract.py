@@ -154,6 +154,19 @@ def test_bad_arguments_are_named():
         env.step(np.array([np.nan, 0.0]))
 
 
+def test_a_users_gymnasium_id_of_a_task_is_answered_with_its_class():
+    gym.register("user/Doors-v0", entry_point="sili_robots.examples.two_doors:TwoDoorsEnv")
+    try:
+        with pytest.raises(
+            ConfigError, match=r"your own task: give its class, sili_robots.examples.two_doors:Two"
+        ):
+            make_task("user/Doors-v0")
+        with pytest.raises(ConfigError, match=r"\)$"):  # no hint for another kind of env
+            make_task("Pendulum-v1")
+    finally:
+        del gym.registry["user/Doors-v0"]
+
+
 def test_task_arguments_take_numpy_numbers_their_printed_bounds_and_name_bad_ones():
     from sili_robots.tasks.speaker_listener import SpeakerListenerEnv
 

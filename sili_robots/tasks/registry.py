@@ -25,6 +25,8 @@ import numpy as np
 from gymnasium.envs.registration import load_env_creator
 
 from sili_robots.errors import ConfigError
+from sili_robots.plugins import load_class
+from sili_robots.tasks.base import RepeatedInteractionEnv
 
 
 @dataclass(frozen=True)
@@ -87,8 +89,22 @@ def task_spec(name: str) -> TaskSpec:
             return spec
     raise ConfigError(
         f"unknown task {name!r}; allowed: {', '.join(TASKS)} "
-        f"(earlier versions: {', '.join(EARLIER_VERSIONS)})"
+        f"(earlier versions: {', '.join(EARLIER_VERSIONS)}){_own_class_hint(name)}"
     )
+
+
+def _own_class_hint(name: str) -> str:
+    """For a user's gymnasium id of a repeated-interaction task: give it as its class instead
+    (a run records its class, which every process, a sweep's too, can import)."""
+    if name not in gym.registry:
+        return ""
+    entry = gym.registry[name].entry_point
+    path = entry if isinstance(entry, str) else f"{entry.__module__}:{entry.__qualname__}"
+    try:
+        load_class(path, RepeatedInteractionEnv, "task")
+    except ConfigError:
+        return ""  # not one (Pendulum-v1), or not importable as named
+    return f"; the gymnasium id {name} is your own task: give its class, {path}"
 
 
 def first_version(name: str) -> TaskSpec:
