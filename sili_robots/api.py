@@ -198,10 +198,17 @@ class SILI:
         target = done + interactions
         env = None if self._task_env is None else observed_as(self._task_env, self.cfg)
         threads = torch.get_num_threads()  # training sets the run's; the caller's come back
-        if done == 0 and self._overwrite:
-            clear_run(self.run_dir)  # before the claim, which is one of a run's files
+
+        def still_new() -> None:  # with the claim: a run may have started and ended there since
+            if done == 0:
+                self._check_run_dir()
+                if self._overwrite:
+                    clear_run(self.run_dir)
+
+        claimed = False
         try:
-            with training_claim(self.run_dir):
+            with training_claim(self.run_dir, before=still_new):
+                claimed = True
                 if done == 0:
                     self.cfg.interactions = target
                     train(self.cfg, self.run_dir, progress=progress_bar, env=env)
@@ -215,8 +222,12 @@ class SILI:
                         train(self.cfg, self.run_dir, resume=True, progress=progress_bar, env=env)
         finally:
             torch.set_num_threads(threads)
-            if done == 0 and not (self.run_dir / CHECKPOINT).is_file():
-                clear_run(self.run_dir)  # stopped before its first checkpoint: a new model again
+            # a new model again: stopped before its first checkpoint, or refused (another
+            # process trains there, whose files stay)
+            new = done == 0 and (not claimed or not (self.run_dir / CHECKPOINT).is_file())
+            if new and claimed:
+                clear_run(self.run_dir)
+            if new:
                 self.cfg.interactions = 0
                 self._setup(None)
             else:

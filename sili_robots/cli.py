@@ -142,7 +142,11 @@ def _allocation(err: BaseException) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = _parse(build_parser(), argv)
+    try:
+        args = _parse(build_parser(), argv)  # imports every command: a second or two
+    except KeyboardInterrupt:  # Ctrl-C while starting: nothing has been done yet
+        print("sili: interrupted", file=sys.stderr)
+        return 130
     try:
         with _stop_signals_as_ctrl_c():
             code = int(args.run(args) or 0)

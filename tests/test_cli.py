@@ -458,3 +458,16 @@ def test_read_outs_name_a_damaged_summary_and_read_a_sweep_they_cannot_write(tmp
     monkeypatch.setattr(results, "write_tables", read_only)
     read = load_results(collection)  # its runs as they are, nothing written
     assert sorted(set(read["run"])) == ["s1", "s2"] and len(read) == 2 * 600
+
+
+def test_ctrl_c_while_the_commands_load_is_one_line(monkeypatch, capsys):
+    """The commands import torch and the simulators' bindings (a second or two): a Ctrl-C then
+    printed a traceback through them."""
+    import sili_robots.cli as cli
+
+    def loading():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "build_parser", loading)
+    assert cli.main(["runs", "."]) == 130
+    assert capsys.readouterr().err == "sili: interrupted\n"

@@ -251,11 +251,15 @@ def run(args: argparse.Namespace) -> int:
         check_not_trained(args.out)  # --overwrite too: never under a live trainer
         check_new_run_dir(args.out, args.overwrite, resume=f"--resume {args.out}")
         _check_env_builds(cfg)
-        if args.overwrite:
-            clear_run(args.out)  # the run's own files; anything else in the folder stays
         make_run_dir(args.out)
         _note_threads_beyond_cores(cfg.threads)
-        with _resume_hint(args.out), training_claim(args.out):
+
+        def still_new() -> None:  # with the claim: a run may have started and ended there since
+            check_new_run_dir(args.out, args.overwrite, resume=f"--resume {args.out}")
+            if args.overwrite:
+                clear_run(args.out)  # the run's own files; anything else in the folder stays
+
+        with _resume_hint(args.out), training_claim(args.out, before=still_new):
             run_dir = train(cfg, args.out, progress=not args.no_progress)
     summary = write_summary(run_dir)
     print(json.dumps({"run_dir": str(run_dir), **summary}, indent=2))

@@ -26,6 +26,7 @@ from sili_robots.sweep.state import (
     run_state,
     shorter_run,
     sweep_lock,
+    training_worker,
     write_invocations,
 )
 from sili_robots.sweep.worker import Job, Outcome
@@ -199,7 +200,8 @@ def run_sweep(
         jobs: list[Job] = []
         for run in planned:
             path = run_path(sweep_dir, run.name)
-            (path / RUNNING_FILE).unlink(missing_ok=True)  # stale: its process is gone
+            if training_worker(path) is None:  # stale: its process is gone (a live one since
+                (path / RUNNING_FILE).unlink(missing_ok=True)  # check_planned: its worker says)
             (path / STOP_FILE).unlink(missing_ok=True)  # an earlier stopped sweep's
             if run_state(path) == "done":
                 report.skipped.append(run.name)

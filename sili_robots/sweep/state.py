@@ -19,7 +19,7 @@ import fcntl
 import json
 import os
 import socket
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import replace
 from pathlib import Path
 from typing import Literal
@@ -139,11 +139,13 @@ def process_started(pid: int) -> str | None:
 
 
 @contextlib.contextmanager
-def training_claim(run_dir: Path) -> Iterator[None]:
+def training_claim(run_dir: Path, before: Callable[[], None] | None = None) -> Iterator[None]:
     """Mark ``run_dir`` as trained by this process while the block runs, so that a sweep or a
     second ``sili train --resume`` refuses it (``training_worker``) instead of training beside;
-    ConfigError when another live process has claimed it. The check and the claim are one step
-    (under a lock on the folder): of two trainers started together, one trains."""
+    ``RunBeingTrained`` when another live process has claimed it. The check and the claim are
+    one step (under a lock on the folder): of two trainers started together, one trains.
+    ``before`` runs in that step too (a new run's folder checked, or cleared, for what another
+    process may have started and finished there since it was first checked)."""
     import fcntl
 
     path = Path(run_dir) / RUNNING_FILE
@@ -154,6 +156,8 @@ def training_claim(run_dir: Path) -> Iterator[None]:
         with contextlib.suppress(OSError):  # NFS may refuse to lock a folder: the check alone
             fcntl.flock(folder, fcntl.LOCK_EX)  # released with the descriptor, also on a kill
         check_not_trained(run_dir)
+        if before is not None:
+            before()
         write_text(path, json.dumps(claim))
     finally:
         os.close(folder)
@@ -167,12 +171,16 @@ def training_claim(run_dir: Path) -> Iterator[None]:
             pass
 
 
+class RunBeingTrained(ConfigError):
+    """Another live process trains the run: not this one's failure, nor the run's."""
+
+
 def check_not_trained(run_dir: Path, who: str | None = None, by: str = "") -> None:
-    """ConfigError when another live process trains the run (``who``, default its folder;
-    ``by``: who that may be): two writers would interleave its files."""
+    """``RunBeingTrained`` when another live process trains the run (``who``, default its
+    folder; ``by``: who that may be): two writers would interleave its files."""
     pid = training_worker(run_dir)
     if pid is not None:
-        raise ConfigError(
+        raise RunBeingTrained(
             f"{who or run_dir} is being trained by process {pid}{by}; let it finish or stop it "
             "first"
         )

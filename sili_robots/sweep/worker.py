@@ -17,7 +17,7 @@ from typing import Any
 
 from sili_robots.runs import ERROR_FILE, STOP_FILE
 from sili_robots.sweep import tensorboard
-from sili_robots.sweep.state import run_state, training_claim
+from sili_robots.sweep.state import RunBeingTrained, run_state, training_claim
 
 #: one thread per worker: K workers share the machine's cores
 THREAD_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
@@ -76,6 +76,8 @@ def run_job(job: Job) -> Outcome:
                 train(cfg, run_dir, state == "resumable", progress=False, stop_file=stop_file)
     except (KeyboardInterrupt, SystemExit):
         raise  # the sweep is being stopped: the run stays resumable from its checkpoint
+    except RunBeingTrained as err:  # another process's run now: no error of the run's to keep
+        return Outcome(job.name, "failed", error=str(err), pid=os.getpid())
     except Exception as err:  # a run's failure must not reach the sweep
         (run_dir / ERROR_FILE).write_text("".join(traceback.format_exception(err)))
         return Outcome(
