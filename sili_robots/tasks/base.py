@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import functools
 import inspect
+import math
 import warnings
 from abc import ABC, abstractmethod
 from typing import Any, ClassVar
@@ -216,7 +217,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
             )
         action = self._validate_action(action)
         reward = float(self._apply_action(action))
-        if not np.isfinite(reward):  # else met as a diverged training, blamed on its settings
+        if not math.isfinite(reward):  # else met as a diverged training, blamed on its settings
             raise ConfigError(
                 f"{type(self).__name__}._apply_action() returned reward {reward} (interaction "
                 f"{self.interaction}, step {self.t + 1}): a task's rewards must be finite"
@@ -316,20 +317,28 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
                 f"{name}._base_observation() returned shape {obs.shape}; its "
                 f"observation_space has shape {space.shape}"
             )
+        clipped = np.clip(obs, space.low, space.high)
+        # two tests of ~0.1 us each, every step; what they let through is looked at closely
+        if clipped.tobytes() != obs.tobytes() or not math.isfinite(sum(obs.tolist())):
+            self._check_observation(obs, clipped)
+        return clipped
+
+    def _check_observation(self, obs: np.ndarray, clipped: np.ndarray) -> None:
+        """ConfigError for a non-finite observation; a warning for one outside the space."""
+        name, space = type(self).__name__, self.observation_space
+        where = f"(interaction {self.interaction}, step {self.t})"
         if not np.all(np.isfinite(obs)):
             raise ConfigError(
-                f"{name}._base_observation() returned {obs.tolist()} (interaction "
-                f"{self.interaction}, step {self.t}): a task's observations must be finite"
+                f"{name}._base_observation() returned {obs.tolist()} {where}: a task's "
+                "observations must be finite"
             )
-        clipped = np.clip(obs, space.low, space.high)
-        if not np.array_equal(clipped, obs):
+        if not (clipped == obs).all():  # not merely -0.0 clipped to 0.0
             warnings.warn(  # once per place, as Python shows warnings
-                f"{name}._base_observation() returned {obs.tolist()}, outside its "
+                f"{name}._base_observation() returned {obs.tolist()} {where}, outside its "
                 f"observation_space ({space.low.tolist()} to {space.high.tolist()}); it is "
                 "clipped to the space: widen _base_observation_space if such values are real",
-                stacklevel=2,
+                stacklevel=3,
             )
-        return clipped
 
     def _info(self) -> dict[str, Any]:
         return {
