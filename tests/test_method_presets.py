@@ -70,6 +70,16 @@ def test_paper_profile_writes_the_papers_values(tmp_path):
     assert method_config("sili", profile="paper").model.squash is True
 
 
+def test_the_paper_profile_keeps_float32_products_where_a_machine_would_choose_bfloat16(
+    monkeypatch,
+):
+    from sili_robots.agent import matmul
+
+    monkeypatch.setattr(matmul, "_cached_choice", lambda kind, measure: "bfloat16")
+    assert method_config("sili").sac.precision == "bfloat16"  # such a machine's own choice
+    assert method_config("sili", profile="paper").sac.precision == "float32"  # the authors'
+
+
 def test_a_continuous_latent_is_the_raw_encoder_output_unless_squashed():
     import torch
 

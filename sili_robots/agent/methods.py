@@ -82,6 +82,7 @@ PAPER_PROFILE: dict[str, Any] = {
     "sili.beta": 0.5,
     "sili.credit": "per_step",
     "sili.scale": None,
+    "sac.precision": "float32",  # as the authors' code; a machine may choose bfloat16 products
 }
 
 
