@@ -275,8 +275,9 @@ def add_override_args(p: argparse.ArgumentParser, scope: str) -> None:
         default=[],
         metavar="KEY=VALUE",
         dest="agent_set",
-        help=f"override an agent setting{scope} (JSON value), repeatable, "
-        "e.g. --set sac.updates_per_step=0.5",
+        help=f"override an agent or add-on setting{scope} (JSON value), repeatable, "
+        "e.g. --set sac.updates_per_step=0.5; your own add-on: --set "
+        "addons.plugins=module:ClassName",
     )
     add_env_kwarg_arg(p, scope)
 
