@@ -192,8 +192,16 @@ class RunConfig:
 
     def metric_columns(self) -> tuple[str, ...]:
         """``metrics.csv``'s columns: ``METRIC_COLUMNS``, then those its own add-ons declare."""
-        own = [c for cls in self.addons.plugin_classes() for c in cls.metric_columns]
-        return (*METRIC_COLUMNS, *dict.fromkeys(c for c in own if c not in METRIC_COLUMNS))
+        own: dict[str, None] = {}
+        for cls in self.addons.plugin_classes():
+            taken = [c for c in cls.metric_columns if c in METRIC_COLUMNS]
+            if taken:
+                raise ConfigError(
+                    f"add-on {cls.__module__}:{cls.__qualname__} declares metric_columns "
+                    f"{', '.join(taken)}, which metrics.csv has already; name its own otherwise"
+                )
+            own.update(dict.fromkeys(cls.metric_columns))
+        return (*METRIC_COLUMNS, *own)
 
     def set(self, name: str, value: Any) -> None:
         """Set an agent or add-on setting by dotted path (or an earlier flat name)."""
@@ -509,9 +517,16 @@ def check_history(
             with path.open(newline="") as f:
                 reader = csv.DictReader(f)
                 rows = sum(1 for _ in reader)
-                unknown = set(reader.fieldnames or ()) - set(columns)
+                found = set(reader.fieldnames or ())
+                unknown = found - set(columns)
         except (UnicodeDecodeError, csv.Error) as err:
-            unknown = {_first_line(err)}
+            found, unknown = set(), {_first_line(err)}
+        if unknown and set(METRIC_COLUMNS) <= found:  # a run's history, and an add-on's column
+            raise ConfigError(
+                f"{path} has columns {', '.join(sorted(unknown))} that no add-on of the run "
+                "(addons.plugins) declares in its metric_columns now; declare them again to "
+                "resume it"
+            )
         if unknown:  # it would not take the run's next rows
             raise ConfigError(
                 f"{path} is damaged (not a run's history: {', '.join(sorted(unknown))}); "

@@ -102,7 +102,9 @@ def train(
                 recent.append((played.task_reward, played.strategy_changed if j else None))
                 metrics.write(
                     {
-                        "interaction": j,
+                        "filter_step": -1,  # the latent filter's, when it runs
+                        **stats.extra,  # the add-ons' declared columns (metric_columns) ...
+                        "interaction": j,  # ... never in place of these
                         "task_reward": played.task_reward,
                         "stability_reward": stats.stability_reward,
                         "strategy_changed": int(played.strategy_changed),
@@ -111,8 +113,6 @@ def train(
                         "latent_changed": int(stats.latent_changed),
                         "beta": agent.beta,
                         "wall_time": elapsed0 + time.perf_counter() - t0,
-                        "filter_step": -1,  # the latent filter's, when it runs
-                        **stats.extra,  # the add-ons' declared columns (metric_columns)
                         **losses,
                     }
                 )

@@ -28,7 +28,7 @@ class Constant(AgentAddon):
 
     def interaction_stored(self, j):
         self.stored += 1
-        return {"stored": self.stored, "not_declared": 1.0}
+        return {"stored": self.stored, "not_declared": 1.0, "task_reward": 999.0}
 
     def stability_distance(self, j):
         return np.full(len(j), 0.37)
@@ -37,6 +37,19 @@ class Constant(AgentAddon):
 class Configured(AgentAddon):
     def __init__(self, d):
         self.d = d
+
+
+class Buggy(AgentAddon):
+    def __init__(self):
+        self.n = len(5)  # its own TypeError, not a question of arguments
+
+
+class Renamed(Constant):
+    metric_columns = ("count",)
+
+
+class Usurper(Constant):
+    metric_columns = ("task_reward",)
 '''
 
 
@@ -45,7 +58,9 @@ def _rows(run):
         return list(csv.DictReader(f))
 
 
-def test_a_users_addon_runs_writes_its_columns_and_stays_through_a_resume(tmp_path, monkeypatch):
+def test_a_users_addon_runs_writes_its_columns_and_stays_through_a_resume(
+    tmp_path, monkeypatch, capsys
+):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "my_addons.py").write_text(textwrap.dedent(PLUGIN))
     run = tmp_path / "run"
@@ -58,6 +73,14 @@ def test_a_users_addon_runs_writes_its_columns_and_stays_through_a_resume(tmp_pa
     # the add-on's own count: built anew on resume, as its state is not checkpointed
     assert [r["stored"] for r in rows] == ["1", "2", "3", "4", "1", "2"]
     assert "not_declared" not in rows[0]
+    assert all(float(r["task_reward"]) < 0 for r in rows)  # the task's: not an add-on's
+    again = ["train", "--resume", str(run), "--interactions", "8", "--no-progress"]
+    config = run / "config.json"
+    config.write_text(config.read_text().replace("my_addons:Constant", "my_addons:Renamed"))
+    assert main(again) == 2  # its add-on now declares another column
+    assert "has columns stored that no add-on of the run (addons.plugins) declares" in (
+        capsys.readouterr().err
+    )
 
 
 def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, capsys):
@@ -77,3 +100,10 @@ def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, caps
     err = capsys.readouterr().err
     assert "add-on my_addons:Configured is built with no arguments" in err
     assert "Traceback" not in err
+    assert main([*args, "--set", "addons.plugins=my_addons:Usurper", "--overwrite"]) == 2
+    assert "declares metric_columns task_reward, which metrics.csv has already" in (
+        capsys.readouterr().err
+    )
+    with pytest.raises(TypeError, match="has no len"):  # its own error, as itself
+        make_run_config("circle-3", "sili", settings={"addons.plugins": "my_addons:Buggy"})
+        main([*args, "--set", "addons.plugins=my_addons:Buggy", "--overwrite"])

@@ -1,5 +1,8 @@
 """The shared task contract, checked on every registered task."""
 
+import functools
+import re
+import warnings
 from typing import ClassVar
 
 import gymnasium as gym
@@ -163,8 +166,12 @@ def test_a_users_gymnasium_id_of_a_task_is_answered_with_its_class():
             make_task("user/Doors-v0")
         with pytest.raises(ConfigError, match=r"\)$"):  # no hint for another kind of env
             make_task("Pendulum-v1")
+        gym.register("user/Made-v0", entry_point=functools.partial(TwoDoorsEnv, horizon=5))
+        with pytest.raises(ConfigError, match=r"\)$"):  # no class to name
+            make_task("user/Made-v0")
     finally:
         del gym.registry["user/Doors-v0"]
+        gym.registry.pop("user/Made-v0", None)
 
 
 def test_task_arguments_take_numpy_numbers_their_printed_bounds_and_name_bad_ones():
@@ -246,6 +253,12 @@ def test_a_task_s_own_mistakes_are_named_where_they_are_made():
         def __init__(self):
             self.door = 1.0  # super().__init__ forgotten
 
+    class DrawingNoBase(NoBase):  # a class with render modes takes render_mode itself
+        metadata: ClassVar[dict] = {"render_modes": ["rgb_array"]}
+
+        def __init__(self, render_mode=None):
+            self.door = 1.0
+
     with pytest.raises(ConfigError, match=r"NaNObservation._base_observation\(\) returned \[nan"):
         NaNObservation().reset(seed=0)
     env = NaNReward()
@@ -258,6 +271,8 @@ def test_a_task_s_own_mistakes_are_named_where_they_are_made():
         NamedStrategy().reset(seed=0)
     with pytest.raises(ConfigError, match=r"NoBase.__init__ did not call super\(\).__init__"):
         NoBase()
+    with pytest.raises(ConfigError, match=r"DrawingNoBase.__init__ did not call super"):
+        DrawingNoBase()
 
 
 def test_an_observation_outside_the_space_is_clipped_with_a_warning():
@@ -267,10 +282,16 @@ def test_an_observation_outside_the_space_is_clipped_with_a_warning():
 
     env = Narrow()
     env.reset(seed=0)
-    with pytest.warns(UserWarning, match=r"outside its observation_space .* widen"):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")  # Python's own filter would hide repeats of a text
         for _ in range(8):
             obs, *_ = env.step(np.ones(1))
     assert obs[0] == 1.0  # clipped to the space
+    assert len(caught) == 1  # told once, not on each of the steps outside
+    assert re.search(
+        r"returned \[1.2.*\(interaction 0, step 3\), outside its observation_sp",
+        str(caught[0].message),
+    )
 
 
 def test_an_action_space_other_than_minus_one_to_one_is_refused():

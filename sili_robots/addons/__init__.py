@@ -15,6 +15,8 @@ the paper's algorithm and runs none of their code.
 
 from __future__ import annotations
 
+import inspect
+
 from sili_robots.addons.config import AddonsConfig
 from sili_robots.addons.last_step import LastStep
 from sili_robots.addons.latent_filter import LatentFilter
@@ -43,12 +45,13 @@ def build_addons(addons: AddonsConfig, agent: AgentConfig) -> list[AgentAddon]:
         out.append(LatentFilter(f.eps, f.start, f.noise))
     for cls in addons.plugin_classes():
         try:
-            out.append(cls())
+            inspect.signature(cls).bind()
         except TypeError as err:  # e.g. a constructor that takes settings
             raise ConfigError(
                 f"add-on {cls.__module__}:{cls.__qualname__} is built with no arguments ({err}): "
                 "give its settings as class attributes, a subclass per variant"
             ) from None
+        out.append(cls())
     return out
 
 

@@ -73,8 +73,10 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
         init = cls.__dict__.get("__init__")
-        if init is not None and not cls.metadata.get("render_modes"):
-            cls.__init__ = _taking_render_mode(init)  # type: ignore[method-assign]
+        if init is not None:
+            if not cls.metadata.get("render_modes"):
+                init = _taking_render_mode(init)
+            cls.__init__ = _calling_base_init(init)  # type: ignore[method-assign]
 
     def __init__(self, horizon: int) -> None:
         self.horizon = check_count("horizon", horizon, 1, LONGEST_HORIZON)
@@ -84,6 +86,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         self._started = False
         self._last_strategy_id: StrategyId | None = None
         self._changed_since_last_step = False
+        self._warned_outside = False  # an observation outside the space: told once
         self.action_space = _checked_action_space(self._make_action_space())
         base = self._base_observation_space()
         low, high = base.low.astype(np.float32), base.high.astype(np.float32)
@@ -332,8 +335,9 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
                 f"{name}._base_observation() returned {obs.tolist()} {where}: a task's "
                 "observations must be finite"
             )
-        if not (clipped == obs).all():  # not merely -0.0 clipped to 0.0
-            warnings.warn(  # once per place, as Python shows warnings
+        if not self._warned_outside and not (clipped == obs).all():  # not merely -0.0 to 0.0
+            self._warned_outside = True
+            warnings.warn(
                 f"{name}._base_observation() returned {obs.tolist()} {where}, outside its "
                 f"observation_space ({space.low.tolist()} to {space.high.tolist()}); it is "
                 "clipped to the space: widen _base_observation_space if such values are real",
@@ -391,9 +395,7 @@ def resume_game(env: gym.Env, state: dict[str, Any]) -> tuple[np.ndarray, dict[s
 def _taking_render_mode(init: Any) -> Any:
     """``init`` that also takes gymnasium's ``render_mode``: None (what many scripts pass) or
     one of the modes the class's ``metadata`` declares; the tasks here declare none, as they draw
-    no frames. (A class that declares modes and has its own ``__init__`` takes it itself.)
-    It also names a subclass whose ``__init__`` never called the base's, which sets up the
-    spaces (else an AttributeError far from the cause)."""
+    no frames. (A class that declares modes and has its own ``__init__`` takes it itself.)"""
 
     @functools.wraps(init)  # its signature stays the class's (inspect follows __wrapped__)
     def __init__(self: Any, *args: Any, render_mode: str | None = None, **kwargs: Any) -> None:
@@ -402,13 +404,24 @@ def _taking_render_mode(init: Any) -> Any:
             why = f"allowed: {', '.join(map(repr, [None, *modes]))}" if modes else NO_FRAMES
             raise ConfigError(f"render_mode {render_mode!r}: {why}")
         init(self, *args, **kwargs)
+        if render_mode is not None:
+            self.render_mode = render_mode
+
+    return __init__
+
+
+def _calling_base_init(init: Any) -> Any:
+    """``init`` that names a subclass whose ``__init__`` never called the base's, which sets up
+    the spaces and the game (else an AttributeError far from the cause)."""
+
+    @functools.wraps(init)
+    def __init__(self: Any, *args: Any, **kwargs: Any) -> None:
+        init(self, *args, **kwargs)
         if "horizon" not in vars(self):
             raise ConfigError(
                 f"{type(self).__name__}.__init__ did not call super().__init__(horizon), "
                 "where a RepeatedInteractionEnv sets up its spaces and its game"
             )
-        if render_mode is not None:
-            self.render_mode = render_mode
 
     return __init__
 

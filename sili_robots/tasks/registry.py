@@ -99,11 +99,11 @@ def _own_class_hint(name: str) -> str:
     if name not in gym.registry:
         return ""
     entry = gym.registry[name].entry_point
-    path = entry if isinstance(entry, str) else f"{entry.__module__}:{entry.__qualname__}"
     try:
+        path = entry if isinstance(entry, str) else f"{entry.__module__}:{entry.__qualname__}"
         load_class(path, RepeatedInteractionEnv, "task")
-    except ConfigError:
-        return ""  # not one (Pendulum-v1), or not importable as named
+    except (ConfigError, AttributeError):
+        return ""  # not one (Pendulum-v1), not importable as named, or no class (a partial)
     return f"; the gymnasium id {name} is your own task: give its class, {path}"
 
 
