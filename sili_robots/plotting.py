@@ -30,8 +30,8 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from matplotlib import colormaps
 from matplotlib.axes import Axes
+from matplotlib.colors import to_rgb
 from matplotlib.figure import Figure
 
 from sili_robots.errors import ConfigError
@@ -48,15 +48,6 @@ TASK_TITLES = {
     "sawyer-reach": "Sawyer-Reach",
 }
 METHOD_ORDER = ("sili", "oracle", "lili", "stable", "sac", "smirl")
-#: one colour family per method; variants of a method (e.g. b values) take shades of it
-METHOD_CMAPS = {
-    "sili": "Blues",
-    "oracle": "Greys",
-    "lili": "Oranges",
-    "stable": "Greens",
-    "sac": "Reds",
-    "smirl": "Purples",
-}
 METHOD_COLORS = {
     "sili": "tab:blue",
     "oracle": "black",
@@ -65,6 +56,8 @@ METHOD_COLORS = {
     "sac": "tab:red",
     "smirl": "tab:purple",
 }
+#: where a variant (``VARIANT_KEYS``) says its latent kind
+LATENT_KEY = VARIANT_KEYS.index("latent")
 #: (table column, axis label) of the per-interaction panels
 CURVE_METRICS = (
     ("task_reward", "task reward"),
@@ -88,9 +81,9 @@ def spread(metric: str, mean: np.ndarray, std: np.ndarray) -> tuple[np.ndarray, 
 BOUND_METRICS = {"task_reward": "task_reward", "true_stability": "stability"}
 #: (colour, dash pattern) of each bound kind's line
 BOUND_STYLES = {
-    "random": ("0.55", (0, (1, 2))),
+    "random": ("0.6", (0, (1, 2))),
     "still": ("tab:olive", (0, (1, 2))),
-    "oracle": ("0.15", (0, (6, 2, 1, 2))),
+    "oracle": ("0.4", (0, (6, 2, 1, 2))),  # apart from the Oracle method's black
     "stabilizing": ("tab:cyan", (0, (6, 2, 1, 2))),
     "blind": ("tab:pink", (0, (3, 2))),
     "tracking": ("tab:brown", (0, (3, 2))),
@@ -183,9 +176,9 @@ def draw_bounds(ax: Axes, metric: str, task_ids: Sequence[str], note: str = "") 
             va="top" if upper else "bottom",
             fontsize=6.5,
             color="0.25",
-            bbox={"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.75},
+            bbox={"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.5},
             gid="bound_label",
-            zorder=3,
+            zorder=1.6,  # over the bound lines, under the runs' curves and spreads
         )
 
 
@@ -300,17 +293,16 @@ def _variant_order(df: pd.DataFrame) -> list[tuple]:
 
 
 def _shades(keys: list[tuple[str, Hashable]]) -> dict[Hashable, object]:
-    """Colours for (method, key) pairs: a method's only key gets the method's colour, several
-    get shades of its colour map, never the same colour twice."""
+    """Colours for (method, key) pairs: a method's first key gets the method's colour (in
+    every figure), the others shades of it towards black (a dark colour's towards white),
+    never the same colour twice."""
     out: dict[Hashable, object] = {}
     for method in dict.fromkeys(m for m, _ in keys):
         mine = list(dict.fromkeys(k for m, k in keys if m == method))
-        if len(mine) == 1:
-            out[mine[0]] = METHOD_COLORS.get(method, "tab:gray")
-        else:
-            cmap = colormaps[METHOD_CMAPS.get(method, "viridis")]
-            for key, x in zip(mine, np.linspace(0.4, 0.95, len(mine)), strict=True):
-                out[key] = cmap(x)
+        base = np.array(to_rgb(METHOD_COLORS.get(method, "tab:gray")))
+        toward = 1.0 if base.mean() < 0.3 else 0.0
+        for key, f in zip(mine, np.linspace(0.0, 0.65, max(len(mine), 2)), strict=False):
+            out[key] = tuple(base + (toward - base) * f)
     return out
 
 
@@ -387,6 +379,8 @@ def _draw_curves(
         color = palette.setdefault(label, colors[variant])
         style = "--" if variant[0] == "oracle" else "-"
         for ax, (metric, _) in zip(axes, metrics, strict=True):
+            if metric == "stability_reward" and variant[LATENT_KEY] == "none":
+                continue  # no latent, so no change of it to pay for: not a perfect 0
             stats = curve(rows, metric, window)
             x = stats.index.to_numpy(float)
             mean, std = stats["mean"].to_numpy(), stats["std"].to_numpy()
@@ -511,10 +505,12 @@ def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "si
             ax.grid(alpha=0.3)
     seeds = finals.groupby("config_beta")["seed"].nunique()
     seed_text = f"{seeds.min()}" if seeds.min() == seeds.max() else f"{seeds.min()}-{seeds.max()}"
-    last = min(window, int(rows.groupby("run").size().min()))
+    lengths = rows.groupby("run").size()
+    last = min(window, int(lengths.min()))
+    runs = f"{lengths.min():,}" if lengths.min() == lengths.max() else f"{lengths.min():,}+"
     fig.suptitle(
-        f"{task_title(task)}: effect of b on {METHOD_NAMES.get(method, method)} "
-        f"(mean of the last {last} interactions; mean ± std over {seed_text} "
+        f"{task_title(task)}: effect of b on {METHOD_NAMES.get(method, method)} after {runs} "
+        f"interactions (mean of the last {last}; mean ± std over {seed_text} "
         f"seed{'s' if seeds.max() > 1 else ''})"
     )
     if len(groups) > 1:
@@ -522,12 +518,24 @@ def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "si
     return fig
 
 
+#: the rows of the paper's results figure, top to bottom
+PAPER_ROWS = (
+    "circle-3",
+    "circle-8",
+    "circle-unequal",
+    "driving",
+    "sawyer-reach",
+    "circle-continuous",
+    "speaker-listener",
+)
+
+
 def overview(df: pd.DataFrame, smooth: int | None = None) -> Figure:
-    """One row per task: task reward and true stability per interaction, like the paper's
-    results figure."""
+    """One row per task: task reward and true stability per interaction, in the rows of the
+    paper's results figure (its right column is the stability reward)."""
     df = with_profile(df)
-    tasks = [t for t in TASK_TITLES if t in set(df["task"])] + sorted(
-        set(df["task"]) - set(TASK_TITLES)
+    tasks = [t for t in PAPER_ROWS if t in set(df["task"])] + sorted(
+        set(df["task"]) - set(PAPER_ROWS)
     )
     metrics = CURVE_METRICS[:2]
     fig = Figure(figsize=(11, 2.7 * len(tasks) + 0.6), layout="constrained")
@@ -543,6 +551,11 @@ def overview(df: pd.DataFrame, smooth: int | None = None) -> Figure:
         window = smooth or default_smoothing(int(rows["interaction"].max()) + 1)
         _draw_curves(row, rows, metrics, window, profiled, palette)
         row[0].set_title(task_title(task), loc="left", fontsize=10)
+        row[-1].set_title(
+            f"mean ± std over {_seed_note(rows)}, smoothed over {window} interactions",
+            loc="right",
+            fontsize=8,
+        )
         for h, lab in zip(*row[0].get_legend_handles_labels(), strict=True):
             handles.setdefault(lab, h)
     fig.legend(list(handles.values()), list(handles), loc="outside right upper")
