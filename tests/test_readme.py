@@ -77,3 +77,10 @@ def test_the_committed_results_are_not_ignored_by_git():
         ["git", "ls-files", "results/paper-grid/runs"], cwd=root, capture_output=True, text=True
     ).stdout.split()
     assert set(paths) <= set(tracked), sorted(set(paths) - set(tracked))[:5]
+
+
+def test_the_readmes_links_into_the_repository_lead_to_files():
+    targets = re.findall(r"\]\(((?!https?:|#)[^)\s]+)\)", README.read_text())
+    assert any(t.startswith("docs/preview-") for t in targets)  # the links are really read
+    missing = [t for t in targets if not (README.parent / t.split("#")[0]).exists()]
+    assert not missing
