@@ -27,7 +27,7 @@ def load_class(path: str, base: type, kind: str, instead: str = "") -> type:
     if os.getcwd() not in sys.path:
         sys.path.append(os.getcwd())
     where = (
-        f"give {instead}package.module:ClassName of a {base.__name__} subclass importable from "
+        f"give {instead}package.module:ClassName of a subclass of {base.__name__} importable from "
         f"the current directory (a run of one is resumed, evaluated and loaded from a folder "
         "its module imports from)"
     )

@@ -50,6 +50,16 @@ class Renamed(Constant):
 
 class Usurper(Constant):
     metric_columns = ("task_reward",)
+
+
+class Scalar(AgentAddon):
+    def stability_distance(self, j):
+        return 0.5  # not one per interaction j
+
+
+class NaN(AgentAddon):
+    def stability_distance(self, j):
+        return np.full(j.shape, np.nan)
 '''
 
 
@@ -104,6 +114,19 @@ def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, caps
     assert "declares metric_columns task_reward, which metrics.csv has already" in (
         capsys.readouterr().err
     )
+    wrong = {
+        "my_addons:Scalar": "add-on Scalar: stability_distance must return finite values of j's "
+        "shape (1,), got shape ()",
+        "my_addons:NaN": "add-on NaN: stability_distance must return finite values of j's shape "
+        "(1,), got shape (1,) (not finite)",
+        # the packaged posteriors add-on replaces d too: one of them would be ignored
+        "my_addons:Constant --set addons.stability_distance=posterior": "add-ons "
+        "HindsightPosteriors, Constant each replace stability_distance: keep one",
+    }
+    for plugins, message in wrong.items():
+        given = ["--set", f"addons.plugins={plugins.split()[0]}", *plugins.split()[1:]]
+        assert main([*args, *FAST_ARGS, "--interactions", "2", *given, "--overwrite"]) == 2
+        assert message in capsys.readouterr().err
     with pytest.raises(TypeError, match="has no len"):  # its own error, as itself
         make_run_config("circle-3", "sili", settings={"addons.plugins": "my_addons:Buggy"})
         main([*args, "--set", "addons.plugins=my_addons:Buggy", "--overwrite"])

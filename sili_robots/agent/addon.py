@@ -5,22 +5,23 @@ hook, only the add-ons that override it, so a hook nobody overrides costs nothin
 add-ons the agent runs the paper's algorithm and none of their code, per step or per update.
 Add-ons live outside ``sili_robots/agent/`` (in ``sili_robots/addons/``, or a user's own module
 named by the setting ``addons.plugins``) and are wired in by configuration
-(``sili_robots.addons.build_addons``); they may read the agent's public state
-(``buffer``, ``latents``, ``model``, ``cfg``, ``rng``).
+(``sili_robots.addons.build_addons``); they may read the agent's public state (``buffer``;
+``Z``, the cached latents: ``Z[j]`` is z^j of stored interaction j, ``Z[0]`` the zeros of no
+history; ``latents``, ``model``, ``cfg``, ``rng``).
 
 Hooks, in the order the agent calls them:
 
 - ``encoder_readouts``: extra per-interaction features for the encoder's head, at construction.
 - ``begin_interaction``: a new interaction starts (after construction, each interaction, load).
-- ``acting_latent`` / ``observe_step``: per step, z^j as the policy should act on it now, and
-  each step played (the only per-step hooks).
+- ``acting_latent`` / ``observe_step``: per step, z^j as the policy should act on it now (the
+  last add-on's that gives one), and each step played (the only per-step hooks).
 - ``interaction_stored(j)``: interaction j is stored and z^{j+1} cached; returns values for
   the ``metrics.csv`` columns the class declares in ``metric_columns``.
 - ``latents_refreshed``: the cached latents were recomputed with the current encoder.
 - ``before_update(interaction)``: settings for the updates after ``interaction``.
 - ``latent_pairs`` / ``rl_interactions``: which stored interactions a batch draws.
-- ``batch_latents``: z^j per sampled step as the policy acted on it.
-- ``stability_distance``: d(z^j, z^{j+1}) replaced (training and metrics alike).
+- ``batch_latents``: z^j per sampled step as the policy acted on it (the last add-on's).
+- ``stability_distance``: d(z^j, z^{j+1}) replaced (training and metrics alike; one add-on).
 - ``state_dict`` / ``load_state_dict``: checkpoints.
 """
 
@@ -102,7 +103,9 @@ class AgentAddon:
         return None
 
     def stability_distance(self, j: np.ndarray) -> np.ndarray | None:
-        """d for the change after each stored interaction j (None: the latents' distance)."""
+        """d for the change after each stored interaction j, finite, of ``j``'s shape (any:
+        ``[1]`` for the metrics, ``[U, M, K]`` for training batches); None: the latents'
+        distance, which is 0 after interaction 0 (there was no z^0 to keep)."""
         return None
 
     def state_dict(self) -> dict[str, Any]:

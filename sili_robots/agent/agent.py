@@ -31,7 +31,7 @@ from sili_robots.agent.latent_cache import LatentCache
 from sili_robots.agent.sac import SAC
 from sili_robots.agent.schedule import value_at
 from sili_robots.agent.smirl import RunningGaussian
-from sili_robots.errors import CheckpointMismatch, TrainingDiverged
+from sili_robots.errors import CheckpointMismatch, ConfigError, TrainingDiverged
 
 
 @dataclass
@@ -257,11 +257,20 @@ class SILIAgent:
 
     def change_after(self, j: np.ndarray) -> np.ndarray:
         """d for the change after each stored interaction j, as the stability reward counts it."""
-        for addon in self.hooks["stability_distance"]:
-            d = addon.stability_distance(j)
-            if d is not None:
-                return d
-        return stability.change_after(self.Z, j, self.cfg.latent)
+        given = [(a, a.stability_distance(j)) for a in self.hooks["stability_distance"]]
+        given = [(a, d) for a, d in given if d is not None]
+        if not given:
+            return stability.change_after(self.Z, j, self.cfg.latent)
+        names = ", ".join(type(a).__name__ for a, _ in given)
+        if len(given) > 1:
+            raise ConfigError(f"add-ons {names} each replace stability_distance: keep one")
+        d = np.asarray(given[0][1])
+        if d.shape != j.shape or not np.isfinite(d).all():  # else met as a diverged training
+            raise ConfigError(
+                f"add-on {names}: stability_distance must return finite values of j's shape "
+                f"{j.shape}, got shape {d.shape}{'' if d.shape != j.shape else ' (not finite)'}"
+            )
+        return d
 
     def _stats(self, j: int, next_first: np.ndarray, extra: dict[str, float]) -> InteractionStats:
         if self.cfg.latent == "partial":
