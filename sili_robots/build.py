@@ -325,4 +325,5 @@ def make_run_config(
             f"(or the earlier flat names {', '.join(LEGACY_SETTINGS)})"
         ) from None
     cfg.addons.validate(cfg.agent)
+    cfg.metric_columns()  # a plug-in's columns checked before a run is written
     return cfg

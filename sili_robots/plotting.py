@@ -178,7 +178,7 @@ def draw_bounds(ax: Axes, metric: str, task_ids: Sequence[str], note: str = "") 
             color="0.25",
             bbox={"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.5},
             gid="bound_label",
-            zorder=1.6,  # over the bound lines, under the runs' curves and spreads
+            zorder=1.6,  # over the bound lines and the runs' spreads, under their curves
         )
 
 
@@ -294,15 +294,14 @@ def _variant_order(df: pd.DataFrame) -> list[tuple]:
 
 def _shades(keys: list[tuple[str, Hashable]]) -> dict[Hashable, object]:
     """Colours for (method, key) pairs: a method's first key gets the method's colour (in
-    every figure), the others shades of it towards black (a dark colour's towards white),
-    never the same colour twice."""
+    every figure), the others ever lighter tints of it (never near Oracle's black), never the
+    same colour twice."""
     out: dict[Hashable, object] = {}
     for method in dict.fromkeys(m for m, _ in keys):
         mine = list(dict.fromkeys(k for m, k in keys if m == method))
         base = np.array(to_rgb(METHOD_COLORS.get(method, "tab:gray")))
-        toward = 1.0 if base.mean() < 0.3 else 0.0
-        for key, f in zip(mine, np.linspace(0.0, 0.65, max(len(mine), 2)), strict=False):
-            out[key] = tuple(base + (toward - base) * f)
+        for key, f in zip(mine, np.linspace(0.0, 0.6, max(len(mine), 2)), strict=False):
+            out[key] = tuple(base + (1.0 - base) * f)
     return out
 
 
@@ -505,11 +504,10 @@ def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "si
             ax.grid(alpha=0.3)
     seeds = finals.groupby("config_beta")["seed"].nunique()
     seed_text = f"{seeds.min()}" if seeds.min() == seeds.max() else f"{seeds.min()}-{seeds.max()}"
-    lengths = rows.groupby("run").size()
-    last = min(window, int(lengths.min()))
-    runs = f"{lengths.min():,}" if lengths.min() == lengths.max() else f"{lengths.min():,}+"
+    length = int(rows.groupby("run").size().min())  # b_sweep_rows: runs of one length
+    last = min(window, length)
     fig.suptitle(
-        f"{task_title(task)}: effect of b on {METHOD_NAMES.get(method, method)} after {runs} "
+        f"{task_title(task)}: effect of b on {METHOD_NAMES.get(method, method)} after {length:,} "
         f"interactions (mean of the last {last}; mean ± std over {seed_text} "
         f"seed{'s' if seeds.max() > 1 else ''})"
     )
@@ -552,7 +550,8 @@ def overview(df: pd.DataFrame, smooth: int | None = None) -> Figure:
         _draw_curves(row, rows, metrics, window, profiled, palette)
         row[0].set_title(task_title(task), loc="left", fontsize=10)
         row[-1].set_title(
-            f"mean ± std over {_seed_note(rows)}, smoothed over {window} interactions",
+            f"mean ± std over {_seed_note(rows)}, smoothed over {window} "
+            f"interaction{'s' if window > 1 else ''}",
             loc="right",
             fontsize=8,
         )

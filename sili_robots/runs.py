@@ -505,11 +505,14 @@ def differences(a: Any, b: Any, prefix: str = "") -> list[tuple[str, Any, Any]]:
 
 
 def check_history(
-    run_dir: Path, interactions: int, columns: Collection[str] = METRIC_COLUMNS
+    run_dir: Path,
+    interactions: int,
+    columns: Collection[str] = METRIC_COLUMNS,
+    plugins: str = "",
 ) -> None:
     """Refuse to resume a run whose ``metrics.csv`` lacks rows its checkpoint has trained (the
     file lost or cut short): the run would go on with a hole in its record. ``columns``: those
-    the run writes (``RunConfig.metric_columns``)."""
+    the run writes (``RunConfig.metric_columns``), ``plugins`` its own add-ons."""
     path = Path(run_dir) / METRICS
     rows = 0
     if path.is_file():
@@ -521,10 +524,10 @@ def check_history(
                 unknown = found - set(columns)
         except (UnicodeDecodeError, csv.Error) as err:
             found, unknown = set(), {_first_line(err)}
-        if unknown and set(METRIC_COLUMNS) <= found:  # a run's history, and an add-on's column
+        if unknown and plugins and set(METRIC_COLUMNS) <= found:  # an add-on's columns
             raise ConfigError(
                 f"{path} has columns {', '.join(sorted(unknown))} that no add-on of the run "
-                "(addons.plugins) declares in its metric_columns now; declare them again to "
+                f"({plugins}) declares in its metric_columns now; declare them again to "
                 "resume it"
             )
         if unknown:  # it would not take the run's next rows

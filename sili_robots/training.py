@@ -56,7 +56,7 @@ def train(
     run_dir = Path(run_dir)
     state = load_checkpoint(run_dir) if resume else None
     if state is not None:
-        check_history(run_dir, int(state["interaction"]), cfg.metric_columns())
+        check_history(run_dir, int(state["interaction"]), cfg.metric_columns(), cfg.addons.plugins)
     torch.set_num_threads(cfg.threads)
     own_env = env is None
     env = make_run_env(cfg) if env is None else env

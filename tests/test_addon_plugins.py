@@ -88,7 +88,7 @@ def test_a_users_addon_runs_writes_its_columns_and_stays_through_a_resume(
     config = run / "config.json"
     config.write_text(config.read_text().replace("my_addons:Constant", "my_addons:Renamed"))
     assert main(again) == 2  # its add-on now declares another column
-    assert "has columns stored that no add-on of the run (addons.plugins) declares" in (
+    assert "has columns stored that no add-on of the run (my_addons:Renamed) declares" in (
         capsys.readouterr().err
     )
 
@@ -110,10 +110,12 @@ def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, caps
     err = capsys.readouterr().err
     assert "add-on my_addons:Configured is built with no arguments" in err
     assert "Traceback" not in err
-    assert main([*args, "--set", "addons.plugins=my_addons:Usurper", "--overwrite"]) == 2
+    fresh = ["train", "--task", "circle-3", "--out", str(tmp_path / "u"), "--no-progress"]
+    assert main([*fresh, "--set", "addons.plugins=my_addons:Usurper"]) == 2
     assert "declares metric_columns task_reward, which metrics.csv has already" in (
         capsys.readouterr().err
     )
+    assert not (tmp_path / "u" / "config.json").exists()  # refused before a run was written
     wrong = {
         "my_addons:Scalar": "add-on Scalar: stability_distance must return finite values of j's "
         "shape (1,), got shape ()",
@@ -130,3 +132,13 @@ def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, caps
     with pytest.raises(TypeError, match="has no len"):  # its own error, as itself
         make_run_config("circle-3", "sili", settings={"addons.plugins": "my_addons:Buggy"})
         main([*args, "--set", "addons.plugins=my_addons:Buggy", "--overwrite"])
+
+
+def test_a_history_with_a_column_of_no_add_on_is_damaged_unless_the_run_has_add_ons(tmp_path):
+    from sili_robots.runs import METRIC_COLUMNS, check_history
+
+    (tmp_path / "metrics.csv").write_text(",".join([*METRIC_COLUMNS, "my_note"]) + "\n")
+    with pytest.raises(ConfigError, match="is damaged"):
+        check_history(tmp_path, 0)
+    with pytest.raises(ConfigError, match=r"my_note that no add-on of the run \(mine:A\) declares"):
+        check_history(tmp_path, 0, plugins="mine:A")

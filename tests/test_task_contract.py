@@ -274,6 +274,17 @@ def test_a_task_s_own_mistakes_are_named_where_they_are_made():
     with pytest.raises(ConfigError, match=r"DrawingNoBase.__init__ did not call super"):
         DrawingNoBase()
 
+    class Helpers(TwoDoorsEnv):
+        def __init__(self):
+            self.note = "helpers only"
+
+    class Both(Helpers):  # the base's __init__ called after a parent's that skips it
+        def __init__(self):
+            Helpers.__init__(self)
+            TwoDoorsEnv.__init__(self)
+
+    assert Both().note == "helpers only"
+
 
 def test_an_observation_outside_the_space_is_clipped_with_a_warning():
     class Narrow(TwoDoorsEnv):

@@ -7,7 +7,7 @@ Add-ons live outside ``sili_robots/agent/`` (in ``sili_robots/addons/``, or a us
 named by the setting ``addons.plugins``) and are wired in by configuration
 (``sili_robots.addons.build_addons``); they may read the agent's public state (``buffer``;
 ``Z``, the cached latents: ``Z[j]`` is z^j of stored interaction j, ``Z[0]`` the zeros of no
-history; ``latents``, ``model``, ``cfg``, ``rng``).
+history, the true strategy for ``latent="true"``; ``latents``, ``model``, ``cfg``, ``rng``).
 
 Hooks, in the order the agent calls them:
 
@@ -105,7 +105,8 @@ class AgentAddon:
     def stability_distance(self, j: np.ndarray) -> np.ndarray | None:
         """d for the change after each stored interaction j, finite, of ``j``'s shape (any:
         ``[1]`` for the metrics, ``[U, M, K]`` for training batches); None: the latents'
-        distance, which is 0 after interaction 0 (there was no z^0 to keep)."""
+        distance, which is 0 after interaction 0 (there was no z^0 to keep; not so for the
+        true latent, whose z^0 is the true strategy)."""
         return None
 
     def state_dict(self) -> dict[str, Any]:

@@ -417,7 +417,8 @@ def _calling_base_init(init: Any) -> Any:
     @functools.wraps(init)
     def __init__(self: Any, *args: Any, **kwargs: Any) -> None:
         init(self, *args, **kwargs)
-        if "horizon" not in vars(self):
+        outermost = type(self).__init__ is __init__  # a parent's may run before the base's
+        if outermost and "horizon" not in vars(self):
             raise ConfigError(
                 f"{type(self).__name__}.__init__ did not call super().__init__(horizon), "
                 "where a RepeatedInteractionEnv sets up its spaces and its game"
