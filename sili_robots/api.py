@@ -17,6 +17,7 @@ the agent the interaction just played, from which it infers z^{j+1}.
 
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 import tempfile
@@ -53,6 +54,7 @@ from sili_robots.runs import (
     clear_run,
     load_checkpoint,
     make_run_dir,
+    ready_new_run_dir,
     require_checkpoint,
     set_target,
 )
@@ -126,12 +128,12 @@ class SILI:
         self.cfg = cfg
         self._setup(None)
 
-    def _check_run_dir(self) -> None:
-        """A new model never trains over a run or into a folder of other files (the CLI's rule)."""
+    def _check_run_dir(self, clear: bool = False) -> None:
+        """A new model never trains over a run or into a folder of other files (the CLI's rule);
+        ``clear``: with ``overwrite``, the run there removed (``ready_new_run_dir``)."""
         load = f"SILI.load({str(self.run_dir)!r})"
-        check_new_run_dir(
-            self.run_dir, self._overwrite, out="run_dir", replace="overwrite=True", resume=load
-        )
+        check = ready_new_run_dir if clear else check_new_run_dir
+        check(self.run_dir, self._overwrite, out="run_dir", replace="overwrite=True", resume=load)
 
     # ------------------------------------------------------------------ building
     def _setup(self, state: dict[str, Any] | None) -> None:
@@ -198,16 +200,11 @@ class SILI:
         target = done + interactions
         env = None if self._task_env is None else observed_as(self._task_env, self.cfg)
         threads = torch.get_num_threads()  # training sets the run's; the caller's come back
-
-        def still_new() -> None:  # with the claim: a run may have started and ended there since
-            if done == 0:
-                self._check_run_dir()
-                if self._overwrite:
-                    clear_run(self.run_dir)
-
+        # a new model's folder again with the claim: a run may have started and ended there
+        ready = functools.partial(self._check_run_dir, clear=True) if done == 0 else None
         claimed = False
         try:
-            with training_claim(self.run_dir, before=still_new):
+            with training_claim(self.run_dir, before=ready):
                 claimed = True
                 if done == 0:
                     self.cfg.interactions = target

@@ -406,6 +406,15 @@ def check_new_run_dir(
             )
 
 
+def ready_new_run_dir(run_dir: Path, overwrite: bool = False, **names: str) -> None:
+    """``check_new_run_dir``, then with ``overwrite`` the run there removed (``clear_run``): a
+    new run's folder as its trainer takes it, under the training claim (``training_claim``'s
+    ``before``: nothing may start or end there between the check and the claim)."""
+    check_new_run_dir(run_dir, overwrite, **names)
+    if overwrite:
+        clear_run(run_dir)
+
+
 def make_run_dir(run_dir: Path, out: str = "--out") -> None:
     """Create a run directory, or ConfigError naming it (and ``out``, what the caller calls
     it) when it cannot be."""

@@ -257,17 +257,20 @@ class SILIAgent:
 
     def change_after(self, j: np.ndarray) -> np.ndarray:
         """d for the change after each stored interaction j, as the stability reward counts it."""
-        given = [(a, a.stability_distance(j)) for a in self.hooks["stability_distance"]]
-        given = [(a, d) for a, d in given if d is not None]
+        given = []
+        for addon in self.hooks["stability_distance"]:
+            d = addon.stability_distance(j)
+            if d is not None:
+                given.append((type(addon).__name__, np.asarray(d)))
         if not given:
             return stability.change_after(self.Z, j, self.cfg.latent)
-        names = ", ".join(type(a).__name__ for a, _ in given)
         if len(given) > 1:
+            names = ", ".join(name for name, _ in given)
             raise ConfigError(f"add-ons {names} each replace stability_distance: keep one")
-        d = np.asarray(given[0][1])
+        [(name, d)] = given
         if d.shape != j.shape or not np.isfinite(d).all():  # else met as a diverged training
             raise ConfigError(
-                f"add-on {names}: stability_distance must return finite values of j's shape "
+                f"add-on {name}: stability_distance must return finite values of j's shape "
                 f"{j.shape}, got shape {d.shape}{'' if d.shape != j.shape else ' (not finite)'}"
             )
         return d

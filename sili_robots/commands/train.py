@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import json
 import os
 import sys
@@ -36,9 +37,9 @@ from sili_robots.runs import (
     TB_DIR,
     RunConfig,
     check_new_run_dir,
-    clear_run,
     make_run_dir,
     read_config,
+    ready_new_run_dir,
 )
 
 
@@ -253,13 +254,11 @@ def run(args: argparse.Namespace) -> int:
         _check_env_builds(cfg)
         make_run_dir(args.out)
         _note_threads_beyond_cores(cfg.threads)
-
-        def still_new() -> None:  # with the claim: a run may have started and ended there since
-            check_new_run_dir(args.out, args.overwrite, resume=f"--resume {args.out}")
-            if args.overwrite:
-                clear_run(args.out)  # the run's own files; anything else in the folder stays
-
-        with _resume_hint(args.out), training_claim(args.out, before=still_new):
+        # again with the claim: a run may have started and ended there since
+        ready = functools.partial(
+            ready_new_run_dir, args.out, args.overwrite, resume=f"--resume {args.out}"
+        )
+        with _resume_hint(args.out), training_claim(args.out, before=ready):
             run_dir = train(cfg, args.out, progress=not args.no_progress)
     summary = write_summary(run_dir)
     print(json.dumps({"run_dir": str(run_dir), **summary}, indent=2))

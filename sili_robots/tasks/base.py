@@ -314,10 +314,10 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
 
     def _observation(self) -> np.ndarray:
         obs = np.asarray(self._base_observation(), np.float32)
-        space, name = self.observation_space, type(self).__name__
+        space = self.observation_space
         if obs.shape != space.shape:  # a task's own mistake: numpy would broadcast or fail
             raise ConfigError(
-                f"{name}._base_observation() returned shape {obs.shape}; its "
+                f"{type(self).__name__}._base_observation() returned shape {obs.shape}; its "
                 f"observation_space has shape {space.shape}"
             )
         clipped = np.clip(obs, space.low, space.high)
