@@ -8,7 +8,8 @@ runs into a small collection that is kept in the repository (``sili collect``).
 Budgets (interactions per run): the original configurations used 5,000 for the point-mass tasks,
 2,500 for Driving and 1,200 for Speaker-Listener; here the Circle variants get 2,000 (what 2 CPU
 cores allow for 6 methods x 3 seeds x 4 variants), Driving 2,500, Speaker-Listener 1,500 and
-Sawyer-Reach 1,500. Stable and SMiRL, which the paper uses as ablations, get half.
+Sawyer-Reach 1,500. Stable (SILI at b = 1) and SMiRL, the two baselines that seek stability
+alone, get half, to fit the grid in 2 cores.
 """
 
 from __future__ import annotations

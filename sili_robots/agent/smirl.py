@@ -6,6 +6,9 @@ log N(s_{t+1}; mean, diag(max(std, floor)^2)) under the density as it was before
 interaction, clipped to [-300, 300] as in the SMiRL authors' code. Over all visited states
 (rather than the current episode) because the paper contrasts SILI's pairwise stability with
 SMiRL's "history of previously visited states", and it keeps the policy's input unchanged.
+The state is the whole observation, its last element t/H included: that element's term
+depends on the step alone, which the policy sees, so it shifts the reward by a function of
+time and leaves the best policy unchanged.
 """
 
 from __future__ import annotations
