@@ -39,7 +39,7 @@ class AgentFeedback(gym.Wrapper):
     history: the interactions of the game before are not its history.
     """
 
-    def __init__(self, env: gym.Env, agent: SILIAgent, game_state: dict[str, Any]) -> None:
+    def __init__(self, env: gym.Env, agent: SILIAgent, game_state: dict[str, Any] | None) -> None:
         super().__init__(env)
         self.agent = agent
         self._game_state = game_state

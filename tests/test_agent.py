@@ -9,7 +9,7 @@ import torch
 from agent_helpers import make_agent, run_config
 
 from sili_robots.addons.last_step import last_transition
-from sili_robots.addons.latent_filter import largest_power_of_two
+from sili_robots.addons.latent_filter import LatentFilter, largest_power_of_two
 from sili_robots.addons.posteriors import HindsightPosteriors
 from sili_robots.agent import AgentConfig, Schedule, SILIAgent
 from sili_robots.agent.latent import (
@@ -831,6 +831,26 @@ def test_latent_model_schedules_move_the_model_and_are_ignored_without_one(metho
     if method == "sili":
         assert [g["lr"] for g in agent.model_opt.param_groups] == [pytest.approx(1e-4)]
         assert (agent.model.usage_bonus, agent.model.preact_penalty) == (0.0, 0.01)
+
+
+@pytest.mark.parametrize(
+    ("method", "latent", "addon", "needs"),
+    [("sac", None, HindsightPosteriors(), "learned latents"),
+     ("sili", "continuous", HindsightPosteriors(), "discrete latents"),
+     ("oracle", None, LatentFilter(0.1), "learned latents")],
+)  # fmt: skip
+def test_an_addon_wired_in_directly_is_refused_without_the_latents_it_reads(
+    method, latent, addon, needs
+):
+    """The settings refuse these before a run; given to the agent itself they failed later,
+    with an AttributeError deep in the add-on."""
+    cfg = method_config(method, latent, hidden=32)
+    with pytest.raises(ConfigError, match=f"add-on {addon.name} needs {needs}"):
+        SILIAgent(cfg, 3, 2, H, 2, addons=[addon])
+    agent = SILIAgent(cfg, 3, 2, H, 2)
+    with pytest.raises(ConfigError, match=f"add-on {addon.name} needs {needs}"):
+        agent.attach_addon(addon)
+    assert agent.addons == []  # left as it was
 
 
 @pytest.mark.parametrize("setting", [{"addons__stability_distance": "hindsight"},

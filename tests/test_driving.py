@@ -83,6 +83,12 @@ def first_seed(env: DrivingEnv, lane: int) -> int:
     raise AssertionError("no seed gives that first strategy")
 
 
+def test_a_chosen_first_lane_within_rounding_is_that_lane(env):
+    for lane in env.strategy_choices():
+        _, info = env.reset(seed=0, options={"strategy": lane - 1e-10})
+        assert info["strategy_id"] == lane  # not int(1.9999999999) = 1, no lane of the opponent's
+
+
 def test_stabilizing_policy_forms_the_convention_then_never_collides(env):
     stabilizing = scripted_policy(env, "stabilizing")
     runs = play(env, lambda e, t: float(stabilizing(e, None)[0]), 8, seed=first_seed(env, LEFT))

@@ -104,6 +104,15 @@ def test_oracle_exposes_strategy_and_plain_does_not(name):
 
 
 @pytest.mark.parametrize("name", LIGHT_TASKS)
+def test_a_chosen_first_strategy_within_rounding_starts_from_that_strategy(name):
+    env = make_task(name).unwrapped
+    for z in env.strategy_choices() or [1.0, 2.0]:
+        for given in (z - 1e-10, np.int64(z) if float(z).is_integer() else np.float64(z)):
+            _, info = env.reset(seed=0, options={"strategy": given})
+            assert info["strategy_id"] == pytest.approx(z, abs=1e-9), given  # not int(0.99..) = 0
+
+
+@pytest.mark.parametrize("name", LIGHT_TASKS)
 def test_the_plain_observation_ends_with_t_over_h_and_the_same_play_sees_the_same_whatever_z(name):
     env = make_task(name).unwrapped
     actions = np.random.default_rng(0).uniform(-1, 1, (env.horizon, *env.action_space.shape))

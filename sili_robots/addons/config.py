@@ -14,6 +14,19 @@ from sili_robots.plugins import load_class
 StabilityDistance = Literal["latents", "posterior", "hindsight"]
 
 
+def check_learned_latents(name: str, agent: AgentConfig, discrete: bool = False) -> None:
+    """Refuse add-on ``name`` on an agent without the learned latents it reads: from the
+    settings before a run starts, and again when an add-on is wired into an agent directly."""
+    if not agent.uses_latent_model:
+        raise ConfigError(
+            f"add-on {name} needs learned latents (discrete or continuous) of a method "
+            f"with a latent model (sili, lili, stable), got method {agent.method!r} with "
+            f"latent {agent.latent!r}; switch it off for this method"
+        )
+    if discrete and agent.latent != "discrete":
+        raise ConfigError(f"add-on {name} needs discrete latents, got latent {agent.latent!r}")
+
+
 @dataclass
 class FilterConfig:
     """Within-interaction latent filter (addons/latent_filter.py)."""
@@ -101,15 +114,10 @@ class AddonsConfig:
     def validate(self, agent: AgentConfig) -> AddonsConfig:
         check(self, "addons.")
         self.plugin_classes()  # each one loads, before a run starts
-        learned, active = agent.uses_latent_model, self.active()
+        active = self.active()
         for name in active:
-            if name == "recent" or learned:
-                continue
-            raise ConfigError(
-                f"add-on {name} needs learned latents (discrete or continuous) of a method "
-                f"with a latent model (sili, lili, stable), got method {agent.method!r} with "
-                f"latent {agent.latent!r}; switch it off for this method"
-            )
+            if name != "recent":
+                check_learned_latents(name, agent)
         if "posteriors" in active and agent.latent != "discrete":
             raise ConfigError(
                 f"add-on posteriors (addons.stability_distance {self.stability_distance!r}, "

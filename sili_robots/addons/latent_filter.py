@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from sili_robots.addons.config import check_learned_latents
 from sili_robots.addons.filter_math import (
     FILTER_CANDIDATES,
     continuous_residual_scale,
@@ -54,6 +55,7 @@ class LatentFilter(AgentAddon):
         self.eps, self.start, self.noise = eps, start, noise
 
     def attach(self, agent: Any) -> None:
+        check_learned_latents(self.name, agent.cfg)
         super().attach(agent)
         self.continuous = agent.cfg.latent == "continuous"
         self.horizon, self.zdim = agent.horizon, agent.zdim

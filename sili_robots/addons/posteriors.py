@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from sili_robots.addons.config import check_learned_latents
 from sili_robots.agent.addon import AgentAddon
 from sili_robots.agent.latent_cache import in_chunks, replay_target_scale
 
@@ -37,6 +38,7 @@ class HindsightPosteriors(AgentAddon):
         self.P = np.zeros((0, 0), np.float32)
 
     def attach(self, agent: Any) -> None:
+        check_learned_latents(self.name, agent.cfg, discrete=True)
         super().attach(agent)
         self.P = np.zeros((0, agent.zdim), np.float32)
         #: LILI has no stability reward to replace (nor a column of it: build_addons leaves

@@ -146,9 +146,9 @@ class SILIAgent:
         """Wire in an add-on after construction (e.g. a filter on a trained agent); its
         ``encoder_readouts`` cannot change a model that is already built. With interactions
         stored, it starts as from a checkpoint saved without it (its state built for them)."""
+        addon.attach(self)  # first: one it refuses is not wired in
         self.addons.append(addon)
         self.hooks = {h: overriding(self.addons, h) for h in HOOKS}
-        addon.attach(self)
         if self.buffer.n:
             addon.load_state_dict({})
 

@@ -24,6 +24,7 @@ import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
 from sili_robots.errors import ConfigError
@@ -304,7 +305,7 @@ BELIEVING_POLICIES: dict[str, dict[str, Believing]] = {
 }
 
 
-def available_kinds(env: RepeatedInteractionEnv) -> tuple[str, ...]:
+def available_kinds(env: gym.Env) -> tuple[str, ...]:
     """The scripted kinds that exist for ``env``'s task, in ``SCRIPTED_KINDS`` order (random
     and still on any task: they need no knowledge of it)."""
     name = type(env.unwrapped).__name__
@@ -312,8 +313,9 @@ def available_kinds(env: RepeatedInteractionEnv) -> tuple[str, ...]:
     return tuple(k for k in SCRIPTED_KINDS if k in own)
 
 
-def scripted_policy(env: RepeatedInteractionEnv, kind: str) -> Policy:
-    """The scripted policy ``kind`` for ``env`` (its unwrapped task decides which)."""
+def scripted_policy(env: gym.Env, kind: str) -> Policy:
+    """The scripted policy ``kind`` for ``env``, wrapped or not (its unwrapped task decides
+    which, and is what the policy reads)."""
     if kind not in SCRIPTED_KINDS:
         raise ConfigError(f"unknown scripted policy {kind!r}; allowed: {', '.join(SCRIPTED_KINDS)}")
     task = env.unwrapped

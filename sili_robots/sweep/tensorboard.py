@@ -21,6 +21,7 @@ import threading
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 from sili_robots.runs import METRIC_COLUMNS, METRICS, TB_DIR
 
@@ -71,7 +72,7 @@ class MetricsTail:
         self._old_inode = self._inode()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="tensorboard-tail", daemon=True)
-        self._writer = None
+        self._writer: Any = None  # a SummaryWriter from the first rows on
         self._file: io.TextIOBase | None = None
         self._pending = ""
         self.rows_written = 0

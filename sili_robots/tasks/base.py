@@ -147,21 +147,23 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         strategy override this (``_check_start`` refuses the rest)."""
         raise NotImplementedError
 
-    def _check_start(self, strategy: Any) -> None:
-        """Refuse a chosen first strategy this task cannot start from, before ``reset`` changes
-        anything, so a refused reset leaves the game as it was."""
+    def _check_start(self, strategy: Any) -> StrategyId:
+        """The task's own value of a chosen first strategy (the choice it equals, within
+        rounding), refusing one this task cannot start from before ``reset`` changes anything,
+        so a refused reset leaves the game as it was."""
         if type(self)._set_strategy is RepeatedInteractionEnv._set_strategy:
             raise ConfigError(f"{type(self).__name__} cannot start from a chosen strategy")
         choices = self.strategy_choices()
         if isinstance(strategy, bool) or not isinstance(strategy, (int, float, np.number)):
-            ok = False
+            matched = None
         elif choices is None:
-            ok = bool(np.isfinite(strategy))
-        else:
-            ok = any(_same(strategy, c) for c in choices)
-        if not ok:
+            matched = float(strategy) if np.isfinite(strategy) else None
+        else:  # 0.9999999999 starts from 1, not from int(0.9999999999)
+            matched = next((c for c in choices if _same(strategy, c)), None)
+        if matched is None:
             allowed = "any finite number" if choices is None else ", ".join(map(str, choices))
             raise ConfigError(f"unknown strategy {strategy!r}; allowed: {allowed}")
+        return matched
 
     # ----------------------------------------------------------------- gymnasium API
     def reset(
@@ -173,8 +175,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
             raise ConfigError(
                 f"unknown reset options {sorted(unknown)}; allowed: {list(RESET_OPTIONS)}"
             )
-        if "strategy" in options:
-            self._check_start(options["strategy"])
+        start = self._check_start(options["strategy"]) if "strategy" in options else None
         if not self._started and self.spec is not None and self.spec.id.startswith("sili/"):
             from sili_robots.tasks.registry import check_identity
 
@@ -191,8 +192,8 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         if restart:
             self.interaction = 0
             self._initial_strategy()  # drawn even when chosen: the generator moves on the same
-            if "strategy" in options:
-                self._set_strategy(options["strategy"])
+            if start is not None:
+                self._set_strategy(start)
             self._last_strategy_id = None
             self._started = True
         else:
