@@ -100,7 +100,7 @@ def read_metrics(path: Path) -> Any:
     import pandas as pd
 
     try:
-        df = pd.read_csv(path)
+        df = pd.read_csv(path, float_precision="round_trip")  # the values written, to the bit
         missing = [c for c in READ_COLUMNS if c not in df.columns]
         if missing:
             raise ValueError(f"no column {', '.join(missing)}")

@@ -34,6 +34,16 @@ def test_the_faster_library_is_chosen_and_the_choice_cached(cache, monkeypatch):
     assert AgentConfig().matmul == "aten"  # what a new run records in config.json
 
 
+@pytest.mark.parametrize(("onednn", "chosen"), [(0.99e-3, "aten"), (0.9e-3, "onednn")])
+def test_onednn_is_chosen_only_where_clearly_faster(cache, monkeypatch, onednn, chosen):
+    """A near tie takes ATen, so a timing under load does not flip a fresh cache's choice
+    (and with it every run's numbers)."""
+    if not matmul.onednn_available():
+        pytest.skip("this PyTorch has no oneDNN linear op: aten is the only library")
+    monkeypatch.setattr(matmul, "time_matmuls", lambda: {"onednn": onednn, "aten": 1e-3})
+    assert matmul.default_matmul() == chosen
+
+
 def test_a_real_timing_measures_both_libraries(cache):
     times = matmul.time_matmuls(width=64, batch=32, rounds=1)
     assert set(times) == set(matmul.MATMULS) and all(0 < t < 1 for t in times.values())

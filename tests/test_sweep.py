@@ -87,13 +87,16 @@ def test_a_sweep_run_is_the_run_sili_train_would_make(tiny_sweep, tmp_path):
 
 def test_results_table_has_a_row_per_run_per_interaction(tiny_sweep):
     out, report = tiny_sweep
-    table = pd.read_csv(out / "results.csv")
+    exact = {"float_precision": "round_trip"}  # the values written, to the bit
+    table = pd.read_csv(out / "results.csv", **exact)
     assert len(table) == 4 * 8
     assert table.groupby("run")["interaction"].apply(list).map(lambda x: x == list(range(8))).all()
     for name in report.planned:
         rows = table[table["run"] == name].reset_index(drop=True)
-        metrics = pd.read_csv(out / "runs" / name / "metrics.csv")
-        pd.testing.assert_frame_equal(rows[metrics.columns], metrics, check_dtype=False)
+        metrics = pd.read_csv(out / "runs" / name / "metrics.csv", **exact)
+        pd.testing.assert_frame_equal(
+            rows[metrics.columns], metrics, check_dtype=False, check_exact=True
+        )
         cfg = RunConfig.from_dict(
             json.loads((out / "runs" / name / "config.json").read_text())["run"]
         )
