@@ -267,6 +267,12 @@ def test_cli_rejects_bad_input_with_exit_2(tmp_path, capsys):
     assert "previewed on its own task arguments (its config.json's), got horizon=9: drop" in (
         capsys.readouterr().err
     )
+    assert (
+        main(["preview", "circle-3", "--checkpoint", str(tmp_path / "doors"), "--seed", "7"]) == 2
+    )
+    assert "--seed 7 and --checkpoint: a trained run's agent goes on with the game" in (
+        capsys.readouterr().err
+    )
 
 
 def test_a_scripted_preview_plays_the_controller_asked_for():

@@ -255,6 +255,15 @@ def _alive_with(text):
     return out
 
 
+def test_a_browser_that_fails_to_start_is_reported_with_what_it_wrote(tmp_path):
+    fake = tmp_path / "chromium"  # a browser that cannot start, as one missing a library
+    fake.write_text("#!/bin/sh\necho 'error while loading shared libraries: libnss3.so' >&2\n"
+                    "exit 127\n")  # fmt: skip
+    fake.chmod(0o755)
+    with pytest.raises(BrowserError, match=r"(exited|closed).*it said: error while loading .*nss3"):
+        Browser(executable=str(fake), timeout=20).start()
+
+
 def test_browser_processes_end_with_close():
     b = Browser().start()
     profile = b._profile

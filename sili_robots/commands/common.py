@@ -301,6 +301,12 @@ def add_task_args(p: argparse.ArgumentParser) -> None:
 
 #: the controllers, for help texts (written out: importing them at start-up loads MuJoCo)
 CONTROLLERS_HELP = "sawyer-reach: mink, the default; osc; joint_velocity"
+LATENT_HELP = (
+    "discrete (categories), continuous (a vector), partial (no model: the observation's "
+    "'strategy changed' flag) or true (the true strategy, a diagnostic); default: the task's "
+    "(continuous on circle-continuous, partial on speaker-listener, where lili takes discrete; "
+    "else discrete)"
+)
 
 
 def track_typed_options(p: argparse.ArgumentParser) -> None:

@@ -16,8 +16,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--interactions",
         type=positive_int,
         default=100,
-        help="interactions to play (default 100); the stability counts those after the first, "
-        "whose change the training's last interaction caused",
+        help="interactions to play (default 100); the reward is their mean, the stability "
+        "counts those after the first, whose change the training's last interaction caused",
     )
     p.set_defaults(run=run)
 

@@ -23,6 +23,7 @@ from sili_robots.commands.common import (
     task_arguments_given,
     writable_file,
 )
+from sili_robots.errors import ConfigError
 
 if TYPE_CHECKING:
     from sili_robots.preview import PreviewResult
@@ -32,9 +33,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "preview",
         help="meshcat preview of a task: HTML, PNG (headless Chromium) or a live server",
-        description="Record a rollout and show it in meshcat: --out writes a self-contained "
-        "HTML file, --png renders its picture frame in headless Chromium, --serve starts a live "
-        "meshcat server on 127.0.0.1 until Ctrl-C.",
+        description="Record a rollout and show it in meshcat: it is written to --out, a "
+        "self-contained HTML file (preview.html unless given); --png also renders its picture "
+        "frame in headless Chromium, --serve also starts a live meshcat server on 127.0.0.1 "
+        "until Ctrl-C.",
     )
     p.add_argument(
         "task",
@@ -58,9 +60,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--seed",
         type=seed,
-        default=0,
-        help="the game's seed (default 0); a --checkpoint's agent goes on with the game it "
-        "trained in",
+        help="the game's seed (default 0); not with --checkpoint, whose agent goes on with the "
+        "game it trained in",
     )
     p.add_argument(
         "--out", type=path_arg, default="preview.html", help="HTML file to write (preview.html)"
@@ -88,6 +89,11 @@ def run(args: argparse.Namespace) -> int:
         reported.append(_report(result))
         print(f"meshcat server: {result.url}  (Ctrl-C to stop)", flush=True)
 
+    if args.checkpoint is not None and args.seed is not None:
+        raise ConfigError(
+            f"--seed {args.seed} and --checkpoint: a trained run's agent goes on with the game it "
+            "trained in; drop --seed"
+        )
     env_kwargs = task_arguments_given(args)
     if env_kwargs:
         from sili_robots.build import check_task_builds
@@ -102,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
             policy=args.policy,
             checkpoint=args.checkpoint,
             interactions=args.interactions,
-            seed=args.seed,
+            seed=0 if args.seed is None else args.seed,
             out=args.out,
             png=args.png,
             serve=args.serve,

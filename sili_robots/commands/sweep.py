@@ -10,9 +10,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from sili_robots.agent import LATENT_CHOICES, PROFILES
+from sili_robots.agent import LATENT_CHOICES, METHODS, PROFILES
 from sili_robots.commands.common import (
     CONTROLLERS_HELP,
+    LATENT_HELP,
     add_override_args,
     add_schedule_args,
     given_options,
@@ -51,8 +52,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--tasks",
         help="comma-separated task names or package.module:ClassName, e.g. circle-3,circle-8",
     )
-    p.add_argument("--methods", help="comma-separated methods, or 'all'")
-    p.add_argument("--seeds", default="0", help="seeds: ranges and lists, e.g. 0-4 or 0,2,7")
+    p.add_argument("--methods", help=f"comma-separated methods ({', '.join(METHODS)}), or 'all'")
+    p.add_argument(
+        "--seeds", default="0", help="seeds: ranges and lists, e.g. 0-4 or 0,2,7 (default 0)"
+    )
     p.add_argument(
         "--beta",
         metavar="B1,B2,...",
@@ -64,7 +67,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="C1,C2,...",
         help=f"controllers to sweep on the tasks that take one ({CONTROLLERS_HELP})",
     )
-    p.add_argument("--latent", choices=LATENT_CHOICES, help="latent kind (default: each task's)")
+    p.add_argument("--latent", choices=LATENT_CHOICES, help=f"latent kind: {LATENT_HELP}")
     p.add_argument(
         "--profile",
         choices=PROFILES,
@@ -96,7 +99,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         metavar="SWEEP_DIR",
         help="run the sweep recorded in SWEEP_DIR again",
     )
-    p.add_argument("--backend", choices=BACKENDS, default="local")
+    p.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="local",
+        help="local processes (default), or Ray (the ray extra: pip install -e '.[ray]')",
+    )
     p.add_argument(
         "--workers",
         type=positive_int,
@@ -112,7 +120,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--retries",
         type=non_negative_int,
         default=0,
-        help="re-run a run whose worker died this many times (it resumes from its checkpoint)",
+        help="re-run a run whose worker died this many times (it resumes from its checkpoint; "
+        "default 0)",
     )
     p.add_argument("--no-tensorboard", action="store_true", help="no TensorBoard scalars")
     p.add_argument("--no-progress", action="store_true", help="no live display (log lines only)")

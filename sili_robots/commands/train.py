@@ -15,6 +15,7 @@ from sili_robots.agent import BETA_METHODS, LATENT_CHOICES, METHODS, PROFILES, S
 from sili_robots.build import make_run_config
 from sili_robots.commands.common import (
     CONTROLLERS_HELP,
+    LATENT_HELP,
     add_override_args,
     add_schedule_args,
     check_schedule_overrides,
@@ -50,7 +51,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=task_name,
         help="task name, e.g. circle-3, or a task class as package.module:ClassName",
     )
-    p.add_argument("--method", default="sili", choices=METHODS)
+    p.add_argument("--method", default="sili", choices=METHODS, help="(default sili)")
     p.add_argument(
         "--profile",
         choices=PROFILES,
@@ -60,7 +61,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--latent",
         choices=LATENT_CHOICES,
-        help="latent kind for sili/stable/lili (default: the task's, usually discrete)",
+        help=f"latent kind of sili, stable and lili: {LATENT_HELP}",
     )
     p.add_argument(
         "--interactions",
@@ -80,7 +81,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--beta",
         type=unit_float,
-        help="stability weight b in [0, 1], fixed (default: the method's schedule)",
+        help="stability weight b in [0, 1], fixed (default: sili 0 until interaction 250, 0.5 "
+        "from 300; 0.5 for smirl and sili's paper profile, as on driving)",
     )
     anneal = p.add_argument(
         "--beta-anneal",

@@ -130,15 +130,17 @@ class Browser:
         # The browser reads commands on fd 3 and writes replies on fd 4; a tiny exec wrapper
         # puts the pipe ends there (no shell: dash cannot redirect fds above 9).
         try:
-            self._proc = subprocess.Popen(
-                [sys.executable, "-c", FD_WRAPPER, str(to_browser_r), str(from_browser_w), *args],
-                pass_fds=(to_browser_r, from_browser_w),
-                stdin=subprocess.DEVNULL,
-                stdout=subprocess.DEVNULL,
-                stderr=subprocess.DEVNULL,
-                start_new_session=True,
-                env=_profile_env(self._profile),
-            )
+            wrapper = [sys.executable, "-c", FD_WRAPPER, str(to_browser_r), str(from_browser_w)]
+            with open(self._stderr_log(), "wb") as stderr:  # its reasons, should it fail
+                self._proc = subprocess.Popen(
+                    [*wrapper, *args],
+                    pass_fds=(to_browser_r, from_browser_w),
+                    stdin=subprocess.DEVNULL,
+                    stdout=subprocess.DEVNULL,
+                    stderr=stderr,
+                    start_new_session=True,
+                    env=_profile_env(self._profile),
+                )
         finally:
             os.close(to_browser_r)
             os.close(from_browser_w)
@@ -194,6 +196,19 @@ class Browser:
             data = data[n:]
         return self._next_id
 
+    def _stderr_log(self) -> Path:
+        return Path(str(self._profile)) / "chromium-stderr.log"
+
+    def _gone(self, what: str) -> BrowserError:
+        """``what`` happened to Chromium, with the last lines it wrote to stderr (a missing
+        library, a memory limit, a sandbox it cannot use)."""
+        try:
+            lines = self._stderr_log().read_text(errors="replace").strip().splitlines()
+        except OSError:
+            lines = []
+        said = " | ".join(line.strip() for line in lines[-3:] if line.strip())
+        return BrowserError(f"{what}; it said: {said}" if said else what)
+
     def _read_message(self, deadline: float) -> dict[str, Any]:
         import select
 
@@ -204,11 +219,11 @@ class Browser:
             ready, _, _ = select.select([self._read_fd], [], [], min(left, 0.5))
             if not ready:
                 if self._proc is not None and self._proc.poll() is not None:
-                    raise BrowserError(f"Chromium exited with code {self._proc.returncode}")
+                    raise self._gone(f"Chromium exited with code {self._proc.returncode}")
                 continue
             chunk = os.read(self._read_fd, 1 << 20)
             if not chunk:
-                raise BrowserError("Chromium closed its DevTools pipe")
+                raise self._gone("Chromium closed its DevTools pipe")
             self._buffer += chunk
         raw, self._buffer = self._buffer.split(b"\0", 1)
         return json.loads(raw)
