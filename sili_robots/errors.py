@@ -11,6 +11,12 @@ class ConfigError(ValueError):
     """A value given by the user is not allowed; the message names the value and the choices."""
 
 
+class RenderModeRefused(ConfigError, TypeError):
+    """A ``render_mode`` the task does not draw: also a TypeError, as from an ``__init__``
+    without that argument, which tools catch to build the task again without one
+    (stable-baselines3's ``make_vec_env`` asks for ``rgb_array`` first)."""
+
+
 class TrainingDiverged(ConfigError):
     """A loss became infinite or NaN: settings far outside their usual range."""
 

@@ -426,6 +426,17 @@ def test_render_mode_none_is_taken_and_any_mode_refused_by_every_task():
         Drawn(render_mode="human")
 
 
+@pytest.mark.filterwarnings("ignore:.*render_mode=.rgb_array. that is not in the possible")
+def test_stable_baselines3_make_vec_env_builds_the_tasks():
+    """It asks for render_mode='rgb_array' and falls back on a TypeError only: every task
+    failed there with the refusal, a ValueError."""
+    from stable_baselines3.common.env_util import make_vec_env
+
+    vec = make_vec_env("sili/Circle3-v1", n_envs=2, seed=0)
+    assert vec.reset().shape == (2, 3)
+    vec.close()
+
+
 def test_gym_make_cannot_build_another_task_under_an_id():
     """gym.make("sili/Circle3-v1", variant="8") built Circle (8 Goals) whose spec said Circle
     (3 Goals); refused at its first reset, as make_task refuses it at once."""

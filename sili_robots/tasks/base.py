@@ -29,7 +29,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from sili_robots.errors import ConfigError, check_count
+from sili_robots.errors import ConfigError, RenderModeRefused, check_count
 
 StrategyId = int | float
 #: what ``reset(options=...)`` takes: restart the game, restore a saved one, start from z
@@ -403,7 +403,7 @@ def _taking_render_mode(init: Any) -> Any:
         modes = list(type(self).metadata.get("render_modes") or [])
         if render_mode is not None and render_mode not in modes:
             why = f"allowed: {', '.join(map(repr, [None, *modes]))}" if modes else NO_FRAMES
-            raise ConfigError(f"render_mode {render_mode!r}: {why}")
+            raise RenderModeRefused(f"render_mode {render_mode!r}: {why}")
         init(self, *args, **kwargs)
         if render_mode is not None:
             self.render_mode = render_mode

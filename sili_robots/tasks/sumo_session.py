@@ -168,7 +168,7 @@ def _claim_libsumo(token: int) -> None:
             "libsumo runs one SUMO simulation per process and another Driving environment in "
             "this process still holds it; call close() on that environment first, pass "
             "backend='traci', or run parallel environments in subprocesses (gymnasium "
-            "AsyncVectorEnv)"
+            "AsyncVectorEnv, stable-baselines3 SubprocVecEnv)"
         )
     if _LIBSUMO_OWNER["token"] is not None:
         # A forked child inherited its parent's simulation: drop this copy before starting ours.
