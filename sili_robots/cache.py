@@ -4,12 +4,19 @@ SUMO scenario), so a later process reuses it."""
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 
 def cache_dir() -> Path:
-    """``$SILI_ROBOTS_CACHE``, else ``$XDG_CACHE_HOME/sili-robots`` (``~/.cache/sili-robots``)."""
+    """``$SILI_ROBOTS_CACHE``, else ``$XDG_CACHE_HOME/sili-robots`` (``~/.cache/sili-robots``);
+    without a home (no ``$HOME`` and no user entry, as in some containers) the temporary
+    directory's ``sili-robots-cache``, not a ``~`` folder in the current directory."""
     if os.environ.get("SILI_ROBOTS_CACHE"):
-        return Path(os.environ["SILI_ROBOTS_CACHE"])
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "sili-robots"
+        return Path(os.environ["SILI_ROBOTS_CACHE"]).expanduser()
+    if os.environ.get("XDG_CACHE_HOME"):
+        return Path(os.environ["XDG_CACHE_HOME"]).expanduser() / "sili-robots"
+    home = os.path.expanduser("~")
+    if home == "~":
+        return Path(tempfile.gettempdir()) / "sili-robots-cache"
+    return Path(home) / ".cache" / "sili-robots"

@@ -206,8 +206,18 @@ def test_sweep_refuses_bad_seeds_a_task_twice_and_a_latent_no_method_takes(tmp_p
         ["preview", "circle-3", "--out"],
         ["preview", "circle-3", "--out", "p.html", "--png"],
         ["plot", "SRC", "--out"],
+        ["train", "--task", "circle-3", "--interactions", "1", "--out"],
     ],
-    ids=["sweep", "sweep-dry-run", "collect", "bounds", "preview-html", "preview-png", "plot"],
+    ids=[
+        "sweep",
+        "sweep-dry-run",
+        "collect",
+        "bounds",
+        "preview-html",
+        "preview-png",
+        "plot",
+        "train",
+    ],
 )
 def test_an_output_path_that_cannot_be_written_exits_2_before_any_work(tmp_path, args):
     (tmp_path / "file").write_text("")
@@ -216,6 +226,33 @@ def test_an_output_path_that_cannot_be_written_exits_2_before_any_work(tmp_path,
     code, out, err = _main(*args, str(blocked))
     assert code == 2 and f"{blocked}: cannot write there" in err, err
     assert out == "" and "Traceback" not in err  # nothing computed first
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self"), reason="needs /proc, unwritable even as root")
+def test_train_into_a_folder_that_cannot_be_written_exits_2(tmp_path):
+    code, _, err = _main("train", "--task", "circle-3", "--interactions", "1", "--out", "/proc/x")
+    assert code == 2 and "--out /proc/x: cannot write there" in err, err
+    assert "Traceback" not in err
+
+
+def test_a_path_option_expands_a_tilde_the_shell_left(tmp_path, monkeypatch):
+    """``--out=~/runs``: bash leaves this ~ alone; trained into ./~ but read from $HOME before."""
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.chdir(tmp_path)
+    code, _, err = _main("train", "--task", "circle-3", "--method", "sac", "--interactions", "1",
+                         "--set", "hidden=8", "--no-progress", "--out=~/runs/t")  # fmt: skip
+    assert code == 0, err
+    assert (tmp_path / "home" / "runs" / "t" / "summary.json").is_file()
+    assert not (tmp_path / "~").exists()
+
+
+def test_a_suggested_command_quotes_a_path_as_a_shell_takes_it_back(tmp_path):
+    run = tmp_path / "with space" / "r"
+    args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "1"]
+    args += ["--set", "hidden=8", "--no-progress", "--out", str(run)]
+    assert _main(*args)[0] == 0
+    code, _, err = _main(*args)
+    assert code == 2 and f"--resume '{run}' continues it" in err, err
 
 
 def test_bad_input_found_after_the_output_check_leaves_no_directory(tmp_path):

@@ -4,6 +4,7 @@ with each run."""
 from __future__ import annotations
 
 import json
+import tempfile
 
 import pytest
 
@@ -108,3 +109,22 @@ def test_two_cpu_generations_under_one_name_are_timed_apart():
     )
     assert matmul.cpu_of(zen5 + flags)[0] == "AMD EPYC (cpu family 26, model 2, stepping 1)"
     assert matmul.cpu_of("model name\t: Apple M2\n") == ("Apple M2", "")
+
+
+def test_the_cache_is_never_a_tilde_folder_in_the_current_directory(monkeypatch, tmp_path):
+    """Without $HOME and a user entry (some containers), expanduser leaves "~" as it is: the
+    cache went to ./~/.cache; now to the temporary directory."""
+    import pwd
+
+    from sili_robots.cache import cache_dir
+
+    for name in ("SILI_ROBOTS_CACHE", "XDG_CACHE_HOME", "HOME"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setattr(pwd, "getpwuid", lambda uid: (_ for _ in ()).throw(KeyError(uid)))
+    monkeypatch.setenv("TMPDIR", str(tmp_path))
+    monkeypatch.setattr(tempfile, "tempdir", None)  # read TMPDIR again
+    assert cache_dir() == tmp_path / "sili-robots-cache"
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    assert cache_dir() == tmp_path / "home" / ".cache" / "sili-robots"
+    monkeypatch.setenv("SILI_ROBOTS_CACHE", "~/c")  # a quoted ~ too
+    assert cache_dir() == tmp_path / "home" / "c"

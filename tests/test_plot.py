@@ -193,6 +193,17 @@ def test_unfinished_runs_are_left_out_unless_asked(sweep_dir, tmp_path):
     assert main(args) == 0 and (figures / "circle-3.png").is_file()
 
 
+def test_a_sweep_whose_figures_folder_cannot_be_written_is_named(sweep_dir, tmp_path, capsys):
+    copy = tmp_path / "sweep"
+    shutil.copytree(sweep_dir, copy)
+    (copy / "figures").write_text("not a folder")  # as a read-only one: it cannot be written
+    assert main(["plot", str(copy), "--formats", "png"]) == 2
+    err = capsys.readouterr().err
+    assert f"--out (its default) {copy / 'figures'}: cannot write there" in err
+    assert "Traceback" not in err
+    assert main(["plot", str(copy), "--formats", "png", "--out", str(tmp_path / "f")]) == 0
+
+
 def test_plot_of_a_non_sweep_exits_2(tmp_path, capsys):
     assert main(["plot", str(tmp_path)]) == 2
     assert "holds no runs" in capsys.readouterr().err

@@ -428,11 +428,14 @@ def test_overwrite_starts_the_sweep_anew_and_keeps_a_users_files(tmp_path, capsy
         assert f"circle-3__sac__s1 in {out} is being trained by process" in capsys.readouterr().err
     (s1 / "worker.json").unlink()
     (out / "figures").mkdir()
-    (out / "figures" / "curves.png").write_text("the replaced sweep's")
+    plotted = ["circle-3.png", "circle-3.pdf", "circle-3_beta.svg", "overview.png"]
+    for name in [*plotted, "mine.png"]:
+        (out / "figures" / name).write_text("the replaced sweep's" if name in plotted else "mine")
     assert main([*again, "--overwrite", "--no-progress"]) == 0
     assert len(pd.read_csv(s0 / "metrics.csv")) == 3  # trained anew, not resumed
     assert not s1.exists()  # the replaced sweep's run, which the new one does not plan
-    assert not (out / "figures").exists()  # its figures showed the replaced sweep
+    # sili plot's figures showed the replaced sweep; a user's own figure beside them stays
+    assert [p.name for p in (out / "figures").iterdir()] == ["mine.png"]
     assert (out / "notes.txt").read_text() == (s0 / "plot.png").read_text() == "mine"
     recorded = json.loads((out / "sweep.json").read_text())["invocations"]
     assert [(r["seeds"], r["interactions"]) for r in recorded] == [([0], 3)]
@@ -829,6 +832,12 @@ def test_a_sweeps_run_extended_by_hand_updates_the_sweeps_tables(tmp_path, capsy
     assert main(["train", "--resume", str(run), "--interactions", "5", "--no-progress"]) == 0
     assert pd.read_csv(out / "runs.csv")["interactions_logged"].tolist() == [5]
     assert len(pd.read_csv(out / "results.csv")) == 5
+    elsewhere = tmp_path / "disk2" / "circle-3__sac__s0"  # a run kept elsewhere, linked in
+    elsewhere.parent.mkdir()
+    run.rename(elsewhere)
+    run.symlink_to(elsewhere, target_is_directory=True)
+    assert main(["train", "--resume", str(run), "--interactions", "7", "--no-progress"]) == 0
+    assert len(pd.read_csv(out / "results.csv")) == 7
 
 
 def test_a_ray_address_is_probed_where_its_port_can_be_told(monkeypatch):

@@ -66,11 +66,12 @@ def _check_can_create(path: Path, option: str, given: Path, what: str) -> None:
 
 
 def path_arg(text: str) -> Path:
-    """A path option's value; an empty one (``--out ""``, a variable left unset) is refused
-    rather than read as the current directory."""
+    """A path option's value, ``~`` expanded as the shell does (it leaves the one in
+    ``--out=~/runs`` to us, and pandas would expand it where the rest would not); an empty one
+    (``--out ""``, a variable left unset) is refused rather than read as the current directory."""
     if not text.strip():
         raise argparse.ArgumentTypeError("an empty path; give a directory or file name")
-    return Path(text)
+    return Path(text).expanduser()
 
 
 def writable_dir(path: Path, option: str) -> Path:

@@ -6,8 +6,8 @@ import argparse
 
 from sili_robots.commands.common import path_arg, positive_int, writable_dir
 from sili_robots.errors import ConfigError
-
-FORMATS = ("png", "pdf", "svg")
+from sili_robots.sweep.state import FIGURE_FORMATS as FORMATS
+from sili_robots.sweep.state import FIGURES
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -67,6 +67,8 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"--tasks {args.tasks!r} names none; leave it out for every task")
     if args.out is not None:
         writable_dir(args.out, "--out")
+    elif args.sweep_dir.is_dir():  # its figures folder; else plot_sweep names what it is
+        writable_dir(args.sweep_dir / FIGURES, "--out (its default)")
     for path in plot_sweep(
         args.sweep_dir,
         args.out,

@@ -7,6 +7,7 @@ import contextlib
 import functools
 import json
 import os
+import shlex
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -30,6 +31,7 @@ from sili_robots.commands.common import (
     task_name,
     track_typed_options,
     unit_float,
+    writable_dir,
 )
 from sili_robots.errors import ConfigError
 from sili_robots.migrations import setting_path
@@ -201,7 +203,7 @@ def _rebuild_sweep_tables(run_dir: Path) -> None:
     from sili_robots.sweep.results import write_tables
     from sili_robots.sweep.state import RUNS_DIR, SWEEP_FILE
 
-    run_dir = Path(run_dir).resolve()
+    run_dir = Path(run_dir).absolute()  # not resolved: a run linked into a sweep is the sweep's
     sweep_dir = run_dir.parent.parent
     if run_dir.parent.name != RUNS_DIR or not (sweep_dir / SWEEP_FILE).is_file():
         return
@@ -209,7 +211,8 @@ def _rebuild_sweep_tables(run_dir: Path) -> None:
         write_tables(sweep_dir)
     except (OSError, ConfigError) as err:  # the run is trained; only its sweep's tables lag
         print(
-            f"{sweep_dir}'s tables were not rebuilt ({err}); `sili plot {sweep_dir}` rebuilds them",
+            f"{sweep_dir}'s tables were not rebuilt ({err}); "
+            f"`sili plot {shlex.quote(str(sweep_dir))}` rebuilds them",
             file=sys.stderr,
         )
 
@@ -224,6 +227,7 @@ def run(args: argparse.Namespace) -> int:
     if args.resume is not None:
         read_config(args.resume)  # a clear error when it is not a run
         check_resumable(args.resume)
+        writable_dir(args.resume, "--resume")
         by = " (a sweep's worker, which sili sweep --resume goes on with, or another sili train)"
         check_not_trained(args.resume, by=by)
         ignored = given_options(args, {"resume", "interactions", "no_progress"})
@@ -251,14 +255,16 @@ def run(args: argparse.Namespace) -> int:
         cfg = config_from_args(args)
         if args.out is None:
             raise ConfigError("--out RUN_DIR is required for a new run")
+        quoted = shlex.quote(str(args.out))  # as a shell takes it back
         check_not_trained(args.out)  # --overwrite too: never under a live trainer
-        check_new_run_dir(args.out, args.overwrite, resume=f"--resume {args.out}")
+        check_new_run_dir(args.out, args.overwrite, resume=f"--resume {quoted}")
+        writable_dir(args.out, "--out")
         _check_env_builds(cfg)
         make_run_dir(args.out)
         _note_threads_beyond_cores(cfg.threads)
         # again with the claim: a run may have started and ended there since
         ready = functools.partial(
-            ready_new_run_dir, args.out, args.overwrite, resume=f"--resume {args.out}"
+            ready_new_run_dir, args.out, args.overwrite, resume=f"--resume {quoted}"
         )
         with _resume_hint(args.out), training_claim(args.out, before=ready):
             run_dir = train(cfg, args.out, progress=not args.no_progress)
@@ -308,7 +314,10 @@ def _resume_hint(run_dir: Path) -> Iterator[None]:
         if run_state(Path(run_dir)) == "done":  # stopped in its last interaction
             print(f"the run finished all its interactions: {run_dir}", file=sys.stderr)
         elif (Path(run_dir) / CHECKPOINT).is_file():
-            print(f"continue the run with: sili train --resume {run_dir}", file=sys.stderr)
+            print(
+                f"continue the run with: sili train --resume {shlex.quote(str(run_dir))}",
+                file=sys.stderr,
+            )
         raise
 
 

@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 from typing import Any
 
@@ -79,8 +80,8 @@ def check_exists(directory: Path) -> None:
     if (Path(directory) / CONFIG).is_file():
         raise ConfigError(
             f"{directory} is a run, not a sweep or a collection; give the folder that holds its "
-            f"runs/ (one run alone: its summary.json, or sili eval {directory} if it kept its "
-            "checkpoint)"
+            f"runs/ (one run alone: its summary.json, or sili eval "
+            f"{shlex.quote(str(directory))} if it kept its checkpoint)"
         )
 
 

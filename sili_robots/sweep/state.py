@@ -18,6 +18,7 @@ import contextlib
 import fcntl
 import json
 import os
+import shlex
 import socket
 from collections.abc import Callable, Iterator
 from dataclasses import replace
@@ -26,6 +27,7 @@ from typing import Literal
 
 from sili_robots.atomic import write_text
 from sili_robots.errors import ConfigError
+from sili_robots.labels import file_stem
 from sili_robots.runs import (
     CHECKPOINT,
     CONFIG,
@@ -49,6 +51,8 @@ SWEEP_FILE, RUNS_DIR, RESULTS, RUNS_TABLE, LOCK, FIGURES = (
     ".lock",
     "figures",
 )
+#: the formats ``sili plot`` writes its figures in
+FIGURE_FORMATS = ("png", "pdf", "svg")
 DAMAGED_SWEEP = "it is not a sweep's record, so the sweep cannot resume"
 
 RunState = Literal["done", "resumable", "new"]
@@ -84,6 +88,22 @@ def run_path(sweep_dir: Path, name: str) -> Path:
     return Path(sweep_dir) / RUNS_DIR / name
 
 
+def _plotted_figures(sweep_dir: Path) -> list[Path]:
+    """The figures ``sili plot`` wrote into the sweep's folder for its tasks (a user's own
+    files beside them, or all of them when the record is damaged, stay)."""
+    try:
+        tasks = {t for spec in recorded_specs(sweep_dir) for t in spec.tasks}
+    except ConfigError:
+        return []
+    stems = {"overview", *map(file_stem, tasks), *(f"{file_stem(t)}_beta" for t in tasks)}
+    return [
+        path
+        for fmt in FIGURE_FORMATS
+        for path in (Path(sweep_dir) / FIGURES).glob(f"*.{fmt}")
+        if path.name.removesuffix(f".{fmt}") in stems
+    ]
+
+
 def clear_sweep(sweep_dir: Path, names: list[str]) -> None:
     """Remove a sweep's own files (the runs ``names``, its tables, ``sili plot``'s figures) and
     leave anything else a user put there; its record last, so a removal cut short still leaves
@@ -95,7 +115,7 @@ def clear_sweep(sweep_dir: Path, names: list[str]) -> None:
             clear_run(path)
             with contextlib.suppress(OSError):
                 path.rmdir()  # kept when a user's file is in it
-    for figure in [*sweep_dir.glob(f"{FIGURES}/*.png"), *sweep_dir.glob(f"{FIGURES}/*.pdf")]:
+    for figure in _plotted_figures(sweep_dir):
         figure.unlink()
     with contextlib.suppress(OSError):
         (sweep_dir / FIGURES).rmdir()
@@ -224,7 +244,7 @@ def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
         raise ConfigError(
             f"run {planned.name} in {sweep_dir} has {longer} interactions, more than the "
             f"{planned.config.interactions} asked for now (a run is never shortened); ask for "
-            f"{longer}: sili sweep --resume {sweep_dir} --interactions {longer}"
+            f"{longer}: sili sweep --resume {shlex.quote(str(sweep_dir))} --interactions {longer}"
         )
     if diffs:
         raise ConfigError(
