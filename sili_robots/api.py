@@ -52,6 +52,7 @@ from sili_robots.runs import (
     RunConfig,
     check_new_run_dir,
     clear_run,
+    copy_history,
     load_checkpoint,
     make_run_dir,
     ready_new_run_dir,
@@ -59,6 +60,7 @@ from sili_robots.runs import (
     set_target,
 )
 from sili_robots.runs import read_config as read_run_config
+from sili_robots.stopping import HeldStops
 from sili_robots.sweep.state import check_not_trained, training_claim
 from sili_robots.tasks import RepeatedInteractionEnv
 from sili_robots.training import resume, train
@@ -218,17 +220,18 @@ class SILI:
                     else:
                         train(self.cfg, self.run_dir, resume=True, progress=progress_bar, env=env)
         finally:
-            torch.set_num_threads(threads)
-            # a new model again: stopped before its first checkpoint, or refused (another
-            # process trains there, whose files stay)
-            new = done == 0 and (not claimed or not (self.run_dir / CHECKPOINT).is_file())
-            if new and claimed:
-                clear_run(self.run_dir)
-            if new:
-                self.cfg.interactions = 0
-                self._setup(None)
-            else:
-                self._reload()
+            with HeldStops():  # a Ctrl-C pressed again here left the model before its training
+                torch.set_num_threads(threads)
+                # a new model again: stopped before its first checkpoint, or refused (another
+                # process trains there, whose files stay)
+                new = done == 0 and (not claimed or not (self.run_dir / CHECKPOINT).is_file())
+                if new and claimed:
+                    clear_run(self.run_dir)
+                if new:
+                    self.cfg.interactions = 0
+                    self._setup(None)
+                else:
+                    self._reload()
         return self
 
     def _check_own_task(self) -> None:
@@ -249,6 +252,8 @@ class SILI:
         the interaction being played on ``model.env``."""
         obs = np.asarray(obs, np.float32)
         expected = self.env.observation_space.shape
+        if not np.isfinite(obs).all():
+            raise ConfigError(f"obs {obs} is not finite; the agent acts on finite observations")
         if obs.shape[1:] == expected:
             raise ConfigError(
                 f"obs is a batch of {obs.shape[0]}; predict takes one observation (the agent's "
@@ -283,9 +288,11 @@ class SILI:
             if replace:  # nothing of the replaced run stays to mix with this one
                 clear_run(path)
             path.mkdir(parents=True, exist_ok=True)
-            for name in (CONFIG, METRICS, CHECKPOINT, SUMMARY, COMPRESSED_METRICS):
+            for name in (CONFIG, CHECKPOINT, SUMMARY, COMPRESSED_METRICS):
                 if (self.run_dir / name).is_file():
                     shutil.copy2(self.run_dir / name, path / name)
+            if (self.run_dir / METRICS).is_file():  # the checkpoint's rows (a stop writes more)
+                copy_history(self.run_dir / METRICS, path / METRICS, self._done)
         _keep_temporary(path)
         self._saved[path.resolve()] = _stamp(path)
         return path

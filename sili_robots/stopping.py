@@ -80,3 +80,12 @@ class StopBetweenInteractions:
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
         self._previous = {}
+
+
+class HeldStops(StopBetweenInteractions):
+    """``with HeldStops():`` around a short step that must not be cut (a model taking back its
+    run's checkpoint after training): every stop is held, and the first acts at the end."""
+
+    def _hold(self, signum: int, _frame: FrameType | None) -> None:
+        if self.signum is None:
+            self.signum = signum

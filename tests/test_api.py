@@ -297,6 +297,60 @@ def test_learn_stopped_by_ctrl_c_leaves_the_model_at_its_checkpoint_and_counts_o
     assert model.agent.buffer.n == 6 and SILI.load(run).cfg.interactions == 6
 
 
+def test_ctrl_c_while_learn_takes_back_its_checkpoint_acts_once_the_model_has_it(
+    tmp_path, monkeypatch
+):
+    """A second press of the stop can fall in learn's last step: it left a new model beside
+    its trained run (the next learn refused: "already holds a run"), or a trained one before
+    its training."""
+    import signal
+
+    reload = SILI._reload
+
+    def pressed_meanwhile(self):
+        signal.raise_signal(signal.SIGINT)
+        reload(self)
+
+    run = tmp_path / "run"
+    model = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # as at a terminal
+    try:
+        for interactions in (2, 5):
+            with monkeypatch.context() as patch:
+                patch.setattr(SILI, "_reload", pressed_meanwhile)
+                with pytest.raises(KeyboardInterrupt):
+                    model.learn(interactions - model.agent.buffer.n)
+            assert model.agent.buffer.n == interactions  # the checkpoint's agent
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    model.learn(1)
+    assert model.agent.buffer.n == 6
+
+
+def test_save_copies_the_history_its_checkpoint_has_trained(tmp_path):
+    run = tmp_path / "run"
+    model = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run).learn(3)
+    with (run / "metrics.csv").open("a") as f:  # a row a stop wrote after the checkpoint
+        f.write((run / "metrics.csv").read_text().splitlines()[-1] + "\n")
+    model.save(tmp_path / "saved")
+    saved = (tmp_path / "saved" / "metrics.csv").read_text().splitlines()
+    assert saved == (run / "metrics.csv").read_text().splitlines()[: 1 + 3]
+
+
+def test_predict_refuses_a_non_finite_observation_and_the_agent_another_default_dtype():
+    import torch
+
+    model = SILI("circle-3", method="sac", settings=FAST_AGENT)
+    with pytest.raises(ConfigError, match=r"obs \[nan  0.  0.\] is not finite"):
+        model.predict(np.array([np.nan, 0.0, 0.0]))
+    torch.set_default_dtype(torch.float64)
+    try:
+        with pytest.raises(ConfigError, match=r"default dtype is torch.float64 .*torch.float32"):
+            SILI("circle-3", method="sac", settings=FAST_AGENT)
+    finally:
+        torch.set_default_dtype(torch.float32)
+
+
 def test_a_run_dir_that_cannot_be_made_is_named_before_the_model_changes(tmp_path, monkeypatch):
     (tmp_path / "file").write_text("not a folder")
     model = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=tmp_path / "file" / "run")

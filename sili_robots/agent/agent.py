@@ -77,6 +77,11 @@ class SILIAgent:
         addons: list[AgentAddon] | tuple[AgentAddon, ...] = (),
     ) -> None:
         self.cfg = cfg.validate()
+        if torch.get_default_dtype() != torch.float32:  # networks of it would meet float32 data
+            raise ConfigError(
+                f"torch's default dtype is {torch.get_default_dtype()} (torch.set_default_dtype); "
+                "the agent computes in float32: set it back to torch.float32"
+            )
         self.obs_dim, self.act_dim, self.horizon = obs_dim, act_dim, horizon
         self.rng = np.random.default_rng(seed)
         torch.manual_seed(seed)
