@@ -68,8 +68,9 @@ class OneLineErrorParser(argparse.ArgumentParser):
 def build_parser() -> OneLineErrorParser:
     parser = OneLineErrorParser(
         prog="sili",
-        description="Stable Influencing of Latent Intent: train and evaluate its methods, sweep "
-        "and plot them, rebuild the paper's grid and claims, preview the tasks.",
+        description="Stable Influencing of Latent Intent: train and evaluate its methods; sweep, "
+        "list, collect and plot runs; play the scripted references; rebuild the paper's grid and "
+        "claims; preview the tasks.",
     )
     parser.add_argument("--version", action="version", version=f"sili {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")

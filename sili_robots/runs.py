@@ -558,9 +558,9 @@ def copy_history(source: Path, target: Path, rows: int) -> None:
     """``metrics.csv``'s header and first ``rows`` rows (those a checkpoint at ``rows`` has
     trained; a run stopped between checkpoints wrote more) to ``target``."""
     with Path(source).open(newline="") as f:
-        kept = list(itertools.islice(f, rows + 1))
-    with replacing(Path(target)) as tmp:
-        tmp.write_text("".join(kept))
+        kept = list(itertools.islice(csv.reader(f), rows + 1))  # records: a value may hold \n
+    with replacing(Path(target)) as tmp, tmp.open("w", newline="") as f:
+        csv.writer(f).writerows(kept)
 
 
 class MetricsWriter:

@@ -89,3 +89,7 @@ class HeldStops(StopBetweenInteractions):
     def _hold(self, signum: int, _frame: FrameType | None) -> None:
         if self.signum is None:
             self.signum = signum
+
+    def __exit__(self, exc_type: object, *_: object) -> None:
+        self._restore()
+        self.deliver()  # also when the step failed: a stop asked for meanwhile still acts

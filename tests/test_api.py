@@ -3,6 +3,7 @@ task class, and on a run of the CLI."""
 
 from __future__ import annotations
 
+import csv
 import gc
 import json
 import shutil
@@ -335,6 +336,18 @@ def test_save_copies_the_history_its_checkpoint_has_trained(tmp_path):
     model.save(tmp_path / "saved")
     saved = (tmp_path / "saved" / "metrics.csv").read_text().splitlines()
     assert saved == (run / "metrics.csv").read_text().splitlines()[: 1 + 3]
+
+
+def test_copy_history_counts_records_not_lines(tmp_path):
+    from sili_robots.runs import MetricsWriter, copy_history
+
+    writer = MetricsWriter(tmp_path, ("interaction", "note"))
+    for j, note in enumerate(["line1\nline2", "b", "c"]):  # an add-on's text with a newline
+        writer.write({"interaction": j, "note": note})
+    writer.close()
+    copy_history(tmp_path / "metrics.csv", tmp_path / "copy.csv", 2)
+    with (tmp_path / "copy.csv").open(newline="") as f:
+        assert [r["note"] for r in csv.DictReader(f)] == ["line1\nline2", "b"]
 
 
 def test_predict_refuses_a_non_finite_observation_and_the_agent_another_default_dtype():

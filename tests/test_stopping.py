@@ -6,7 +6,7 @@ import signal
 
 import pytest
 
-from sili_robots.stopping import StopBetweenInteractions
+from sili_robots.stopping import HeldStops, StopBetweenInteractions
 
 
 @pytest.fixture
@@ -54,5 +54,21 @@ def test_a_second_stop_of_another_kind_acts_as_itself(handlers):
             signal.raise_signal(signal.SIGINT)  # Ctrl-C, then `kill`: the run is killed
             signal.raise_signal(signal.SIGTERM)
         assert signal.getsignal(signal.SIGTERM) is _terminated
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def test_held_stops_hold_every_stop_and_the_first_acts_after_the_step_failed_too(handlers):
+    previous = signal.signal(signal.SIGTERM, _terminated)
+    try:
+        with pytest.raises(KeyboardInterrupt), HeldStops():
+            signal.raise_signal(signal.SIGINT)
+            signal.raise_signal(signal.SIGINT)  # again: still held, the step must not be cut
+        with pytest.raises(Terminated) as stopped, HeldStops():  # a scheduler's SIGTERM ...
+            signal.raise_signal(signal.SIGTERM)
+            raise ValueError("the checkpoint could not be read")  # ... not lost to an error
+        assert isinstance(stopped.value.__context__, ValueError)
+        assert signal.getsignal(signal.SIGTERM) is _terminated
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
     finally:
         signal.signal(signal.SIGTERM, previous)

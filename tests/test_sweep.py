@@ -824,7 +824,18 @@ def test_in_a_log_the_closing_line_starts_a_line_of_its_own(tmp_path):
     assert "\nsweep: 1 done (1 of them earlier)" in buf.getvalue()
 
 
-def test_a_sweeps_run_extended_by_hand_updates_the_sweeps_tables(tmp_path, capsys):
+def test_overwrite_removes_the_figures_of_a_task_the_sweep_was_given_by_another_name(tmp_path):
+    out = tmp_path / "sweep"
+    base = ["sweep", "--tasks", "sili/Circle3-v1", "--methods", "sac", "--out", str(out)]
+    assert main([*base, *FAST_ARGS, "--interactions", "1", "--no-progress"]) == 0
+    (out / "figures").mkdir()
+    for name in ("circle-3.png", "circle-3_beta.pdf", "overview.png", "mine.png"):
+        (out / "figures" / name).write_text("")  # sili plot names them by the runs' circle-3
+    assert main([*base, *FAST_ARGS, "--interactions", "2", "--no-progress", "--overwrite"]) == 0
+    assert [p.name for p in (out / "figures").iterdir()] == ["mine.png"]
+
+
+def test_a_sweeps_run_extended_by_hand_updates_the_sweeps_tables(tmp_path, capsys, monkeypatch):
     out = tmp_path / "sweep"
     args = ["sweep", "--tasks", "circle-3", "--methods", "sac", "--seeds", "0"]
     assert main([*args, "--interactions", "3", *FAST_ARGS, "--out", str(out), "--no-progress"]) == 0
@@ -832,6 +843,12 @@ def test_a_sweeps_run_extended_by_hand_updates_the_sweeps_tables(tmp_path, capsy
     assert main(["train", "--resume", str(run), "--interactions", "5", "--no-progress"]) == 0
     assert pd.read_csv(out / "runs.csv")["interactions_logged"].tolist() == [5]
     assert len(pd.read_csv(out / "results.csv")) == 5
+    monkeypatch.chdir(run)  # from inside the run: runs/NAME/../NAME
+    assert (
+        main(["train", "--resume", f"../{run.name}", "--interactions", "6", "--no-progress"]) == 0
+    )
+    assert len(pd.read_csv(out / "results.csv")) == 6
+    monkeypatch.chdir(tmp_path)
     elsewhere = tmp_path / "disk2" / "circle-3__sac__s0"  # a run kept elsewhere, linked in
     elsewhere.parent.mkdir()
     run.rename(elsewhere)

@@ -203,7 +203,7 @@ def _rebuild_sweep_tables(run_dir: Path) -> None:
     from sili_robots.sweep.results import write_tables
     from sili_robots.sweep.state import RUNS_DIR, SWEEP_FILE
 
-    run_dir = Path(run_dir).absolute()  # not resolved: a run linked into a sweep is the sweep's
+    run_dir = Path(os.path.abspath(run_dir))  # not resolved: a run linked into a sweep is its
     sweep_dir = run_dir.parent.parent
     if run_dir.parent.name != RUNS_DIR or not (sweep_dir / SWEEP_FILE).is_file():
         return

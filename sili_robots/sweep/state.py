@@ -88,11 +88,22 @@ def run_path(sweep_dir: Path, name: str) -> Path:
     return Path(sweep_dir) / RUNS_DIR / name
 
 
+def _plotted_name(task: str) -> str:
+    """The name a run records of ``task`` as the sweep was given it (``sili/Circle3-v1`` is
+    ``circle-3``), which names its figures; a user's class path as it is (not imported)."""
+    from sili_robots.build import canonical_task, is_class_path
+
+    try:
+        return task if is_class_path(task) else canonical_task(task)
+    except ConfigError:
+        return task
+
+
 def _plotted_figures(sweep_dir: Path) -> list[Path]:
     """The figures ``sili plot`` wrote into the sweep's folder for its tasks (a user's own
     files beside them, or all of them when the record is damaged, stay)."""
     try:
-        tasks = {t for spec in recorded_specs(sweep_dir) for t in spec.tasks}
+        tasks = {_plotted_name(t) for spec in recorded_specs(sweep_dir) for t in spec.tasks}
     except ConfigError:
         return []
     stems = {"overview", *map(file_stem, tasks), *(f"{file_stem(t)}_beta" for t in tasks)}
