@@ -52,6 +52,15 @@ def test_check_env_passes(wrap):
     check_env(env, skip_render_check=True)
 
 
+def test_the_scene_reserves_a_small_arena():
+    """robosuite's nconmax = njmax = 5000 made every MjData reserve 1.25 GB of address space:
+    under a vmem limit, or with a few envs in one process, MuJoCo could not allocate one."""
+    from sili_robots.tasks.sawyer_scene import ACTUATIONS, scene_model
+
+    for actuation in ACTUATIONS:
+        assert scene_model(actuation).narena <= 16 * 2**20, actuation
+
+
 def test_unknown_controller_is_a_config_error_listing_choices():
     for build in (
         lambda: make_task("sawyer-reach", controller="pid"),

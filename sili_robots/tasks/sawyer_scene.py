@@ -85,6 +85,10 @@ EE_SITE = "gripper0_right_grip_site"
 BASE_SITE = "robot0_right_center"
 
 
+#: MuJoCo's arena per MjData (contacts, constraints, stack)
+ARENA_MEMORY = "16M"
+
+
 def _scene_xml(actuation: str, visual: bool = False) -> str:
     """robosuite's models merged into one MJCF string, actuated as ``actuation`` asks."""
     quiet_robosuite_import()
@@ -105,6 +109,13 @@ def _scene_xml(actuation: str, visual: bool = False) -> str:
 
     root = task.root
     root.find("option").set("timestep", repr(TIMESTEP))
+    # robosuite sizes the arena for its busiest scenes (nconmax = njmax = 5000): 1.25 GB of
+    # address space per MjData, which a vmem limit or a few envs in one process run out of;
+    # this scene's contacts and constraints use about 50 KB
+    size = root.find("size")
+    if size is None:
+        size = ET.SubElement(root, "size")
+    size.attrib = {"memory": ARENA_MEMORY}
     world = root.find("worldbody")
     for i, goal in enumerate(GOALS):
         ET.SubElement(
