@@ -258,7 +258,8 @@ def run(args: argparse.Namespace) -> int:
         quoted = shlex.quote(str(args.out))  # as a shell takes it back
         check_not_trained(args.out)  # --overwrite too: never under a live trainer
         check_new_run_dir(args.out, args.overwrite, resume=f"--resume {quoted}")
-        writable_dir(args.out, "--out")
+        if args.out.is_dir():  # an existing folder (one to be made: make_run_dir says why not)
+            writable_dir(args.out, "--out")
         _check_env_builds(cfg)
         make_run_dir(args.out)
         _note_threads_beyond_cores(cfg.threads)
