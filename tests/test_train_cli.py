@@ -1064,3 +1064,36 @@ def test_a_stop_file_stops_the_run_once_its_interaction_is_saved(tmp_path, monke
     stop.unlink()
     training.train(cfg, tmp_path / "run", resume=True, progress=False, stop_file=stop)
     assert len(pd.read_csv(tmp_path / "run" / "metrics.csv")) == 5
+
+
+def test_training_into_a_log_writes_plain_progress_lines(tmp_path, monkeypatch):
+    """Into a log (nohup, CI) rich's bar draws only when it stops: the log stayed empty for
+    the whole run; now a plain line comes every LOG_EVERY seconds, and one at the end."""
+    from sili_robots import progress
+
+    monkeypatch.setattr(progress, "LOG_EVERY", 0.0)
+    args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "3"]
+    done = _sili(*args, *FAST_ARGS, "--out", tmp_path / "run")  # stderr: a StringIO, no terminal
+    assert done.returncode == 0, done.stderr
+    lines = [line for line in done.stderr.splitlines() if " interactions, reward " in line]
+    assert [line.split(":")[1].split()[0] for line in lines] == ["1/3", "2/3", "3/3", "3/3"]
+    assert lines[0].startswith("circle-3 sac seed 0: 1/3 interactions, reward ")
+    assert "\x1b" not in done.stderr and "━" not in done.stderr  # no bar, no escape codes
+
+
+def test_a_narrow_terminal_shortens_the_label_not_the_numbers(monkeypatch):
+    import io
+
+    from rich.console import Console
+
+    from sili_robots import progress
+
+    out = io.StringIO()
+    console = Console(file=out, width=80, force_terminal=True, force_interactive=True)
+    monkeypatch.setattr(progress, "Console", lambda **_: console)
+    bar = progress.TrainingProgress(2500, 189, label="circle-unequal oracle seed 12")
+    bar.advance(-47.87, 0.01)
+    bar.close()
+    drawn = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", out.getvalue()).replace("\r", "\n")
+    last = [line for line in drawn.splitlines() if line.strip()][-1]
+    assert "190/2500 reward   -47.87 stable 0.01" in last, last

@@ -26,6 +26,7 @@ from rich.progress import (
 from rich.table import Column
 from rich.text import Text
 
+from sili_robots.progress import numbers_column
 from sili_robots.runs import METRICS
 from sili_robots.sweep.worker import Job, Outcome
 
@@ -72,10 +73,13 @@ class SweepProgress:
                     table_column=Column(no_wrap=True, overflow="ellipsis", max_width=40),
                 ),
                 BarColumn(bar_width=24),
-                MofNCompleteColumn(),
-                TimeElapsedColumn(),
+                # numbers a narrow terminal must not cut: the name gives way first
+                MofNCompleteColumn(
+                    table_column=numbers_column(2 * len(str(self._total_interactions)) + 1)
+                ),
+                TimeElapsedColumn(table_column=numbers_column(7)),
                 TextColumn("ETA"),
-                TimeRemainingColumn(),
+                TimeRemainingColumn(table_column=numbers_column(7)),
                 console=self.console,
             )
             self._overall = self._progress.add_task(
@@ -172,7 +176,7 @@ class SweepProgress:
         if self._live is not None:
             self._refresh(force=True)
             self._live.stop()
-            if not self.console.is_interactive:  # a log: end the display's last line (as
+            if not self.console.is_terminal:  # a log: end the display's last line (as
                 self.console.line()  # rich's Progress.stop does), before the closing one
         stopped = f" ({len(self.running)} stopped midway, resumable)" if self.running else ""
         not_run = self.total_runs - self.done - self.failed
