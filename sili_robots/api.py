@@ -49,10 +49,10 @@ from sili_robots.runs import (
     CONFIG,
     METRICS,
     SUMMARY,
+    MetricsWriter,
     RunConfig,
     check_new_run_dir,
     clear_run,
-    copy_history,
     load_checkpoint,
     make_run_dir,
     ready_new_run_dir,
@@ -288,11 +288,11 @@ class SILI:
             if replace:  # nothing of the replaced run stays to mix with this one
                 clear_run(path)
             path.mkdir(parents=True, exist_ok=True)
-            for name in (CONFIG, CHECKPOINT, SUMMARY, COMPRESSED_METRICS):
+            for name in (CONFIG, METRICS, CHECKPOINT, SUMMARY, COMPRESSED_METRICS):
                 if (self.run_dir / name).is_file():
                     shutil.copy2(self.run_dir / name, path / name)
-            if (self.run_dir / METRICS).is_file():  # the checkpoint's rows (a stop writes more)
-                copy_history(self.run_dir / METRICS, path / METRICS, self._done)
+            if (path / METRICS).is_file():  # the checkpoint's rows only (a stop writes more)
+                MetricsWriter(path, self.cfg.metric_columns(), keep_rows=self._done).close()
         _keep_temporary(path)
         self._saved[path.resolve()] = _stamp(path)
         return path

@@ -11,7 +11,6 @@ import contextlib
 import csv
 import functools
 import hashlib
-import itertools
 import json
 import os
 import pickle
@@ -552,15 +551,6 @@ def check_history(
             f"{state}; resuming would leave a hole in its record: restore {METRICS}, or train "
             "it again (sili train --overwrite; in a sweep, delete the run's folder and resume)"
         )
-
-
-def copy_history(source: Path, target: Path, rows: int) -> None:
-    """``metrics.csv``'s header and first ``rows`` rows (those a checkpoint at ``rows`` has
-    trained; a run stopped between checkpoints wrote more) to ``target``."""
-    with Path(source).open(newline="") as f:
-        kept = list(itertools.islice(csv.reader(f), rows + 1))  # records: a value may hold \n
-    with replacing(Path(target)) as tmp, tmp.open("w", newline="") as f:
-        csv.writer(f).writerows(kept)
 
 
 class MetricsWriter:

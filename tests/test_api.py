@@ -338,15 +338,15 @@ def test_save_copies_the_history_its_checkpoint_has_trained(tmp_path):
     assert saved == (run / "metrics.csv").read_text().splitlines()[: 1 + 3]
 
 
-def test_copy_history_counts_records_not_lines(tmp_path):
-    from sili_robots.runs import MetricsWriter, copy_history
+def test_a_kept_history_counts_records_not_lines(tmp_path):
+    from sili_robots.runs import MetricsWriter
 
     writer = MetricsWriter(tmp_path, ("interaction", "note"))
     for j, note in enumerate(["line1\nline2", "b", "c"]):  # an add-on's text with a newline
         writer.write({"interaction": j, "note": note})
     writer.close()
-    copy_history(tmp_path / "metrics.csv", tmp_path / "copy.csv", 2)
-    with (tmp_path / "copy.csv").open(newline="") as f:
+    MetricsWriter(tmp_path, ("interaction", "note"), keep_rows=2).close()  # as save keeps it
+    with (tmp_path / "metrics.csv").open(newline="") as f:
         assert [r["note"] for r in csv.DictReader(f)] == ["line1\nline2", "b"]
 
 
