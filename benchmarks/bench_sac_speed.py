@@ -118,6 +118,7 @@ def time_ours(
 def make_sb3(in_dim: int, act_dim: int, batch: int) -> object:
     """stable-baselines3's SAC on a dummy env, its buffer filled and its first updates done."""
     from stable_baselines3 import SAC as SB3SAC
+    from stable_baselines3.common.logger import Logger
 
     class Dummy(gym.Env):
         observation_space = gym.spaces.Box(-np.inf, np.inf, (in_dim,), np.float32)
@@ -149,6 +150,9 @@ def make_sb3(in_dim: int, act_dim: int, batch: int) -> object:
             np.zeros(1),
             [{}],
         )
+    # a silent logger of its own: without one, _setup_learn makes an empty SB3-<time> folder in
+    # the temporary directory on every call
+    model.set_logger(Logger(folder=None, output_formats=[]))
     model._setup_learn(total_timesteps=1)
     model.train(gradient_steps=10, batch_size=batch)
     return model

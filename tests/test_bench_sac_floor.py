@@ -5,6 +5,7 @@ pass (the 13% more arithmetic RESULTS.md states) and its output layer as product
 
 from __future__ import annotations
 
+from pathlib import Path
 from types import ModuleType
 
 import pytest
@@ -94,3 +95,16 @@ def test_floor_counts_every_product_of_a_latent_update(bench: ModuleType) -> Non
     gflop = bench.product_gflop(lambda: [step() for _ in range(2)], 2)
     flop = latent_update_flop(3, 2, cfg.model.dim, cfg.hidden, cfg.model.batch, 7)
     assert gflop * 1e9 == pytest.approx(flop, rel=1e-9)
+
+
+def test_stable_baselines3_reference_leaves_no_log_folder(
+    bench: ModuleType, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """stable-baselines3 makes an empty SB3-<time> folder in the temporary directory for a model
+    without a logger; the benchmark's reference, built once per round, must not litter it."""
+    pytest.importorskip("stable_baselines3")
+    import tempfile
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    bench.make_sb3(5, 2, 16)
+    assert list(tmp_path.iterdir()) == []
