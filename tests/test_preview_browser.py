@@ -9,6 +9,7 @@ import io
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 from dataclasses import replace
@@ -284,6 +285,33 @@ def test_chromium_writes_nothing_in_the_home_folder(monkeypatch, tmp_path):
     with Browser() as b:
         assert prev.render(html, browser=b).problems() == []
     assert sorted(home.rglob("*")) == []
+
+
+def test_chromium_leaves_nothing_in_the_temporary_folder(monkeypatch):
+    """A headless Chromium leaves its process-singleton folder (org.chromium.Chromium.*) in
+    the temporary directory; one per preview piled up in /tmp."""
+    import tempfile
+
+    tmp = tempfile.mkdtemp(prefix="s", dir="/tmp")  # short: see the next test
+    try:
+        monkeypatch.setenv("TMPDIR", tmp)
+        monkeypatch.setattr(tempfile, "tempdir", tmp)  # the profile's folder, too
+        with Browser() as b:
+            assert os.readlink(os.path.join(b._profile, "SingletonSocket")).startswith(tmp)
+        assert os.listdir(tmp) == []
+    finally:
+        shutil.rmtree(tmp)
+
+
+def test_chromium_starts_under_a_temporary_folder_too_long_for_its_socket(monkeypatch, tmp_path):
+    """Chromium's singleton socket lives in TMPDIR and it refuses to start when the socket's
+    path is over 107 bytes: a preview under a long TMPDIR (a cluster's job folder) failed."""
+    long = tmp_path / ("x" * 60)
+    long.mkdir()
+    monkeypatch.setenv("TMPDIR", str(long))
+    with Browser() as b:
+        assert b.call("Browser.getVersion")["product"]
+    assert list(long.iterdir()) == []
 
 
 def test_sawyer_is_drawn_from_the_models_own_geoms_and_joint_positions():

@@ -55,6 +55,8 @@ COVERED_JS = (
     ".map(e => e.getBoundingClientRect()).filter(r => r.width > 0 && r.height > 0)"
     ".map(r => [r.left, r.top, r.right, r.bottom])"
 )
+#: the longest path of a Unix socket's address (``sun_path`` holds 108 bytes with its NUL)
+SOCKET_PATH_MAX = 107
 CANDIDATES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 
 
@@ -173,6 +175,7 @@ class Browser:
                     with contextlib.suppress(OSError):
                         os.close(fd)
         if self._profile is not None:
+            _remove_singleton_folder(self._profile)
             shutil.rmtree(self._profile, ignore_errors=True)
             self._profile = None
 
@@ -401,9 +404,32 @@ def _profile_env(profile: str) -> dict[str, str]:
     return {
         **os.environ,
         "HOME": profile,
+        "TMPDIR": _chromium_tmpdir(),
         "XDG_CONFIG_HOME": os.path.join(profile, "config"),
         "XDG_CACHE_HOME": os.path.join(profile, "cache"),
     }
+
+
+def _chromium_tmpdir() -> str:
+    """The user's temporary directory, or ``/tmp`` where that is too long for Chromium: its
+    process-singleton socket goes there, and Chromium stops at start ("Socket path too long")
+    when the socket's path is longer than a socket address holds (107 bytes)."""
+    tmp = os.environ.get("TMPDIR") or "/tmp"
+    socket = os.path.join(tmp, "org.chromium.Chromium.XXXXXX", "SingletonSocket")
+    if len(os.fsencode(socket)) <= SOCKET_PATH_MAX or not os.access("/tmp", os.W_OK):
+        return tmp
+    return "/tmp"
+
+
+def _remove_singleton_folder(profile: str) -> None:
+    """Remove the folder Chromium keeps its process-singleton socket in: it makes one in the
+    temporary directory (``org.chromium.Chromium.*``, linked from the profile) and a headless
+    run leaves it there. Not moved into the profile with ``TMPDIR``: a socket's path has at most
+    107 bytes, and a profile under a long temporary path would stop Chromium from starting."""
+    with contextlib.suppress(OSError):
+        folder = Path(os.readlink(os.path.join(profile, "SingletonSocket"))).parent
+        if folder.name.startswith("org.chromium.Chromium."):
+            shutil.rmtree(folder, ignore_errors=True)
 
 
 def _high_fd(fd: int) -> int:
