@@ -1,0 +1,85 @@
+"""What ``pip install`` delivers: the wheel holds every module, the packaged bounds and the
+license, reports the one version the code states, and requires every library the package
+imports (one it only reached through another library's requirements could vanish with it)."""
+
+from __future__ import annotations
+
+import ast
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+import sili_robots
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = Path(sili_robots.__file__).parent
+#: imported only where an optional group is installed (``pyproject.toml``'s extras)
+OPTIONAL = {"ray", "tensorboard", "stable_baselines3"}
+
+
+def _requirement_name(spec: str) -> str:
+    for sep in "<>=!~[; ":
+        spec = spec.split(sep)[0]
+    return spec.strip().lower().replace("_", "-")
+
+
+def _third_party_imports() -> set[str]:
+    names: set[str] = set()
+    for path in PACKAGE.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                names |= {a.name.split(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names.add(node.module.split(".")[0])
+    return names - set(sys.stdlib_module_names) - {"sili_robots", "__future__"}
+
+
+def test_every_imported_library_is_a_declared_requirement() -> None:
+    from importlib.metadata import packages_distributions
+
+    tomllib = pytest.importorskip("tomllib")
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    declared = {_requirement_name(r) for r in project["dependencies"]}
+    distributions = packages_distributions()
+    undeclared = {
+        module: distributions.get(module)
+        for module in _third_party_imports() - OPTIONAL
+        if not {_requirement_name(d) for d in distributions.get(module, [module])} & declared
+    }
+    assert undeclared == {}
+
+
+@pytest.fixture(scope="module")
+def wheel(tmp_path_factory: pytest.TempPathFactory) -> zipfile.ZipFile:
+    """The wheel, built from a copy of the sources (a build in place leaves build/ behind)."""
+    src = tmp_path_factory.mktemp("src")
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
+        shutil.copy(ROOT / name, src / name)
+    shutil.copytree(PACKAGE, src / "sili_robots", ignore=shutil.ignore_patterns("__pycache__"))
+    out = src / "dist"
+    subprocess.run(
+        [sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation",
+         "-w", str(out), str(src)],
+        check=True, capture_output=True, timeout=300,
+    )  # fmt: skip
+    (path,) = out.glob("*.whl")
+    return zipfile.ZipFile(path)
+
+
+def test_the_wheel_holds_every_module_the_bounds_and_the_license(wheel: zipfile.ZipFile) -> None:
+    names = set(wheel.namelist())
+    modules = {p.relative_to(PACKAGE.parent).as_posix() for p in PACKAGE.rglob("*.py")}
+    assert modules - names == set()
+    assert "sili_robots/tasks/bounds.json" in names
+    assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
+
+
+def test_the_wheel_reports_the_version_the_code_states(wheel: zipfile.ZipFile) -> None:
+    (meta,) = [n for n in wheel.namelist() if n.endswith(".dist-info/METADATA")]
+    lines = wheel.read(meta).decode().splitlines()
+    assert f"Version: {sili_robots.__version__}" in lines
+    assert "License-Expression: MIT" in lines
