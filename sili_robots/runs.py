@@ -502,6 +502,26 @@ def read_config(run_dir: Path) -> RunConfig:
 MACHINE_SETTINGS = ("threads", "checkpoint_every", "agent.matmul", "agent.sac.precision")
 
 
+def with_machine_settings(cfg: RunConfig, recorded: dict[str, Any]) -> RunConfig:
+    """``cfg`` with the ``MACHINE_SETTINGS`` of ``recorded`` (a run's config as a dict, e.g.
+    ``recorded_run``), those it has: a run goes on with the kernels it was made with."""
+    data = cfg.to_dict()
+    for key in MACHINE_SETTINGS:
+        *parents, leaf = key.split(".")
+        source, target = recorded, data
+        for part in parents:
+            source, target = source.get(part, {}), target[part]
+        if isinstance(source, dict) and leaf in source:
+            target[leaf] = source[leaf]
+    return RunConfig.from_dict(data)
+
+
+def same_run(a: RunConfig, b: RunConfig) -> bool:
+    """Whether two configs make the same run, whatever machine settings each picked."""
+    diffs = differences(a.to_dict(), b.to_dict())
+    return all(key in MACHINE_SETTINGS for key, _, _ in diffs)
+
+
 def differences(a: Any, b: Any, prefix: str = "") -> list[tuple[str, Any, Any]]:
     """(dotted key, value in ``a``, value in ``b``) for every leaf two nested dicts (two runs'
     configs) differ in, in key order."""

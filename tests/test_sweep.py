@@ -386,6 +386,48 @@ def test_resume_of_a_non_sweep_and_changed_settings_exit_2(tiny_sweep, tmp_path,
     assert "it takes no --seeds (" in capsys.readouterr().err
 
 
+class _JobsSeen(LocalBackend):
+    """A local backend that keeps the jobs it was handed."""
+
+    def run(self, jobs, monitor):
+        self.jobs = {job.name: job.config for job in jobs}
+        return super().run(jobs, monitor)
+
+
+def test_a_sweep_run_again_where_kernels_time_otherwise_keeps_each_runs_own(
+    tmp_path, monkeypatch, capsys
+):
+    """The same sweep re-run for more seeds where the kernel timing picks another library
+    (another machine, a fresh cache): the runs on disk go on with the kernels they were made
+    with, as ``sili train --resume`` does, and the new ones take this machine's. It was refused:
+    'made with other settings (agent.matmul: 'aten' on disk, 'onednn' now)'."""
+    import sili_robots.sweep.spec as spec_module
+
+    def made_with(run):
+        return json.loads((tmp_path / "runs" / run / "config.json").read_text())["run"]["agent"]
+
+    monkeypatch.setattr(spec_module, "default_matmul", lambda: "aten")
+    first = _spec(methods=["sac"], seeds=[0], interactions=5)
+    assert run_sweep(first, tmp_path, LocalBackend(workers=1), progress=False).ok
+    (tmp_path / "runs" / "circle-3__sac__s0" / "summary.json").unlink()  # as if stopped
+    monkeypatch.setattr(spec_module, "default_matmul", lambda: "onednn")
+    args = ["--tasks", "circle-3", "--methods", "sac", "--seeds", "0-1", "--interactions", "5"]
+    assert main(["sweep", *args, "--out", str(tmp_path), *FAST_ARGS, "--dry-run"]) == 0
+    assert "circle-3__sac__s0\tresumable" in capsys.readouterr().out
+    backend = _JobsSeen(workers=1)
+    more = _spec(methods=["sac"], seeds=[0, 1], interactions=5)  # planned here and now
+    assert run_sweep(more, tmp_path, backend, progress=False).ok
+    assert {name: cfg["agent"]["matmul"] for name, cfg in backend.jobs.items()} == {
+        "circle-3__sac__s0": "aten",
+        "circle-3__sac__s1": "onednn",
+    }
+    assert [made_with(f"circle-3__sac__s{seed}")["matmul"] for seed in (0, 1)] == [
+        "aten",
+        "onednn",
+    ]
+    assert run_sweep(recorded_specs(tmp_path), tmp_path, progress=False, recorded=True).ok
+
+
 def test_a_record_that_cannot_run_is_named_and_a_dry_run_refuses_it_too(tmp_path, capsys):
     out = tmp_path / "sweep"
     base = ["sweep", "--tasks", "circle-3", "--methods", "sac", "--out", str(out), *FAST_ARGS]

@@ -18,12 +18,12 @@ always take it: autocast already sends bfloat16 products to oneDNN.
 
 Which library is faster depends on the CPU (oneDNN 2x on one AMD EPYC, slower than MKL on
 another), so the default is chosen by measurement: ``default_matmul`` times a SAC-sized layer's
-forward and backward on both, once per machine, torch version and thread count, and caches the
-choice (``kernels.json`` in the package's cache directory). The precision of SAC's products
-is chosen the same way (``default_precision``): bfloat16 only where a whole SAC update runs at
-least ``BF16_SPEEDUP`` times as fast (CPUs with bfloat16 units; on AVX2 alone it is ~10x
-slower). A run records both choices in its config, so it resumes on the kernels it was trained
-with.
+forward and backward on both (at one thread, as training runs), once per machine and torch
+version, and caches the choice (``kernels.json`` in the package's cache directory). The
+precision of SAC's products is chosen the same way (``default_precision``): bfloat16 only where
+a whole SAC update runs at least ``BF16_SPEEDUP`` times as fast (CPUs with bfloat16 units; on
+AVX2 alone it is ~10x slower). A run records both choices in its config, so it resumes on the
+kernels it was trained with.
 """
 
 from __future__ import annotations

@@ -249,7 +249,7 @@ def _specs_and_dir(args: argparse.Namespace) -> tuple[list[SweepSpec], Path]:
 def _dry_run(args: argparse.Namespace, specs: list[SweepSpec], sweep_dir: Path) -> int:
     """Print each planned run and what the sweep would do with it; refuse what it would."""
     from sili_robots.runs import CHECKPOINT, ERROR_FILE
-    from sili_robots.sweep.runner import check_planned, plan, replaced_runs
+    from sili_robots.sweep.runner import as_made, check_planned, plan, replaced_runs
     from sili_robots.sweep.state import run_path, run_state
 
     planned = plan(specs)
@@ -262,6 +262,7 @@ def _dry_run(args: argparse.Namespace, specs: list[SweepSpec], sweep_dir: Path) 
                 print(f"{name}\tremoved")
         print(f"{len(planned)} runs")
         return 0
+    planned = as_made(sweep_dir, planned)
     found, shorter = check_planned(sweep_dir, planned, args.resume is not None)
     for run_ in planned:
         on_disk = found[run_.name]

@@ -8,7 +8,14 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from sili_robots.errors import ConfigError
-from sili_robots.runs import STOP_FILE, write_config
+from sili_robots.runs import (
+    CONFIG,
+    STOP_FILE,
+    recorded_run,
+    same_run,
+    with_machine_settings,
+    write_config,
+)
 from sili_robots.sweep import tensorboard
 from sili_robots.sweep.backend import Backend, Monitor
 from sili_robots.sweep.local import LocalBackend
@@ -51,15 +58,31 @@ class SweepReport:
 
 
 def plan(specs: Sequence[SweepSpec]) -> list[PlannedRun]:
-    """The union of the specs' runs (a run named twice must be the same run)."""
+    """The union of the specs' runs (a run named twice must be the same run; the first wins:
+    invocations recorded on two machines may have picked different kernels for it)."""
     runs: dict[str, PlannedRun] = {}
     for spec in specs:
         for run in expand(spec):
             prev = runs.get(run.name)
-            if prev is not None and prev.config.to_dict() != run.config.to_dict():
+            if prev is not None and not same_run(prev.config, run.config):
                 raise ConfigError(f"run {run.name} is planned twice with different settings")
             runs.setdefault(run.name, run)
     return list(runs.values())
+
+
+def as_made(sweep_dir: Path, planned: Sequence[PlannedRun]) -> list[PlannedRun]:
+    """The planned runs, each one already on disk with the machine settings it was made with
+    (``runs.MACHINE_SETTINGS``: kernels, precision, threads, how often it saves): it goes on
+    with them on any machine, as ``sili train --resume`` does, while a new run takes this
+    machine's (the same sweep re-run elsewhere, e.g. for more seeds, was refused)."""
+    out = []
+    for run in planned:
+        folder = run_path(sweep_dir, as_found(sweep_dir, run).name)
+        if (folder / CONFIG).is_file():
+            with contextlib.suppress(ConfigError, KeyError, TypeError, AttributeError):
+                run = replace(run, config=with_machine_settings(run.config, recorded_run(folder)))
+        out.append(run)  # a damaged config stays as planned: check_existing names it
+    return out
 
 
 def former_folder(sweep_dir: Path, run: PlannedRun) -> Path | None:
@@ -184,6 +207,7 @@ def run_sweep(
     with sweep_lock(sweep_dir):
         if overwrite:
             clear_sweep(sweep_dir, replaced_runs(sweep_dir, planned))
+        planned = as_made(sweep_dir, planned)
         _, shorter = check_planned(sweep_dir, planned, recorded)
         adopt_former_names(sweep_dir, planned)
         if recorded:
