@@ -15,6 +15,7 @@ import json
 import os
 import pickle
 import platform
+import re
 import shutil
 import subprocess
 from collections.abc import Collection
@@ -487,13 +488,34 @@ def read_config(run_dir: Path) -> RunConfig:
             f"{run_dir} is not a run directory (no {CONFIG}); "
             "give a directory written by `sili train --out`"
         )
-    raw = read_json(path, DAMAGED_CONFIG, "run")["run"]
+    data = read_json(path, DAMAGED_CONFIG, "run")
     try:
-        return RunConfig.from_dict(raw)
-    except ConfigError as err:  # a value no run can have
-        raise ConfigError(f"{path} is damaged ({err}); {DAMAGED_CONFIG}") from None
-    except (TypeError, KeyError, AttributeError, ValueError) as err:  # valid JSON, not a config
-        raise ConfigError(f"{path} is damaged ({_first_line(err)}); {DAMAGED_CONFIG}") from None
+        return RunConfig.from_dict(data["run"])
+    except (ConfigError, TypeError, KeyError, AttributeError, ValueError) as err:
+        import sili_robots
+
+        why = str(err) if isinstance(err, ConfigError) else _first_line(err)
+        newer = _newer_writer(data, sili_robots.__version__)
+        if newer is not None:  # settings this version does not know, not damage
+            raise ConfigError(
+                f"{path} was written by sili-robots {newer}, newer than this one "
+                f"({sili_robots.__version__}), and does not read here ({why}); update "
+                "sili-robots (pip install -U sili-robots) to resume or play the run"
+            ) from None
+        raise ConfigError(f"{path} is damaged ({why}); {DAMAGED_CONFIG}") from None
+
+
+def _newer_writer(data: dict[str, Any], this: str) -> str | None:
+    """The package version that wrote a ``config.json`` when it is newer than ``this``."""
+    recorded = data.get("versions")
+    written = recorded.get("sili_robots") if isinstance(recorded, dict) else None
+    if not isinstance(written, str):
+        return None
+
+    def numbers(version: str) -> tuple[int, ...]:
+        return tuple(int(n) for n in re.findall(r"\d+", version)[:3])
+
+    return written if numbers(written) > numbers(this) else None
 
 
 #: recorded settings (dotted) that pick kernels or bookkeeping for a machine, the same

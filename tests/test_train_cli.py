@@ -1011,6 +1011,13 @@ def test_a_record_or_history_damaged_in_its_content_exits_2_naming_the_file(tmp_
             res = _sili(*command)
             assert res.returncode == 2, (damage, res.stderr)
             assert f"{run / 'config.json'} is damaged" in res.stderr, (damage, res.stderr)
+    # a setting this version does not know, from a newer one: not damage, and no retraining
+    newer = {"run": {**record["run"], "later_setting": 1}, "versions": {"sili_robots": "9.0.0"}}
+    (run / "config.json").write_text(json.dumps(newer))
+    res = _sili("eval", run)
+    assert res.returncode == 2 and "is damaged" not in res.stderr, res.stderr
+    assert "written by sili-robots 9.0.0, newer than this one" in res.stderr, res.stderr
+    assert "update sili-robots" in res.stderr
     (run / "config.json").write_text(json.dumps(record))
     checkpoint = (run / "checkpoint.pt").read_bytes()
     torch.save({"agent": None, "interaction": 2}, run / "checkpoint.pt")
