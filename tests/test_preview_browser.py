@@ -265,6 +265,20 @@ def test_a_browser_that_fails_to_start_is_reported_with_what_it_wrote(tmp_path):
         Browser(executable=str(fake), timeout=20).start()
 
 
+def test_a_browser_stopped_by_an_address_space_limit_is_reported_with_the_limit():
+    """Chromium reserves far more virtual memory than it uses: under ``ulimit -v`` it stops
+    at start saying only something cryptic, so the error names the limit."""
+    script = (
+        "import resource; from sili_robots.preview import Browser\n"
+        "resource.setrlimit(resource.RLIMIT_AS, (2**31, resource.RLIM_INFINITY))\n"
+        "try:\n    Browser(timeout=20).start()\nexcept Exception as err:\n    print(err)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60
+    ).stdout
+    assert "address space is limited to 2.0 GiB, `ulimit -v`" in out, out
+
+
 def test_browser_processes_end_with_close():
     b = Browser().start()
     profile = b._profile

@@ -210,7 +210,7 @@ class Browser:
         except OSError:
             lines = []
         said = " | ".join(line.strip() for line in lines[-3:] if line.strip())
-        return BrowserError(f"{what}; it said: {said}" if said else what)
+        return BrowserError((f"{what}; it said: {said}" if said else what) + _address_limit())
 
     def _read_message(self, deadline: float) -> dict[str, Any]:
         import select
@@ -408,6 +408,21 @@ def _profile_env(profile: str) -> dict[str, str]:
         "XDG_CONFIG_HOME": os.path.join(profile, "config"),
         "XDG_CACHE_HOME": os.path.join(profile, "cache"),
     }
+
+
+def _address_limit() -> str:
+    """A note on the process's address-space limit (``ulimit -v``), if it has one: Chromium
+    reserves far more virtual memory than it uses and stops at start under a limit of a few
+    GiB, saying only something cryptic."""
+    import resource
+
+    limit = resource.getrlimit(resource.RLIMIT_AS)[0]
+    if limit == resource.RLIM_INFINITY:
+        return ""
+    return (
+        f" (this process's address space is limited to {limit / 2**30:.1f} GiB, `ulimit -v`; "
+        "Chromium reserves much more than it uses: lift the limit for previews)"
+    )
 
 
 def _chromium_tmpdir() -> str:
