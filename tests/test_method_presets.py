@@ -215,6 +215,21 @@ def test_a_setting_the_method_never_reads_is_recorded_with_a_note(tmp_path, caps
         assert unused_settings(method_config(method), credit) == {}
     delayed = method_config("sili", overrides={"sili.beta": Schedule(((0, 0), (10, 0.5)))})
     assert unused_settings(delayed, credit) == {}
+    per_step = method_config("sili", overrides={"sili.credit": "per_step"})
+    assert list(unused_settings(per_step, credit)) == ["sili.scale"]  # paid unscaled
+    discrete_only = [
+        "model.estimator",
+        "model.sample",
+        "model.usage_bonus",
+        "model.merge_threshold",
+    ]
+    continuous_only = ["model.squash", "model.preact_penalty"]
+    continuous = method_config("sili", latent="continuous")
+    assert set(unused_settings(continuous, discrete_only + continuous_only)) == set(discrete_only)
+    discrete = method_config("sili")
+    assert set(unused_settings(discrete, discrete_only + continuous_only)) == set(continuous_only)
+    gumbel = method_config("sili", overrides={"model.estimator": "gumbel"})
+    assert list(unused_settings(gumbel, discrete_only)) == ["model.usage_bonus"]
     out = tmp_path / "sac"
     args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "1", *FAST_ARGS]
     assert main([*args, "--set", "model.dim=4", "--out", str(out), "--no-progress"]) == 0

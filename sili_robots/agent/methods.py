@@ -156,11 +156,24 @@ def unused_settings(cfg: AgentConfig, given: Iterable[str]) -> dict[str, str]:
     for path in given:
         if path.startswith("model.") and not cfg.uses_latent_model:
             out[path] = f"it learns no latent model (latent {cfg.latent!r})"
+        elif path in DISCRETE_ONLY and cfg.latent != "discrete":
+            out[path] = f"only discrete latents read it (latent {cfg.latent!r})"
+        elif path in CONTINUOUS_ONLY and cfg.latent != "continuous":
+            out[path] = f"only continuous latents read it (latent {cfg.latent!r})"
+        elif path == "model.usage_bonus" and cfg.model.estimator == "gumbel":
+            out[path] = "the gumbel estimator has no usage bonus"
         elif path == "sili.smirl_std_floor" and cfg.method != "smirl":
             out[path] = "only SMiRL's state density reads it"
         elif path in ("sili.scale", "sili.credit") and (why := no_stability_term(cfg)):
             out[path] = why
+        elif path == "sili.scale" and cfg.sili.credit == "per_step":
+            out[path] = "per-step credit pays -d(z^j, z^{j-1}) on every step, unscaled"
     return out
+
+
+#: latent-model settings only one kind of latent reads (agent/latent.py, agent/latent_cache.py)
+DISCRETE_ONLY = ("model.estimator", "model.sample", "model.usage_bonus", "model.merge_threshold")
+CONTINUOUS_ONLY = ("model.squash", "model.preact_penalty")
 
 
 def no_stability_term(cfg: AgentConfig) -> str:
