@@ -169,8 +169,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         print(
             f"sili {args.command}: error: out of memory ({_allocation(err)}); the settings that "
-            "size the agent (hidden, sac.batch_interactions, sac.batch_steps, model.batch) or "
-            "its batches per interaction (sac.updates_per_step) may be too large for this machine",
+            "size the agent (hidden, model.dim, sac.batch_interactions, sac.batch_steps, "
+            "model.batch) or its batches per interaction (sac.updates_per_step) may be too large "
+            "for this machine",
             file=sys.stderr,
         )
         return 1

@@ -2,6 +2,8 @@
 
 import copy
 import io
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -516,6 +518,27 @@ def test_relabel_moves_the_optimizers_moments_with_the_categories():
     assert agent.latents.optimizer is agent.model_opt  # refreshes rename through it
 
 
+def test_head_distances_of_many_categories_fit_in_a_bounded_memory():
+    """The heads' pairwise differences grow with ``model.dim`` squared: at 600 categories on 64
+    stored interactions they are 3.7 GB at once, which a ``model.dim`` of a few hundred ran out
+    of at its first merge; in blocks they fit under a 2 GiB address-space margin."""
+    script = """
+import resource, torch
+from sili_robots.agent.latent import LatentModel
+torch.manual_seed(0)
+model = LatentModel(3, 1, latent_dim=600, hidden=16, kind="discrete")
+obs, act = torch.randn(64, 10, 3), torch.randn(64, 10, 1)
+size = int(open("/proc/self/statm").read().split()[0]) * resource.getpagesize()
+resource.setrlimit(resource.RLIMIT_AS, (size + 2**31, resource.RLIM_INFINITY))
+d = model.head_distances(obs, act, torch.ones(4))
+print(tuple(d.shape), bool(torch.isfinite(d).all()))
+"""
+    res = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=300
+    )
+    assert res.stdout.split("\n")[0] == "(600, 600) True", res.stderr[-800:]
+
+
 def test_a_stability_scale_of_zero_is_kept_and_none_means_the_horizon():
     assert _agent(stability_scale=0.0).stability_scale == 0.0
     assert _agent().stability_scale == H
@@ -536,6 +559,13 @@ def test_categories_with_the_same_behaviour_count_as_one_strategy():
     assert float(d[0, 2]) == pytest.approx(5.0, rel=1e-4)
     assert category_groups(d, [1, 0, 2], threshold=0.5) == {1: 1, 0: 1, 2: 2}
     assert category_groups(d, [1, 0, 2], threshold=6.0) == {1: 1, 0: 1, 2: 1}
+
+    whole = model.head_distances(obs, act, torch.ones(4))
+    latent_module = sys.modules[LatentModel.__module__]
+    for elements in (1, 10 * H * 3 * 4 * 2):  # a row at a time; two rows at a time
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(latent_module, "DISTANCE_ELEMENTS", elements)
+            assert torch.equal(model.head_distances(obs, act, torch.ones(4)), whole)
 
     # in the agent: when every head predicts the same, every latent is one category and the
     # stability reward never pays for a change; with grouping off the raw categories change

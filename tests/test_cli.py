@@ -342,8 +342,8 @@ def test_an_agent_too_large_for_memory_is_one_line_and_other_errors_keep_their_t
     assert done.returncode == 1
     assert done.stderr == (
         "sili train: error: out of memory (4611686018.4 GB were asked for); the settings that size "
-        "the agent (hidden, sac.batch_interactions, sac.batch_steps, model.batch) or its batches "
-        "per interaction (sac.updates_per_step) may be too large for this machine\n"
+        "the agent (hidden, model.dim, sac.batch_interactions, sac.batch_steps, model.batch) or "
+        "its batches per interaction (sac.updates_per_step) may be too large for this machine\n"
     )
     monkeypatch.setattr(train, "run", lambda _args: np.empty(2**57))  # numpy's own wording
     done = sili_in_process("train", "--task", "circle-3")

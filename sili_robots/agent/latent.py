@@ -67,6 +67,9 @@ from sili_robots.agent.matmul import Linear
 from sili_robots.agent.networks import mlp
 
 ESTIMATORS = ("marginal", "expected", "gumbel")
+#: most elements of the heads' pairwise differences ``head_distances`` holds at once (256 MB):
+#: they grow with ``dim`` squared, and a ``model.dim`` of a few hundred ran out of memory
+DISTANCE_ELEMENTS = 1 << 26
 
 
 def gumbel_straight_through(logits: torch.Tensor, temperature: float = 1.0) -> torch.Tensor:
@@ -145,8 +148,13 @@ class LatentModel(nn.Module):
         """[k, k]: the largest over outputs of the RMS difference between two categories'
         predictions on the states ``obs`` / actions ``act``, in units of ``scale`` per output."""
         heads = self._heads(obs, act).reshape(-1, self.latent_dim, self.out_dim) / scale
-        diff = heads.unsqueeze(2) - heads.unsqueeze(1)  # [N, k, k, out]
-        return diff.pow(2).mean(0).sqrt().amax(-1)
+        n, k, out = heads.shape
+        rows = max(1, DISTANCE_ELEMENTS // (n * k * out))  # all k at the default sizes
+        blocks = []
+        for i in range(0, k, rows):
+            diff = heads[:, i : i + rows].unsqueeze(2) - heads.unsqueeze(1)  # [N, rows, k, out]
+            blocks.append(diff.pow(2).mean(0).sqrt().amax(-1))
+        return torch.cat(blocks)
 
     @torch.no_grad()
     def step_log_likelihoods(
