@@ -24,14 +24,30 @@ from sili_robots.runs import (
 from sili_robots.tasks.registry import other_task_arguments
 
 
-def _last(run_dir: Path, window: int) -> pd.DataFrame:
-    """The run's last ``window`` rows, from ``metrics.csv`` or a collection's gzipped copy."""
+def _rows(run_dir: Path) -> pd.DataFrame:
+    """The run's rows, from ``metrics.csv`` or a collection's gzipped copy."""
     rows = run_metrics(run_dir)
     if rows is None:
         raise ConfigError(f"{run_dir} has no {METRICS} (nor its gzipped copy): it logged nothing")
     if rows.empty:
         raise ConfigError(f"{run_dir} has logged no interaction yet")
-    return rows.tail(window)
+    return rows
+
+
+def _last(run_dir: Path, window: int) -> pd.DataFrame:
+    return _rows(run_dir).tail(window)
+
+
+def untrained(cfg: RunConfig, interactions: int) -> str:
+    """Why the policy of a run ``interactions`` long has not trained ('' when it has): every
+    interaction was one of the uniform random actions SAC starts with."""
+    random = cfg.agent.sac.random_interactions
+    if interactions > random:
+        return ""
+    return (
+        f"all its {interactions} interactions were random actions (sac.random_interactions="
+        f"{random}): its policy has not trained yet"
+    )
 
 
 #: said where a task version has no stored references (a user's task, other task arguments)
@@ -71,7 +87,8 @@ def verdict(run_dir: Path, window: int = 50) -> str:
     standing still: 0%) and earned -8.1 per interaction (standing still: -50.0, the scripted
     stabilizing policy that sees z: -4.0)"."""
     cfg = read_config(run_dir)
-    tail = _last(run_dir, window)
+    rows = _rows(run_dir)
+    tail = rows.tail(window)
     stability = kept_fraction(tail)
     reward = float(tail["task_reward"].mean())
     bounds = _references(cfg)
@@ -99,7 +116,8 @@ def verdict(run_dir: Path, window: int = 50) -> str:
         refs.append(f"standing still: {still['task_reward']:.1f}")
     if stab:
         refs.append(f"the scripted stabilizing policy that sees z: {stab['task_reward']:.1f}")
-    return line + f" ({', '.join(refs) if refs else NO_REFERENCE})"
+    line += f" ({', '.join(refs) if refs else NO_REFERENCE})"
+    return line + (f"; {why}" if (why := untrained(cfg, len(rows))) else "")
 
 
 def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:

@@ -27,6 +27,7 @@ def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys
     assert "of those after the first (standing still: 0%) and earned" in last
     assert "standing still: -50.0" in last
     assert "the scripted stabilizing policy that sees z: -4.0" in last
+    assert "random actions" not in last  # 3 random interactions, then 1 of its policy
     metrics = pd.read_csv(run / "metrics.csv")
     metrics["strategy_changed"] = 0
     metrics["task_reward"] = -7.25
@@ -47,6 +48,19 @@ def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys
     metrics["task_reward"] = -55.3  # held by parking away from the goal: below standing still
     metrics.to_csv(run / "metrics.csv", index=False)
     assert held(run, window=3) and not worked(run, window=3)
+
+
+def test_a_run_that_never_left_its_random_actions_says_its_policy_has_not_trained(tmp_path, capsys):
+    """A run no longer than ``sac.random_interactions`` trained no policy: its verdict read like
+    the method's failure, and ``sili eval`` scored the untrained policy without a word."""
+    run = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "3"]
+    assert main([*args, *FAST_ARGS, "--set", "random_interactions=5", "--out", str(run)]) == 0
+    note = "all its 3 interactions were random actions (sac.random_interactions=5): its policy "
+    assert note + "has not trained yet" in capsys.readouterr().err.strip().splitlines()[-1]
+    assert verdict(run).endswith("; " + note + "has not trained yet")
+    assert main(["eval", str(run), "--interactions", "2"]) == 0
+    assert f"{run}: {note}" in capsys.readouterr().err
 
 
 def test_true_stability_leaves_out_the_games_first_interaction_everywhere(tmp_path):

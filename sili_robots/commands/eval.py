@@ -25,14 +25,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from sili_robots.evaluation import evaluate
     from sili_robots.runs import read_config
+    from sili_robots.verdict import untrained
 
     result = evaluate(args.run_dir, args.interactions)
-    target = read_config(args.run_dir).interactions
-    if result["trained_interactions"] < target:
+    cfg = read_config(args.run_dir)
+    if result["trained_interactions"] < cfg.interactions:
         print(
             f"{args.run_dir} is unfinished: this evaluates its checkpoint at interaction "
-            f"{result['trained_interactions']} of {target}",
+            f"{result['trained_interactions']} of {cfg.interactions}",
             file=sys.stderr,
         )
+    if why := untrained(cfg, result["trained_interactions"]):
+        print(f"{args.run_dir}: {why}", file=sys.stderr)
     print(json.dumps({"run_dir": str(args.run_dir), **result}, indent=2))
     return 0
