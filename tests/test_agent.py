@@ -354,7 +354,9 @@ def test_lr_schedule_sets_every_sac_optimizers_step_size_at_each_update():
         agent.update(j)
         (seen[j],) = {g["lr"] for o in optimizers for g in o.param_groups}
         after = sac.actor.parameters()
-        moved[j] = max(float((p - q).abs().max()) for p, q in zip(after, before, strict=True))
+        moved[j] = max(
+            float((p.detach() - q).abs().max()) for p, q in zip(after, before, strict=True)
+        )
     # Adam's steps scale with the rate: a tenth of it moves the weights far less
     assert moved[7] < moved[3] / 3, moved
     assert seen == pytest.approx({3: 3e-4, 5: 1.65e-4, 7: 3e-5})
@@ -537,6 +539,21 @@ print(tuple(d.shape), bool(torch.isfinite(d).all()))
         [sys.executable, "-c", script], capture_output=True, text=True, timeout=300
     )
     assert res.stdout.split("\n")[0] == "(600, 600) True", res.stderr[-800:]
+
+
+def test_the_target_scale_of_a_single_transition_is_one_without_a_warning():
+    """A latent batch of one interaction of one step has no spread: torch's std warns
+    ('degrees of freedom is <= 0') and gives NaN, which the scale replaced by 1 only after."""
+    import warnings
+
+    from sili_robots.agent.latent import target_scale
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert torch.equal(target_scale(torch.randn(1, 1, 4)), torch.ones(4))
+    assert torch.equal(
+        target_scale(torch.tensor([[[1.0, 2.0]], [[1.0, 4.0]]]))[0], torch.tensor(1.0)
+    )
 
 
 def test_a_stability_scale_of_zero_is_kept_and_none_means_the_horizon():

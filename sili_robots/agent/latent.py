@@ -252,8 +252,12 @@ def decoder_targets(obs: torch.Tensor, next_obs: torch.Tensor, rew: torch.Tensor
 
 
 def target_scale(target: torch.Tensor) -> torch.Tensor:
-    """Per-output standard deviation of ``decoder_targets`` (1 where constant: left as is)."""
-    std = target.reshape(-1, target.shape[-1]).std(0)
+    """Per-output standard deviation of ``decoder_targets`` (1 where constant, or of a single
+    transition, as a batch of one interaction of one step is: left as is)."""
+    flat = target.reshape(-1, target.shape[-1])
+    if len(flat) < 2:  # no spread to measure (torch would warn and give NaN)
+        return torch.ones(flat.shape[-1], dtype=flat.dtype)
+    std = flat.std(0)
     return torch.where(std > 1e-4, std, torch.ones_like(std))
 
 
