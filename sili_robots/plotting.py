@@ -48,13 +48,15 @@ TASK_TITLES = {
     "sawyer-reach": "Sawyer-Reach",
 }
 METHOD_ORDER = ("sili", "oracle", "lili", "stable", "sac", "smirl")
+#: Okabe and Ito's colour-blind-safe palette (tab10's green/red and blue/purple pairs, which
+#: overlap in most panels, are near one colour under deuteranopia)
 METHOD_COLORS = {
-    "sili": "tab:blue",
+    "sili": "#0072B2",  # blue
     "oracle": "black",
-    "lili": "tab:orange",
-    "stable": "tab:green",
-    "sac": "tab:red",
-    "smirl": "tab:purple",
+    "lili": "#E69F00",  # orange
+    "stable": "#009E73",  # bluish green
+    "sac": "#D55E00",  # vermillion
+    "smirl": "#CC79A7",  # reddish purple
 }
 #: where a variant (``VARIANT_KEYS``) says its latent kind
 LATENT_KEY = VARIANT_KEYS.index("latent")
@@ -482,8 +484,10 @@ def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "si
     axes = fig.subplots(1, len(FINAL_METRICS))
     keys = ["controller", "task_args", "latent"]
     groups = [tuple(g) for g in finals[keys].fillna("").drop_duplicates().values]
+    shades = _shades([(method, g) for g in groups])  # the method's colour, then its tints
     for controller, task_args, latent in groups:
         part = finals[(finals[keys].fillna("") == (controller, task_args, latent)).all(axis=1)]
+        color = shades[(controller, task_args, latent)]
         label = METHOD_NAMES.get(method, method)  # plus what sets the lines apart
         if len({g[0] for g in groups}) > 1:
             label += f" [{controller or 'default'}]"
@@ -494,10 +498,10 @@ def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "si
             stats.columns = ["mean", "std"]
             b = stats.index.to_numpy(float)
             mean = stats["mean"].to_numpy()
-            (line,) = ax.plot(b, mean, "o-", label=label, lw=1.6)
+            ax.plot(b, mean, "o-", label=label, lw=1.6, color=color)
             low, high = spread(metric, mean, stats["std"].to_numpy())
             yerr = np.stack([mean - low, high - mean])
-            ax.errorbar(b, mean, yerr=yerr, fmt="none", color=line.get_color(), capsize=4)
+            ax.errorbar(b, mean, yerr=yerr, fmt="none", color=color, capsize=4)
             ax.set_xlabel("stability weight b")
             ax.set_ylabel(ylabel)
             ax.set_gid(metric)

@@ -12,7 +12,13 @@ from matplotlib.collections import PolyCollection
 from matplotlib.colors import to_rgb
 
 from sili_robots.cli import main
-from sili_robots.plotting import beta_sweep, learning_curves, load_results, overview
+from sili_robots.plotting import (
+    METHOD_COLORS,
+    beta_sweep,
+    learning_curves,
+    load_results,
+    overview,
+)
 from sili_robots.sweep import LocalBackend, SweepSpec, run_sweep
 
 
@@ -96,8 +102,9 @@ def test_learning_curves_plot_the_table_mean_and_std_across_seeds(sweep_dir):
                 assert at_x.max() == pytest.approx(min(mean[x] + std[x], high), abs=1e-9)
 
 
-def test_beta_figure_plots_final_values_against_b(sweep_dir):
+def test_beta_figure_plots_final_values_against_b(sweep_dir, monkeypatch):
     table = pd.read_csv(sweep_dir / "results.csv")
+    monkeypatch.setitem(METHOD_COLORS, "sili", "#123456")  # a colour no cycle would pick
     fig = beta_sweep(load_results(sweep_dir), "circle-3", window=4)
     axes = {ax.get_gid(): ax for ax in fig.axes}
     sili = table[(table.task == "circle-3") & (table.method == "sili")]
@@ -108,8 +115,11 @@ def test_beta_figure_plots_final_values_against_b(sweep_dir):
             .apply(lambda s: s.tail(4).mean())
             .unstack("seed")
         )
-        xy = _line(axes[metric], "SILI").get_xydata()
+        line = _line(axes[metric], "SILI")
+        xy = line.get_xydata()
         np.testing.assert_array_equal(xy[:, 0], [0.5, 1.0])
+        # the method's colour, as in every figure (it took the next of matplotlib's cycle)
+        assert to_rgb(line.get_color()) == to_rgb(METHOD_COLORS["sili"])
         np.testing.assert_allclose(xy[:, 1], finals.mean(axis=1).to_numpy())
         assert axes[metric].get_xlabel() == "stability weight b"
 
@@ -319,15 +329,16 @@ def test_two_profiles_each_alone_on_its_task_get_two_colours():
 
 
 def test_silis_package_runs_are_the_methods_blue_in_every_figure_and_bounds_sit_under_them():
-    """SILI was a pale shade of blue where it ran in two profiles and tab:blue elsewhere; the
+    """SILI was a pale shade of blue where it ran in two profiles and its blue elsewhere; the
     bounds' labels covered the curves near them."""
+
     both = _sili_in_profiles((("circle-3", "sili/Circle3-v1", ("package", "paper")),))
     alone = _sili_in_profiles((("circle-3", "sili/Circle3-v1", ("package",)),))
     for df, label in ((both, "SILI (package)"), (alone, "SILI")):
         fig = learning_curves(df, "circle-3", smooth=1)
         ax = next(a for a in fig.axes if a.get_gid() == "task_reward")
         line = _line(ax, label)
-        assert to_rgb(line.get_color()) == to_rgb("tab:blue")
+        assert to_rgb(line.get_color()) == to_rgb(METHOD_COLORS["sili"])
         labels = [t for t in ax.texts if t.get_gid() == "bound_label"]
         assert labels and all(t.get_zorder() < line.get_zorder() for t in labels)
 
