@@ -192,7 +192,9 @@ def write_summary(run_dir: Path, window: int = 100) -> dict[str, Any]:
         "wall_time_s": float(df["wall_time"].iloc[-1]) if len(df) else 0.0,
         **latent_diagnostics(df, window),
     }
-    write_text(Path(run_dir) / SUMMARY, json.dumps(summary, indent=2))
+    # a mean of no rows is NaN, which strict JSON readers (jq, other languages) refuse
+    summary = {k: None if isinstance(v, float) and np.isnan(v) else v for k, v in summary.items()}
+    write_text(Path(run_dir) / SUMMARY, json.dumps(summary, indent=2, allow_nan=False))
     return summary
 
 

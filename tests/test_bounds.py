@@ -117,7 +117,10 @@ def test_write_adds_to_a_bounds_file(tmp_path, capsys):
     data = json.loads(path.read_text())
     assert set(data["tasks"]) == {"sili/Circle3-v0", "sili/Circle3-v1"}
     assert data["command"] == f"sili bounds circle-3-v0 --interactions 4 --write {path}"
-    assert f"wrote {path}" in capsys.readouterr().out
+    assert f"wrote {path}" in capsys.readouterr().err  # stdout: the results alone
+    args = ["bounds", "circle-3", "--interactions", "4", "--json", "--write", str(path)]
+    assert main(args) == 0
+    assert json.loads(capsys.readouterr().out)["task"] == "circle-3"  # one JSON document
     assert BOUNDS_FILE.is_file()
     packaged = BOUNDS_FILE.read_bytes()
     for counts in (["--interactions", "4"], ["--games", "3"], ["--seed", "1"]):

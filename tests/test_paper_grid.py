@@ -647,6 +647,31 @@ def test_a_resumed_grid_plans_each_block_as_it_was_recorded(tmp_path):
     assert recorded(tmp_path, other) is other  # not recorded yet: planned anew
 
 
+def test_a_grid_with_a_failed_run_names_it_with_its_error_as_a_sweep_does(
+    tmp_path, monkeypatch, capsys
+):
+    """stdout holds JSON lines alone, the failures as the sweep's ``failed`` (run -> error):
+    the grid printed prose there, and its failures as a bare list of names."""
+    import sili_robots.sweep as sweep_module
+    from sili_robots import paper_grid
+    from sili_robots.sweep.worker import Outcome
+
+    real = sweep_module.run_sweep
+
+    def one_fails(*args, **kwargs):
+        report = real(*args, **kwargs)
+        report.outcomes["extra__s9"] = Outcome("extra__s9", "failed", error="ValueError: boom")
+        return report
+
+    tiny = paper_grid.Block("tiny", ("sac",), ("circle-3",), seeds=(0,), interactions=3)
+    monkeypatch.setattr(paper_grid, "BLOCKS", (tiny,))
+    monkeypatch.setattr(sweep_module, "run_sweep", one_fails)
+    args = ["grid", "--blocks", "tiny", "--workers", "1", "--into", str(tmp_path / "c")]
+    assert main([*args, "--sweep-dir", str(tmp_path / "s")]) == 1
+    lines = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert lines[-1] == {"failed": {"extra__s9": "ValueError: boom"}}
+
+
 def test_a_fresh_clone_resumes_the_grid_from_its_collection(tmp_path, monkeypatch, capsys):
     """Without its sweep directory (a fresh clone) ``sili grid`` counts the collected runs as
     done, even on a machine that would choose another kernel library, and trains only the
@@ -669,7 +694,10 @@ def test_a_fresh_clone_resumes_the_grid_from_its_collection(tmp_path, monkeypatc
     capsys.readouterr()
     assert main([*args, "--sweep-dir", str(tmp_path / "fresh")]) == 0
     second = first.name.replace("__s0", "__s1")
-    assert f'"collected": ["{second}"]' in capsys.readouterr().out  # seed 0 not trained again
+    printed = capsys.readouterr()
+    assert f'"collected": ["{second}"]' in printed.out  # seed 0 not trained again
+    assert [json.loads(line) for line in printed.out.splitlines()]  # JSON lines alone
+    assert "grid: " in printed.err
     restored = tmp_path / "fresh" / "runs" / first.name
     assert sorted(p.name for p in restored.iterdir()) == [
         "config.json",
@@ -679,7 +707,7 @@ def test_a_fresh_clone_resumes_the_grid_from_its_collection(tmp_path, monkeypatc
     added = json.loads((collection / "runs" / second / "config.json").read_text())
     assert added["run"]["agent"]["matmul"] == matmul  # the block's, not this machine's
     assert main([*args, "--sweep-dir", str(tmp_path / "third")]) == 0
-    assert "all 2 runs collected" in capsys.readouterr().out
+    assert "all 2 runs collected" in capsys.readouterr().err
     assert not (tmp_path / "third").exists()
 
 

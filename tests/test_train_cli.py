@@ -223,6 +223,14 @@ def test_the_summary_is_the_last_window_of_the_metrics(tmp_path):
     assert summary["final_task_reward"] == pytest.approx(np.arange(50, 150).mean())
     assert summary["final_stability"] == pytest.approx(0.75)
     assert summary["wall_time_s"] == 9.0
+    df.head(0).to_csv(tmp_path / "metrics.csv", index=False)  # no row: means of nothing
+
+    def strict(constant: str) -> None:
+        raise ValueError(f"{constant} is not JSON")
+
+    write_summary(tmp_path)
+    text = (tmp_path / "summary.json").read_text()
+    assert json.loads(text, parse_constant=strict)["final_task_reward"] is None
 
 
 @pytest.mark.parametrize("method", ["lili", "stable", "sac", "oracle", "smirl"])

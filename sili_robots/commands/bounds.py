@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import functools
 import json
+import sys
 from pathlib import Path
 
 from sili_robots.commands.common import (
@@ -130,8 +131,8 @@ def run(args: argparse.Namespace) -> int:
             print(format_table(result), flush=True)
         if args.write:  # as each task ends: a stop or a failure keeps the tasks done
             written = write_bounds_file([result], Path(args.write), _command(args))
-    if args.write:
-        print(f"wrote {written}")
+    if args.write:  # a note: stdout is the results alone (one JSON line per task with --json)
+        print(f"wrote {written}", file=sys.stderr)
     return 0
 
 

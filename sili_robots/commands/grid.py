@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 from pathlib import Path
 
 from sili_robots.commands.common import float_in, path_arg, positive_int
@@ -99,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
             "choose other blocks or tasks (sili grid --dry-run lists them all)"
         )
     dirs = (args.sweep_dir, args.into)  # a run is done in either (a fresh clone has no sweep)
-    failed: list[str] = []
+    failed: dict[str, str] = {}  # run -> its error, as the sweep reports it
     planned = done = planned_interactions = done_interactions = 0
     steps = [(b, s) for b in blocks for s in b.specs(tasks)]
     steps = [(b, recorded(args.sweep_dir, s, args.into)) for b, s in steps]
@@ -125,14 +126,14 @@ def run(args: argparse.Namespace) -> int:
             r.name for r in runs if _finished(run_path(args.into, r.name), spec.interactions)
         ]
         if len(collected) == len(runs):  # nothing to train (its settings may have moved on)
-            print(f"grid: {label}: all {len(runs)} runs collected", flush=True)
+            print(f"grid: {label}: all {len(runs)} runs collected", file=sys.stderr, flush=True)
             continue
-        print(f"grid: {label}", flush=True)
+        print(f"grid: {label}", file=sys.stderr, flush=True)  # stdout: JSON lines alone
         if collected:  # back into the sweep, so it does not train them again
             collect([args.into], args.sweep_dir, names=collected)
         backend = LocalBackend(args.workers or os.cpu_count() or 1)
         report = run_sweep(spec, args.sweep_dir, backend, progress=False)
-        failed += list(report.failed)
+        failed.update(report.failed)
         got = collect([args.sweep_dir], args.into)
         line = {"block": b.name, "task": spec.tasks[0], "collected": got.added}
         print(json.dumps({**line, "replaced": got.replaced} if got.replaced else line))
