@@ -524,11 +524,11 @@ def _newer_writer(data: dict[str, Any], this: str) -> str | None:
 MACHINE_SETTINGS = ("threads", "checkpoint_every", "agent.matmul", "agent.sac.precision")
 
 
-def with_machine_settings(cfg: RunConfig, recorded: dict[str, Any]) -> RunConfig:
-    """``cfg`` with the ``MACHINE_SETTINGS`` of ``recorded`` (a run's config as a dict, e.g.
-    ``recorded_run``), those it has: a run goes on with the kernels it was made with."""
+def with_settings_of(cfg: RunConfig, recorded: dict[str, Any], keys: Collection[str]) -> RunConfig:
+    """``cfg`` with the settings ``keys`` (dotted) of ``recorded`` (a run's config as a dict,
+    e.g. ``recorded_run``), those it has: a run goes on with the kernels it was made with."""
     data = cfg.to_dict()
-    for key in MACHINE_SETTINGS:
+    for key in keys:
         *parents, leaf = key.split(".")
         source, target = recorded, data
         for part in parents:
@@ -538,10 +538,10 @@ def with_machine_settings(cfg: RunConfig, recorded: dict[str, Any]) -> RunConfig
     return RunConfig.from_dict(data)
 
 
-def same_run(a: RunConfig, b: RunConfig) -> bool:
-    """Whether two configs make the same run, whatever machine settings each picked."""
-    diffs = differences(a.to_dict(), b.to_dict())
-    return all(key in MACHINE_SETTINGS for key, _, _ in diffs)
+def same_run(a: RunConfig, b: RunConfig, ignoring: Collection[str]) -> bool:
+    """Whether two configs make the same run, whatever each has in the settings ``ignoring``
+    (dotted; e.g. those a machine's timing chose)."""
+    return all(key in ignoring for key, _, _ in differences(a.to_dict(), b.to_dict()))
 
 
 def differences(a: Any, b: Any, prefix: str = "") -> list[tuple[str, Any, Any]]:

@@ -38,15 +38,15 @@ def _last(run_dir: Path, window: int) -> pd.DataFrame:
     return _rows(run_dir).tail(window)
 
 
-def untrained(cfg: RunConfig, interactions: int) -> str:
-    """Why the policy of a run ``interactions`` long has not trained ('' when it has): every
-    interaction was one of the uniform random actions SAC starts with."""
+def random_only(cfg: RunConfig, interactions: int) -> str:
+    """'' unless every one of a run's ``interactions`` was one of the uniform random actions
+    SAC starts with (its first updates come after the last of them): then, that."""
     random = cfg.agent.sac.random_interactions
     if interactions > random:
         return ""
     return (
         f"all its {interactions} interactions were random actions (sac.random_interactions="
-        f"{random}): its policy has not trained yet"
+        f"{random})"
     )
 
 
@@ -117,7 +117,8 @@ def verdict(run_dir: Path, window: int = 50) -> str:
     if stab:
         refs.append(f"the scripted stabilizing policy that sees z: {stab['task_reward']:.1f}")
     line += f" ({', '.join(refs) if refs else NO_REFERENCE})"
-    return line + (f"; {why}" if (why := untrained(cfg, len(rows))) else "")
+    why = random_only(cfg, len(rows))
+    return line + (f"; {why}: they say nothing of its policy" if why else "")
 
 
 def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:

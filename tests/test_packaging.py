@@ -38,12 +38,14 @@ def _third_party_imports() -> set[str]:
     return names - set(sys.stdlib_module_names) - {"sili_robots", "__future__"}
 
 
-def test_every_imported_library_is_a_declared_requirement() -> None:
+def test_every_imported_library_is_a_declared_requirement(wheel: zipfile.ZipFile) -> None:
     from importlib.metadata import packages_distributions
 
-    tomllib = pytest.importorskip("tomllib")
-    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
-    declared = {_requirement_name(r) for r in project["dependencies"]}
+    declared = {
+        _requirement_name(line.removeprefix("Requires-Dist: "))
+        for line in _metadata(wheel)
+        if line.startswith("Requires-Dist: ") and "extra ==" not in line  # not optional
+    }
     distributions = packages_distributions()
     undeclared = {
         module: distributions.get(module)
@@ -78,8 +80,12 @@ def test_the_wheel_holds_every_module_the_bounds_and_the_license(wheel: zipfile.
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
 
 
-def test_the_wheel_reports_the_version_the_code_states(wheel: zipfile.ZipFile) -> None:
+def _metadata(wheel: zipfile.ZipFile) -> list[str]:
     (meta,) = [n for n in wheel.namelist() if n.endswith(".dist-info/METADATA")]
-    lines = wheel.read(meta).decode().splitlines()
+    return wheel.read(meta).decode().splitlines()
+
+
+def test_the_wheel_reports_the_version_the_code_states(wheel: zipfile.ZipFile) -> None:
+    lines = _metadata(wheel)
     assert f"Version: {sili_robots.__version__}" in lines
     assert "License-Expression: MIT" in lines

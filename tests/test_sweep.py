@@ -412,8 +412,12 @@ def test_a_sweep_run_again_where_kernels_time_otherwise_keeps_each_runs_own(
     (tmp_path / "runs" / "circle-3__sac__s0" / "summary.json").unlink()  # as if stopped
     monkeypatch.setattr(spec_module, "default_matmul", lambda: "onednn")
     args = ["--tasks", "circle-3", "--methods", "sac", "--seeds", "0-1", "--interactions", "5"]
+    args += ["--checkpoint-every", "4"]
     assert main(["sweep", *args, "--out", str(tmp_path), *FAST_ARGS, "--dry-run"]) == 0
     assert "circle-3__sac__s0\tresumable" in capsys.readouterr().out
+    pinned = ["--set", "matmul=onednn"]  # given, not timed: the run on disk is not that run
+    assert main(["sweep", *args, "--out", str(tmp_path), *FAST_ARGS, *pinned, "--dry-run"]) == 2
+    assert "agent.matmul: 'aten' on disk, 'onednn' now" in capsys.readouterr().err
     backend = _JobsSeen(workers=1)
     more = _spec(methods=["sac"], seeds=[0, 1], interactions=5)  # planned here and now
     assert run_sweep(more, tmp_path, backend, progress=False).ok

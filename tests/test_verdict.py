@@ -56,11 +56,19 @@ def test_a_run_that_never_left_its_random_actions_says_its_policy_has_not_traine
     run = tmp_path / "run"
     args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "3"]
     assert main([*args, *FAST_ARGS, "--set", "random_interactions=5", "--out", str(run)]) == 0
-    note = "all its 3 interactions were random actions (sac.random_interactions=5): its policy "
-    assert note + "has not trained yet" in capsys.readouterr().err.strip().splitlines()[-1]
-    assert verdict(run).endswith("; " + note + "has not trained yet")
+    note = "all its 3 interactions were random actions (sac.random_interactions=5)"
+    assert note + ": they say nothing" in capsys.readouterr().err.strip().splitlines()[-1]
+    assert verdict(run).endswith(f"; {note}: they say nothing of its policy")
     assert main(["eval", str(run), "--interactions", "2"]) == 0
-    assert f"{run}: {note}" in capsys.readouterr().err
+    assert f"{run}: its policy has not trained: {note}" in capsys.readouterr().err
+    exact = tmp_path / "exact"  # as long as its random phase: SAC updated after the last one
+    args = [*args, *FAST_ARGS, "--set", "random_interactions=3", "--out", str(exact)]
+    assert main(args) == 0
+    assert verdict(exact).endswith("interactions were random actions (sac.random_interactions=3)"
+                                   ": they say nothing of its policy")  # fmt: skip
+    capsys.readouterr()
+    assert main(["eval", str(exact), "--interactions", "2"]) == 0
+    assert "has not trained" not in capsys.readouterr().err
 
 
 def test_true_stability_leaves_out_the_games_first_interaction_everywhere(tmp_path):

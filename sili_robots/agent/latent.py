@@ -67,8 +67,9 @@ from sili_robots.agent.matmul import Linear
 from sili_robots.agent.networks import mlp
 
 ESTIMATORS = ("marginal", "expected", "gumbel")
-#: most elements of the heads' pairwise differences ``head_distances`` holds at once (256 MB):
-#: they grow with ``dim`` squared, and a ``model.dim`` of a few hundred ran out of memory
+#: most elements of the heads' pairwise differences ``head_distances`` holds at once (256 MB;
+#: a row of categories at least): they grow with ``dim`` squared, and a ``model.dim`` of a few
+#: hundred ran out of memory
 DISTANCE_ELEMENTS = 1 << 26
 
 
@@ -153,7 +154,7 @@ class LatentModel(nn.Module):
         blocks = []
         for i in range(0, k, rows):
             diff = heads[:, i : i + rows].unsqueeze(2) - heads.unsqueeze(1)  # [N, rows, k, out]
-            blocks.append(diff.pow(2).mean(0).sqrt().amax(-1))
+            blocks.append(diff.pow_(2).mean(0).sqrt().amax(-1))  # in place: one block held
         return torch.cat(blocks)
 
     @torch.no_grad()

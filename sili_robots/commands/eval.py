@@ -25,7 +25,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from sili_robots.evaluation import evaluate
     from sili_robots.runs import read_config
-    from sili_robots.verdict import untrained
+    from sili_robots.verdict import random_only
 
     result = evaluate(args.run_dir, args.interactions)
     cfg = read_config(args.run_dir)
@@ -35,7 +35,11 @@ def run(args: argparse.Namespace) -> int:
             f"{result['trained_interactions']} of {cfg.interactions}",
             file=sys.stderr,
         )
-    if why := untrained(cfg, result["trained_interactions"]):
-        print(f"{args.run_dir}: {why}", file=sys.stderr)
+    trained = result["trained_interactions"]
+    if trained < cfg.agent.sac.random_interactions:  # its updates start after the last one
+        print(
+            f"{args.run_dir}: its policy has not trained: {random_only(cfg, trained)}",
+            file=sys.stderr,
+        )
     print(json.dumps({"run_dir": str(args.run_dir), **result}, indent=2))
     return 0

@@ -438,12 +438,13 @@ def _chromium_tmpdir() -> str:
 
 def _remove_singleton_folder(profile: str) -> None:
     """Remove the folder Chromium keeps its process-singleton socket in: it makes one in the
-    temporary directory (``org.chromium.Chromium.*``, linked from the profile) and a headless
-    run leaves it there. Not moved into the profile with ``TMPDIR``: a socket's path has at most
-    107 bytes, and a profile under a long temporary path would stop Chromium from starting."""
+    temporary directory (``org.chromium.Chromium.*``; Chrome's ``com.google.Chrome.*``), linked
+    from the profile, and a headless run leaves it there. Not moved into the profile with
+    ``TMPDIR``: a socket's path has at most 107 bytes, and a profile under a long temporary path
+    would stop Chromium from starting."""
     with contextlib.suppress(OSError):
         folder = Path(os.readlink(os.path.join(profile, "SingletonSocket"))).parent
-        if folder.name.startswith("org.chromium.Chromium."):
+        if folder.name.startswith(("org.chromium.Chromium.", "com.google.Chrome.")):
             shutil.rmtree(folder, ignore_errors=True)
 
 

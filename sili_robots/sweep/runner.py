@@ -13,7 +13,7 @@ from sili_robots.runs import (
     STOP_FILE,
     recorded_run,
     same_run,
-    with_machine_settings,
+    with_settings_of,
     write_config,
 )
 from sili_robots.sweep import tensorboard
@@ -58,29 +58,31 @@ class SweepReport:
 
 
 def plan(specs: Sequence[SweepSpec]) -> list[PlannedRun]:
-    """The union of the specs' runs (a run named twice must be the same run; the first wins:
-    invocations recorded on two machines may have picked different kernels for it)."""
+    """The union of the specs' runs (a run named twice must be the same run, but for what the
+    later one's machine timed: invocations on two machines may time other kernels for it; the
+    first wins)."""
     runs: dict[str, PlannedRun] = {}
     for spec in specs:
         for run in expand(spec):
             prev = runs.get(run.name)
-            if prev is not None and not same_run(prev.config, run.config):
+            if prev is not None and not same_run(prev.config, run.config, run.timed):
                 raise ConfigError(f"run {run.name} is planned twice with different settings")
             runs.setdefault(run.name, run)
     return list(runs.values())
 
 
 def as_made(sweep_dir: Path, planned: Sequence[PlannedRun]) -> list[PlannedRun]:
-    """The planned runs, each one already on disk with the machine settings it was made with
-    (``runs.MACHINE_SETTINGS``: kernels, precision, threads, how often it saves): it goes on
-    with them on any machine, as ``sili train --resume`` does, while a new run takes this
-    machine's (the same sweep re-run elsewhere, e.g. for more seeds, was refused)."""
+    """The planned runs, each one already on disk with the kernels it was made with where this
+    machine's timing chose them (``PlannedRun.timed``; a setting given is kept, and checked):
+    it goes on with them on any machine, as ``sili train --resume`` does, while a new run takes
+    the invocation's (the same sweep re-run elsewhere, e.g. for more seeds, was refused)."""
     out = []
     for run in planned:
         folder = run_path(sweep_dir, as_found(sweep_dir, run).name)
         if (folder / CONFIG).is_file():
             with contextlib.suppress(ConfigError, KeyError, TypeError, AttributeError):
-                run = replace(run, config=with_machine_settings(run.config, recorded_run(folder)))
+                made = with_settings_of(run.config, recorded_run(folder), run.timed)
+                run = replace(run, config=made)
         out.append(run)  # a damaged config stays as planned: check_existing names it
     return out
 

@@ -69,12 +69,17 @@ class SweepSpec:
     #: whether the paper profile's continuous latents are the encoder's raw output (False for
     #: sweeps recorded before: they ran with tanh, ``model.squash``, and resume so)
     paper_raw_latents: bool = True
+    #: the agent settings this machine's timing chose (of ``TIMED``; those not given): a run
+    #: already on disk keeps its own (``runner.as_made``); None: worked out when planned
+    timed: list[str] | None = None
 
     def __post_init__(self) -> None:
         # the kernel library is resolved once, when the sweep is planned, and recorded with it
         # (as a run's config.json records it), so ``--resume`` keeps it on any machine; so are
         # the defaults that have changed since sweeps were first recorded
         given = {setting_path(k) for k in self.agent_overrides}
+        if self.timed is None:  # recorded before: every setting was given (from_dict)
+            self.timed = [k for k in TIMED if k not in given]
         recorded = {"matmul": default_matmul(), **_current(CHANGED_DEFAULTS)}
         if not self.paper_raw_latents:
             recorded["model.squash"] = True
@@ -100,7 +105,8 @@ class SweepSpec:
         recorded before task versions ran each task's first version, one recorded before SILI's
         default b was a schedule ran at b = 0.5, one recorded before profiles ran the package's,
         one recorded before a default in ``CHANGED_DEFAULTS`` changed ran at the earlier value,
-        and one recorded before ``paper_raw_latents`` squashed continuous latents by tanh."""
+        one recorded before ``paper_raw_latents`` squashed continuous latents by tanh, and one
+        recorded before ``timed`` holds its runs to every setting it records."""
         given = {setting_path(k) for k in data.get("agent_overrides", {})}
         older = {"matmul": "aten", **CHANGED_DEFAULTS}
         overrides = {
@@ -122,6 +128,8 @@ class SweepSpec:
 
 #: agent defaults that changed after sweeps were first recorded -> the value before the change
 #: (a recorded sweep without the setting planned its runs with that value)
+#: the agent settings chosen per machine by a timing (agent/matmul.py) when not given
+TIMED = ("matmul", "sac.precision")
 CHANGED_DEFAULTS: dict[str, Any] = {
     "model.updates_per_interaction": 20,
     "sac.precision": "float32",  # now chosen per machine
@@ -153,6 +161,8 @@ class PlannedRun:
     #: the name earlier versions gave the same run (they named the sweep's ``--latent`` also
     #: for methods that take none or take it as another kind); a sweep resumes it under ``name``
     former_name: str | None = None
+    #: the settings of ``config`` (dotted) this machine's timing chose, not the user
+    timed: tuple[str, ...] = ()
 
 
 #: the most seeds one sweep takes (far beyond any study; more is a slip such as 0-99999999)
@@ -404,7 +414,8 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                             interactions=spec.interactions,
                             checkpoint_every=spec.checkpoint_every,
                         )
-                        runs.append(PlannedRun(run, cfg, former if former != run else None))
+                        timed = tuple(f"agent.{k}" for k in spec.timed or ())
+                        runs.append(PlannedRun(run, cfg, former if former != run else None, timed))
     names = [r.name for r in runs]
     clash = sorted({n for n in names if names.count(n) > 1})
     if clash:  # e.g. two b values that print alike (format_beta keeps 6 digits)
