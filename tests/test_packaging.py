@@ -12,6 +12,8 @@ import zipfile
 from pathlib import Path
 
 import pytest
+from packaging.requirements import Requirement
+from packaging.utils import canonicalize_name
 
 import sili_robots
 
@@ -22,9 +24,7 @@ OPTIONAL = {"ray", "tensorboard", "stable_baselines3"}
 
 
 def _requirement_name(spec: str) -> str:
-    for sep in "<>=!~[; ":
-        spec = spec.split(sep)[0]
-    return spec.strip().lower().replace("_", "-")
+    return canonicalize_name(Requirement(spec).name)
 
 
 def _third_party_imports() -> set[str]:

@@ -28,14 +28,13 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.verdict import random_only
 
     result = evaluate(args.run_dir, args.interactions)
-    cfg = read_config(args.run_dir)
-    if result["trained_interactions"] < cfg.interactions:
+    cfg, trained = read_config(args.run_dir), result["trained_interactions"]
+    if trained < cfg.interactions:
         print(
             f"{args.run_dir} is unfinished: this evaluates its checkpoint at interaction "
-            f"{result['trained_interactions']} of {cfg.interactions}",
+            f"{trained} of {cfg.interactions}",
             file=sys.stderr,
         )
-    trained = result["trained_interactions"]
     if trained < cfg.agent.sac.random_interactions:  # its updates start after the last one
         print(
             f"{args.run_dir}: its policy has not trained: {random_only(cfg, trained)}",

@@ -57,6 +57,9 @@ COVERED_JS = (
 )
 #: the longest path of a Unix socket's address (``sun_path`` holds 108 bytes with its NUL)
 SOCKET_PATH_MAX = 107
+#: how the folders of Chromium's (and Chrome's) process-singleton socket are named: the prefix
+#: of ``mkdtemp`` in the temporary directory
+SINGLETON_FOLDERS = ("org.chromium.Chromium.", "com.google.Chrome.")
 CANDIDATES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 
 
@@ -430,7 +433,7 @@ def _chromium_tmpdir() -> str:
     process-singleton socket goes there, and Chromium stops at start ("Socket path too long")
     when the socket's path is longer than a socket address holds (107 bytes)."""
     tmp = os.environ.get("TMPDIR") or "/tmp"
-    socket = os.path.join(tmp, "org.chromium.Chromium.XXXXXX", "SingletonSocket")
+    socket = os.path.join(tmp, f"{SINGLETON_FOLDERS[0]}XXXXXX", "SingletonSocket")  # the longer
     if len(os.fsencode(socket)) <= SOCKET_PATH_MAX or not os.access("/tmp", os.W_OK):
         return tmp
     return "/tmp"
@@ -444,7 +447,7 @@ def _remove_singleton_folder(profile: str) -> None:
     would stop Chromium from starting."""
     with contextlib.suppress(OSError):
         folder = Path(os.readlink(os.path.join(profile, "SingletonSocket"))).parent
-        if folder.name.startswith(("org.chromium.Chromium.", "com.google.Chrome.")):
+        if folder.name.startswith(SINGLETON_FOLDERS):
             shutil.rmtree(folder, ignore_errors=True)
 
 
