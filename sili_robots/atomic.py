@@ -10,7 +10,7 @@ import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, writing
 
 
 @contextlib.contextmanager
@@ -25,9 +25,10 @@ def replacing(path: Path, shared: bool = False) -> Iterator[Path]:
     if path.is_dir():  # os.replace would fail only after the work of writing it
         raise ConfigError(f"{path} is a directory, where a file is written; move it away")
     try:
-        yield tmp
-        sync(tmp)
-        os.replace(tmp, path)
+        with writing(path):
+            yield tmp
+            sync(tmp)
+            os.replace(tmp, path)
         with contextlib.suppress(OSError):  # the rename itself (not every filesystem can)
             sync(path.parent)
     finally:
@@ -43,10 +44,10 @@ def sync(path: Path) -> None:
         os.close(fd)
 
 
-def write_text(path: Path, text: str, shared: bool = False) -> None:
+def write_text(path: Path, text: str, shared: bool = False, encoding: str | None = None) -> None:
     """``path`` replaced whole by ``text`` (``replacing``)."""
     with replacing(path, shared) as tmp:
-        tmp.write_text(text)
+        tmp.write_text(text, encoding=encoding)
 
 
 def write_bytes(path: Path, data: bytes, shared: bool = False) -> None:

@@ -1,14 +1,16 @@
 """The ``sili`` command line: one sub-command per module in ``sili_robots.commands``.
 
 Every sub-command module exposes ``add_parser(subparsers)`` and ``run(args) -> int``. Bad input
-(``ConfigError`` or an argparse error) exits with code 2 and a one-line message, no traceback; so
-does, with code 1, an agent too large for the machine's memory.
+(``ConfigError`` or an argparse error, a name too long for the file system) exits with code 2 and
+a one-line message, no traceback; so do, with code 1, an agent too large for the machine's memory
+and a file the disk refuses to take (full, over quota, read-only).
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import importlib
 import os
 import re
@@ -20,7 +22,7 @@ from collections.abc import Iterator, Sequence
 from typing import Any, NoReturn
 
 from sili_robots import __version__
-from sili_robots.errors import ConfigError
+from sili_robots.errors import STORAGE_ERRORS, ConfigError
 
 #: sub-commands, in the order ``sili --help`` lists them
 COMMANDS = (
@@ -180,6 +182,19 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise  # another pipe (e.g. the browser's): a real failure
         _silence_stdout()
         return 1  # the reader stopped mid-output (`sili runs DIR | head`): cut short, quietly
+    except OSError as err:
+        if err.errno == errno.ENAMETOOLONG:  # a path given: bad input
+            print(
+                f"sili {args.command}: error: {err.filename}: a name in it is too long (most file "
+                "systems allow 255 bytes)",
+                file=sys.stderr,
+            )
+            return 2
+        if err.errno not in STORAGE_ERRORS:
+            raise
+        where = f"{err.filename}: " if err.filename else ""
+        print(f"sili {args.command}: error: {where}{err.strerror}", file=sys.stderr)
+        return 1
     try:
         sys.stdout.flush()  # a closed pipe fails here, not in the interpreter's exit
     except BrokenPipeError:

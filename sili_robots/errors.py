@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import numbers
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from pathlib import Path
 
 
 class ConfigError(ValueError):
@@ -24,6 +27,23 @@ class TrainingDiverged(ConfigError):
 class CheckpointMismatch(ConfigError):
     """A checkpoint's networks or replay do not fit the agent its run's settings build (a
     checkpoint copied from another run, or settings edited by hand)."""
+
+
+#: how a file system refuses a write (full, over a quota or ``ulimit -f``, read-only): the CLI
+#: names the file and the cause, no traceback; a run's last checkpoint is kept
+STORAGE_ERRORS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS})
+
+
+@contextlib.contextmanager
+def writing(path: Path) -> Iterator[None]:
+    """An OSError while ``path`` is written names it: a full disk's failed ``write`` names no
+    file, so the message would not say which one."""
+    try:
+        yield
+    except OSError as err:
+        if err.filename is not None or err.errno is None:
+            raise
+        raise OSError(err.errno, err.strerror, str(path)) from err
 
 
 #: seeds are what numpy's legacy seeding, torch and gymnasium all accept: 0 .. 2**32 - 1

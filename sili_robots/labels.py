@@ -2,6 +2,8 @@
 them (a module of its own so none pulls in another's libraries)."""
 
 import re
+import shlex
+from pathlib import Path
 
 #: how the paper writes each method
 METHOD_NAMES = {
@@ -25,6 +27,13 @@ VARIANT_KEYS = (
     "latent",
     "task_id",
 )
+
+
+def shell_path(path: Path | str) -> str:
+    """``path`` as a command to copy takes it back: quoted for a shell, and a relative name that
+    begins with "-" as ``./-name`` (an option parser would read it as an option)."""
+    text = str(path)
+    return shlex.quote(f"./{text}" if text.startswith("-") else text)
 
 
 def file_stem(task: str) -> str:

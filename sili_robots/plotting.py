@@ -34,6 +34,7 @@ from matplotlib.axes import Axes
 from matplotlib.colors import to_rgb
 from matplotlib.figure import Figure
 
+from sili_robots.atomic import replacing
 from sili_robots.errors import ConfigError
 from sili_robots.labels import METHOD_NAMES, VARIANT_KEYS, file_stem
 from sili_robots.sweep.state import FIGURES
@@ -566,12 +567,14 @@ def overview(df: pd.DataFrame, smooth: int | None = None) -> Figure:
 
 
 def save_figure(fig: Figure, stem: Path, formats: Sequence[str] = ("png", "pdf")) -> list[Path]:
-    """``fig`` as ``stem.png``, ``stem.pdf``, ... (the stem kept whole, dots and all)."""
+    """``fig`` as ``stem.png``, ``stem.pdf``, ... (the stem kept whole, dots and all), each
+    replaced whole: a failed write keeps the figure drawn before."""
     stem.parent.mkdir(parents=True, exist_ok=True)
     paths = []
     for fmt in formats:
         path = stem.parent / f"{stem.name}.{fmt}"
-        fig.savefig(path, dpi=150)
+        with replacing(path) as tmp:
+            fig.savefig(tmp, dpi=150, format=fmt)
         paths.append(path)
     return paths
 

@@ -11,6 +11,7 @@ import contextlib
 import csv
 import functools
 import hashlib
+import io
 import json
 import os
 import pickle
@@ -27,8 +28,8 @@ import torch
 
 from sili_robots.addons.config import AddonsConfig
 from sili_robots.agent.config import AgentConfig, set_path
-from sili_robots.atomic import replacing, write_text
-from sili_robots.errors import ConfigError, check_count, check_seed
+from sili_robots.atomic import replacing, write_bytes, write_text
+from sili_robots.errors import ConfigError, check_count, check_seed, writing
 from sili_robots.migrations import migrate_agent_state, migrate_run, setting_path
 
 CONFIG, METRICS, CHECKPOINT, SUMMARY = "config.json", "metrics.csv", "checkpoint.pt", "summary.json"
@@ -63,6 +64,9 @@ METRIC_COLUMNS = (
     "wall_time",
     "filter_step",
 )
+#: the columns written on every row (the losses are blank before their first update, and
+#: filter_step without a latent filter): a blank one is a row cut short
+FILLED_COLUMNS = METRIC_COLUMNS[:8]
 
 
 def kept(rows: Any) -> Any:
@@ -107,6 +111,10 @@ def read_metrics(path: Path) -> Any:
             raise ValueError(f"no column {', '.join(missing)}")
         for column in READ_COLUMNS:
             pd.to_numeric(df[column])
+        for column in (c for c in FILLED_COLUMNS if c in df.columns):
+            blank = df[column].isna()
+            if blank.any():  # line numbers as an editor shows them: the header is line 1
+                raise ValueError(f"line {int(blank.to_numpy().argmax()) + 2} has no {column}")
     except (ValueError, TypeError, EOFError, OSError) as err:  # pandas' errors are ValueErrors
         raise ConfigError(f"{path} is damaged ({_first_line(err)}); {DAMAGED_METRICS}") from None
     return df
@@ -567,14 +575,26 @@ def check_history(
     path = Path(run_dir) / METRICS
     rows = 0
     if path.is_file():
+        cut = None  # the line of a trained row cut short (it would be kept as it is)
         try:
             with path.open(newline="") as f:
                 reader = csv.DictReader(f)
-                rows = sum(1 for _ in reader)
+                for row in reader:
+                    rows += 1
+                    short = None in row.values() or None in row  # too few fields, or too many
+                    if short and cut is None and rows <= interactions:
+                        cut = reader.line_num
                 found = set(reader.fieldnames or ())
                 unknown = found - set(columns)
+            if cut is None and 0 < rows <= interactions and not _ends_a_line(path):
+                cut = reader.line_num  # the last row lost its end
         except (UnicodeDecodeError, csv.Error) as err:
             found, unknown = set(), {_first_line(err)}
+        if cut is not None:
+            raise ConfigError(
+                f"{path} is damaged (line {cut} is cut short, a row of the {interactions} "
+                f"interactions its checkpoint has trained); {DAMAGED_METRICS}"
+            )
         if unknown and plugins and set(METRIC_COLUMNS) <= found:  # an add-on's columns
             raise ConfigError(
                 f"{path} has columns {', '.join(sorted(unknown))} that no add-on of the run "
@@ -593,6 +613,12 @@ def check_history(
             f"{state}; resuming would leave a hole in its record: restore {METRICS}, or train "
             "it again (sili train --overwrite; in a sweep, delete the run's folder and resume)"
         )
+
+
+def _ends_a_line(path: Path) -> bool:
+    with path.open("rb") as f:
+        f.seek(-1, os.SEEK_END)
+        return f.read(1) == b"\n"
 
 
 class MetricsWriter:
@@ -620,22 +646,27 @@ class MetricsWriter:
             w.writerows(rows)
 
     def write(self, row: dict[str, Any]) -> None:
-        self._writer.writerow({k: row.get(k, "") for k in self.columns})
-        self._file.flush()
+        with writing(self.path):
+            self._writer.writerow({k: row.get(k, "") for k in self.columns})
+            self._file.flush()
 
     def sync(self) -> None:
         """On disk, before a checkpoint that counts these rows is: after a crash of the machine
         the history still holds every interaction the checkpoint has trained."""
-        os.fsync(self._file.fileno())
+        with writing(self.path):
+            os.fsync(self._file.fileno())
 
     def close(self) -> None:
-        self._file.close()
+        with writing(self.path):
+            self._file.close()
 
 
 def save_checkpoint(run_dir: Path, state: dict[str, Any]) -> None:
-    """Write atomically: a kill during the write leaves the previous checkpoint intact."""
-    with replacing(Path(run_dir) / CHECKPOINT) as tmp:
-        torch.save(state, tmp)
+    """Write atomically: a kill during the write leaves the previous checkpoint intact. Made in
+    memory first: torch's own file writer reports a full disk as "unexpected pos"."""
+    data = io.BytesIO()
+    torch.save(state, data)
+    write_bytes(Path(run_dir) / CHECKPOINT, data.getbuffer())
 
 
 def _first_line(err: Exception) -> str:

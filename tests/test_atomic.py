@@ -5,9 +5,14 @@ from __future__ import annotations
 import os
 import threading
 
+import matplotlib.pyplot as plt
 import pytest
+from disk_helpers import file_size_limit
 
 from sili_robots.atomic import replacing, write_text
+from sili_robots.commands.claims import END, START, write_block
+from sili_robots.plotting import save_figure
+from sili_robots.runs import MetricsWriter
 
 
 def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path):
@@ -91,3 +96,45 @@ def test_a_directory_where_the_file_goes_is_named_before_anything_is_written(tmp
     with pytest.raises(ConfigError, match=r"results.csv is a directory, where a file is written"):
         write_text(tmp_path / "results.csv", "table")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["results.csv"]
+
+
+def test_a_write_the_disk_refuses_names_the_file_and_keeps_the_old_one(tmp_path):
+    """A full disk's failed write names no file; the error does (the CLI prints it)."""
+    path = tmp_path / "summary.json"
+    write_text(path, "old")
+    with pytest.raises(OSError) as refused, file_size_limit(1000):
+        write_text(path, "new" * 1000)
+    assert (refused.value.filename, refused.value.strerror) == (str(path), "File too large")
+    assert path.read_text() == "old" and sorted(tmp_path.iterdir()) == [path]
+
+
+def test_figures_and_the_claims_block_keep_the_old_file_when_the_disk_refuses(tmp_path):
+    """`sili plot` and `sili claims --write` replace their files whole: a full disk leaves the
+    figure drawn before, and the README as it was (it truncated them)."""
+    fig, ax = plt.subplots()
+    (old,) = save_figure(fig, tmp_path / "curve", formats=("png",))
+    drawn = old.read_bytes()
+    ax.plot(range(1000), range(1000), marker="o")
+    with pytest.raises(OSError) as refused, file_size_limit(len(drawn) + 100):
+        save_figure(fig, tmp_path / "curve", formats=("png",))
+    plt.close(fig)
+    assert refused.value.filename == str(old) and old.read_bytes() == drawn
+    readme = tmp_path / "README.md"
+    readme.write_text(f"intro\n{START}\nold table\n{END}\nrest\n")
+    kept = readme.read_bytes()
+    with pytest.raises(OSError), file_size_limit(len(kept) + 10):
+        write_block(readme, "a much longer table\n" * 10)
+    assert readme.read_bytes() == kept
+    write_block(readme, "new table\n")
+    assert readme.read_text() == f"intro\n{START}\nnew table\n{END}\nrest\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["README.md", "curve.png"]
+
+
+def test_a_metrics_row_the_disk_refuses_names_the_file(tmp_path):
+    writer = MetricsWriter(tmp_path, columns=("interaction", "note"))
+    writer.write({"interaction": 0, "note": "x"})
+    size = (tmp_path / "metrics.csv").stat().st_size
+    with pytest.raises(OSError) as refused, file_size_limit(size + 10):
+        writer.write({"interaction": 1, "note": "y" * 100})
+    assert refused.value.filename == str(tmp_path / "metrics.csv")
+    writer.close()

@@ -29,6 +29,19 @@ def _record(task, interactions=2, policy="scripted"):
         env.close()
 
 
+def test_a_page_the_disk_refuses_leaves_the_page_written_before(tmp_path):
+    """The page is replaced whole: a full disk keeps the last good one (it was cut)."""
+    from disk_helpers import file_size_limit
+
+    prev = _record("circle-3", interactions=1)
+    page = prev.write_html(tmp_path / "p.html")
+    written = page.read_bytes()
+    with pytest.raises(OSError) as refused, file_size_limit(len(written) // 2):
+        prev.write_html(page)
+    assert refused.value.filename == str(page) and page.read_bytes() == written
+    assert sorted(tmp_path.iterdir()) == [page]
+
+
 def _commands(html: str) -> list[dict]:
     blob = re.search(r"var commands = (\[.*?\]);", html, re.S).group(1)
     return [umsgpack.unpackb(base64.b64decode(c)) for c in json.loads(blob)]

@@ -990,3 +990,22 @@ def test_a_worker_refuses_a_run_another_live_process_claimed_and_leaves_its_clai
             pass
         assert json.loads((run_dir / "worker.json").read_text())["pid"] == os.getpid()
     assert not (run_dir / "worker.json").exists()
+
+
+def test_a_run_the_disk_refuses_fails_with_the_file_named_and_never_fails_the_sweep(tmp_path):
+    """A worker's run that cannot write its checkpoint fails naming it (torch said "unexpected
+    pos"); where even its error.txt cannot be written, the run still fails, not the worker."""
+    from disk_helpers import file_size_limit
+
+    from sili_robots.build import make_run_config
+    from sili_robots.sweep.worker import Job, run_job
+
+    cfg = make_run_config("circle-3", "sac", 0, 2, settings=FAST)
+    with file_size_limit(20_000):  # config and history fit, a checkpoint (~44 kB) does not
+        outcome = run_job(Job("run", cfg.to_dict(), str(tmp_path / "run")))
+    assert outcome.status == "failed", outcome
+    assert f"File too large: '{tmp_path / 'run' / 'checkpoint.pt'}'" in outcome.error
+    assert "File too large" in (tmp_path / "run" / "error.txt").read_text()
+    with file_size_limit(1):  # nothing can be written
+        outcome = run_job(Job("run", cfg.to_dict(), str(tmp_path / "full")))
+    assert outcome.status == "failed" and "File too large" in outcome.error, outcome

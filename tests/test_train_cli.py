@@ -16,6 +16,7 @@ import pandas as pd
 import pytest
 import torch
 from cli_helpers import sili as _sili
+from disk_helpers import file_size_limit
 from fast_settings import FAST_AGENT, FAST_ARGS
 
 from sili_robots import SILI, training
@@ -867,20 +868,74 @@ def test_a_new_run_never_goes_into_a_folder_of_other_files(tmp_path, capsys):
     assert json.loads((empty / "config.json").read_text())["run"]["seed"] == 3
 
 
-def test_a_checkpoint_write_cut_short_leaves_the_previous_one(tmp_path, monkeypatch):
-    """The write goes to a side file that replaces the checkpoint only once it is complete."""
+def test_a_checkpoint_write_cut_short_leaves_the_previous_one_and_names_the_file(tmp_path):
+    """The write goes to a side file that replaces the checkpoint only once it is complete; a
+    disk that refuses it part-way gives the file's name and the cause (torch's own writer said
+    "unexpected pos")."""
     state = {"agent": {"latents": {"Z": np.zeros(2)}, "addons": {}}, "interaction": 5}
     save_checkpoint(tmp_path, state)
-
-    def cut_short(obj, path):
-        Path(path).write_bytes(b"half a checkpoint")
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(torch, "save", cut_short)
-    with pytest.raises(KeyboardInterrupt):
-        save_checkpoint(tmp_path, {**state, "interaction": 10})
-    monkeypatch.undo()
+    size = (tmp_path / "checkpoint.pt").stat().st_size
+    bigger = {**state, "interaction": 10, "replay": np.zeros(10_000)}
+    with pytest.raises(OSError) as refused, file_size_limit(size + 1000):
+        save_checkpoint(tmp_path, bigger)
+    assert refused.value.filename == str(tmp_path / "checkpoint.pt")
+    assert refused.value.strerror == "File too large"
     assert load_checkpoint(tmp_path)["interaction"] == 5
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["checkpoint.pt"]
+
+
+def test_a_full_disk_ends_training_in_one_line_and_the_run_resumes(tmp_path, monkeypatch):
+    """A write the disk refuses (past the file size limit here, as a full disk refuses it) ends
+    the command naming the file, with no traceback; the last checkpoint is kept, and the command
+    printed to go on works as given (a name with a leading dash too)."""
+    monkeypatch.chdir(tmp_path)
+    run = Path("-run")
+    args = ["--task", "circle-3", "--method", "sac", *FAST]
+    assert _sili("train", *args, "--interactions", 2, "--out=-run").returncode == 0
+    before = (run / "checkpoint.pt").read_bytes()
+    with file_size_limit(len(before) // 2):
+        res = _sili("train", "--resume=-run", "--interactions", 4)
+    assert res.returncode == 1, res.stderr
+    assert f"sili train: error: {run / 'checkpoint.pt'}: File too large" in res.stderr
+    said = "once the disk takes writes again, continue the run with: "
+    assert f"{said}sili train --resume ./-run\n" in res.stderr
+    assert (run / "checkpoint.pt").read_bytes() == before
+    assert not list(run.glob("*.tmp"))
+    command = res.stderr.split(said)[1].splitlines()[0].split()
+    assert _sili(*command[1:], "--interactions", 4, "--no-progress").returncode == 0
+    assert pd.read_csv(run / "metrics.csv")["interaction"].tolist() == [0, 1, 2, 3]
+    assert run_state(run) == "done"
+
+
+def test_a_history_row_cut_short_is_refused_not_trained_on(tmp_path):
+    """A trained row of metrics.csv cut short (by hand, or a disk) would be kept as it is, its
+    missing values blank; rows past the checkpoint are the run's to drop."""
+    run = tmp_path / "run"
+    args = ["--task", "circle-3", "--method", "sac", "--interactions", 3, *FAST, "--out", run]
+    assert _sili("train", *args).returncode == 0
+    whole = (run / "metrics.csv").read_bytes()
+    lines = whole.splitlines(keepends=True)  # the header and interactions 0, 1, 2
+    for damaged, line in (
+        (b"".join([*lines[:2], lines[2][:8] + b"\r\n", lines[3]]), 3),  # interaction 1
+        (whole[:-2], 4),  # the last row's end
+    ):
+        (run / "metrics.csv").write_bytes(damaged)
+        res = _sili("train", "--resume", run, "--interactions", 4)
+        assert res.returncode == 2, res.stderr
+        said = f"{run / 'metrics.csv'} is damaged (line {line} is cut short, a row of the 3"
+        assert said in res.stderr
+        assert (run / "metrics.csv").read_bytes() == damaged
+    (run / "metrics.csv").write_bytes(whole + lines[3][:8])  # a row past the checkpoint
+    assert _sili("train", "--resume", run, "--interactions", 4).returncode == 0
+    assert pd.read_csv(run / "metrics.csv")["interaction"].tolist() == [0, 1, 2, 3]
+
+
+def test_a_name_too_long_for_the_file_system_is_bad_input(tmp_path):
+    long = tmp_path / ("b" * 256)
+    for command in (["eval", long], ["train", "--task", "circle-3", *FAST, "--out", long]):
+        res = _sili(*command)
+        assert res.returncode == 2, res.stderr
+        assert f"error: {long}: a name in it is too long (most file systems allow 255" in res.stderr
 
 
 def test_a_run_kept_without_its_checkpoint_is_not_trained_again(tmp_path, capsys):
@@ -1039,6 +1094,7 @@ def test_a_record_or_history_damaged_in_its_content_exits_2_naming_the_file(tmp_
         "a,b\n1,2\n",
         "\x00\xff\xfe",
         "interaction,task_reward,strategy_changed\n0,x,0\n",
+        "interaction,task_reward,strategy_changed,strategy_id\n0,-1.5,0,1\n1,-6\n",  # cut
     ):
         for where in (run, held):
             (where / "metrics.csv").write_bytes(content.encode("latin-1"))

@@ -7,6 +7,7 @@ import re
 import sys
 from pathlib import Path
 
+from sili_robots.atomic import write_text
 from sili_robots.commands.common import path_arg
 from sili_robots.errors import ConfigError
 
@@ -112,4 +113,6 @@ def _claims_block(path: Path) -> tuple[str, re.Pattern[str]]:
 def write_block(path: Path, table: str) -> None:
     """Replace the text between the claims markers of ``path`` with ``table``."""
     text, pattern = _claims_block(path)
-    path.write_text(pattern.sub(lambda _: f"{START}\n{table}{END}", text, count=1))
+    write_text(
+        path, pattern.sub(lambda _: f"{START}\n{table}{END}", text, count=1), encoding="utf-8"
+    )

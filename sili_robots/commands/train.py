@@ -7,7 +7,6 @@ import contextlib
 import functools
 import json
 import os
-import shlex
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -33,7 +32,8 @@ from sili_robots.commands.common import (
     unit_float,
     writable_dir,
 )
-from sili_robots.errors import ConfigError
+from sili_robots.errors import STORAGE_ERRORS, ConfigError
+from sili_robots.labels import shell_path
 from sili_robots.migrations import setting_path
 from sili_robots.runs import (
     CHECKPOINT,
@@ -212,7 +212,7 @@ def _rebuild_sweep_tables(run_dir: Path) -> None:
     except (OSError, ConfigError) as err:  # the run is trained; only its sweep's tables lag
         print(
             f"{sweep_dir}'s tables were not rebuilt ({err}); "
-            f"`sili plot {shlex.quote(str(sweep_dir))}` rebuilds them",
+            f"`sili plot {shell_path(sweep_dir)}` rebuilds them",
             file=sys.stderr,
         )
 
@@ -255,7 +255,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = config_from_args(args)
         if args.out is None:
             raise ConfigError("--out RUN_DIR is required for a new run")
-        quoted = shlex.quote(str(args.out))  # as a shell takes it back
+        quoted = shell_path(args.out)
         check_not_trained(args.out)  # --overwrite too: never under a live trainer
         check_new_run_dir(args.out, args.overwrite, resume=f"--resume {quoted}")
         if args.out.is_dir():  # an existing folder (one to be made: make_run_dir says why not)
@@ -306,19 +306,24 @@ def _note_threads_beyond_cores(threads: int) -> None:
 
 @contextlib.contextmanager
 def _resume_hint(run_dir: Path) -> Iterator[None]:
-    """A run stopped (Ctrl-C, SIGTERM) after its first checkpoint says how to go on."""
+    """A run stopped (Ctrl-C, SIGTERM, a full disk) after its first checkpoint says how to go
+    on."""
     try:
         yield
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, OSError) as stop:
+        if isinstance(stop, OSError) and stop.errno not in STORAGE_ERRORS:
+            raise
         from sili_robots.sweep.state import run_state
 
-        if run_state(Path(run_dir)) == "done":  # stopped in its last interaction
-            print(f"the run finished all its interactions: {run_dir}", file=sys.stderr)
-        elif (Path(run_dir) / CHECKPOINT).is_file():
-            print(
-                f"continue the run with: sili train --resume {shlex.quote(str(run_dir))}",
-                file=sys.stderr,
-            )
+        with contextlib.suppress(OSError):  # the disk may refuse a read too
+            if run_state(Path(run_dir)) == "done":  # stopped in its last interaction
+                print(f"the run finished all its interactions: {run_dir}", file=sys.stderr)
+            elif (Path(run_dir) / CHECKPOINT).is_file():
+                when = "once the disk takes writes again, " if isinstance(stop, OSError) else ""
+                print(
+                    f"{when}continue the run with: sili train --resume {shell_path(run_dir)}",
+                    file=sys.stderr,
+                )
         raise
 
 

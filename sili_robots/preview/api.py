@@ -21,6 +21,7 @@ import gymnasium as gym
 import meshcat
 import numpy as np
 
+from sili_robots.atomic import write_bytes
 from sili_robots.errors import ConfigError, check_choice, check_count, check_seed
 from sili_robots.preview.browser import Browser
 from sili_robots.preview.build import overlay, populate, world_point
@@ -277,7 +278,7 @@ def preview(
             result.rendered = prev.render(result.html)
             result.png = Path(png)
             result.png.parent.mkdir(parents=True, exist_ok=True)
-            result.png.write_bytes(marked_png(result.rendered.png))
+            write_bytes(result.png, marked_png(result.rendered.png))
             seconds["png"] = time.perf_counter() - t2
         if temporary is not None:
             temporary.unlink(missing_ok=True)

@@ -23,6 +23,8 @@ import meshcat
 import umsgpack
 from meshcat.servers.tree import SceneTree, find_node, walk
 
+from sili_robots.atomic import write_text
+
 VIEWER_JS = Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js"
 
 
@@ -184,8 +186,9 @@ def _js(value: Any) -> str:
 
 
 def write_html(recorder: SceneRecorder, overlay: Overlay, out: str | Path) -> Path:
-    """Write the page to ``out`` (parent folders created) and return its path."""
+    """Write the page to ``out`` (parent folders created; replaced whole: a failed write keeps
+    the page written before) and return its path."""
     path = Path(out)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(scene_html(recorder, overlay), encoding="utf-8")
+    write_text(path, scene_html(recorder, overlay), encoding="utf-8")
     return path

@@ -24,9 +24,16 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 
 from sili_robots.errors import ConfigError
-from sili_robots.runs import ERROR_FILE, RUNNING_FILE, STOP_FILE
+from sili_robots.runs import RUNNING_FILE, STOP_FILE
 from sili_robots.sweep.backend import STOP_GRACE_S, Monitor, describe_exit
-from sili_robots.sweep.worker import THREAD_ENV, Job, Outcome, limit_threads, run_job
+from sili_robots.sweep.worker import (
+    THREAD_ENV,
+    Job,
+    Outcome,
+    limit_threads,
+    record_failure,
+    run_job,
+)
 
 #: what the sweep sends a worker still running after its grace: stop at once (SIGTERM is held
 #: until the interaction ends, and two close together may reach Python as one)
@@ -224,7 +231,5 @@ class LocalBackend:
 
 
 def _record_crash(job: Job, reason: str) -> None:
-    path = Path(job.run_dir)
-    path.mkdir(parents=True, exist_ok=True)
-    (path / ERROR_FILE).write_text(reason + "\n")
-    (path / RUNNING_FILE).unlink(missing_ok=True)
+    record_failure(Path(job.run_dir), reason + "\n")
+    (Path(job.run_dir) / RUNNING_FILE).unlink(missing_ok=True)

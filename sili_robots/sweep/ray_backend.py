@@ -23,10 +23,10 @@ from pathlib import Path
 from typing import Any
 
 from sili_robots.errors import ConfigError
-from sili_robots.runs import ERROR_FILE, RUNNING_FILE, STOP_FILE
+from sili_robots.runs import RUNNING_FILE, STOP_FILE
 from sili_robots.stopping import STOP_SIGNALS, act_as
 from sili_robots.sweep.backend import STOP_GRACE_S, Monitor
-from sili_robots.sweep.worker import Job, Outcome, run_job
+from sili_robots.sweep.worker import Job, Outcome, record_failure, run_job
 
 
 def import_ray() -> Any:
@@ -129,10 +129,8 @@ class RayBackend:
         except ray.exceptions.RayError as err:
             reason = str(err).strip().splitlines()[0] if str(err).strip() else type(err).__name__
             reason = f"{type(err).__name__}: {reason}"[:2000]
-            path = Path(job.run_dir)
-            path.mkdir(parents=True, exist_ok=True)
-            (path / ERROR_FILE).write_text(str(err) + "\n")
-            (path / RUNNING_FILE).unlink(missing_ok=True)
+            record_failure(Path(job.run_dir), str(err) + "\n")
+            (Path(job.run_dir) / RUNNING_FILE).unlink(missing_ok=True)
             return Outcome(job.name, "failed", error=reason)
 
 

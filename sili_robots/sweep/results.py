@@ -12,7 +12,6 @@
 
 from __future__ import annotations
 
-import shlex
 from pathlib import Path
 from typing import Any
 
@@ -21,6 +20,7 @@ import pandas as pd
 from sili_robots.agent.schedule import Schedule
 from sili_robots.atomic import replacing
 from sili_robots.errors import ConfigError, is_number
+from sili_robots.labels import shell_path
 from sili_robots.migrations import migrate_run
 from sili_robots.runs import (
     CONFIG,
@@ -81,7 +81,7 @@ def check_exists(directory: Path) -> None:
         raise ConfigError(
             f"{directory} is a run, not a sweep or a collection; give the folder that holds its "
             f"runs/ (one run alone: its summary.json, or sili eval "
-            f"{shlex.quote(str(directory))} if it kept its checkpoint)"
+            f"{shell_path(directory)} if it kept its checkpoint)"
         )
 
 

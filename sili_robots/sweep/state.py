@@ -18,7 +18,6 @@ import contextlib
 import fcntl
 import json
 import os
-import shlex
 import socket
 from collections.abc import Callable, Iterator
 from dataclasses import replace
@@ -27,7 +26,7 @@ from typing import Literal
 
 from sili_robots.atomic import write_text
 from sili_robots.errors import ConfigError
-from sili_robots.labels import file_stem
+from sili_robots.labels import file_stem, shell_path
 from sili_robots.runs import (
     CHECKPOINT,
     CONFIG,
@@ -255,7 +254,7 @@ def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
         raise ConfigError(
             f"run {planned.name} in {sweep_dir} has {longer} interactions, more than the "
             f"{planned.config.interactions} asked for now (a run is never shortened); ask for "
-            f"{longer}: sili sweep --resume {shlex.quote(str(sweep_dir))} --interactions {longer}"
+            f"{longer}: sili sweep --resume {shell_path(sweep_dir)} --interactions {longer}"
         )
     if diffs:
         raise ConfigError(

@@ -8,6 +8,7 @@ the sweep. This module imports torch only inside the call, after capping threads
 
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 import traceback
@@ -79,7 +80,7 @@ def run_job(job: Job) -> Outcome:
     except RunBeingTrained as err:  # another process's run now: no error of the run's to keep
         return Outcome(job.name, "failed", error=str(err), pid=os.getpid())
     except Exception as err:  # a run's failure must not reach the sweep
-        (run_dir / ERROR_FILE).write_text("".join(traceback.format_exception(err)))
+        record_failure(run_dir, "".join(traceback.format_exception(err)))
         return Outcome(
             job.name,
             "failed",
@@ -96,6 +97,14 @@ def run_job(job: Job) -> Outcome:
         pid=os.getpid(),
         verdict=_verdict(run_dir),
     )
+
+
+def record_failure(run_dir: Path, text: str) -> None:
+    """The run's ``error.txt``, which the sweep's tables read: a disk too full to take it loses
+    the text (the run shows as incomplete), not the sweep."""
+    with contextlib.suppress(OSError):
+        run_dir.mkdir(parents=True, exist_ok=True)
+        (run_dir / ERROR_FILE).write_text(text)
 
 
 def _verdict(run_dir: Path) -> str:
