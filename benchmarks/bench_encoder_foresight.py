@@ -81,8 +81,7 @@ def run(last_step: bool, seed: int, interactions: int, updates: int) -> dict[str
         played = play_interaction(env, obs, info, scripted_policy(task, rng, j))
         obs, info = played.next_obs, played.next_info
         agent.observe_interaction(
-            played.obs, played.act, played.rew, obs, played.strategy_id, played.strategy,
-            info, refresh=False,
+            played.obs, played.act, played.rew, obs, played.strategy_id, info, refresh=False,
         )  # fmt: skip
         radius.append(float(np.linalg.norm(played.obs[-1, :2])))
         if j < interactions and (j + 1) % 100 == 0:

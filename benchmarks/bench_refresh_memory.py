@@ -69,7 +69,6 @@ def measure(config: str, padded: bool, interactions: int, matmul: str | None = N
             rng.normal(size=H).astype(np.float32),
             rng.normal(size=OBS).astype(np.float32),
             float(j % 3),
-            np.zeros(2, np.float32),
             {"strategy": np.zeros(2, np.float32)},
         )
         if (j + 1) % 250 == 0:

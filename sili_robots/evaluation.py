@@ -71,7 +71,6 @@ class AgentFeedback(gym.Wrapper):
                     r,
                     obs,
                     float(self._first_info["strategy_id"]),
-                    np.asarray(self._first_info["strategy"], np.float32),
                     info,
                     refresh=False,
                 )

@@ -24,7 +24,6 @@ class Interaction:
     obs: np.ndarray  # [H+1, o]
     act: np.ndarray  # [H, a]
     rew: np.ndarray  # [H] task rewards
-    strategy: np.ndarray  # the true strategy's encoding during it
     strategy_id: float  # at its start
     end_strategy_id: float  # after its last step (differs where z may change within one)
     strategy_changed: bool  # the true strategy changed at its start or within it
@@ -61,7 +60,6 @@ def play_interaction(
     rew_seq = np.zeros(h, np.float32)
     obs_seq[0] = obs
     changed = bool(info["strategy_changed"])
-    strategy = np.asarray(info["strategy"], np.float32)
     strategy_id = float(info["strategy_id"])
     for t in range(h):
         a = policy(obs)
@@ -73,9 +71,7 @@ def play_interaction(
         changed |= bool(info["strategy_changed"])
     end_id = float(info["strategy_id"])
     next_obs, next_info = env.reset() if reset else (None, None)
-    return Interaction(
-        obs_seq, act_seq, rew_seq, strategy, strategy_id, end_id, changed, next_obs, next_info
-    )
+    return Interaction(obs_seq, act_seq, rew_seq, strategy_id, end_id, changed, next_obs, next_info)
 
 
 def run_interactions(

@@ -95,7 +95,6 @@ def train(
                     played.rew,
                     obs,
                     played.strategy_id,
-                    played.strategy,
                     info,
                 )
                 losses = agent.update(j, rl=j + 1 >= cfg.agent.sac.random_interactions)

@@ -56,7 +56,6 @@ def _fill(agent, n, flags=None):
             rng.normal(size=H).astype(np.float32),
             nxt,
             float(j % 2),
-            np.array([j % 2, 0], np.float32),
             {"strategy": np.array([(j + 1) % 2, 0], np.float32)},
         )
 
@@ -695,7 +694,6 @@ def test_posterior_stability_pays_only_for_a_strategy_shown_to_stay():
             np.full(H, reward, np.float32),
             obs[0],
             0.0,
-            np.zeros(2, np.float32),
             info,
             refresh=False,
         )

@@ -60,7 +60,6 @@ def _store(agent, reward, obs=None):
         np.full(H, reward, np.float32),
         obs[0],
         0.0,
-        np.zeros(2, np.float32),
         {"strategy": np.zeros(2, np.float32)},
         refresh=False,
     )
@@ -269,7 +268,6 @@ def test_continuous_filter_switches_to_the_latent_that_explains_the_steps():
         np.full(H, -5.0, np.float32),
         obs,
         0.0,
-        np.zeros(2, np.float32),
         {},
         refresh=False,
     )

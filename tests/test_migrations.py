@@ -1,11 +1,12 @@
 """Runs written before the settings were nested (flat config.json, the latent cache and the
-add-ons' state at the top of the checkpoint, no task version) resume exactly where they
-stopped, on the task version they were trained on."""
+add-ons' state at the top of the checkpoint, the true strategy's encoding in the replay, no task
+version) resume exactly where they stopped, on the task version they were trained on."""
 
 from __future__ import annotations
 
 import json
 
+import numpy as np
 import pandas as pd
 import torch
 from agent_helpers import flat_layout
@@ -32,6 +33,8 @@ def _old_checkpoint(state: dict) -> dict:
         posteriors=addons["posteriors"]["P"],
         filter=addons["latent_filter"],
     )
+    n = agent["buffer"]["n"]
+    agent["buffer"] = {**agent["buffer"], "strategy": np.ones((n, 2), np.float32)}
     return {**state, "agent": agent}
 
 

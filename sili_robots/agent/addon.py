@@ -17,11 +17,12 @@ Hooks, in the order the agent calls them:
   last add-on's that gives one), and each step played (the only per-step hooks).
 - ``interaction_stored(j)``: interaction j is stored and z^{j+1} cached; returns values for
   the ``metrics.csv`` columns the class declares in ``metric_columns``.
+- ``stability_distance``: d(z^j, z^{j+1}) replaced (one add-on), for the metrics here and for
+  each batch's stability reward below.
 - ``latents_refreshed``: the cached latents were recomputed with the current encoder.
 - ``before_update(interaction)``: settings for the updates after ``interaction``.
 - ``latent_pairs`` / ``rl_interactions``: which stored interactions a batch draws.
 - ``batch_latents``: z^j per sampled step as the policy acted on it (the last add-on's).
-- ``stability_distance``: d(z^j, z^{j+1}) replaced (training and metrics alike; one add-on).
 - ``state_dict`` / ``load_state_dict``: checkpoints.
 """
 

@@ -118,7 +118,7 @@ class SILIAgent:
                 matmul=cfg.matmul,
             )
             self.model_opt = torch.optim.Adam(self.model.parameters(), lr=value_at(m.lr, 0))
-        self.buffer = InteractionBuffer(obs_dim, act_dim, horizon, strategy_dim)
+        self.buffer = InteractionBuffer(obs_dim, act_dim, horizon)
         self.latents = LatentCache(
             self.model,
             self.buffer,
@@ -228,7 +228,6 @@ class SILIAgent:
         rew: np.ndarray,
         next_first: np.ndarray,
         strategy_id: float,
-        strategy: np.ndarray,
         next_info: dict[str, Any],
         refresh: bool = True,
     ) -> InteractionStats:
@@ -237,7 +236,7 @@ class SILIAgent:
         if self.cfg.method == "smirl":
             aux = self.smirl.log_likelihood(obs[1:]).astype(np.float32)
             self.smirl.update(obs[1:])
-        j = self.buffer.add(obs, act, rew, aux, next_first, strategy_id, strategy)
+        j = self.buffer.add(obs, act, rew, aux, next_first, strategy_id)
         if self.cfg.latent == "true":
             z_next = np.asarray(next_info["strategy"], np.float32)
         elif self.model is None:

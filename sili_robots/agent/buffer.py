@@ -2,8 +2,9 @@
 
 Interaction j is stored as its H+1 observations, H actions and H task rewards, plus the first
 observation of interaction j+1 (where the critic bootstraps across the boundary) and the true
-strategy (diagnostics only; Oracle reads it from its observation). Keeping interactions whole and
-in order gives the latent model its (j-1, j) pairs and lets latents be recomputed for any j.
+strategy's id (diagnostics only: the metrics and benchmarks that score the latents; Oracle reads
+the strategy from its observation). Keeping interactions whole and in order gives the latent
+model its (j-1, j) pairs and lets latents be recomputed for any j.
 """
 
 from __future__ import annotations
@@ -12,17 +13,16 @@ from typing import Any
 
 import numpy as np
 
-KEYS = ("obs", "act", "rew", "aux", "next_first", "strategy_id", "strategy")
+#: what a checkpoint holds (earlier ones also hold "strategy", the true strategy's encoding,
+#: which nothing read)
+KEYS = ("obs", "act", "rew", "aux", "next_first", "strategy_id")
 
 
 class InteractionBuffer:
     """Growable arrays of complete interactions (the paper keeps the whole history)."""
 
-    def __init__(
-        self, obs_dim: int, act_dim: int, horizon: int, strategy_dim: int, capacity: int = 256
-    ) -> None:
+    def __init__(self, obs_dim: int, act_dim: int, horizon: int, capacity: int = 256) -> None:
         self.obs_dim, self.act_dim, self.horizon = obs_dim, act_dim, horizon
-        self.strategy_dim = strategy_dim
         self.n = 0
         self._alloc(capacity)
 
@@ -35,7 +35,6 @@ class InteractionBuffer:
             "aux": np.zeros((capacity, h), np.float32),  # e.g. the SMiRL reward
             "next_first": np.zeros((capacity, o), np.float32),
             "strategy_id": np.zeros(capacity, np.float64),
-            "strategy": np.zeros((capacity, self.strategy_dim), np.float32),
         }
         if hasattr(self, "obs"):
             for k, v in new.items():
@@ -52,7 +51,6 @@ class InteractionBuffer:
         aux: np.ndarray,
         next_first: np.ndarray,
         strategy_id: float,
-        strategy: np.ndarray,
     ) -> int:
         """Store a finished interaction; returns its index."""
         if self.n == self.capacity:
@@ -61,7 +59,6 @@ class InteractionBuffer:
         self.obs[i], self.act[i], self.rew[i], self.aux[i] = obs, act, rew, aux
         self.next_first[i] = next_first
         self.strategy_id[i] = strategy_id
-        self.strategy[i] = strategy
         self.n += 1
         return i
 

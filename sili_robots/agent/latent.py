@@ -232,7 +232,9 @@ class LatentModel(nn.Module):
         heads = (self._heads(obs, act) - mean) / scale  # [B, H, k, out]
         err = (heads - target.unsqueeze(-2)).pow(2).mean(-1).mean(1)  # [B, k]
         if self.estimator == "marginal":
-            # -log sum_k q_k p(tau^j | k); log p = -0.5 * H * err (unit-variance Gaussian steps)
+            # -log sum_k q_k p(tau^j | k); log p = -0.5 * H * err: err averages the outputs too,
+            # so each output is a Gaussian of variance out_dim (the mixture's weights sharpen
+            # out_dim times more slowly than under unit variance)
             log_lik = -0.5 * obs.shape[1] * err
             log_q = F.log_softmax(logits, dim=-1)
             nll = -torch.logsumexp(log_q + log_lik, dim=-1).mean() / obs.shape[1]

@@ -2,9 +2,10 @@
 
 Why: PyTorch sends float32 matrix products to its BLAS (MKL in the x86 wheels), and on some
 CPUs that runs them well below what the hardware does. Measured on an AMD EPYC (Zen 5, one
-thread): a 256 x 256 x 256 product at 106 GFLOP/s through MKL, 225 GFLOP/s through oneDNN
-(``benchmarks/bench_sac_speed.py --matmul-only``, numbers in benchmarks/RESULTS.md). SAC's update
-is mostly such products, so the kernel library decides much of its speed.
+thread): a 256-wide layer of SAC's update in 0.73 ms through oneDNN against 1.28 ms through the
+BLAS (benchmarks/RESULTS.md, "SAC gradient updates per second"; ``benchmarks/bench_sac_speed.py
+--matmul-only`` times the products alone). SAC's update is mostly such products, so the kernel
+library decides much of its speed.
 
 PyTorch reaches oneDNN's float32 matmul only through ``torch.ops.mkldnn._linear_pointwise``,
 the op its own compiler emits for CPU linear layers. That op has no autograd formula, so the

@@ -22,8 +22,8 @@ def mlp(inp: int, out: int, hidden: int, layers: int = 2, matmul: str = "aten") 
 
 
 class EnsembleLinear(nn.Module):
-    """``n`` independent linear layers evaluated in one batched matmul (a width-1 layer, a
-    critic's Q, as one weighted sum)."""
+    """``n`` independent linear layers: one batched matmul on ``aten``, one oneDNN product per
+    layer on ``onednn`` (a width-1 layer, a critic's Q, as one weighted sum on both)."""
 
     def __init__(self, n: int, inp: int, out: int, matmul: str = "aten") -> None:
         super().__init__()
