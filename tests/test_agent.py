@@ -17,6 +17,7 @@ from sili_robots.agent import AgentConfig, Schedule, SILIAgent
 from sili_robots.agent.latent import (
     LatentModel,
     category_groups,
+    decoder_targets,
     gumbel_straight_through,
     transitions,
 )
@@ -337,6 +338,74 @@ def test_discount_schedule_sets_the_critic_targets_gamma_at_each_update():
     assert method_config("sili").sac.gamma == 0.99
     with pytest.raises(ConfigError, match=r"schedule of sac.gamma: value must be in \[1e-09, 1\]"):
         method_config("sili", gamma_schedule=Schedule([(0, 0.99), (9, 1.5)]))
+
+
+def test_the_critic_target_is_the_soft_backup_of_the_smaller_target_twin():
+    """y = r + gamma (min_k Q'_k(x2, a2) - alpha log pi(a2 | x2)), each critic regressed on it
+    (CleanRL's SAC), with target critics that differ from the critics and from each other."""
+    torch.manual_seed(0)
+    sac = SAC(in_dim=3, act_dim=2, hidden=16, gamma=0.5)
+    with torch.no_grad():
+        sac.log_alpha.fill_(np.log(0.3))
+        for p in sac.critic_target.parameters():
+            p.add_(torch.randn_like(p))
+    x, a, r, x2, a2 = (
+        torch.randn(32, 3),
+        torch.rand(32, 2),
+        torch.randn(32),
+        torch.randn(32, 3),
+        torch.rand(32, 2),
+    )
+    logp2 = torch.randn(32)
+    with torch.no_grad():
+        twins = sac.critic_target(x2, a2)
+        assert (twins[0] < twins[1]).any() and (twins[1] < twins[0]).any()
+        y = r + 0.5 * (torch.minimum(twins[0], twins[1]) - 0.3 * logp2)
+        q = sac.critic(x, a)
+        expected = ((q[0] - y) ** 2).mean() + ((q[1] - y) ** 2).mean()
+        assert float(sac.critic_loss(x, a, r, x2, a2, logp2)) == pytest.approx(float(expected))
+
+
+def test_the_target_critics_follow_the_critics_by_polyak_averaging():
+    torch.manual_seed(0)
+    sac = SAC(in_dim=3, act_dim=2, hidden=16, tau=0.1)
+    with torch.no_grad():
+        for p in sac.critic_target.parameters():
+            p.add_(torch.randn_like(p))
+    old = [p.clone() for p in sac.critic_target.parameters()]
+    sac.update(torch.randn(32, 3), torch.rand(32, 2), torch.randn(32), torch.randn(32, 3))
+    for before, critic, target in zip(
+        old, sac.critic.parameters(), sac.critic_target.parameters(), strict=True
+    ):
+        torch.testing.assert_close(target, 0.9 * before + 0.1 * critic.detach())
+
+
+def test_the_decoder_predicts_each_steps_change_of_state_and_its_reward():
+    obs, next_obs = torch.tensor([[1.0, 2.0]]), torch.tensor([[1.5, 1.0]])
+    torch.testing.assert_close(
+        decoder_targets(obs, next_obs, torch.tensor([-3.0])), torch.tensor([[0.5, -1.0, -3.0]])
+    )
+
+
+def test_transitions_stack_each_steps_state_action_reward_and_next_state():
+    obs = torch.arange(6.0).reshape(1, 3, 2)  # s_0 = (0, 1), s_1 = (2, 3), s_2 = (4, 5)
+    act, rew = torch.tensor([[[10.0], [11.0]]]), torch.tensor([[20.0, 21.0]])
+    expected = torch.tensor([[[0, 1, 10, 20, 2, 3], [2, 3, 11, 21, 4, 5]]], dtype=torch.float32)
+    torch.testing.assert_close(transitions(obs, act, rew), expected)
+
+
+def test_the_policy_acts_on_the_state_this_interactions_latent_and_the_one_before():
+    """[s, z^j, z^{j-1}] for SILI, [s, z^j] for LILI; z^{j-1} is zeros in a game's first
+    interaction (no history), also in a game started later."""
+    sili, lili = _agent("sili"), _agent("lili")
+    for agent in (sili, lili):
+        _fill(agent, 3)
+        agent.Z = np.arange(4 * 4, dtype=np.float32).reshape(4, 4)  # z^0 .. z^3
+    s = np.array([7.0, 8.0, 9.0], np.float32)
+    np.testing.assert_array_equal(sili.policy_input(s), np.concatenate([s, sili.Z[3], sili.Z[2]]))
+    np.testing.assert_array_equal(lili.policy_input(s), np.concatenate([s, lili.Z[3]]))
+    sili.begin_game({"strategy": np.zeros(2, np.float32)})
+    np.testing.assert_array_equal(sili.policy_input(s), np.concatenate([s, np.zeros(8)]))
 
 
 def test_lr_schedule_sets_every_sac_optimizers_step_size_at_each_update():

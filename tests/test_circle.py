@@ -19,6 +19,17 @@ def _finish_at(env, target, seed=None):
     env.step(np.zeros(2))
 
 
+def test_the_reward_is_minus_the_distance_to_the_opponent_after_the_move():
+    """Euclidean, after the move (the action, a velocity, times 0.1 per step)."""
+    env = make_task("circle-3").unwrapped
+    env.reset(seed=0, options={"strategy": 0})
+    env.position = np.array([0.3, -0.2])
+    _, reward, *_ = env.step(np.array([1.0, 0.5]))
+    np.testing.assert_allclose(env.position, [0.4, -0.15])
+    other = env.opponent_position
+    assert reward == pytest.approx(-math.hypot(0.4 - other[0], -0.15 - other[1]))
+
+
 @pytest.mark.parametrize("variant,n", [("3", 3), ("8", 8)])
 def test_inside_moves_counter_clockwise_outside_holds(variant, n):
     env = make_task(f"circle-{variant}").unwrapped

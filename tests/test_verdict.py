@@ -48,6 +48,12 @@ def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys
     metrics["task_reward"] = -55.3  # held by parking away from the goal: below standing still
     metrics.to_csv(run / "metrics.csv", index=False)
     assert held(run, window=3) and not worked(run, window=3)
+    ten = pd.concat([metrics] * 3, ignore_index=True).head(10)
+    ten["interaction"], ten["task_reward"], ten["strategy_changed"] = range(20, 30), -7.25, 0
+    ten.loc[3, "strategy_changed"] = 1  # 9 of 10 kept: exactly 90% holds
+    ten.to_csv(run / "metrics.csv", index=False)
+    assert held(run, window=10) and worked(run, window=10)
+    assert verdict(run, window=10).startswith("SILI held the opponent (kept its strategy in 90%")
 
 
 def test_a_run_that_never_left_its_random_actions_says_its_policy_has_not_trained(tmp_path, capsys):
