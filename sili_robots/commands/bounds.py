@@ -56,7 +56,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--all", action="store_true", help="every registered task version (current and earlier)"
     )
-    add_task_args(p)  # e.g. the references of a controller ablation
+    add_task_args(p, only="; one TASK, not --all, and not stored by --write")  # an ablation's
     slow = ", ".join(f"{t}: {n}" for t, n in TASK_INTERACTIONS.items())
     p.add_argument(
         "--interactions",
@@ -83,7 +83,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         const=str(BOUNDS_FILE),
         metavar="FILE",
         help="also store the bounds (keyed by gymnasium id) in FILE, default the packaged "
-        "bounds file `sili plot` reads",
+        "bounds file `sili plot` reads (only at the task's default arguments; the packaged "
+        "file only at the default counts and seed)",
     )
     p.set_defaults(run=run)
 

@@ -17,8 +17,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         description="Copies every finished run of each SOURCE (a sweep or another collection) "
         "into DIR/runs/NAME/ as config.json, summary.json and metrics.csv.gz: what `sili plot`, "
         "`sili runs` and `sili claims` read, small enough to commit. Unfinished runs are "
-        "skipped; a run already collected is left as is unless its source's summary.json differs "
-        "(an extended or retrained run of the same config), which replaces it.",
+        "skipped; a run already collected is left as is unless a source holds the same config at "
+        "least as long with another summary.json (an extended or retrained run), which replaces "
+        "it: the longest copy is kept.",
     )
     p.add_argument("sources", type=path_arg, nargs="+", metavar="SOURCE")
     p.add_argument(

@@ -268,8 +268,11 @@ def task_arguments_given(args: argparse.Namespace) -> dict:
     return env_kwargs
 
 
-def add_override_args(p: argparse.ArgumentParser, scope: str) -> None:
-    """``--set KEY=VALUE`` (agent settings) and ``--env-kwarg KEY=VALUE`` (task arguments)."""
+def add_override_args(
+    p: argparse.ArgumentParser, scope: str, refused: str = "", refused_kwargs: str = ""
+) -> None:
+    """``--set KEY=VALUE`` (agent settings) and ``--env-kwarg KEY=VALUE`` (task arguments);
+    ``refused``, ``refused_kwargs``: what the command takes through its own options instead."""
     p.add_argument(
         "--set",
         action="append",
@@ -278,26 +281,26 @@ def add_override_args(p: argparse.ArgumentParser, scope: str) -> None:
         dest="agent_set",
         help=f"override an agent or add-on setting{scope} (JSON value), repeatable, "
         "e.g. --set sac.updates_per_step=0.5; your own add-on: --set "
-        "addons.plugins=module:ClassName",
+        f"addons.plugins=module:ClassName{refused}",
     )
-    add_env_kwarg_arg(p, scope)
+    add_env_kwarg_arg(p, scope, refused_kwargs)
 
 
-def add_env_kwarg_arg(p: argparse.ArgumentParser, scope: str = "") -> None:
+def add_env_kwarg_arg(p: argparse.ArgumentParser, scope: str = "", note: str = "") -> None:
     p.add_argument(
         "--env-kwarg",
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help=f"extra task constructor argument{scope} (JSON value), repeatable",
+        help=f"extra task constructor argument{scope} (JSON value), repeatable{note}",
     )
 
 
-def add_task_args(p: argparse.ArgumentParser) -> None:
+def add_task_args(p: argparse.ArgumentParser, only: str = "") -> None:
     """``--controller`` and ``--env-kwarg``: the task arguments of a command that plays a task
-    (``task_kwargs_arg`` reads them)."""
-    p.add_argument("--controller", help=f"controller of a robot task ({CONTROLLERS_HELP})")
-    add_env_kwarg_arg(p)
+    (``task_kwargs_arg`` reads them); ``only``: where the command takes them."""
+    p.add_argument("--controller", help=f"controller of a robot task ({CONTROLLERS_HELP}){only}")
+    add_env_kwarg_arg(p, note=only)
 
 
 #: the controllers, for help texts (written out: importing them at start-up loads MuJoCo)

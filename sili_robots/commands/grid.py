@@ -46,7 +46,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "minutes), into a --sweep-dir and --into of its own; the claims judge full budgets only",
     )
     p.add_argument("--workers", type=positive_int, help="parallel runs (default: the CPU count)")
-    p.add_argument("--dry-run", action="store_true", help="list the invocations and runs only")
+    p.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="list each invocation with how many of its runs are done; run none",
+    )
     p.set_defaults(run=run)
 
 

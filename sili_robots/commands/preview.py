@@ -74,7 +74,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "interaction's moment the ego draws level with the opponent",
     )
     p.add_argument("--serve", action="store_true", help="serve live on 127.0.0.1 until Ctrl-C")
-    add_task_args(p)  # for the scripted and random policies (a trained run has its own)
+    add_task_args(p, only="; not with --checkpoint (a trained run plays its own)")
     p.set_defaults(run=run)
 
 

@@ -32,7 +32,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--policy",
         default="stabilizing",
         choices=SCRIPTED_KINDS,
-        help="the scripted policy (default stabilizing): "
+        help="the scripted policy (default stabilizing; blind and tracking not on driving): "
         + "; ".join(f"{k}: {d}" for k, d in KIND_DESCRIPTIONS.items()),
     )
     p.add_argument(

@@ -86,7 +86,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         default=50,
         help="interactions between each run's checkpoints, where --resume continues (default 50)",
     )
-    add_override_args(p, scope=" for every run")
+    add_override_args(
+        p,
+        scope=" for every run",
+        refused="; not b, the latent kind or the method (--beta or --beta-schedule, --latent, "
+        "--methods)",
+        refused_kwargs="; not controller (--controller)",
+    )
     p.add_argument("--out", type=path_arg, help="sweep directory (created, or continued)")
     p.add_argument(
         "--overwrite",
@@ -97,7 +103,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--resume",
         type=path_arg,
         metavar="SWEEP_DIR",
-        help="run the sweep recorded in SWEEP_DIR again",
+        help="run the sweep recorded in SWEEP_DIR again (with it give only --interactions and "
+        "how it runs: --backend, --workers, --ray-address, --retries, --no-tensorboard, "
+        "--no-progress, --dry-run)",
     )
     p.add_argument(
         "--backend",
@@ -114,7 +122,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--ray-address",
         type=ray_address,
         metavar="ADDRESS",
-        help="Ray cluster to join (e.g. auto, HOST:6379, ray://HOST:10001); default: a local one",
+        help="with --backend ray: the Ray cluster to join (e.g. auto, HOST:6379, "
+        "ray://HOST:10001); default: a local one",
     )
     p.add_argument(
         "--retries",

@@ -63,7 +63,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--latent",
         choices=LATENT_CHOICES,
-        help=f"latent kind of sili, stable and lili: {LATENT_HELP}",
+        help=f"latent kind of sili, stable and lili (partial: sili and stable): {LATENT_HELP}",
     )
     p.add_argument(
         "--interactions",
@@ -78,19 +78,22 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--resume",
         type=path_arg,
         metavar="RUN_DIR",
-        help="continue a killed run (or, with --interactions, extend a finished one)",
+        help="continue a killed run (or, with --interactions, extend a finished one); with it "
+        "give only --interactions and --no-progress",
     )
     p.add_argument(
         "--beta",
         type=unit_float,
-        help="stability weight b in [0, 1], fixed (default: sili 0 until interaction 250, 0.5 "
+        help="(sili, smirl) stability weight b in [0, 1], fixed (default: sili 0 until "
+        "interaction 250, 0.5 "
         "from 300; 0.5 for smirl and sili's paper profile, as on driving)",
     )
     anneal = p.add_argument(
         "--beta-anneal",
         nargs="+",
         action="append",  # given twice: refused (beta_anneal), not the last kept
-        help="b = START for DELAY interactions (default 0), then linear to END over LENGTH "
+        help="(sili, smirl) b = START for DELAY interactions (default 0), then linear to END "
+        "over LENGTH "
         "(one segment; several: --beta-schedule)",
     )
     anneal.usage_args = "START END LENGTH [DELAY]"  # type: ignore[attr-defined]
