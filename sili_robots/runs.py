@@ -66,7 +66,16 @@ METRIC_COLUMNS = (
 )
 #: the columns written on every row (the losses are blank before their first update, and
 #: filter_step without a latent filter): a blank one is a row cut short
-FILLED_COLUMNS = METRIC_COLUMNS[:8]
+FILLED_COLUMNS = (
+    "interaction",
+    "task_reward",
+    "stability_reward",
+    "strategy_changed",
+    "strategy_id",
+    "latent_category",
+    "latent_changed",
+    "beta",
+)
 
 
 def kept(rows: Any) -> Any:

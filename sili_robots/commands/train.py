@@ -85,16 +85,14 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--beta",
         type=unit_float,
         help="(sili, smirl) stability weight b in [0, 1], fixed (default: sili 0 until "
-        "interaction 250, 0.5 "
-        "from 300; 0.5 for smirl and sili's paper profile, as on driving)",
+        "interaction 250, 0.5 from 300; 0.5 for smirl and sili's paper profile, as on driving)",
     )
     anneal = p.add_argument(
         "--beta-anneal",
         nargs="+",
         action="append",  # given twice: refused (beta_anneal), not the last kept
         help="(sili, smirl) b = START for DELAY interactions (default 0), then linear to END "
-        "over LENGTH "
-        "(one segment; several: --beta-schedule)",
+        "over LENGTH (one segment; several: --beta-schedule)",
     )
     anneal.usage_args = "START END LENGTH [DELAY]"  # type: ignore[attr-defined]
     add_schedule_args(p, scope="")
