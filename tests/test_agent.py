@@ -997,3 +997,29 @@ def test_the_settings_allow_exactly_the_kernels_and_estimators_the_code_runs():
     assert set(typing.get_args(Matmul)) == set(MATMULS)
     assert set(typing.get_args(Precision)) == set(PRECISIONS)
     assert set(typing.get_args(Estimator)) == set(ESTIMATORS)
+
+
+def test_the_replay_keeps_every_interaction_as_it_grows():
+    """Its arrays double when full (first at 256 interactions): nothing stored may be lost."""
+    from sili_robots.agent.buffer import InteractionBuffer
+
+    buf = InteractionBuffer(obs_dim=3, act_dim=2, horizon=H, capacity=2)
+    for j in range(5):
+        f = np.float32(j)
+        buf.add(np.full((H + 1, 3), f), np.full((H, 2), f), np.full(H, f), np.full(H, -f),
+                np.full(3, f), float(j))  # fmt: skip
+    assert buf.n == 5 and buf.capacity >= 5
+    for j in range(5):
+        stored = [buf.obs[j], buf.act[j], buf.rew[j], -buf.aux[j], buf.next_first[j]]
+        assert all((a == j).all() for a in stored) and buf.strategy_id[j] == j
+
+
+def test_smirls_reward_is_bounded_far_from_the_states_seen():
+    """A state far outside a tight density would give a log-likelihood in the millions: the
+    reward is clipped to +-300 so it cannot swamp the task reward."""
+    from sili_robots.agent.smirl import RunningGaussian
+
+    density = RunningGaussian(2)
+    density.update(np.zeros((10, 2)))
+    assert density.log_likelihood(np.array([[100.0, 100.0]]))[0] == -300.0
+    assert -300.0 < density.log_likelihood(np.array([[0.01, 0.0]]))[0] < 300.0

@@ -18,6 +18,7 @@ from sili_robots.tasks.driving import (
     RIGHT,
     DrivingEnv,
     lane_of,
+    next_target_lane,
 )
 from sili_robots.wrappers import OracleObservation, StrategyFlag
 
@@ -298,3 +299,23 @@ def test_a_running_simulation_is_not_copied_and_says_how_to_save_the_game():
             copy.deepcopy(env)  # was "cannot pickle 'module' object"
     finally:
         env.close()
+
+
+def test_the_opponent_cuts_into_the_lane_the_ego_passed_it_in():
+    """T^z: right after a left merge before the red line; else the lane the ego was in when it
+    passed the opponent, the centre lane's middle counting as left (driving straight)."""
+    half = sc.LANE_WIDTH / 2
+    assert next_target_lane(True, 0.0) == RIGHT
+    assert next_target_lane(False, 0.0) == LEFT  # straight down the centre
+    assert next_target_lane(False, -0.01) == RIGHT
+    assert next_target_lane(False, half + 0.5) == LEFT
+    assert next_target_lane(False, -half - 0.5) == RIGHT
+
+
+def test_the_passing_offset_is_where_the_ego_passed_not_where_it_ended(env):
+    env.reset(seed=0)
+    for _ in range(env.horizon):  # straight until it has passed, then to the left lane
+        env.step(np.array([1.0 if env.passed else 0.0], np.float32))
+    passed_at = next(ego_y for _, ego_x, ego_y, opp_x, *_ in env.substeps if opp_x <= ego_x)
+    assert env.passed and env.passing_offset == passed_at
+    assert abs(env.ego_y - passed_at) > 1.0  # it moved on after passing

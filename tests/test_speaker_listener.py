@@ -70,3 +70,21 @@ def test_stabilizing_policy_keeps_mapping_and_oracle_is_near_optimal():
     assert (
         oracle_mean > np.mean([s.task_reward for s in stab]) > np.mean([s.task_reward for s in rnd])
     )
+
+
+def test_the_v0_mapping_changes_within_an_interaction_but_not_after_its_last_step():
+    """Unvisited, v0's mapping may change before each step and at the boundary (each with
+    probability 0.5), never after the last step: the next interaction's change is the
+    boundary's alone."""
+    env = make_task("speaker-listener-v0")
+    env.reset(seed=0)
+    h = env.unwrapped.horizon
+    after_last, at_boundary = [], []
+    for _ in range(400):
+        for _ in range(h):
+            *_, info = env.step(np.zeros(2, np.float32))
+        after_last.append(info["strategy_changed"])
+        _, info = env.reset()
+        at_boundary.append(info["strategy_changed"])
+    assert not any(after_last)
+    assert 0.44 < np.mean(at_boundary) < 0.56
