@@ -15,6 +15,7 @@ from sili_robots.cli import main
 from sili_robots.plotting import (
     METHOD_COLORS,
     beta_sweep,
+    default_smoothing,
     learning_curves,
     load_results,
     overview,
@@ -356,3 +357,9 @@ def test_the_overview_has_the_papers_rows_and_says_how_it_smooths():
     assert titles == ["Circle (3 Goals)", "Driving", "Detour Speaker-Listener"]
     right = [ax.get_title(loc="right") for ax in fig.axes if ax.get_gid() == "true_stability"]
     assert all(t.endswith("smoothed over 4 interactions") for t in right)
+
+
+def test_curves_are_smoothed_over_about_two_percent_of_the_run_by_default(sweep_dir):
+    assert [default_smoothing(n) for n in (10, 100, 1000, 2500)] == [1, 2, 20, 50]
+    fig = learning_curves(load_results(sweep_dir), "circle-3")  # 8 interactions
+    assert "smoothed over 1 interaction\n" in fig.get_suptitle() + "\n"

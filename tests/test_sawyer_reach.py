@@ -201,3 +201,24 @@ def test_cli_rollout_runs_on_sawyer(capsys):
     out = capsys.readouterr().out
     assert "task=sawyer-reach" in out
     assert "unchanged (after the first): 1.000" in out
+
+
+def test_the_strategy_rule_compares_the_hand_with_the_plane_itself():
+    env = make_task("sawyer-reach").unwrapped
+    env.reset(seed=0)
+    hand = float(env.scene.ee_pos[2])
+    env.plane_z = hand - 0.01
+    assert env.ends_above_plane()
+    env.plane_z = hand + 0.01
+    assert not env.ends_above_plane()
+
+
+def test_an_action_of_one_moves_the_hands_target_at_the_top_speed():
+    """|action| = 1 is MAX_SPEED (0.4 m/s), 2 cm per control step of 0.05 s."""
+    env = make_task("sawyer-reach").unwrapped
+    env.reset(seed=0)
+    before = env.controller.target.copy()
+    env.step(np.array([1.0, 0.0, -0.5], np.float32))
+    dt = env.controller.arm.control_dt
+    np.testing.assert_allclose(env.controller.target - before, [0.02, 0.0, -0.01], atol=1e-12)
+    assert MAX_SPEED * dt == pytest.approx(0.02)

@@ -3,6 +3,7 @@ resume after a SIGKILLed worker, a failing run isolated, bad input."""
 
 import json
 import os
+import shutil
 import signal
 import socket
 import subprocess
@@ -1009,3 +1010,17 @@ def test_a_run_the_disk_refuses_fails_with_the_file_named_and_never_fails_the_sw
     with file_size_limit(1):  # nothing can be written
         outcome = run_job(Job("run", cfg.to_dict(), str(tmp_path / "full")))
     assert outcome.status == "failed" and "File too large" in outcome.error, outcome
+
+
+def test_the_runs_table_tells_a_run_not_started_from_one_under_way(tiny_sweep, tmp_path):
+    from sili_robots.sweep.results import runs_table
+
+    out = tmp_path / "sweep"
+    shutil.copytree(tiny_sweep[0], out)
+    under_way, not_started = "circle-3__sac__s0", "circle-3__sac__s1"
+    (out / "runs" / under_way / "summary.json").unlink()
+    for name in ("summary.json", "metrics.csv", "checkpoint.pt"):
+        (out / "runs" / not_started / name).unlink()
+    status = runs_table(out).set_index("run")["status"]
+    assert status[under_way] == "incomplete" and status[not_started] == "not started"
+    assert status["circle-3__sili-bschedule__s0"] == "done"
