@@ -563,6 +563,29 @@ def test_relabel_keeps_the_function_and_refresh_keeps_category_names():
     assert agent.latents.relabels == relabels + 1
 
 
+def test_a_refresh_keeps_the_names_of_several_categories_in_use():
+    """Three kinds of interaction in distinct categories; training renames the categories (a
+    4-cycle); the refresh names them back, and encoding an interaction again agrees."""
+    torch.manual_seed(0)
+    agent = _agent(latent_merge_threshold=0.0)
+    for j in range(12):
+        level = np.float32([-4, 0, 4][j % 3])
+        obs = np.full((H + 1, 3), level, np.float32)
+        obs[:, 1] = -level
+        agent.observe_interaction(obs, np.zeros((H, 2), np.float32), np.full(H, level),
+                                  obs[0], float(j % 3), {"strategy": np.zeros(2)})  # fmt: skip
+    with torch.no_grad():
+        agent.model.head.weight.mul_(20)  # categories far apart
+    agent.refresh_latents()
+    cached = agent.Z.argmax(-1).copy()
+    assert len(set(cached[1:])) >= 2
+    agent.model.relabel(torch.tensor([1, 2, 3, 0]))
+    agent.refresh_latents()
+    np.testing.assert_array_equal(agent.Z.argmax(-1), cached)
+    again = agent.latents.encode(np.arange(12)).argmax(-1)
+    np.testing.assert_array_equal(again, cached[1:])
+
+
 def test_relabel_moves_the_optimizers_moments_with_the_categories():
     torch.manual_seed(0)
     model = LatentModel(3, 2, latent_dim=4, hidden=16, kind="discrete")
@@ -800,6 +823,21 @@ def test_hindsight_stability_compares_the_strategies_in_effect_in_both_interacti
     agent.Z[2] = np.eye(4, dtype=np.float32)[1]  # the encoder's prediction does not matter here
     r2 = agent._stability_rewards(j, t, t == H - 1, np.zeros((3, 1, 3)))
     np.testing.assert_allclose(r2[:2], r[:2])
+    # the newest is judged against the prediction z^3 (category 0), not against itself
+    agent.Z[3] = np.eye(4, dtype=np.float32)[0]
+    _posteriors(agent).P[2] = [0, 1, 0, 0]
+    r3 = agent._stability_rewards(j, t, t == H - 1, np.zeros((3, 1, 3)))
+    assert r3[2, 0] == pytest.approx(-agent.stability_scale)
+
+
+def test_posteriors_spread_over_the_categories_in_use_only():
+    """Z[0], the zeros of "no history", names no category in use."""
+    agent = _agent(stability_distance="hindsight")
+    _fill(agent, 3)
+    agent.Z = np.concatenate([np.zeros((1, 4)), np.eye(4)[[1, 2, 1]]]).astype(np.float32)
+    post = _posteriors(agent).posteriors(np.arange(3))
+    assert (post[:, [0, 3]] == 0).all()
+    np.testing.assert_allclose(post.sum(-1), 1.0, rtol=1e-6)
 
 
 def test_unknown_stability_distance_is_named():

@@ -105,6 +105,19 @@ def test_policy_acts_on_the_corrected_latent_within_the_interaction():
     assert f._ll[0] == pytest.approx(-LOGLIK_FLOOR)  # one step: floored evidence
 
 
+def test_the_filter_starts_at_the_refresh_that_reaches_its_start():
+    """addons.filter.start=4: not at the refresh after 3 stored interactions, at the one after
+    4 (the latents are recomputed then, and the filter with them)."""
+    agent = _agent(latent_filter_start=4)
+    for reward in (0.0, 5.0, 0.0):
+        _store(agent, reward)
+    agent.refresh_latents()
+    assert _filter(agent).scale is None
+    _store(agent, 5.0)
+    agent.refresh_latents()
+    assert _filter(agent).scale is not None
+
+
 def test_filter_does_not_act_before_the_first_refresh():
     agent = _agent()
     _store(agent, 5.0)
@@ -337,6 +350,12 @@ def test_a_broader_noise_scale_needs_more_steps_of_evidence():
     assert switch == 2  # one step with the residual scale (the test above), two here
     np.testing.assert_array_equal(f.ZF[1], [-1] * switch + [1] * (H + 1 - switch))
     np.testing.assert_array_equal(f.ZF[3], [-1] * (H + 1))
+    # played live, step by step, interaction 1 gathers the same evidence: it switches alike
+    agent.Z[b.n] = agent.Z[1]
+    f.begin_interaction()
+    for t in range(H):
+        agent.observe_step(b.obs[1, t], b.act[1, t], float(b.rew[1, t]), b.obs[1, t + 1])
+    assert f._cats == f.ZF[1].tolist()
 
 
 def test_addons_wired_into_a_trained_agent_start_from_its_stored_interactions():
