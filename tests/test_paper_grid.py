@@ -384,6 +384,55 @@ def _const(n, value):
     return np.full(n, float(value))
 
 
+def _planned_rows(block_name, task, task_id, curves):
+    """Rows of every run a block plans on ``task``: ``curves[method](n)`` -> (rewards,
+    stability) of a run of n interactions."""
+    parts = []
+    for r in plan(block(block_name).specs((task,))):
+        c, n = r.config, r.config.interactions
+        rewards, stability = curves[c.method](n)
+        beta = c.agent.sili.beta if isinstance(c.agent.sili.beta, float) else 0.5
+        parts.append(_rows(task, task_id, c.method, c.seed, rewards, stability, beta=beta,
+                           name=r.name))  # fmt: skip
+    return parts
+
+
+@pytest.mark.parametrize(("b0_reward", "verdict"), [(-20.0, HOLDS), (-6.5, PART)])
+def test_the_sweet_spot_holds_only_where_the_best_b_stands_clear_of_both_ends(b0_reward, verdict):
+    """Best at b=0.6 in both; b=0 within 0.05 of its score in the second: in range, not apart."""
+    reward = {0.0: b0_reward, 0.2: -15.0, 0.4: -10.0, 0.6: -6.0, 0.8: -10.0, 1.0: -20.0}
+    parts = []
+    for b in reward:
+        for seed in range(5):
+            name = run_name("circle-3", "sili", seed, beta=b)
+            rewards, held = _const(1000, reward[b]), _const(1000, 1)
+            parts.append(_rows("circle-3", "sili/Circle3-v1", "sili", seed, rewards, held,
+                               beta=b, name=name))  # fmt: skip
+    (claim,) = [c for c in claims_table(pd.concat(parts)) if c.claim == "b sweet spot 0.4-0.8"]
+    assert claim.verdict == verdict, claim
+
+
+@pytest.mark.parametrize(("stable_from", "verdict"), [(200, HOLDS), (500, PART)])
+def test_speaker_listener_needs_sili_stable_by_about_250(stable_from, verdict):
+    """SILI above LILI, SAC and SMiRL in both; held from interaction 200, or only from 500."""
+
+    def sili(n):
+        return _const(n, -3.0), np.r_[_const(stable_from, 0), _const(n - stable_from, 1)]
+
+    def baseline(n):
+        return _const(n, -30.0), _const(n, 0)
+
+    curves = {"sili": sili, "oracle": baseline, "lili": baseline, "sac": baseline,
+              "stable": baseline, "smirl": baseline}  # fmt: skip
+    task, task_id = "speaker-listener", "sili/SpeakerListener-v1"
+    parts = [p for b in ("sili-oracle", "lili-sac", "stable-smirl")
+             for p in _planned_rows(b, task, task_id, curves)]  # fmt: skip
+    (claim,) = [c for c in claims_table(pd.concat(parts)) if c.claim.startswith("SILI stable by")]
+    assert claim.verdict == verdict, claim
+    first = stable_from - 5  # the first window of 50 with 45 held
+    assert f"first stable at {first}, {first}, {first};" in claim.measured
+
+
 def test_score_is_zero_at_standing_still_and_one_at_the_oracle():
     assert score(-50.0, "sili/Circle3-v1") == pytest.approx(0.0)
     assert score(-3.8568, "sili/Circle3-v1") == pytest.approx(1.0)
