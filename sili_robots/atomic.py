@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
@@ -20,13 +21,17 @@ def replacing(path: Path, shared: bool = False) -> Iterator[Path]:
     same time (a sweep's tables, caches), so the temporary is this write's own; otherwise it has
     a fixed name, which the next write of a killed one reuses."""
     path = Path(path)
+    if path.is_symlink():  # the file it points to is replaced, the link kept
+        path = path.resolve()
     tag = f".{os.getpid()}-{uuid.uuid4().hex[:8]}" if shared else ""
     tmp = path.with_name(f"{path.name}{tag}.tmp")
     if path.is_dir():  # os.replace would fail only after the work of writing it
         raise ConfigError(f"{path} is a directory, where a file is written; move it away")
     try:
-        with writing(path):
+        with writing(path, tmp):
             yield tmp
+            if path.exists():  # the file keeps its permissions
+                os.chmod(tmp, stat.S_IMODE(path.stat().st_mode))
             sync(tmp)
             os.replace(tmp, path)
         with contextlib.suppress(OSError):  # the rename itself (not every filesystem can)

@@ -185,8 +185,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as err:
         if err.errno == errno.ENAMETOOLONG:  # a path given: bad input
             print(
-                f"sili {args.command}: error: {err.filename}: a name in it is too long (most file "
-                "systems allow 255 bytes)",
+                f"sili {args.command}: error: {err.filename}: the path, or a name in it, is too "
+                "long for the file system",
                 file=sys.stderr,
             )
             return 2

@@ -35,13 +35,14 @@ STORAGE_ERRORS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS
 
 
 @contextlib.contextmanager
-def writing(path: Path) -> Iterator[None]:
+def writing(path: Path, temporary: Path | None = None) -> Iterator[None]:
     """An OSError while ``path`` is written names it: a full disk's failed ``write`` names no
-    file, so the message would not say which one."""
+    file, and one on the ``temporary`` written in its place would name a file then gone."""
     try:
         yield
     except OSError as err:
-        if err.filename is not None or err.errno is None:
+        named = err.filename is None or (temporary is not None and err.filename == str(temporary))
+        if not named or err.errno is None:
             raise
         raise OSError(err.errno, err.strerror, str(path)) from err
 

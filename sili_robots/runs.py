@@ -118,9 +118,12 @@ def read_metrics(path: Path) -> Any:
         missing = [c for c in READ_COLUMNS if c not in df.columns]
         if missing:
             raise ValueError(f"no column {', '.join(missing)}")
+        filled = [c for c in FILLED_COLUMNS if c in df.columns]
+        if len(df) and df[filled].iloc[-1].isna().any():
+            df = df.iloc[:-1]  # a last row cut short (a run stopped mid-write): resume drops it
         for column in READ_COLUMNS:
             pd.to_numeric(df[column])
-        for column in (c for c in FILLED_COLUMNS if c in df.columns):
+        for column in filled:
             blank = df[column].isna()
             if blank.any():  # line numbers as an editor shows them: the header is line 1
                 raise ValueError(f"line {int(blank.to_numpy().argmax()) + 2} has no {column}")

@@ -146,9 +146,11 @@ def train(
             write_summary(run_dir)
     finally:
         bar.close()
-        metrics.close()
-        if own_env:
-            env.close()
+        try:
+            metrics.close()  # after a refused write it fails again: the row is still unwritten
+        finally:
+            if own_env:
+                env.close()
     return run_dir
 
 

@@ -130,6 +130,24 @@ def test_figures_and_the_claims_block_keep_the_old_file_when_the_disk_refuses(tm
     assert sorted(p.name for p in tmp_path.iterdir()) == ["README.md", "curve.png"]
 
 
+def test_a_link_keeps_pointing_at_the_file_replaced_and_the_file_its_permissions(tmp_path):
+    real, link = tmp_path / "real.md", tmp_path / "README.md"
+    real.write_text("old")
+    real.chmod(0o664)
+    link.symlink_to(real)
+    write_text(link, "new")
+    assert link.is_symlink() and real.read_text() == "new"
+    assert real.stat().st_mode & 0o777 == 0o664
+
+
+def test_a_refused_temporary_is_named_as_the_file_it_stands_for(tmp_path):
+    """A folder that cannot take the temporary (read-only, out of inodes) names the file."""
+    target = tmp_path / "missing" / "summary.json"
+    with pytest.raises(OSError) as refused:
+        write_text(target, "x")
+    assert refused.value.filename == str(target)
+
+
 def test_a_metrics_row_the_disk_refuses_names_the_file(tmp_path):
     writer = MetricsWriter(tmp_path, columns=("interaction", "note"))
     writer.write({"interaction": 0, "note": "x"})

@@ -1010,6 +1010,7 @@ def test_a_run_the_disk_refuses_fails_with_the_file_named_and_never_fails_the_sw
     with file_size_limit(1):  # nothing can be written
         outcome = run_job(Job("run", cfg.to_dict(), str(tmp_path / "full")))
     assert outcome.status == "failed" and "File too large" in outcome.error, outcome
+    assert not (tmp_path / "full" / "error.txt").exists()  # whole or not at all
 
 
 def test_the_runs_table_tells_a_run_not_started_from_one_under_way(tiny_sweep, tmp_path):

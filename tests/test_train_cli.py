@@ -27,6 +27,7 @@ from sili_robots.evaluation import AgentFeedback, evaluate, load_trained
 from sili_robots.runs import (
     code_revision,
     load_checkpoint,
+    read_metrics,
     record_continuation,
     save_checkpoint,
     set_target,
@@ -926,16 +927,47 @@ def test_a_history_row_cut_short_is_refused_not_trained_on(tmp_path):
         assert said in res.stderr
         assert (run / "metrics.csv").read_bytes() == damaged
     (run / "metrics.csv").write_bytes(whole + lines[3][:8])  # a row past the checkpoint
+    assert len(read_metrics(run / "metrics.csv")) == 3  # readers leave it out as resume does
     assert _sili("train", "--resume", run, "--interactions", 4).returncode == 0
     assert pd.read_csv(run / "metrics.csv")["interaction"].tolist() == [0, 1, 2, 3]
 
 
+def test_a_history_the_disk_refuses_still_closes_the_task(tmp_path, monkeypatch):
+    """The history's close fails again after a refused row (the row is still unwritten): the
+    task (a SUMO or MuJoCo simulation) is closed all the same."""
+    from sili_robots.build import make_run_config
+
+    closed = []
+    built = training.make_run_env
+
+    def tracked(cfg):
+        env = built(cfg)
+        original = env.close
+        env.close = lambda: closed.append(1) or original()
+        return env
+
+    monkeypatch.setattr(training, "make_run_env", tracked)
+    cfg = make_run_config("circle-3", "sac", 0, 60, settings=FAST_AGENT, checkpoint_every=1000)
+    with pytest.raises(OSError) as refused, file_size_limit(4000):  # config.json fits
+        training.train(cfg, tmp_path / "run", progress=False)
+    assert refused.value.filename == str(tmp_path / "run" / "metrics.csv")
+    assert closed == [1]
+
+
 def test_a_name_too_long_for_the_file_system_is_bad_input(tmp_path):
+    """Checked where the path is read (pathlib's own checks say "no such file" from Python
+    3.14); the operating system's refusal of a longer path is named as well."""
     long = tmp_path / ("b" * 256)
     for command in (["eval", long], ["train", "--task", "circle-3", *FAST, "--out", long]):
         res = _sili(*command)
         assert res.returncode == 2, res.stderr
-        assert f"error: {long}: a name in it is too long (most file systems allow 255" in res.stderr
+        assert f"{long}: a name in it is too long (256 bytes; most file systems allow 255)" in (
+            res.stderr
+        )
+    deep = Path(tmp_path, *["d" * 200] * 25)  # each name allowed, the whole over PATH_MAX
+    res = _sili("eval", deep)
+    assert res.returncode == 2, res.stderr
+    assert f"sili eval: error: {deep}: the path, or a name in it, is too long" in res.stderr
 
 
 def test_a_run_kept_without_its_checkpoint_is_not_trained_again(tmp_path, capsys):
@@ -1094,7 +1126,7 @@ def test_a_record_or_history_damaged_in_its_content_exits_2_naming_the_file(tmp_
         "a,b\n1,2\n",
         "\x00\xff\xfe",
         "interaction,task_reward,strategy_changed\n0,x,0\n",
-        "interaction,task_reward,strategy_changed,strategy_id\n0,-1.5,0,1\n1,-6\n",  # cut
+        "interaction,task_reward,strategy_changed,strategy_id\n0,-1.5,0,1\n1,-6\n2,-1,0,1\n",
     ):
         for where in (run, held):
             (where / "metrics.csv").write_bytes(content.encode("latin-1"))

@@ -56,7 +56,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--all", action="store_true", help="every registered task version (current and earlier)"
     )
-    add_task_args(p, only="; one TASK, not --all, and not stored by --write")  # an ablation's
+    add_task_args(p, only="; one TASK, not --all; with --write only the task's defaults")
     slow = ", ".join(f"{t}: {n}" for t, n in TASK_INTERACTIONS.items())
     p.add_argument(
         "--interactions",

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import functools
 import math
+import os
 import re
 import tempfile
 from pathlib import Path
@@ -15,6 +16,9 @@ from sili_robots.build import canonical_task, is_class_path
 from sili_robots.errors import MAX_SEED, ConfigError, check_seed
 from sili_robots.migrations import setting_path
 from sili_robots.tasks import task_spec
+
+#: the longest name (a path's part) in bytes that most file systems allow
+NAME_MAX = 255
 
 
 def _int_at_least(text: str, minimum: int) -> int:
@@ -71,7 +75,14 @@ def path_arg(text: str) -> Path:
     (``--out ""``, a variable left unset) is refused rather than read as the current directory."""
     if not text.strip():
         raise argparse.ArgumentTypeError("an empty path; give a directory or file name")
-    return Path(text).expanduser()
+    path = Path(text).expanduser()
+    longest = max(path.parts, key=lambda part: len(os.fsencode(part)))
+    if len(os.fsencode(longest)) > NAME_MAX:  # found here: pathlib's checks return False
+        raise argparse.ArgumentTypeError(
+            f"{text}: a name in it is too long ({len(os.fsencode(longest))} bytes; most file "
+            f"systems allow {NAME_MAX})"
+        )
+    return path
 
 
 def writable_dir(path: Path, option: str) -> Path:

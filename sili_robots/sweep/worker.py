@@ -16,6 +16,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from sili_robots.atomic import write_text
 from sili_robots.runs import ERROR_FILE, STOP_FILE
 from sili_robots.sweep import tensorboard
 from sili_robots.sweep.state import RunBeingTrained, run_state, training_claim
@@ -100,11 +101,11 @@ def run_job(job: Job) -> Outcome:
 
 
 def record_failure(run_dir: Path, text: str) -> None:
-    """The run's ``error.txt``, which the sweep's tables read: a disk too full to take it loses
-    the text (the run shows as incomplete), not the sweep."""
+    """The run's ``error.txt``, which the sweep's tables read, written whole: a disk too full to
+    take it loses the text (the run shows as incomplete), not the sweep."""
     with contextlib.suppress(OSError):
         run_dir.mkdir(parents=True, exist_ok=True)
-        (run_dir / ERROR_FILE).write_text(text)
+        write_text(run_dir / ERROR_FILE, text)
 
 
 def _verdict(run_dir: Path) -> str:
