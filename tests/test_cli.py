@@ -177,6 +177,21 @@ def test_a_bad_seed_exits_2_naming_it_and_the_range(tmp_path, command, bad):
     assert not (tmp_path / "o").exists()  # train: no run directory left behind
 
 
+def test_the_largest_seed_is_taken_and_a_bool_is_no_count():
+    """2**32 - 1 is the last seed numpy, torch and gymnasium all take; True is not 1."""
+    from sili_robots.build import make_run_config
+    from sili_robots.errors import ConfigError
+    from sili_robots.runs import RunConfig
+
+    code, _, err = _main("rollout", "circle-3", "--seed", str(2**32 - 1), "--interactions", "1")
+    assert code == 0, err
+    with pytest.raises(ConfigError, match="interactions must be an integer >= 0, got True"):
+        make_run_config("circle-3", "sac", 0, True)
+    record = make_run_config("circle-3", "sac", 0, 5).to_dict()
+    with pytest.raises(ConfigError, match="checkpoint_every must be an integer >= 1, got True"):
+        RunConfig.from_dict({**record, "checkpoint_every": True})
+
+
 def test_sweep_refuses_bad_seeds_a_task_twice_and_a_latent_no_method_takes(tmp_path):
     sweep = ["sweep", "--out", str(tmp_path / "s"), "--dry-run", "--methods"]
     code, _, err = _main(*sweep, "oracle", "--tasks", "circle-3", "--seeds", "-1")

@@ -134,3 +134,11 @@ def test_filter_corrections_split_moves_from_false_alarms():
 def test_strategies_per_category_counts_each_interaction_under_its_category():
     split = strategies_per_category(np.array([3, 3, 1, 3, 1]), np.array([0, 2, 0, 0, 0.0]))
     assert split == {1: {0: 2}, 3: {0: 2, 2: 1}}
+
+
+def test_latent_entropy_is_in_nats():
+    """Of the categories predicted in the window: ln 2 for two used equally, 0 for one."""
+    two = latent_diagnostics(_metrics([3, 4, 3, 4, 3], [0, 1, 0, 1, 0]), window=100)
+    assert two["latent_entropy"] == pytest.approx(np.log(2))
+    one = latent_diagnostics(_metrics([3, 3, 3, 3, 3], [0, 0, 0, 0, 0]), window=100)
+    assert one["latent_entropy"] == pytest.approx(0.0)

@@ -49,3 +49,28 @@ def test_training_past_the_memory_left_exits_1_with_one_line(tmp_path, monkeypat
     err = capsys.readouterr().err
     assert err.startswith("sili train: error: out of memory (") and len(err.splitlines()) == 1
     assert resource.getrlimit(resource.RLIMIT_DATA) == before
+
+
+def test_a_lower_limit_already_set_stays(monkeypatch):
+    """``ulimit -d`` below what the machine has free is the user's: the cap never raises it."""
+    before = resource.getrlimit(resource.RLIMIT_DATA)
+    vm_data = memory._kib("/proc/self/status", "VmData")["VmData"]
+    lower = vm_data + 300 * MIB
+    resource.setrlimit(resource.RLIMIT_DATA, (lower, before[1]))
+    try:
+        monkeypatch.setattr(memory, "available_memory", lambda: 10 * 2**30)
+        with memory.capped_at_available():
+            assert resource.getrlimit(resource.RLIMIT_DATA)[0] == lower
+        assert resource.getrlimit(resource.RLIMIT_DATA)[0] == lower
+    finally:
+        resource.setrlimit(resource.RLIMIT_DATA, before)
+
+
+def test_a_containers_memory_limit_bounds_what_is_available(monkeypatch, tmp_path):
+    limit, usage = tmp_path / "memory.max", tmp_path / "memory.current"
+    limit.write_text(f"{2**30}\n")
+    usage.write_text(f"{600 * MIB}\n")
+    monkeypatch.setattr(memory, "CGROUP_FILES", ((str(limit), str(usage)),))
+    assert memory.available_memory() <= 424 * MIB
+    limit.write_text("max\n")  # no limit: the machine's memory
+    assert memory.available_memory() > 424 * MIB

@@ -76,3 +76,15 @@ def test_a_setting_saved_before_it_existed_reads_as_what_the_run_trained_with():
     assert (agent.model.estimator, agent.model.usage_bonus) == ("gumbel", 0.0)
     recorded = make_run_config("circle-3", "sili", 0, 10, settings={"sac.precision": "bfloat16"})
     assert RunConfig.from_dict(flat_layout(recorded.to_dict())).agent.sac.precision == "bfloat16"
+
+
+def test_a_method_without_a_latent_model_reads_as_none_whatever_its_flat_config_says():
+    """Earlier flat configs wrote the unused "latent": "discrete" for SAC, Oracle and SMiRL:
+    read as today's "none", or a sweep's resume refuses the run as made otherwise."""
+    from sili_robots.build import make_run_config
+    from sili_robots.runs import RunConfig
+
+    for method in ("sac", "oracle", "smirl"):
+        run = flat_layout(make_run_config("circle-3", method, 0, 10).to_dict())
+        run["agent"]["latent"] = "discrete"
+        assert RunConfig.from_dict(run).agent.latent == "none", method

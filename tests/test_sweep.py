@@ -228,6 +228,8 @@ def test_killed_worker_is_reported_and_the_sweep_resumes_its_run(tmp_path):
         "circle-3__sili-bschedule__s0": "worker killed by SIGKILL"
     }
     assert len(pd.read_csv(out / "runs" / "circle-3__sili-bschedule__s1" / "metrics.csv")) == 40
+    assert "worker killed by SIGKILL" in (victim / "error.txt").read_text()  # runs.csv's cause
+    assert not (victim / "worker.json").exists()
     checkpointed = torch.load(victim / "checkpoint.pt", weights_only=False)["interaction"]
     assert 10 <= checkpointed < 40 and not (victim / "summary.json").exists()
     before = pd.read_csv(victim / "metrics.csv")
