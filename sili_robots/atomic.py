@@ -21,8 +21,8 @@ def replacing(path: Path, shared: bool = False) -> Iterator[Path]:
     same time (a sweep's tables, caches), so the temporary is this write's own; otherwise it has
     a fixed name, which the next write of a killed one reuses."""
     path = Path(path)
-    if path.is_symlink():  # the file it points to is replaced, the link kept
-        path = path.resolve()
+    if path.is_symlink():  # the file it points to is replaced, the link kept (a loop: itself)
+        path = Path(os.path.realpath(path))
     tag = f".{os.getpid()}-{uuid.uuid4().hex[:8]}" if shared else ""
     tmp = path.with_name(f"{path.name}{tag}.tmp")
     if path.is_dir():  # os.replace would fail only after the work of writing it

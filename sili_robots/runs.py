@@ -119,8 +119,9 @@ def read_metrics(path: Path) -> Any:
         if missing:
             raise ValueError(f"no column {', '.join(missing)}")
         filled = [c for c in FILLED_COLUMNS if c in df.columns]
-        if len(df) and df[filled].iloc[-1].isna().any():
-            df = df.iloc[:-1]  # a last row cut short (a run stopped mid-write): resume drops it
+        if len(df) and df[filled].iloc[-1].isna().any():  # a last row cut short (a run stopped
+            # mid-write): resume drops it; read again, so the columns' types are the rows' own
+            df = pd.read_csv(path, float_precision="round_trip", nrows=len(df) - 1)
         for column in READ_COLUMNS:
             pd.to_numeric(df[column])
         for column in filled:

@@ -140,6 +140,13 @@ def test_a_link_keeps_pointing_at_the_file_replaced_and_the_file_its_permissions
     assert real.stat().st_mode & 0o777 == 0o664
 
 
+def test_a_link_to_itself_is_replaced_as_a_file(tmp_path):
+    loop = tmp_path / "loop"
+    loop.symlink_to(loop)
+    write_text(loop, "new")
+    assert not loop.is_symlink() and loop.read_text() == "new"
+
+
 def test_a_refused_temporary_is_named_as_the_file_it_stands_for(tmp_path):
     """A folder that cannot take the temporary (read-only, out of inodes) names the file."""
     target = tmp_path / "missing" / "summary.json"

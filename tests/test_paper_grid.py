@@ -199,11 +199,15 @@ def test_a_run_collected_back_into_a_sweep_replaces_a_shorter_training_there(
     assert len((run / "metrics.csv").read_text().splitlines()) == 1 + 8
 
 
-def test_runs_counts_runs_and_interactions(sweep_and_collection, capsys):
+def test_runs_counts_runs_and_interactions(sweep_and_collection, capsys, monkeypatch):
     sweep, collection = sweep_and_collection
     assert main(["runs", str(sweep)]) == 0
     out = capsys.readouterr().out
     assert out.strip().splitlines()[-1].startswith("2 runs done, 1 unfinished; 18 interactions")
+    monkeypatch.chdir(sweep)
+    for here in (".", "./"):  # the current folder, which has no name of its own
+        assert main(["runs", here]) == 0
+        assert capsys.readouterr().out == out
     assert main(["runs", str(collection), "--csv"]) == 0
     table = pd.read_csv(__import__("io").StringIO(capsys.readouterr().out))
     assert sorted(table.profile) == ["package", "paper"] and table.done.tolist() == [1, 1]

@@ -1,5 +1,6 @@
 """``sili train`` / ``sili eval`` end to end: run directories, bad input, kill and resume."""
 
+import io
 import json
 import os
 import re
@@ -928,6 +929,10 @@ def test_a_history_row_cut_short_is_refused_not_trained_on(tmp_path):
         assert (run / "metrics.csv").read_bytes() == damaged
     (run / "metrics.csv").write_bytes(whole + lines[3][:8])  # a row past the checkpoint
     assert len(read_metrics(run / "metrics.csv")) == 3  # readers leave it out as resume does
+    (run / "metrics.csv").write_bytes(whole + b"3,-")  # cut inside a number
+    rows = read_metrics(run / "metrics.csv")
+    assert rows.dtypes.equals(pd.read_csv(io.BytesIO(whole)).dtypes)  # numbers, as written
+    assert rows["task_reward"].mean() < 0
     assert _sili("train", "--resume", run, "--interactions", 4).returncode == 0
     assert pd.read_csv(run / "metrics.csv")["interaction"].tolist() == [0, 1, 2, 3]
 

@@ -76,7 +76,7 @@ def path_arg(text: str) -> Path:
     if not text.strip():
         raise argparse.ArgumentTypeError("an empty path; give a directory or file name")
     path = Path(text).expanduser()
-    longest = max(path.parts, key=lambda part: len(os.fsencode(part)))
+    longest = max(path.parts, key=lambda part: len(os.fsencode(part)), default="")  # "." has none
     if len(os.fsencode(longest)) > NAME_MAX:  # found here: pathlib's checks return False
         raise argparse.ArgumentTypeError(
             f"{text}: a name in it is too long ({len(os.fsencode(longest))} bytes; most file "
