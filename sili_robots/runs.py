@@ -48,22 +48,6 @@ DAMAGED_METRICS = (
 READ_COLUMNS = ("interaction", "task_reward", "strategy_changed")
 
 
-METRIC_COLUMNS = (
-    "interaction",
-    "task_reward",
-    "stability_reward",
-    "strategy_changed",
-    "strategy_id",
-    "latent_category",
-    "latent_changed",
-    "beta",
-    "latent_loss",
-    "critic_loss",
-    "actor_loss",
-    "alpha",
-    "wall_time",
-    "filter_step",
-)
 #: the columns written on every row (the losses are blank before their first update, and
 #: filter_step without a latent filter): a blank one is a row cut short
 FILLED_COLUMNS = (
@@ -75,6 +59,15 @@ FILLED_COLUMNS = (
     "latent_category",
     "latent_changed",
     "beta",
+)
+METRIC_COLUMNS = (
+    *FILLED_COLUMNS,
+    "latent_loss",
+    "critic_loss",
+    "actor_loss",
+    "alpha",
+    "wall_time",
+    "filter_step",
 )
 
 

@@ -76,11 +76,11 @@ def path_arg(text: str) -> Path:
     if not text.strip():
         raise argparse.ArgumentTypeError("an empty path; give a directory or file name")
     path = Path(text).expanduser()
-    longest = max(path.parts, key=lambda part: len(os.fsencode(part)), default="")  # "." has none
-    if len(os.fsencode(longest)) > NAME_MAX:  # found here: pathlib's checks return False
+    longest = max((len(os.fsencode(part)) for part in path.parts), default=0)  # ".": no parts
+    if longest > NAME_MAX:  # found here: pathlib's checks return False
         raise argparse.ArgumentTypeError(
-            f"{text}: a name in it is too long ({len(os.fsencode(longest))} bytes; most file "
-            f"systems allow {NAME_MAX})"
+            f"{text}: a name in it is too long ({longest} bytes; most file systems allow "
+            f"{NAME_MAX})"
         )
     return path
 

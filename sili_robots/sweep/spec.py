@@ -126,10 +126,10 @@ class SweepSpec:
         return Schedule.from_dict(b) if isinstance(b, dict) else float(b)
 
 
-#: agent defaults that changed after sweeps were first recorded -> the value before the change
-#: (a recorded sweep without the setting planned its runs with that value)
 #: the agent settings chosen per machine by a timing (agent/matmul.py) when not given
 TIMED = ("matmul", "sac.precision")
+#: agent defaults that changed after sweeps were first recorded -> the value before the change
+#: (a recorded sweep without the setting planned its runs with that value)
 CHANGED_DEFAULTS: dict[str, Any] = {
     "model.updates_per_interaction": 20,
     "sac.precision": "float32",  # now chosen per machine
