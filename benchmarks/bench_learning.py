@@ -39,15 +39,9 @@ from sili_robots.build import make_run_config
 from sili_robots.commands.common import parse_settings, positive_int, task_name
 from sili_robots.diagnostics import latent_diagnostics
 from sili_robots.errors import ConfigError, one_line_errors
+from sili_robots.metrics import HOLDING, first_stable, kept, kept_fraction, run_metrics
 from sili_robots.migrations import migrate_run, setting_path
-from sili_robots.runs import (
-    HOLDING,
-    MACHINE_SETTINGS,
-    first_stable,
-    kept,
-    kept_fraction,
-    run_metrics,
-)
+from sili_robots.runs import MACHINE_SETTINGS
 from sili_robots.sweep import parse_seeds
 
 MARKS = {True: "MET    ", False: "NOT MET", None: "N/A    "}

@@ -68,7 +68,7 @@ from sili_robots.commands.common import positive_int
 from sili_robots.diagnostics import change_masks, foresight_by_exit
 from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.evaluation import load_trained
-from sili_robots.runs import kept_fraction
+from sili_robots.metrics import kept_fraction
 from sili_robots.tasks.circle import ARENA, STEP, CircleEnv
 
 PHASE_STEPS = 10

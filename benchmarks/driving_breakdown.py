@@ -35,7 +35,7 @@ from sili_robots.commands.common import positive_int
 from sili_robots.diagnostics import category_strategies
 from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.evaluation import load_trained
-from sili_robots.runs import kept, kept_fraction
+from sili_robots.metrics import kept, kept_fraction
 from sili_robots.tasks.driving import DrivingEnv
 
 LANES = {0.0: "right", 1.0: "centre", 2.0: "left"}

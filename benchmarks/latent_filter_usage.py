@@ -18,7 +18,8 @@ import pandas as pd
 from sili_robots.commands.common import non_negative_int, positive_int
 from sili_robots.diagnostics import filter_corrections
 from sili_robots.errors import one_line_errors
-from sili_robots.runs import METRICS, read_config
+from sili_robots.metrics import METRICS
+from sili_robots.runs import read_config
 
 
 def main() -> None:

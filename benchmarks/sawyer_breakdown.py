@@ -32,7 +32,7 @@ from sili_robots.commands.common import positive_int
 from sili_robots.diagnostics import category_strategies
 from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.evaluation import load_trained
-from sili_robots.runs import kept
+from sili_robots.metrics import kept
 from sili_robots.tasks.sawyer_reach import SawyerReachEnv
 from sili_robots.tasks.sawyer_scene import GOALS
 

@@ -29,7 +29,7 @@ from sili_robots.bounds import stored_bounds
 from sili_robots.commands.common import positive_int
 from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.evaluation import load_trained
-from sili_robots.runs import kept
+from sili_robots.metrics import kept
 from sili_robots.tasks.speaker_listener import VISIT_RADIUS, SpeakerListenerEnv
 
 

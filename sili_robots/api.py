@@ -43,13 +43,11 @@ from sili_robots.build import (
 )
 from sili_robots.errors import ConfigError, check_count
 from sili_robots.evaluation import AgentFeedback, check_same_task, evaluate, fitting
+from sili_robots.metrics import COMPRESSED_METRICS, METRICS, MetricsWriter
 from sili_robots.runs import (
     CHECKPOINT,
-    COMPRESSED_METRICS,
     CONFIG,
-    METRICS,
     SUMMARY,
-    MetricsWriter,
     RunConfig,
     check_new_run_dir,
     clear_run,

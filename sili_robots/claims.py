@@ -46,8 +46,8 @@ import numpy as np
 import pandas as pd
 
 from sili_robots.bounds import stored_bounds
+from sili_robots.metrics import HOLDING, first_stable
 from sili_robots.paper_grid import SWEEP_BETAS, TASKS, Block, block
-from sili_robots.runs import HOLDING, first_stable
 from sili_robots.tasks import task_spec
 
 WINDOW = 100

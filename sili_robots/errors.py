@@ -69,6 +69,12 @@ def check_count(name: str, value: object, low: int = 1, high: int | None = None)
     return int(value)
 
 
+def first_line(err: Exception) -> str:
+    """An error as one line of a message: its type and first sentence (a damaged file's
+    ``pickle`` or ``pandas`` error runs on over many)."""
+    return f"{type(err).__name__}: {str(err).split('. ')[0]}"
+
+
 def is_number(value: object) -> bool:
     """A real number, numpy's too (``np.float32(0.1)``), and not a bool."""
     return not isinstance(value, bool) and isinstance(value, numbers.Real)

@@ -1,24 +1,19 @@
-"""Run directories: the resolved config, a tidy per-interaction CSV, and checkpoints.
+"""Run directories: the resolved config, checkpoints, and the files that say a run's state.
 
 A run directory holds ``config.json`` (everything needed to rebuild the run, plus package
-versions), ``metrics.csv`` (one row per interaction), ``checkpoint.pt`` (written atomically
-every ``checkpoint_every`` interactions) and, once finished, ``summary.json``.
+versions: ``provenance``), ``metrics.csv`` (one row per interaction: ``metrics``),
+``checkpoint.pt`` (written atomically every ``checkpoint_every`` interactions) and, once
+finished, ``summary.json``.
 """
 
 from __future__ import annotations
 
 import contextlib
-import csv
-import functools
-import hashlib
 import io
 import json
-import os
 import pickle
-import platform
 import re
 import shutil
-import subprocess
 from collections.abc import Collection
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -28,117 +23,19 @@ import torch
 
 from sili_robots.addons.config import AddonsConfig
 from sili_robots.agent.config import AgentConfig, set_path
-from sili_robots.atomic import replacing, write_bytes, write_text
-from sili_robots.errors import ConfigError, check_count, check_seed, writing
+from sili_robots.atomic import write_bytes, write_text
+from sili_robots.errors import ConfigError, check_count, check_seed, first_line
+from sili_robots.metrics import COMPRESSED_METRICS, METRIC_COLUMNS, METRICS
 from sili_robots.migrations import migrate_agent_state, migrate_run, setting_path
+from sili_robots.provenance import REVISION, versions
 
-CONFIG, METRICS, CHECKPOINT, SUMMARY = "config.json", "metrics.csv", "checkpoint.pt", "summary.json"
+CONFIG, CHECKPOINT, SUMMARY = "config.json", "checkpoint.pt", "summary.json"
 #: what to do about a damaged file (``read_json``)
 DAMAGED_CONFIG = "it is not a run's config: train the run again"
 DAMAGED_SUMMARY = (
     "delete it, then resume the run from its checkpoint (sili train --resume or sili sweep "
     "--resume), or collect a collected one again"
 )
-COMPRESSED_METRICS = f"{METRICS}.gz"  # a run kept small (``sili collect``)
-DAMAGED_METRICS = (
-    "restore it, or train the run again (sili train --overwrite; in a sweep, delete the run's "
-    "folder and resume; in a collection, collect it again)"
-)
-#: the columns every reader of a run's history needs, numbers all
-READ_COLUMNS = ("interaction", "task_reward", "strategy_changed")
-
-
-#: the columns written on every row (the losses are blank before their first update, and
-#: filter_step without a latent filter): a blank one is a row cut short
-FILLED_COLUMNS = (
-    "interaction",
-    "task_reward",
-    "stability_reward",
-    "strategy_changed",
-    "strategy_id",
-    "latent_category",
-    "latent_changed",
-    "beta",
-)
-METRIC_COLUMNS = (
-    *FILLED_COLUMNS,
-    "latent_loss",
-    "critic_loss",
-    "actor_loss",
-    "alpha",
-    "wall_time",
-    "filter_step",
-)
-
-
-def kept(rows: Any) -> Any:
-    """Per interaction of metrics ``rows`` (a DataFrame): 1 where the true strategy stayed, 0
-    where it changed, NaN for the game's first (interaction 0), which has no strategy before it
-    to keep (as ``sili bounds`` counts)."""
-    return (1.0 - rows["strategy_changed"]).where(rows["interaction"] > 0)
-
-
-def kept_fraction(rows: Any) -> float | None:
-    """True stability of metrics ``rows``: the mean of ``kept``; None when no row is left."""
-    stayed = kept(rows).dropna()
-    return float(stayed.mean()) if len(stayed) else None
-
-
-#: the true stability at which a run holds the opponent (verdicts, claims and benchmarks)
-HOLDING = 0.9
-
-
-def first_stable(stability: Any, window: int = 50) -> int | None:
-    """Where the first ``window``-interaction window of ``stability`` (an array, one value per
-    interaction; a NaN spoils its windows) with mean >= ``HOLDING`` starts; None: none does."""
-    import numpy as np
-
-    stability = np.asarray(stability, float)
-    if len(stability) < window:
-        return None
-    sums = np.convolve(stability, np.ones(window), mode="valid")  # whole counts: 90 of 100
-    hits = np.flatnonzero(sums >= HOLDING * window - 1e-9)  # holds, as kept_fraction says
-    return int(hits[0]) if len(hits) else None
-
-
-def read_metrics(path: Path) -> Any:
-    """A run's per-interaction rows (``metrics.csv`` or its gzipped copy) as a DataFrame;
-    ConfigError naming the file when it is damaged (cut, overwritten, not a run's history)."""
-    import pandas as pd
-
-    try:
-        df = pd.read_csv(path, float_precision="round_trip")  # the values written, to the bit
-        missing = [c for c in READ_COLUMNS if c not in df.columns]
-        if missing:
-            raise ValueError(f"no column {', '.join(missing)}")
-        filled = [c for c in FILLED_COLUMNS if c in df.columns]
-        if len(df) and df[filled].iloc[-1].isna().any():  # a last row cut short (a run stopped
-            # mid-write): resume drops it; read again, so the columns' types are the rows' own
-            df = pd.read_csv(path, float_precision="round_trip", nrows=len(df) - 1)
-        for column in READ_COLUMNS:
-            pd.to_numeric(df[column])
-        for column in filled:
-            blank = df[column].isna()
-            if blank.any():  # line numbers as an editor shows them: the header is line 1
-                raise ValueError(f"line {int(blank.to_numpy().argmax()) + 2} has no {column}")
-    except (ValueError, TypeError, EOFError, OSError) as err:  # pandas' errors are ValueErrors
-        raise ConfigError(f"{path} is damaged ({_first_line(err)}); {DAMAGED_METRICS}") from None
-    return df
-
-
-def metrics_file(run_dir: Path) -> Path | None:
-    """A run's ``metrics.csv``, or the gzipped copy a results collection keeps (None: neither)."""
-    for path in (run_dir / METRICS, run_dir / COMPRESSED_METRICS):
-        if path.is_file():
-            return path
-    return None
-
-
-def run_metrics(run_dir: Path) -> Any:
-    """The run's per-interaction rows (``read_metrics`` of ``metrics_file``); None when it
-    logged none."""
-    path = metrics_file(Path(run_dir))
-    return None if path is None else read_metrics(path)
 
 
 @dataclass
@@ -238,102 +135,6 @@ def recorded_task_id(run: dict[str, Any]) -> str | None:
         return first_version(run["task"]).gym_id
     except ConfigError:
         return None
-
-
-#: the libraries behind the tasks' dynamics and the agent's numbers beyond torch and numpy
-#: (recorded where installed): simulators, solvers, SciPy (category matching, k-means)
-RECORDED_PACKAGES = (
-    "mujoco",
-    "robosuite",
-    "mink",
-    "qpsolvers",
-    "daqp",
-    "libsumo",
-    "eclipse-sumo",
-    "traci",
-    "scipy",
-)
-
-
-#: ``versions`` key of the code's git revision (``code_revision``)
-REVISION = "sili_robots_revision"
-
-
-#: the checkout this package runs from, if it does
-CHECKOUT = Path(__file__).resolve().parents[1]
-
-
-@functools.cache
-def code_revision(root: Path = CHECKOUT) -> str | None:
-    """This package's git commit when it runs from a checkout, ``+`` a digest of its local
-    changes to the package's code when there are any (edits elsewhere, e.g. to results or
-    docs, do not count; nor do untracked files but Python modules, such as an editor's); None
-    when installed otherwise or git cannot tell. Its version number alone does not change with
-    every change of its numbers."""
-    if not (root / ".git").exists():
-        return None
-    git = ["git", "-C", str(root), "-c", f"safe.directory={root}", "--no-optional-locks"]
-    status = ["status", "--porcelain=v1", "-z", "--no-renames", "--untracked-files=all"]
-    try:  # (no index lock: a sweep's workers ask at once)
-        commit, changes = (
-            subprocess.run([*git, *ask], capture_output=True, timeout=30, check=True).stdout
-            for ask in (["rev-parse", "HEAD"], [*status, "--", "sili_robots"])
-        )
-    except (OSError, subprocess.SubprocessError):
-        return None
-    changed = sorted(
-        entry[3:]
-        for entry in changes.split(b"\0")
-        if entry and (not entry.startswith(b"??") or entry.endswith(b".py"))
-    )
-    head = commit.decode().strip()[:12]
-    return f"{head}+{_digest(root, changed)}" if changed else head
-
-
-def _digest(root: Path, names: list[bytes]) -> str:
-    """12 hex digits of the files' names and contents as they are now (a removed or unreadable
-    one by its name and state)."""
-    digest = hashlib.sha256()
-    for name in names:
-        path = root / os.fsdecode(name)
-        digest.update(name + b"\0")
-        try:
-            if path.is_symlink():
-                digest.update(os.fsencode(os.readlink(path)))
-            elif path.is_file():
-                digest.update(hashlib.sha256(path.read_bytes()).digest())  # package files: small
-            else:
-                digest.update(b"absent")
-        except OSError:
-            digest.update(b"unreadable")
-    return digest.hexdigest()[:12]
-
-
-def versions(threads: int = 1) -> dict[str, str]:
-    """The software and the processor a run used: seeded runs repeat exactly only on the same
-    code (``sili_robots_revision``), the same kernels, which torch picks by CPU, instruction-set
-    cap and thread count (``machine``), and the same libraries."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    import gymnasium
-    import numpy
-
-    import sili_robots
-    from sili_robots.agent.matmul import machine_key
-
-    found = {
-        "machine": machine_key(threads),
-        "sili_robots": sili_robots.__version__,
-        **({REVISION: code_revision()} if code_revision() else {}),
-        "torch": torch.__version__,
-        "numpy": numpy.__version__,
-        "gymnasium": gymnasium.__version__,
-        "python": platform.python_version(),
-    }
-    for name in RECORDED_PACKAGES:
-        with contextlib.suppress(PackageNotFoundError):
-            found[name] = version(name)
-    return found
 
 
 #: written by a failed sweep run (the traceback or how its worker died); removed when it succeeds
@@ -484,7 +285,7 @@ def read_json(path: Path, what: str, *keys: str) -> dict[str, Any]:
     try:
         data = json.loads(Path(path).read_text())
     except ValueError as err:
-        raise ConfigError(f"{path} is damaged ({_first_line(err)}); {what}") from None
+        raise ConfigError(f"{path} is damaged ({first_line(err)}); {what}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{path} is damaged (not a JSON object); {what}")
     missing = [k for k in keys if k not in data]
@@ -508,7 +309,7 @@ def read_config(run_dir: Path) -> RunConfig:
     except (ConfigError, TypeError, KeyError, AttributeError, ValueError) as err:
         import sili_robots
 
-        why = str(err) if isinstance(err, ConfigError) else _first_line(err)
+        why = str(err) if isinstance(err, ConfigError) else first_line(err)
         newer = _newer_writer(data, sili_robots.__version__)
         if newer is not None:  # settings this version does not know, not damage
             raise ConfigError(
@@ -569,114 +370,12 @@ def differences(a: Any, b: Any, prefix: str = "") -> list[tuple[str, Any, Any]]:
     return [] if a == b else [(prefix[:-1], a, b)]
 
 
-def check_history(
-    run_dir: Path,
-    interactions: int,
-    columns: Collection[str] = METRIC_COLUMNS,
-    plugins: str = "",
-) -> None:
-    """Refuse to resume a run whose ``metrics.csv`` lacks rows its checkpoint has trained (the
-    file lost or cut short): the run would go on with a hole in its record. ``columns``: those
-    the run writes (``RunConfig.metric_columns``), ``plugins`` its own add-ons."""
-    path = Path(run_dir) / METRICS
-    rows = 0
-    if path.is_file():
-        cut = None  # the line of a trained row cut short (it would be kept as it is)
-        try:
-            with path.open(newline="") as f:
-                reader = csv.DictReader(f)
-                for row in reader:
-                    rows += 1
-                    short = None in row.values() or None in row  # too few fields, or too many
-                    if short and cut is None and rows <= interactions:
-                        cut = reader.line_num
-                found = set(reader.fieldnames or ())
-                unknown = found - set(columns)
-            if cut is None and 0 < rows <= interactions and not _ends_a_line(path):
-                cut = reader.line_num  # the last row lost its end
-        except (UnicodeDecodeError, csv.Error) as err:
-            found, unknown = set(), {_first_line(err)}
-        if cut is not None:
-            raise ConfigError(
-                f"{path} is damaged (line {cut} is cut short, a row of the {interactions} "
-                f"interactions its checkpoint has trained); {DAMAGED_METRICS}"
-            )
-        if unknown and plugins and set(METRIC_COLUMNS) <= found:  # an add-on's columns
-            raise ConfigError(
-                f"{path} has columns {', '.join(sorted(unknown))} that no add-on of the run "
-                f"({plugins}) declares in its metric_columns now; declare them again to "
-                "resume it"
-            )
-        if unknown:  # it would not take the run's next rows
-            raise ConfigError(
-                f"{path} is damaged (not a run's history: {', '.join(sorted(unknown))}); "
-                f"{DAMAGED_METRICS}"
-            )
-    if rows < interactions:
-        state = f"holds {rows} rows" if path.is_file() else "is missing"
-        raise ConfigError(
-            f"{run_dir}: its checkpoint is at interaction {interactions} but its {METRICS} "
-            f"{state}; resuming would leave a hole in its record: restore {METRICS}, or train "
-            "it again (sili train --overwrite; in a sweep, delete the run's folder and resume)"
-        )
-
-
-def _ends_a_line(path: Path) -> bool:
-    with path.open("rb") as f:
-        f.seek(-1, os.SEEK_END)
-        return f.read(1) == b"\n"
-
-
-class MetricsWriter:
-    """Append-only CSV of ``columns`` (``RunConfig.metric_columns``); on resume, rows past the
-    checkpoint are dropped first."""
-
-    def __init__(
-        self, run_dir: Path, columns: tuple[str, ...] = METRIC_COLUMNS, keep_rows: int | None = None
-    ) -> None:
-        self.path = Path(run_dir) / METRICS
-        self.columns = columns
-        if keep_rows is not None and self.path.exists():
-            with self.path.open() as f:
-                rows = list(csv.DictReader(f))[:keep_rows]
-            self._rewrite(rows)
-        else:
-            self._rewrite([])
-        self._file = self.path.open("a", newline="")
-        self._writer = csv.DictWriter(self._file, self.columns)
-
-    def _rewrite(self, rows: list[dict[str, str]]) -> None:
-        with replacing(self.path) as tmp, tmp.open("w", newline="") as f:
-            w = csv.DictWriter(f, self.columns)
-            w.writeheader()
-            w.writerows(rows)
-
-    def write(self, row: dict[str, Any]) -> None:
-        with writing(self.path):
-            self._writer.writerow({k: row.get(k, "") for k in self.columns})
-            self._file.flush()
-
-    def sync(self) -> None:
-        """On disk, before a checkpoint that counts these rows is: after a crash of the machine
-        the history still holds every interaction the checkpoint has trained."""
-        with writing(self.path):
-            os.fsync(self._file.fileno())
-
-    def close(self) -> None:
-        with writing(self.path):
-            self._file.close()
-
-
 def save_checkpoint(run_dir: Path, state: dict[str, Any]) -> None:
     """Write atomically: a kill during the write leaves the previous checkpoint intact. Made in
     memory first: torch's own file writer reports a full disk as "unexpected pos"."""
     data = io.BytesIO()
     torch.save(state, data)
     write_bytes(Path(run_dir) / CHECKPOINT, data.getbuffer())
-
-
-def _first_line(err: Exception) -> str:
-    return f"{type(err).__name__}: {str(err).split('. ')[0]}"
 
 
 def check_resumable(run_dir: Path) -> None:
@@ -725,7 +424,7 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
         state["agent"] = migrate_agent_state(state["agent"])
     except (pickle.UnpicklingError, RuntimeError, EOFError, ValueError, KeyError, TypeError) as err:
         raise ConfigError(
-            f"{path} is damaged ({_first_line(err)}); the run can be neither resumed nor "
+            f"{path} is damaged ({first_line(err)}); the run can be neither resumed nor "
             "played from it: train it again (sili train ... --overwrite)"
         ) from None
     task = state.get("task")  # recorded since checkpoints name their task

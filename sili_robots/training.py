@@ -19,19 +19,15 @@ from sili_robots.diagnostics import latent_diagnostics
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import fitting
 from sili_robots.memory import capped_at_available
+from sili_robots.metrics import METRICS, MetricsWriter, check_history, kept_fraction, read_metrics
 from sili_robots.progress import TrainingProgress
 from sili_robots.rollout import play_interaction
 from sili_robots.runs import (
-    METRICS,
     SUMMARY,
-    MetricsWriter,
     RunConfig,
-    check_history,
     check_resumable,
-    kept_fraction,
     load_checkpoint,
     read_config,
-    read_metrics,
     record_continuation,
     save_checkpoint,
     set_target,

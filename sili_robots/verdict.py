@@ -11,16 +11,8 @@ import pandas as pd
 from sili_robots.bounds import stored_bounds
 from sili_robots.errors import ConfigError
 from sili_robots.labels import METHOD_NAMES
-from sili_robots.runs import (
-    HOLDING,
-    MACHINE_SETTINGS,
-    METRICS,
-    RunConfig,
-    differences,
-    kept_fraction,
-    read_config,
-    run_metrics,
-)
+from sili_robots.metrics import HOLDING, METRICS, kept_fraction, run_metrics
+from sili_robots.runs import MACHINE_SETTINGS, RunConfig, differences, read_config
 from sili_robots.tasks.registry import other_task_arguments
 
 

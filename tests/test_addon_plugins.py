@@ -135,7 +135,7 @@ def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, caps
 
 
 def test_a_history_with_a_column_of_no_add_on_is_damaged_unless_the_run_has_add_ons(tmp_path):
-    from sili_robots.runs import METRIC_COLUMNS, check_history
+    from sili_robots.metrics import METRIC_COLUMNS, check_history
 
     (tmp_path / "metrics.csv").write_text(",".join([*METRIC_COLUMNS, "my_note"]) + "\n")
     with pytest.raises(ConfigError, match="is damaged"):

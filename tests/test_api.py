@@ -339,7 +339,7 @@ def test_save_copies_the_history_its_checkpoint_has_trained(tmp_path):
 
 
 def test_a_kept_history_counts_records_not_lines(tmp_path):
-    from sili_robots.runs import MetricsWriter
+    from sili_robots.metrics import MetricsWriter
 
     writer = MetricsWriter(tmp_path, ("interaction", "note"))
     for j, note in enumerate(["line1\nline2", "b", "c"]):  # an add-on's text with a newline

@@ -11,8 +11,8 @@ from disk_helpers import file_size_limit
 
 from sili_robots.atomic import replacing, write_text
 from sili_robots.commands.claims import END, START, write_block
+from sili_robots.metrics import MetricsWriter
 from sili_robots.plotting import save_figure
-from sili_robots.runs import MetricsWriter
 
 
 def test_a_failed_write_leaves_the_old_file_and_no_temporary(tmp_path):
@@ -68,11 +68,11 @@ def test_the_new_file_is_on_disk_before_it_replaces_the_old(tmp_path, monkeypatc
 def test_training_syncs_its_history_before_each_checkpoint(tmp_path, monkeypatch):
     from fast_settings import FAST_AGENT
 
-    from sili_robots import runs, training
+    from sili_robots import metrics, training
     from sili_robots.build import make_run_config
 
     events: list[str] = []
-    sync, save = runs.MetricsWriter.sync, training.save_checkpoint
+    sync, save = metrics.MetricsWriter.sync, training.save_checkpoint
 
     def synced(self) -> None:
         events.append(f"metrics {len(self.path.read_text().splitlines()) - 1}")
@@ -82,7 +82,7 @@ def test_training_syncs_its_history_before_each_checkpoint(tmp_path, monkeypatch
         events.append(f"checkpoint {state['interaction']}")
         save(run_dir, state)
 
-    monkeypatch.setattr(runs.MetricsWriter, "sync", synced)
+    monkeypatch.setattr(metrics.MetricsWriter, "sync", synced)
     monkeypatch.setattr(training, "save_checkpoint", saved)
     cfg = make_run_config("circle-3", "sac", 0, 4, settings=FAST_AGENT, checkpoint_every=2)
     training.train(cfg, tmp_path / "run", progress=False)

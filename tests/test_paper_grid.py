@@ -174,7 +174,7 @@ def test_a_run_collected_back_into_a_sweep_replaces_a_shorter_training_there(
 ):
     """`sili grid` copies collected runs back into its sweep: a shorter training left in a run's
     folder must not stay beside the copy, where its rows would be read first."""
-    from sili_robots.runs import metrics_file
+    from sili_robots.metrics import metrics_file
     from sili_robots.sweep.collect import collect
     from sili_robots.sweep.state import run_state
 

@@ -827,7 +827,7 @@ def test_without_tensorboard_no_scalars_are_written(tmp_path, monkeypatch):
 def test_tensorboard_tail_skips_rows_a_resume_drops_and_waits_for_whole_lines(tmp_path):
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    from sili_robots.runs import METRIC_COLUMNS
+    from sili_robots.metrics import METRIC_COLUMNS
 
     def row(j, reward):
         values = {"interaction": j, "task_reward": reward, "strategy_changed": j % 2}

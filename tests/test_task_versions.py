@@ -268,7 +268,8 @@ def test_runs_record_their_task_version_and_older_records_ran_v0(tmp_path):
 
     from sili_robots.agent import method_config
     from sili_robots.build import make_run_env
-    from sili_robots.runs import METRIC_COLUMNS, RunConfig, read_config, write_config
+    from sili_robots.metrics import METRIC_COLUMNS
+    from sili_robots.runs import RunConfig, read_config, write_config
     from sili_robots.sweep import SweepSpec, expand
     from sili_robots.sweep.results import results_table
     from sili_robots.sweep.state import check_existing, run_path

@@ -25,14 +25,9 @@ from sili_robots.addons import LatentFilter
 from sili_robots.cli import main
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import AgentFeedback, evaluate, load_trained
-from sili_robots.runs import (
-    code_revision,
-    load_checkpoint,
-    read_metrics,
-    record_continuation,
-    save_checkpoint,
-    set_target,
-)
+from sili_robots.metrics import read_metrics
+from sili_robots.provenance import code_revision
+from sili_robots.runs import load_checkpoint, record_continuation, save_checkpoint, set_target
 from sili_robots.sweep.state import run_state
 from sili_robots.training import extend, resume, write_summary
 

@@ -80,7 +80,7 @@ def test_a_run_that_never_left_its_random_actions_says_its_policy_has_not_traine
 def test_true_stability_leaves_out_the_games_first_interaction_everywhere(tmp_path):
     """Interaction 0 has no strategy before it to keep: counted as kept, a 3-interaction run
     that lost the opponent once would report 67% where ``sili bounds`` counts 50%."""
-    from sili_robots.runs import kept_fraction
+    from sili_robots.metrics import kept_fraction
     from sili_robots.sweep.results import results_table
     from sili_robots.training import write_summary
 
@@ -208,7 +208,7 @@ def test_seeds_trained_with_another_machines_kernels_are_judged_together(tmp_pat
 def test_a_window_of_exactly_90_percent_holds_wherever_its_changes_fall():
     """The verdicts' plain mean and first_stable's windows agree at the threshold: 9 kept of 10
     (or 90 of 100) holds, however floating point would sum the window's fractions."""
-    from sili_robots.runs import first_stable
+    from sili_robots.metrics import first_stable
 
     rng = np.random.default_rng(0)
     for window in (10, 50, 100):

@@ -20,19 +20,21 @@ from typing import Any
 
 from sili_robots.atomic import write_bytes
 from sili_robots.errors import ConfigError
+from sili_robots.metrics import (
+    COMPRESSED_METRICS,
+    DAMAGED_METRICS,
+    METRICS,
+    metrics_file,
+    read_metrics,
+)
 from sili_robots.runs import (
     CHECKPOINT,
-    COMPRESSED_METRICS,
     CONFIG,
-    DAMAGED_METRICS,
     DAMAGED_SUMMARY,
     ERROR_FILE,
-    METRICS,
     SUMMARY,
     differences,
-    metrics_file,
     read_json,
-    read_metrics,
     recorded_run,
 )
 from sili_robots.sweep.results import run_identity, runs_of

@@ -26,8 +26,8 @@ from rich.progress import (
 from rich.table import Column
 from rich.text import Text
 
+from sili_robots.metrics import METRICS
 from sili_robots.progress import numbers_column
-from sili_robots.runs import METRICS
 from sili_robots.sweep.worker import Job, Outcome
 
 

@@ -21,18 +21,16 @@ from sili_robots.agent.schedule import Schedule
 from sili_robots.atomic import replacing
 from sili_robots.errors import ConfigError, is_number
 from sili_robots.labels import shell_path
+from sili_robots.metrics import METRIC_COLUMNS, kept, run_metrics
 from sili_robots.migrations import migrate_run
 from sili_robots.runs import (
     CONFIG,
     DAMAGED_CONFIG,
     DAMAGED_SUMMARY,
     ERROR_FILE,
-    METRIC_COLUMNS,
     SUMMARY,
-    kept,
     read_json,
     recorded_task_id,
-    run_metrics,
 )
 from sili_robots.sweep.state import RESULTS, RUNS_DIR, RUNS_TABLE
 from sili_robots.tasks.registry import task_arguments_key, task_defaults

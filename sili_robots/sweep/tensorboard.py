@@ -23,7 +23,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from sili_robots.runs import METRIC_COLUMNS, METRICS, TB_DIR
+from sili_robots.metrics import METRIC_COLUMNS, METRICS
+from sili_robots.runs import TB_DIR
 
 #: metrics.csv column -> TensorBoard tag (true stability is derived: 1 - strategy_changed)
 TAGS = {
@@ -62,7 +63,7 @@ class MetricsTail:
     """Mirror ``metrics.csv`` into TensorBoard event files, polling every ``interval`` seconds.
 
     Waits until the training loop has (re)created the CSV (a new file, see
-    ``runs.MetricsWriter``) so rows a resume is about to drop are never mirrored.
+    ``metrics.MetricsWriter``) so rows a resume is about to drop are never mirrored.
     """
 
     def __init__(self, run_dir: Path, interval: float = 2.0) -> None:
