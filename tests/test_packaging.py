@@ -1,6 +1,7 @@
 """What ``pip install`` delivers: the wheel holds every module, the packaged bounds and the
 license, reports the one version the code states, and requires every library the package
-imports (one it only reached through another library's requirements could vanish with it)."""
+imports (one it only reached through another library's requirements could vanish with it);
+the source distribution holds the package, not tests that need the rest of the repository."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import ast
 import shutil
 import subprocess
 import sys
+import tarfile
 import zipfile
 from pathlib import Path
 
@@ -94,6 +96,33 @@ def test_the_wheel_holds_every_module_the_bounds_and_the_license(wheel: zipfile.
     assert modules - names == set()
     assert "sili_robots/tasks/bounds.json" in names
     assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
+
+
+@pytest.fixture(scope="module")
+def sdist(tmp_path_factory: pytest.TempPathFactory) -> tarfile.TarFile:
+    """The source distribution, built from a copy of the checkout's files it could take."""
+    src = tmp_path_factory.mktemp("sdist-src")
+    for name in ("pyproject.toml", "README.md", "LICENSE", "MANIFEST.in"):
+        shutil.copy(ROOT / name, src / name)
+    for name in ("sili_robots", "tests"):
+        shutil.copytree(ROOT / name, src / name, ignore=shutil.ignore_patterns("__pycache__"))
+    out = src / "dist"
+    build = f"from setuptools import build_meta; build_meta.build_sdist({str(out)!r})"
+    subprocess.run(
+        [sys.executable, "-c", build], cwd=src, check=True, capture_output=True, timeout=300
+    )
+    (path,) = out.glob("*.tar.gz")
+    return tarfile.open(path)
+
+
+def test_the_sdist_holds_the_package_and_no_tests_cut_from_their_repository(
+    sdist: tarfile.TarFile,
+) -> None:
+    names = {name.split("/", 1)[1] for name in sdist.getnames() if "/" in name}
+    modules = {p.relative_to(PACKAGE.parent).as_posix() for p in PACKAGE.rglob("*.py")}
+    assert modules - names == set()
+    assert {"sili_robots/tasks/bounds.json", "LICENSE", "README.md"} <= names
+    assert not [name for name in names if name.startswith("tests/")]  # they need the checkout
 
 
 def _metadata(wheel: zipfile.ZipFile) -> list[str]:
