@@ -158,3 +158,37 @@ def test_sumo_comes_from_the_wheel_and_netconvert_builds_the_network(tmp_path: P
         "road.rou.xml",
         "road.sumocfg",
     }
+
+
+def test_a_killed_process_session_folder_is_removed_by_the_next_one(tmp_path: Path):
+    """SIGKILL (a sweep stopping its worker, AsyncVectorEnv.close(terminate=True)) runs no
+    clean-up: the next Driving session on the machine removes that folder, not a live one's."""
+    env = {**os.environ, "TMPDIR": str(tmp_path)}
+    start = """
+        import os, signal, sys, time
+        from sili_robots.tasks.driving import DrivingEnv
+
+        env = DrivingEnv()
+        env.reset(seed=0)
+        print(env.session.workdir, flush=True)
+        {then}
+        """
+    live = subprocess.Popen(
+        [sys.executable, "-c", textwrap.dedent(start.format(then="time.sleep(120)"))],
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    try:
+        live_dir = Path(live.stdout.readline().strip())
+        killed = _python(start.format(then="os.kill(os.getpid(), signal.SIGKILL)"), env=env)
+        assert killed.returncode == -9, killed.stderr
+        killed_dir = Path(killed.stdout.strip())
+        assert killed_dir.is_dir() and live_dir.is_dir()  # no clean-up ran on the kill
+        assert _python(start.format(then="env.close()"), env=env).returncode == 0
+        assert not killed_dir.exists()
+        assert live_dir.is_dir() and (live_dir / "start-state.xml").is_file()  # still in use
+    finally:
+        live.kill()
+        live.wait()
+    assert sorted(p.name for p in tmp_path.iterdir() if "driving" in p.name) == [live_dir.name]

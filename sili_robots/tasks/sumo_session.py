@@ -45,6 +45,10 @@ class SimulationSlotError(ConfigError, RuntimeError):
 # The libsumo slot of this process: (pid, token) of the live session, or None.
 _LIBSUMO_OWNER: dict[str, Any] = {"pid": None, "token": None}
 _TOKENS = itertools.count(1)
+#: a session's folder in the temporary directory (SUMO's logs, the task's start state), and the
+#: file in it that the session keeps locked while its process lives
+WORKDIR_PREFIX = "sili-driving-"
+WORKDIR_LOCK = "session.lock"
 
 
 def _sumo_exceptions() -> tuple[type[BaseException], ...]:
@@ -74,7 +78,7 @@ class SumoSession:
         token = next(_TOKENS)
         if backend == "libsumo":
             _claim_libsumo(token)
-        self.workdir = Path(tempfile.mkdtemp(prefix="sili-driving-"))
+        self.workdir, self._lock = _make_workdir()
         self.error_log = self.workdir / "sumo-errors.log"
         cmd = [binary, "-c", str(files.config), "--error-log", str(self.error_log)]
         connection = None
@@ -101,14 +105,15 @@ class SumoSession:
                 connection = traci.getConnection(label)
                 self.api = connection
         except BaseException as exc:  # give the slot back whatever went wrong
-            _shutdown(backend, connection, token, self.workdir, keep_workdir=True)
+            _shutdown(backend, connection, token, self.workdir, None, keep_workdir=True)
             message = self._sumo_message(exc) if isinstance(exc, self._errors) else None
             shutil.rmtree(self.workdir, ignore_errors=True)
+            _release(self._lock)  # (held until its logs are read)
             if message is None:
                 raise
             raise SumoError(f"SUMO could not start ({backend}): {message}") from None
         self._finalizer = weakref.finalize(
-            self, _shutdown, backend, connection, token, self.workdir, False
+            self, _shutdown, backend, connection, token, self.workdir, self._lock, False
         )
 
     @contextlib.contextmanager
@@ -141,6 +146,38 @@ class SumoSession:
             return
         self.closed = True
         self._finalizer()
+
+
+def _make_workdir() -> tuple[Path, int | None]:
+    """A new session folder, locked (the descriptor returned) while this process lives: the
+    kernel drops the lock when the process dies, also on a kill, which runs no clean-up. The
+    folders whose lock nobody holds were left so, and are removed first."""
+    import fcntl
+
+    root = Path(tempfile.gettempdir())
+    for folder in root.glob(f"{WORKDIR_PREFIX}*"):
+        try:
+            held = os.open(folder / WORKDIR_LOCK, os.O_WRONLY)
+        except OSError:
+            continue  # no lock file (not a session's), or another user's
+        try:
+            fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            continue  # locked: a live session's
+        finally:
+            os.close(held)  # (the lock, if taken, goes with it)
+        shutil.rmtree(folder, ignore_errors=True)
+    new = Path(tempfile.mkdtemp(prefix=f".{WORKDIR_PREFIX}"))  # hidden from the scan until
+    lock: int | None = os.open(new / WORKDIR_LOCK, os.O_CREAT | os.O_WRONLY, 0o600)  # locked
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:  # a file system without locks: the folder is never taken for a leftover
+        os.close(lock)
+        lock = None
+        (new / WORKDIR_LOCK).unlink()
+    workdir = new.with_name(new.name.removeprefix("."))
+    new.rename(workdir)
+    return workdir, lock
 
 
 @contextlib.contextmanager
@@ -181,7 +218,9 @@ def _claim_libsumo(token: int) -> None:
     _LIBSUMO_OWNER["token"] = token
 
 
-def _shutdown(backend: str, connection: Any, token: int, workdir: Path, keep_workdir: bool) -> None:
+def _shutdown(
+    backend: str, connection: Any, token: int, workdir: Path, lock: int | None, keep_workdir: bool
+) -> None:
     """Close the simulation; also run by the garbage collector for a never-closed session."""
     if backend == "libsumo":
         if _LIBSUMO_OWNER["token"] == token and _LIBSUMO_OWNER["pid"] == os.getpid():
@@ -197,3 +236,10 @@ def _shutdown(backend: str, connection: Any, token: int, workdir: Path, keep_wor
             connection.close()
     if not keep_workdir:
         shutil.rmtree(workdir, ignore_errors=True)
+    _release(lock)
+
+
+def _release(lock: int | None) -> None:
+    if lock is not None:
+        with contextlib.suppress(OSError):
+            os.close(lock)
