@@ -1087,6 +1087,37 @@ def test_more_threads_than_cores_is_trained_with_a_note(tmp_path, capsys, monkey
     assert "note: --threads" not in capsys.readouterr().err
 
 
+def test_kernels_slow_on_this_machine_are_trained_with_a_note(tmp_path, capsys, monkeypatch):
+    """A bfloat16 run resumed on a machine without bfloat16 units keeps its precision (its
+    numbers depend on it) and says how much slower it is there, from the kernel timings."""
+    from sili_robots.agent.matmul import machine_key
+
+    monkeypatch.setenv("SILI_ROBOTS_CACHE", str(tmp_path / "cache"))
+    (tmp_path / "cache").mkdir()
+    timed = {
+        "matmul": "aten",
+        "seconds": {"onednn": 1.2e-3, "aten": 1e-3},  # close: no note
+        "precision": "float32",
+        "precision_seconds": {"float32": 1e-3, "bfloat16": 1.03e-2},
+    }
+    (tmp_path / "cache" / "kernels.json").write_text(json.dumps({machine_key(): timed}))
+    args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "1", *FAST]
+    run = tmp_path / "bf16"
+    assert main([*args, "--set", "sac.precision=bfloat16", "--out", str(run)]) == 0
+    note = (
+        "sili train: note: sac.precision=bfloat16 is 10.3x as slow as float32 on this machine "
+        "(as timed for its default); the run keeps it, as its numbers depend on it"
+    )
+    assert note in capsys.readouterr().err
+    assert main(["train", "--resume", str(run), "--interactions", "2"]) == 0
+    assert note in capsys.readouterr().err
+    assert json.loads((run / "config.json").read_text())["run"]["agent"]["sac"]["precision"] == (
+        "bfloat16"
+    )
+    assert main([*args, "--set", "matmul=onednn", "--out", str(tmp_path / "plain")]) == 0
+    assert "as slow as" not in capsys.readouterr().err  # float32 by default, oneDNN 1.2x
+
+
 def test_a_record_or_history_damaged_in_its_content_exits_2_naming_the_file(tmp_path):
     run = tmp_path / "run"
     args = ["--task", "circle-3", "--method", "sac", "--interactions", 2, *FAST, "--out", run]

@@ -156,14 +156,30 @@ def _cached_choice(name: str, measure: Callable[[], tuple[str, dict[str, float]]
         choice, times = measure()
     finally:
         torch.set_num_threads(threads)
-    seconds = "seconds" if name == "matmul" else f"{name}_seconds"
-    cached[key] = {**entry, name: choice, seconds: times}
+    cached[key] = {**entry, name: choice, _seconds_key(name): times}
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         write_text(path, json.dumps(cached, indent=2), shared=True)
     except OSError:
         pass  # an unwritable cache only means measuring again next time
     return choice
+
+
+def _seconds_key(name: str) -> str:
+    return "seconds" if name == "matmul" else f"{name}_seconds"
+
+
+def choice_timings(name: str) -> dict[str, float]:
+    """Seconds per option behind this machine's choice ``name`` (``matmul``: a layer's forward
+    and backward; ``precision``: a SAC update), measured first if need be; {} where nothing was
+    timed (no oneDNN op) or the cache cannot be written."""
+    (default_matmul if name == "matmul" else default_precision)()
+    try:
+        entry = json.loads((cache_dir() / "kernels.json").read_text()).get(machine_key(), {})
+    except (OSError, ValueError, AttributeError):
+        return {}
+    times = entry.get(_seconds_key(name))
+    return times if isinstance(times, dict) else {}
 
 
 def default_matmul() -> str:

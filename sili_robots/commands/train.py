@@ -244,6 +244,7 @@ def run(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
         _note_threads_beyond_cores(read_config(args.resume).threads)
+        _note_slow_kernels(read_config(args.resume))
         scalars = _keeps_scalars(args.resume)
         with (
             _resume_hint(args.resume),
@@ -264,6 +265,7 @@ def run(args: argparse.Namespace) -> int:
         _check_env_builds(cfg)
         make_run_dir(args.out)
         _note_threads_beyond_cores(cfg.threads)
+        _note_slow_kernels(cfg)
         # again with the claim: a run may have started and ended there since
         ready = functools.partial(
             ready_new_run_dir, args.out, args.overwrite, resume=f"--resume {quoted}"
@@ -303,6 +305,28 @@ def _note_threads_beyond_cores(threads: int) -> None:
             f"process may use: the run is slower than with --threads {cores}",
             file=sys.stderr,
         )
+
+
+#: how much slower than this machine's choice a run's kernels are before a note says so
+SLOW_KERNELS = 1.5
+
+
+def _note_slow_kernels(cfg: RunConfig) -> None:
+    """A run keeps the kernels it began with (they decide how it rounds), also resumed on a
+    machine where they are slow (bfloat16 products without bfloat16 units: ~10x); say so."""
+    from sili_robots.agent.matmul import choice_timings
+
+    for name, value in (("matmul", cfg.agent.matmul), ("precision", cfg.agent.sac.precision)):
+        times = choice_timings(name)
+        fastest = min(times, key=times.__getitem__, default=None)
+        if fastest and value in times and times[value] > SLOW_KERNELS * times[fastest]:
+            setting = "matmul" if name == "matmul" else "sac.precision"
+            print(
+                f"sili train: note: {setting}={value} is {times[value] / times[fastest]:.1f}x "
+                f"as slow as {fastest} on this machine (as timed for its default); the run "
+                "keeps it, as its numbers depend on it",
+                file=sys.stderr,
+            )
 
 
 @contextlib.contextmanager
