@@ -307,6 +307,12 @@ def test_every_latent_kind_trains(tmp_path, latent):
         (["--task", "circle-3", "--set", "sac.updates_per_step=Infinity"], "must be a finite"),
         (["--task", "circle-3", "--set", "sac.target_entropy=-Infinity"], "must be a finite"),
         (["--task", "circle-3", "--set", "hidden=1e300"], "hidden must be at most 2147483647"),
+        (["--task", "circle-3", "--set", "sili.scale=1e39"], "must be at most 3.40282e+38 in size"),
+        (["--task", "circle-3", "--set", "sac.target_entropy=-1e39"], "3.40282e+38 in size"),
+        (
+            ["--task", "circle-3", "--set", 'model.usage_bonus={"points": [[0, 1e39]]}'],
+            "value must be in [0, 3.40282e+38], got 1e+39",
+        ),
         (["--task", "circle-3", "--set", "sac.lr.x=1"], "unknown setting 'sac.lr.x'"),
         (["--task", "circle-3", "--set", 'sac.lr={"start": 0}'], "sac.lr: a schedule is"),
         (["--task", "circle-3", "--set", 'sac.lr={"points": [[0, "a"]]}'], "a schedule is"),
