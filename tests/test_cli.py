@@ -304,14 +304,18 @@ def test_beta_options_set_b_as_given():
     assert b("--beta-schedule", "250:0,300:0.5") == Schedule(((250, 0.0), (300, 0.5)))
 
 
+#: a run that a broken refusal would train is over in seconds
+BRIEF = ["--interactions", "1", "--no-progress"]
+
+
 def test_beta_and_a_set_of_b_together_exit_2(tmp_path):
-    train = ["train", "--task", "circle-3", "--out", str(tmp_path / "r")]
+    train = ["train", "--task", "circle-3", "--out", str(tmp_path / "r"), *BRIEF]
     code, _, err = _main(*train, "--beta", "0.3", "--set", "sili.beta=0.7")
     assert code == 2 and "give one of --beta and --set sili.beta, not both" in err
 
 
 def test_an_option_and_a_setting_of_the_same_thing_together_exit_2(tmp_path):
-    train = ["train", "--task", "sawyer-reach", "--out", str(tmp_path / "r")]
+    train = ["train", "--task", "sawyer-reach", "--out", str(tmp_path / "r"), *BRIEF]
     code, _, err = _main(*train, "--latent", "discrete", "--set", "latent=continuous")
     assert code == 2 and "give one of --latent and --set latent, not both" in err
     both = ["--controller", "mink", "--env-kwarg", 'controller="osc"']

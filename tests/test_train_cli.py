@@ -404,6 +404,8 @@ def test_every_latent_kind_trains(tmp_path, latent):
 )
 def test_bad_input_exits_2_without_traceback(tmp_path, args, message):
     extra = [] if "--resume" in args else ["--out", str(tmp_path / "x")]
+    if not {"--resume", "--interactions"} & set(args):  # a refusal that broke trains briefly
+        extra += ["--interactions", "1", "--no-progress"]
     res = _sili("train", *args, *extra)
     assert res.returncode == 2, res.stderr
     assert message in res.stderr
