@@ -1027,3 +1027,34 @@ def test_the_runs_table_tells_a_run_not_started_from_one_under_way(tiny_sweep, t
     status = runs_table(out).set_index("run")["status"]
     assert status[under_way] == "incomplete" and status[not_started] == "not started"
     assert status["circle-3__sili-bschedule__s0"] == "done"
+
+
+def test_a_sweep_notes_runs_whose_kernels_are_slow_on_this_machine(tmp_path, monkeypatch):
+    """As ``sili train`` does, once per kind, for the runs it will train: a sweep made on a
+    machine with bfloat16 units and resumed on one without goes on ~10x slower."""
+    from sili_robots.agent.matmul import machine_key
+
+    monkeypatch.setenv("SILI_ROBOTS_CACHE", str(tmp_path / "cache"))
+    (tmp_path / "cache").mkdir()
+    timed = {
+        "matmul": "aten",
+        "seconds": {"onednn": 1e-3, "aten": 1e-3},
+        "precision": "float32",
+        "precision_seconds": {"float32": 1e-3, "bfloat16": 4.2e-3},
+    }
+    (tmp_path / "cache" / "kernels.json").write_text(json.dumps({machine_key(): timed}))
+    out = tmp_path / "sweep"
+    args = ["sweep", "--tasks", "circle-3", "--methods", "sac", "--seeds", "0-1", *FAST_ARGS]
+    args += ["--interactions", "1", "--no-progress", "--no-tensorboard", "--workers", "1"]
+    res = sili_in_process(*args, "--set", "sac.precision=bfloat16", "--out", out)
+    note = (
+        "sili sweep: note: 2 runs train with sac.precision=bfloat16, 4.2x as slow as float32 on "
+        "this machine (as timed for its default): a run keeps its kernels"
+    )
+    assert res.returncode == 0, res.stderr
+    assert note in res.stderr
+    res = sili_in_process("sweep", "--resume", out, "--interactions", "2", "--no-progress")
+    assert res.returncode == 0, res.stderr
+    assert note in res.stderr  # extended: the runs made in bfloat16 keep it
+    res = sili_in_process("sweep", "--resume", out, "--no-progress")
+    assert res.returncode == 0 and "as slow as" not in res.stderr  # all done: none to train

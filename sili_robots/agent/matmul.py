@@ -182,6 +182,25 @@ def choice_timings(name: str) -> dict[str, float]:
     return times if isinstance(times, dict) else {}
 
 
+#: how much slower than this machine's choice a run's kernels are before a note says so
+SLOW_KERNELS = 1.5
+
+
+def slow_kernels(matmul: str, precision: str) -> list[tuple[str, float, str]]:
+    """The settings among a run's ``matmul`` and ``precision`` that are ``SLOW_KERNELS`` times
+    as slow as this machine's choice: (``"sac.precision=bfloat16"``, how many times as slow,
+    the fastest option). A run keeps its kernels wherever it goes on: they decide how it
+    rounds."""
+    found = []
+    for name, value in (("matmul", matmul), ("precision", precision)):
+        times = choice_timings(name)
+        fastest = min(times, key=times.__getitem__, default=None)
+        if fastest and value in times and times[value] > SLOW_KERNELS * times[fastest]:
+            setting = "matmul" if name == "matmul" else "sac.precision"
+            found.append((f"{setting}={value}", times[value] / times[fastest], fastest))
+    return found
+
+
 def default_matmul() -> str:
     """The faster float32 library on this machine: ``onednn`` where its products are at least
     ``ONEDNN_SPEEDUP`` times as fast, else ``aten`` (also where oneDNN's op is missing);

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import re
@@ -307,6 +308,40 @@ def _backend(args: argparse.Namespace):
     return LocalBackend(args.workers or os.cpu_count() or 1, args.retries)
 
 
+def _note_slow_kernels(specs: list[SweepSpec], sweep_dir: Path) -> None:
+    """Runs to train whose kernels are slow on this machine (``sili train``'s note, once per
+    kind): a run made elsewhere keeps the kernels it began with."""
+    from collections import Counter
+
+    from sili_robots.agent.matmul import slow_kernels
+    from sili_robots.runs import read_config
+    from sili_robots.sweep.runner import as_found, as_made, plan
+    from sili_robots.sweep.state import run_path, run_state
+
+    try:
+        planned = as_made(sweep_dir, plan(specs))
+    except ConfigError:
+        return  # the sweep itself says why
+    found: Counter[tuple[str, float, str]] = Counter()
+    for run_ in planned:
+        folder = run_path(sweep_dir, as_found(sweep_dir, run_).name)  # (an earlier version's)
+        with contextlib.suppress(ConfigError):  # (a damaged record: the sweep says so)
+            if run_state(folder) == "done" and read_config(folder).interactions >= (
+                run_.config.interactions
+            ):
+                continue  # nothing to train
+            agent = run_.config.agent
+            found.update(slow_kernels(agent.matmul, agent.sac.precision))
+    for (setting, ratio, fastest), count in found.items():
+        runs = "1 run trains" if count == 1 else f"{count} runs train"
+        print(
+            f"sili sweep: note: {runs} with {setting}, {ratio:.1f}x as slow as {fastest} on this "
+            "machine (as timed for its default): a run keeps its kernels, as its numbers depend "
+            "on them",
+            file=sys.stderr,
+        )
+
+
 def run(args: argparse.Namespace) -> int:
     from sili_robots.sweep.runner import run_sweep
     from sili_robots.sweep.state import check_sweep_dir
@@ -320,6 +355,8 @@ def run(args: argparse.Namespace) -> int:
     writable_dir(sweep_dir, "--resume" if args.resume else "--out")  # creates nothing
     if args.dry_run:
         return _dry_run(args, specs, sweep_dir)
+    if not args.ray_address:  # (a cluster's machines time their own)
+        _note_slow_kernels(specs, sweep_dir)
     report = run_sweep(
         specs,
         sweep_dir,

@@ -307,26 +307,17 @@ def _note_threads_beyond_cores(threads: int) -> None:
         )
 
 
-#: how much slower than this machine's choice a run's kernels are before a note says so
-SLOW_KERNELS = 1.5
-
-
 def _note_slow_kernels(cfg: RunConfig) -> None:
     """A run keeps the kernels it began with (they decide how it rounds), also resumed on a
     machine where they are slow (bfloat16 products without bfloat16 units: ~10x); say so."""
-    from sili_robots.agent.matmul import choice_timings
+    from sili_robots.agent.matmul import slow_kernels
 
-    for name, value in (("matmul", cfg.agent.matmul), ("precision", cfg.agent.sac.precision)):
-        times = choice_timings(name)
-        fastest = min(times, key=times.__getitem__, default=None)
-        if fastest and value in times and times[value] > SLOW_KERNELS * times[fastest]:
-            setting = "matmul" if name == "matmul" else "sac.precision"
-            print(
-                f"sili train: note: {setting}={value} is {times[value] / times[fastest]:.1f}x "
-                f"as slow as {fastest} on this machine (as timed for its default); the run "
-                "keeps it, as its numbers depend on it",
-                file=sys.stderr,
-            )
+    for setting, ratio, fastest in slow_kernels(cfg.agent.matmul, cfg.agent.sac.precision):
+        print(
+            f"sili train: note: {setting} is {ratio:.1f}x as slow as {fastest} on this machine "
+            "(as timed for its default); the run keeps it, as its numbers depend on it",
+            file=sys.stderr,
+        )
 
 
 @contextlib.contextmanager
