@@ -125,3 +125,68 @@ def test_no_nan_over_long_random_rollouts(controller):
             worst = max(worst, _joint_limit_violation(env.unwrapped))
             assert trunc == (t == 49)
     assert worst < ARM_LIMIT_TOL
+
+
+@pytest.mark.parametrize("controller", CONTROLLER_NAMES)
+def test_after_a_step_the_observed_hand_is_the_arms_current_state(controller):
+    """The kinematics are brought up to date after the last physics substep: the hand the
+    observation, reward and plane rule read is where the joints are now."""
+    import mujoco
+
+    env = make_task("sawyer-reach", controller=controller).unwrapped
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(np.array([0.0, 1.0, 0.0], np.float32))
+    model = env.scene.model
+    fresh = mujoco.MjData(model)
+    fresh.qpos[:], fresh.qvel[:] = env.scene.data.qpos, env.scene.data.qvel
+    mujoco.mj_forward(model, fresh)
+    site = fresh.site_xpos[env.scene.arm.ee_site_id]
+    np.testing.assert_allclose(env.scene.ee_pos, site, atol=1e-9)
+
+
+@pytest.mark.parametrize(("controller", "lag"), [("mink", 0.0035), ("joint_velocity", 0.01)])
+def test_the_hand_follows_a_full_speed_command_closely(controller, lag):
+    """The velocity feed-forward and the IK reference's steps toward the whole target keep the
+    hand within millimetres of its target (0.18 cm for mink, 0.38 cm for joint velocity after
+    five full-speed steps; without the feed-forward 3-4 cm)."""
+    env = make_task("sawyer-reach", controller=controller).unwrapped
+    env.reset(seed=0)
+    for _ in range(5):
+        env.step(np.array([0.0, 1.0, 0.0], np.float32))
+    assert np.linalg.norm(env.scene.ee_pos - env.controller.target) < lag
+
+
+@pytest.mark.parametrize(("controller", "drift"), [("mink", 0.08), ("osc", 0.04)])
+def test_the_arm_comes_back_to_its_start_posture(controller, drift):
+    """The posture task (mink) and OSC's nullspace pull toward the home joints keep the spare
+    seventh joint from drifting: after visiting every goal and coming back to the start, each
+    joint is within ``drift`` rad of home (0.051 and 0.008 measured)."""
+    env = make_task("sawyer-reach", controller=controller, horizon=200).unwrapped
+    env.reset(seed=0)
+    for point in [*GOALS, env.start]:
+        for _ in range(50):
+            env.step(action_toward(env, point))
+    arm = env.scene.arm
+    away = np.abs(env.scene.data.qpos[arm.qpos_adr] - arm.home_qpos[arm.qpos_adr])
+    assert away.max() < drift
+
+
+def test_held_up_out_of_reach_the_ik_reference_stays_inside_the_joint_ranges():
+    """mink's joint limits keep a margin inside the stops (35 mrad here): the reference never
+    asks the servos for a joint past its range."""
+    env = make_task("sawyer-reach", horizon=150).unwrapped
+    env.reset(seed=0)
+    m, d = env.scene.model, env.scene.data
+    for _ in range(150):
+        env.step(np.array([0.0, 0.0, 1.0], np.float32))
+        for j in range(7):
+            lo, hi = m.jnt_range[j]
+            assert lo <= d.qpos[m.jnt_qposadr[j]] <= hi, j
+
+
+def test_gravity_compensation_counts_against_the_torque_limits():
+    """Both actuations compensate gravity through the actuators (``actuatorgravcomp``), so the
+    arm's torque limits bound the compensation too, as on the robot."""
+    for actuation in ("position", "velocity"):
+        assert scene_model(actuation).jnt_actgravcomp[:7].tolist() == [1] * 7

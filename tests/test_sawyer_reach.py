@@ -222,3 +222,33 @@ def test_an_action_of_one_moves_the_hands_target_at_the_top_speed():
     dt = env.controller.arm.control_dt
     np.testing.assert_allclose(env.controller.target - before, [0.02, 0.0, -0.01], atol=1e-12)
     assert MAX_SPEED * dt == pytest.approx(0.02)
+
+
+def test_the_stabilizing_reference_rises_for_the_last_rise_steps():
+    from sili_robots.tasks.sawyer_reach import RISE_MARGIN, RISE_STEPS, stabilizing_point
+
+    env = make_task("sawyer-reach").unwrapped
+    env.reset(seed=0)
+    for _ in range(env.horizon - RISE_STEPS):
+        env.step(np.zeros(3, np.float32))
+    assert stabilizing_point(env)[2] == pytest.approx(env.plane_z + RISE_MARGIN)
+
+
+@pytest.mark.parametrize("kind", ["blind", "tracking"])
+def test_blind_and_tracking_policies_act_on_the_goal_revealed(kind):
+    """Blind stabilizes the goal the last interaction revealed; tracking waits between the
+    other two, where the goal moves (the reference bounds of both rest on it)."""
+    from sili_robots.tasks.sawyer_reach import action_toward, stabilizing_point
+
+    env = make_task("sawyer-reach")
+    task = env.unwrapped
+    policy = scripted_policy(env, kind)
+    obs, _ = env.reset(seed=0, options={"strategy": 2})
+    for _ in range(task.horizon):
+        obs, *_ = env.step(policy(env, obs))
+    obs, _ = env.reset()
+    if kind == "blind":
+        wanted = action_toward(task, stabilizing_point(task, 2))
+    else:
+        wanted = action_toward(task, GOALS[[0, 1]].mean(axis=0))
+    np.testing.assert_allclose(policy(env, obs), wanted)
