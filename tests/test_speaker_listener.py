@@ -1,11 +1,14 @@
 """Detour Speaker-Listener: the visit rule and the speaker's change probability."""
 
+import warnings
+
 import numpy as np
 
 from sili_robots.policies import scripted_policy
+from sili_robots.policies.scripted import Revealed
 from sili_robots.rollout import run_interactions
 from sili_robots.tasks import make_task
-from sili_robots.tasks.speaker_listener import MAPPINGS, SPEAKER
+from sili_robots.tasks.speaker_listener import ARENA, GOALS, MAPPINGS, SPEAKER
 from sili_robots.wrappers import StrategyFlag
 
 
@@ -88,3 +91,108 @@ def test_the_v0_mapping_changes_within_an_interaction_but_not_after_its_last_ste
         at_boundary.append(info["strategy_changed"])
     assert not any(after_last)
     assert 0.44 < np.mean(at_boundary) < 0.56
+
+
+def test_every_goal_is_drawn_about_a_third_of_the_time():
+    env = make_task("speaker-listener").unwrapped
+    env.reset(seed=0)
+    goals = [env.goal]
+    for _ in range(299):
+        env.reset()
+        goals.append(env.goal)
+    counts = np.bincount(goals, minlength=len(GOALS))
+    assert counts.min() > 0.25 * len(goals), counts
+
+
+def test_the_listener_stays_in_the_arena():
+    env = make_task("speaker-listener").unwrapped
+    env.reset(seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # an observation outside its space warns
+        for _ in range(env.horizon):
+            obs, *_ = env.step(np.array([1.0, 1.0]))
+    assert np.all(np.abs(env.position) <= ARENA)
+    np.testing.assert_allclose(obs[:2], env.position)
+
+
+def _v0_mappings(env, steps):
+    """The mapping after each of ``steps`` steps away from the speaker."""
+    out = []
+    for _ in range(steps):
+        env.step(np.array([0.0, 1.0]))
+        out.append(env.mapping)
+    return out
+
+
+def _visit_for_an_interaction(env):
+    env.position = SPEAKER.copy()
+    for _ in range(env.horizon):
+        env.step(np.zeros(2))
+
+
+def test_a_seeded_restart_forgets_a_visit_of_the_previous_game():
+    fresh = make_task("speaker-listener-v0").unwrapped
+    fresh.reset(seed=7)
+    expected = _v0_mappings(fresh, fresh.horizon)
+    env = make_task("speaker-listener-v0").unwrapped
+    env.reset(seed=0)
+    _visit_for_an_interaction(env)
+    env.reset()  # the visit locks this interaction's mapping ...
+    env.reset(seed=7)  # ... but a seeded reset starts a new game
+    assert _v0_mappings(env, env.horizon) == expected
+
+
+def test_a_saved_v0_game_keeps_the_lock_a_visit_earned():
+    env = make_task("speaker-listener-v0").unwrapped
+    env.reset(seed=1)
+    _visit_for_an_interaction(env)
+    env.reset()
+    saved = env.game_state()
+    expected = _v0_mappings(env, env.horizon)
+    fresh = make_task("speaker-listener-v0").unwrapped
+    fresh.restore_game_state(saved)
+    assert _v0_mappings(fresh, fresh.horizon) == expected
+
+
+def test_on_v1_a_visit_locks_only_its_own_interaction():
+    env = make_task("speaker-listener").unwrapped  # the interaction rule
+    env.reset(seed=0)
+    env.position = env.speaker.copy()
+    env.step(np.zeros(2))
+    assert env.locked
+    for _ in range(env.horizon - 1):
+        env.step(np.zeros(2))
+    env.reset()
+    env.step(np.array([0.0, 1.0]))
+    assert not env.visited_now and not env.locked  # it may change at the next boundary
+
+
+def test_the_blind_policy_does_not_read_the_true_mapping():
+    """Blind decodes the message with the mapping the last interaction revealed: were it to
+    read the true one, its reference bound would be an oracle's."""
+    env = make_task("speaker-listener")
+    policy = scripted_policy(env, "blind")
+    obs, _ = env.reset(seed=0)
+    before = policy(env, obs)
+    message = int(np.argmax(obs[2:5]))
+    env.unwrapped.mapping = next(
+        m for m in range(len(MAPPINGS)) if MAPPINGS[m].index(message) != MAPPINGS[0].index(message)
+    )
+    np.testing.assert_array_equal(policy(env, obs), before)
+
+
+def test_revealed_is_the_previous_interactions_last_strategy_and_none_after_a_restart():
+    env = make_task("speaker-listener-v0").unwrapped  # the mapping changes within interactions
+    revealed = Revealed()
+    env.reset(seed=0)
+    for _ in range(env.horizon):
+        revealed(env)
+        env.step(np.array([0.0, 1.0]))
+    last = env.mapping
+    env.reset()
+    assert revealed(env) == last  # where the interaction ended, not where it began
+    for _ in range(3):
+        env.step(np.zeros(2))
+        revealed(env)
+    env.reset(seed=5)
+    assert revealed(env) is None  # a new game reveals nothing yet

@@ -444,3 +444,56 @@ def test_gym_make_cannot_build_another_task_under_an_id():
     with pytest.raises(ConfigError, match=r"circle-3 fixes variant='3'.*circle-8"):
         env.reset(seed=0)
     assert gym.make("sili/Circle3-v1", variant="3").reset(seed=0)[0].shape == (3,)
+
+
+def _zeros(env: gym.Env) -> np.ndarray:
+    return np.zeros(env.action_space.shape, env.action_space.dtype)
+
+
+@pytest.mark.parametrize("task", LIGHT_TASKS)
+def test_an_action_outside_the_box_acts_as_the_clipped_action(task):
+    a, b = (make_task(task).unwrapped for _ in range(2))
+    a.reset(seed=0)
+    b.reset(seed=0)
+    high = a.action_space.high
+    signs = np.where(np.arange(high.size) % 2, -1.0, 1.0).reshape(high.shape)
+    np.testing.assert_array_equal(a.step(5 * signs * high)[0], b.step(signs * high)[0])
+
+
+@pytest.mark.parametrize("task", LIGHT_TASKS)
+def test_no_step_after_the_horizon(task):
+    env = make_task(task).unwrapped
+    env.reset(seed=0)
+    for _ in range(env.horizon):
+        env.step(_zeros(env))
+    with pytest.raises(RuntimeError, match="already ended after"):
+        env.step(_zeros(env))
+
+
+@pytest.mark.parametrize("task", LIGHT_TASKS)
+def test_a_chosen_first_strategy_plays_the_game_a_drawn_one_does(task):
+    """The first strategy is drawn even when chosen, so reset(seed, strategy=z) plays the game
+    reset(seed) plays when it draws z."""
+    a, b = (make_task(task).unwrapped for _ in range(2))
+    _, info = a.reset(seed=3)
+    b.reset(seed=3, options={"strategy": info["strategy_id"]})
+    for j in range(3):
+        if j:
+            np.testing.assert_array_equal(a.reset()[0], b.reset()[0])
+        for _ in range(a.horizon):
+            np.testing.assert_array_equal(a.step(_zeros(a))[0], b.step(_zeros(b))[0])
+
+
+@pytest.mark.parametrize("task", LIGHT_TASKS)
+def test_a_restored_game_reports_the_change_at_its_boundary(task):
+    env = make_task(task).unwrapped
+    _, info = env.reset(seed=0)
+    for _ in range(50):
+        for _ in range(env.horizon):
+            env.step(_zeros(env))
+        _, info = env.reset()
+        if info["strategy_changed"]:
+            break
+    assert info["strategy_changed"]
+    _, restored = make_task(task).unwrapped.restore_game_state(env.game_state())
+    assert restored["strategy_changed"]
