@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Iterator
 
 import gymnasium as gym
@@ -319,3 +320,57 @@ def test_the_passing_offset_is_where_the_ego_passed_not_where_it_ended(env):
     passed_at = next(ego_y for _, ego_x, ego_y, opp_x, *_ in env.substeps if opp_x <= ego_x)
     assert env.passed and env.passing_offset == passed_at
     assert abs(env.ego_y - passed_at) > 1.0  # it moved on after passing
+
+
+def test_the_passing_offset_is_taken_when_the_fronts_are_level(env):
+    """Merging as the ego passes (the fronts are level at 6.0 s): the offset is the one at the
+    SUMO step of passing, not a step later (0.2 m on)."""
+    env.reset(seed=0)
+    for t in range(env.horizon):
+        env.step(np.array([0.0 if t < 6 else 1.0], np.float32))
+    passed_at = next(ego_y for _, ego_x, ego_y, opp_x, *_ in env.substeps if opp_x <= ego_x)
+    assert env.passing_offset == passed_at
+
+
+def test_the_opponents_lateral_position_is_observed_in_lane_widths(env):
+    env.reset(seed=0)
+    for _ in range(env.horizon):
+        obs, *_ = env.step(np.array([0.0], np.float32))
+    assert abs(env.opp_y) > 1.0  # it cut in
+    assert obs[3] == pytest.approx(env.opp_y / sc.LANE_WIDTH, abs=1e-5)
+
+
+def test_at_the_road_edge_the_observation_is_inside_its_space(env):
+    env.reset(seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # an observation outside its space warns
+        for _ in range(env.horizon):
+            obs, *_ = env.step(np.array([1.0], np.float32))
+    assert obs[1] * sc.LANE_WIDTH == pytest.approx(env.ego_y, abs=1e-5)
+    assert env.ego_y > sc.LANE_WIDTH  # in the left lane, at its edge
+
+
+def test_the_longest_horizon_allowed_is_played(make_env):
+    env = make_env(horizon=30)
+    env.reset(seed=0)
+    for _ in range(30):
+        env.step(np.array([1.0], np.float32))
+    assert env.t == 30
+
+
+def test_the_opponent_cuts_in_at_three_metres_per_second(env):
+    """Its vehicle type's lateral speed, which the scenario sets (a change of the dynamics is a
+    new task version)."""
+    env.reset(seed=0)
+    for _ in range(env.horizon):
+        env.step(np.array([0.0], np.float32))
+    moved = np.abs(np.diff([s[4] for s in env.substeps]))
+    assert moved.max() == pytest.approx(sc.OPPONENT_LATERAL_SPEED * sc.STEP_LENGTH, abs=1e-6)
+    assert sc.OPPONENT_LATERAL_SPEED == 3.0
+
+
+def test_the_scenario_cache_key_covers_the_routes(monkeypatch):
+    """Changing a vehicle's speed or start builds the scenario anew, not from the cache."""
+    key = sc.scenario_key()
+    monkeypatch.setattr(sc, "OPPONENT_SPEED", 12.0)
+    assert sc.scenario_key() != key
