@@ -1061,3 +1061,21 @@ def test_smirls_reward_is_bounded_far_from_the_states_seen():
     density.update(np.zeros((10, 2)))
     assert density.log_likelihood(np.array([[100.0, 100.0]]))[0] == -300.0
     assert -300.0 < density.log_likelihood(np.array([[0.01, 0.0]]))[0] < 300.0
+
+
+def test_behaviour_groups_are_led_by_their_most_used_category():
+    """A chain 0 ~ 1 ~ 2 with 0 and 2 apart: the most used (0) leads and takes 1; 2 stays."""
+    from sili_robots.agent.buffer import InteractionBuffer
+    from sili_robots.agent.latent_cache import LatentCache
+
+    class Heads:
+        def head_distances(self, obs, act, scale):
+            return torch.tensor([[0.0, 0.1, 1.0], [0.1, 0.0, 0.1], [1.0, 0.1, 0.0]])
+
+    buffer = InteractionBuffer(2, 1, 3, capacity=8)
+    buffer.obs[:6] = np.random.default_rng(0).normal(size=(6, 4, 2))
+    buffer.n = 6
+    cache = LatentCache(
+        Heads(), buffer, "discrete", 3, np.random.default_rng(0), merge_threshold=0.5
+    )
+    assert list(cache._behaviour_groups(np.array([0, 0, 0, 1, 1, 2]))) == [0, 0, 2]

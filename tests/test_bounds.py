@@ -356,3 +356,25 @@ def test_compute_bounds_checks_its_seed_as_the_cli_does(seed, said):
 
     with pytest.raises(ConfigError, match=said):  # 1.5 was taken as 1
         compute_bounds("circle-3", 2, seed, 1)
+
+
+def test_the_default_games_stay_a_multiple_of_the_strategies_when_interactions_are_few():
+    """Every first strategy as often as the others: 9 games of Circle (3 Goals) in 20
+    interactions, not 10."""
+    from sili_robots.bounds import check_counts, default_games
+
+    assert check_counts(20, None, 3) == (20, 9)
+    assert check_counts(30, None, 8) == (30, 8)
+    assert default_games("circle-3", 20) == 9
+
+
+def test_a_bound_with_a_value_that_is_not_finite_is_not_drawn(tmp_path):
+    from sili_robots.bounds import write_bounds_file
+
+    path = tmp_path / "bounds.json"
+    bounds = {
+        "random": {"task_reward": -5.0, "stability": float("nan")},
+        "still": {"task_reward": -3.0, "stability": 1.0},
+    }
+    write_bounds_file([{"task_id": "sili/Circle3-v1", "bounds": bounds}], path)
+    assert set(stored_bounds("sili/Circle3-v1", path)) == {"still"}

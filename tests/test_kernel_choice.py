@@ -128,3 +128,34 @@ def test_the_cache_is_never_a_tilde_folder_in_the_current_directory(monkeypatch,
     assert cache_dir() == tmp_path / "home" / ".cache" / "sili-robots"
     monkeypatch.setenv("SILI_ROBOTS_CACHE", "~/c")  # a quoted ~ too
     assert cache_dir() == tmp_path / "home" / "c"
+
+
+def test_caching_the_precision_keeps_the_cached_library(cache, monkeypatch):
+    """Both choices live in one entry per machine: caching one must not erase the other (the
+    library would be timed again at every start, and a fresh timing may choose another)."""
+    timed = []
+
+    def fake_matmuls():
+        timed.append(1)
+        return {"onednn": 1e-3, "aten": 2e-3}
+
+    monkeypatch.setattr(matmul, "onednn_available", lambda: True)
+    monkeypatch.setattr(matmul, "time_matmuls", fake_matmuls)
+    monkeypatch.setattr(matmul, "time_precisions", lambda m: {"float32": 1e-3, "bfloat16": 2e-3})
+    assert matmul.default_precision() == "float32"
+    assert matmul.default_matmul() == "onednn"
+    assert len(timed) == 1  # measured once, then read from the cache
+    (entry,) = json.loads(cache.read_text()).values()
+    assert entry["matmul"] == "onednn" and entry["precision"] == "float32"
+
+
+def test_a_onednn_layer_under_bfloat16_autocast_computes_in_bfloat16():
+    """Autocast sends bfloat16 products to oneDNN itself: a layer given ``onednn`` takes
+    PyTorch's path there, not the float32 oneDNN op (which would undo the bfloat16)."""
+    import torch
+
+    if not matmul.onednn_available():
+        pytest.skip("this PyTorch has no oneDNN linear op: aten is the only library")
+    layer = matmul.Linear(32, 32, "onednn")
+    with torch.autocast("cpu", dtype=torch.bfloat16):
+        assert layer(torch.randn(8, 32)).dtype == torch.bfloat16

@@ -288,3 +288,19 @@ def test_an_addon_setting_that_does_nothing_is_noted_and_its_addon_not_built(cap
     assert "note: --set addons.filter.noise does nothing here: the latent filter is off" in (
         capsys.readouterr().err
     )
+
+
+def test_stable_on_a_partial_latent_task_observes_the_strategy_flag():
+    """Stable with the partial latent (Speaker-Listener's default) reads its stability from the
+    flag the observation ends with: without it, it would read the time fraction."""
+    from sili_robots.build import make_run_config, make_run_env
+    from sili_robots.wrappers import StrategyFlag
+
+    cfg = make_run_config("speaker-listener", "stable", interactions=2)
+    assert cfg.agent.latent == "partial"
+    env = make_run_env(cfg)
+    try:
+        assert isinstance(env, StrategyFlag)
+        assert env.observation_space.shape[0] == env.unwrapped.observation_space.shape[0] + 1
+    finally:
+        env.close()

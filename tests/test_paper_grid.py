@@ -873,3 +873,53 @@ def test_a_rehearsal_at_a_fraction_of_the_budgets_goes_into_folders_of_its_own(
         in capsys.readouterr().err
     )
     assert sorted(p.name for p in (tmp_path / "s" / "runs").iterdir()) == [held.name]
+
+
+def test_collect_refuses_a_run_one_row_short(sweep_and_collection, tmp_path, capsys):
+    sweep, _ = sweep_and_collection
+    source = tmp_path / "source"
+    shutil.copytree(sweep, source)
+    metrics = source / "runs" / "circle-3__sili-bschedule__s0" / "metrics.csv"
+    metrics.write_text("".join(metrics.read_text().splitlines(keepends=True)[:-1]))
+    assert main(["collect", str(source), "--into", str(tmp_path / "into")]) == 2
+    assert "is damaged (it holds 5 rows, its summary.json says 6)" in capsys.readouterr().err
+
+
+def test_a_collected_run_replaces_a_training_there_stopped_before_its_summary(
+    sweep_and_collection, tmp_path
+):
+    """All its rows logged, no summary.json: it is not further than the collected copy."""
+    from sili_robots.sweep.collect import collect
+
+    sweep, collection = sweep_and_collection
+    name = "circle-3__sili-bschedule__s0"
+    into = tmp_path / "sweep"
+    shutil.copytree(sweep, into)
+    (into / "runs" / name / "summary.json").unlink()
+    assert collect([collection], into, names=[name]).replaced == [name]
+    assert (into / "runs" / name / "summary.json").is_file()
+
+
+def test_grid_refuses_a_sweep_folder_holding_a_run_at_a_larger_budget(
+    tmp_path, monkeypatch, capsys
+):
+    import sili_robots.sweep as sweep_package
+
+    monkeypatch.setattr(sweep_package, "run_sweep", lambda *a, **k: pytest.fail("trained"))
+    own = ["--sweep-dir", str(tmp_path / "s"), "--into", str(tmp_path / "r")]
+    held = tmp_path / "s" / "runs" / "circle-3__sili-b0__s0"
+    held.mkdir(parents=True)
+    (held / "config.json").write_text(json.dumps({"run": {"interactions": 50}}))
+    assert main(["grid", "--fraction", "0.01", "--blocks", "b-sweep", *own]) == 2
+    assert "holds circle-3__sili-b0__s0 at 50 interactions" in capsys.readouterr().err
+
+
+def test_a_block_recorded_at_another_budget_is_not_the_block_resumed(tmp_path):
+    """A rehearsal's invocation (--fraction) in the folder does not set the full grid's budget."""
+    from sili_robots.commands.grid import recorded
+    from sili_robots.sweep.state import record_invocation
+
+    (full,) = block("sili-oracle").specs(("circle-8",))
+    (rehearsal,) = block("sili-oracle").scaled(0.01).specs(("circle-8",))
+    record_invocation(tmp_path, rehearsal)
+    assert recorded(tmp_path, full).interactions == full.interactions

@@ -363,3 +363,29 @@ def test_curves_are_smoothed_over_about_two_percent_of_the_run_by_default(sweep_
     assert [default_smoothing(n) for n in (10, 100, 1000, 2500)] == [1, 2, 20, 50]
     fig = learning_curves(load_results(sweep_dir), "circle-3")  # 8 interactions
     assert "smoothed over 1 interaction\n" in fig.get_suptitle() + "\n"
+
+
+def test_a_method_run_in_one_profile_other_than_the_packages_is_labelled_with_it():
+    from sili_robots.plotting import variant_labels
+
+    rows = pd.DataFrame(
+        {
+            "method": ["sili", "sac"],
+            "profile": ["paper", "package"],
+            "config_beta": [0.5, 0.5],
+            "beta_scheduled": [False, False],
+            "controller": ["", ""],
+            "task_args": ["", ""],
+            "latent": ["discrete", "none"],
+            "task_id": ["sili/Circle3-v1"] * 2,
+        }
+    )
+    assert list(variant_labels(rows)) == ["SILI (paper)", "SAC"]
+
+
+def test_bound_labels_within_the_gap_of_the_one_before_share_a_cluster():
+    from sili_robots.plotting import _clusters
+
+    points = [(0.0, "a"), (0.06, "b"), (0.12, "c")]
+    assert _clusters(points, 0.07) == [points]
+    assert _clusters(points, 0.05) == [[p] for p in points]

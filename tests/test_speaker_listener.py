@@ -196,3 +196,21 @@ def test_revealed_is_the_previous_interactions_last_strategy_and_none_after_a_re
         revealed(env)
     env.reset(seed=5)
     assert revealed(env) is None  # a new game reveals nothing yet
+
+
+def test_an_interactions_end_strategy_is_the_one_after_its_last_step():
+    """On v0 the mapping changes within interactions: the summary's end strategy is where it
+    ended (what the next interaction reveals), not where it began."""
+    env = make_task("speaker-listener-v0")
+    horizon = env.unwrapped.horizon
+    seen = []
+    summaries = run_interactions(
+        env,
+        lambda e, o: np.zeros(2, np.float32),
+        40,
+        seed=0,
+        on_step=lambda *step: seen.append(step[-1]["strategy_id"]),
+    )
+    ends = [seen[(j + 1) * horizon - 1] for j in range(40)]
+    assert [s.end_strategy_id for s in summaries] == ends
+    assert any(s.end_strategy_id != seen[j * horizon] for j, s in enumerate(summaries))

@@ -1058,3 +1058,24 @@ def test_a_sweep_notes_runs_whose_kernels_are_slow_on_this_machine(tmp_path, mon
     assert note in res.stderr  # extended: the runs made in bfloat16 keep it
     res = sili_in_process("sweep", "--resume", out, "--no-progress")
     assert res.returncode == 0 and "as slow as" not in res.stderr  # all done: none to train
+
+
+def test_progress_counts_runs_under_way_as_running_not_pending(tmp_path):
+    import io
+
+    from rich.console import Console
+
+    from sili_robots.sweep.progress import SweepProgress
+    from sili_robots.sweep.worker import Job
+
+    jobs = [Job(f"r{i}", {}, str(tmp_path / f"r{i}")) for i in range(3)]
+    display = SweepProgress(
+        jobs,
+        dict.fromkeys(("r0", "r1", "r2"), 10),
+        already_done=0,
+        console=Console(file=io.StringIO()),
+    )
+    display.started(jobs[0])
+    display.started(jobs[1])
+    counts = display._counts()
+    assert "2 running" in counts and "1 pending (of 3)" in counts
