@@ -192,3 +192,28 @@ def test_a_killed_process_session_folder_is_removed_by_the_next_one(tmp_path: Pa
         live.kill()
         live.wait()
     assert sorted(p.name for p in tmp_path.iterdir() if "driving" in p.name) == [live_dir.name]
+
+
+def test_a_second_session_keeps_the_first_ones_folder_where_locks_are_posix_locks(tmp_path):
+    """On NFS flock is a POSIX lock, which the process holding it takes again: the scan must
+    not take this process's own live folder for a leftover (emulated with lockf)."""
+    out = _python(
+        """
+        import fcntl
+        fcntl.flock = fcntl.lockf  # what the NFS client does
+        from sili_robots.tasks.driving import DrivingEnv
+
+        first = DrivingEnv(backend="traci")
+        first.reset(seed=0)
+        second = DrivingEnv(backend="traci")
+        second.reset(seed=0)
+        print("FIRST KEPT:", first.session.workdir.is_dir())
+        first.reset(seed=1)
+        first.close()
+        second.close()
+        print("OK")
+        """,
+        env={**os.environ, "TMPDIR": str(tmp_path)},
+    )
+    assert out.returncode == 0, out.stderr
+    assert "FIRST KEPT: True" in out.stdout and out.stdout.strip().endswith("OK")

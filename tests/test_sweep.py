@@ -1058,6 +1058,37 @@ def test_a_sweep_notes_runs_whose_kernels_are_slow_on_this_machine(tmp_path, mon
     assert note in res.stderr  # extended: the runs made in bfloat16 keep it
     res = sili_in_process("sweep", "--resume", out, "--no-progress")
     assert res.returncode == 0 and "as slow as" not in res.stderr  # all done: none to train
+    from sili_robots.errors import ConfigError
+
+    def stopped(*args, **kwargs):
+        raise ConfigError("stopped where the sweep would train")
+
+    monkeypatch.setattr("sili_robots.sweep.runner.run_sweep", stopped)
+    ray = sili_in_process("sweep", "--resume", out, "--interactions", "3", "--backend", "ray")
+    assert "stopped where the sweep would train" in ray.stderr
+    assert "as slow as" not in ray.stderr  # Ray's machines may be a cluster's: not this one's
+
+
+def test_an_unwritable_kernel_cache_is_timed_once_per_process(monkeypatch):
+    """Where kernels.json cannot be written, the choice is kept in the process: a sweep's note
+    asks for every run it plans, and each timing takes seconds."""
+    from sili_robots.agent import matmul
+
+    monkeypatch.setenv("SILI_ROBOTS_CACHE", "/dev/null/cache")
+    monkeypatch.setattr(matmul, "_MEASURED", {})
+    timed = []
+
+    def fake(precision_of):
+        timed.append(precision_of)
+        return {"float32": 1e-3, "bfloat16": 4e-3}
+
+    monkeypatch.setattr(matmul, "time_precisions", fake)
+    monkeypatch.setattr(matmul, "default_matmul", lambda: "aten")
+    for _ in range(5):
+        assert matmul.slow_kernels("aten", "bfloat16") == [
+            ("sac.precision=bfloat16", 4.0, "float32")
+        ]
+    assert len(timed) == 1
 
 
 def test_progress_counts_runs_under_way_as_running_not_pending(tmp_path):

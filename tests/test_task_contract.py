@@ -479,9 +479,13 @@ def test_a_chosen_first_strategy_plays_the_game_a_drawn_one_does(task):
     b.reset(seed=3, options={"strategy": info["strategy_id"]})
     for j in range(3):
         if j:
-            np.testing.assert_array_equal(a.reset()[0], b.reset()[0])
+            (obs_a, info_a), (obs_b, info_b) = a.reset(), b.reset()
+            np.testing.assert_array_equal(obs_a, obs_b)
+            assert info_a["strategy_id"] == info_b["strategy_id"]
         for _ in range(a.horizon):
-            np.testing.assert_array_equal(a.step(_zeros(a))[0], b.step(_zeros(b))[0])
+            step_a, step_b = a.step(_zeros(a)), b.step(_zeros(b))
+            np.testing.assert_array_equal(step_a[0], step_b[0])
+            assert step_a[1] == step_b[1]  # the reward: where the opponent is
 
 
 @pytest.mark.parametrize("task", LIGHT_TASKS)

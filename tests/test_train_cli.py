@@ -307,8 +307,12 @@ def test_every_latent_kind_trains(tmp_path, latent):
         (["--task", "circle-3", "--set", "sac.updates_per_step=Infinity"], "must be a finite"),
         (["--task", "circle-3", "--set", "sac.target_entropy=-Infinity"], "must be a finite"),
         (["--task", "circle-3", "--set", "hidden=1e300"], "hidden must be at most 2147483647"),
-        (["--task", "circle-3", "--set", "sili.scale=1e39"], "must be at most 3.40282e+38 in size"),
-        (["--task", "circle-3", "--set", "sac.target_entropy=-1e39"], "3.40282e+38 in size"),
+        (
+            ["--task", "circle-3", "--set", "sili.scale=1e39"],
+            "sili.scale must be at most 3.4028234663852886e+38 in size (the networks compute in "
+            "float32, where 1e+39 is infinite)",
+        ),
+        (["--task", "circle-3", "--set", "sac.target_entropy=-1e39"], "where -1e+39 is infinite"),
         (
             ["--task", "circle-3", "--set", 'model.usage_bonus={"points": [[0, 1e39]]}'],
             "value must be in [0, 3.40282e+38], got 1e+39",
@@ -410,6 +414,19 @@ def test_bad_input_exits_2_without_traceback(tmp_path, args, message):
     assert res.returncode == 2, res.stderr
     assert message in res.stderr
     assert "Traceback" not in res.stderr
+
+
+def test_float32s_largest_number_is_a_setting_and_one_that_rounds_past_it_is_not():
+    from sili_robots.agent.config import FLOAT32_OVERFLOW
+    from sili_robots.build import make_run_config
+
+    printed = 3.4028235e38  # float32's largest as numpy prints it: a hair above, rounds to it
+    assert np.float32(printed) == np.finfo(np.float32).max
+    cfg = make_run_config("circle-3", "sili", 0, 1, settings={"sili.scale": printed})
+    assert cfg.agent.sili.scale == printed
+    assert np.isfinite(np.float32(np.nextafter(FLOAT32_OVERFLOW, 0.0)))
+    with pytest.raises(ConfigError, match=r"where 3.4028235677973366e\+38 is infinite"):
+        make_run_config("circle-3", "sili", 0, 1, settings={"sili.scale": FLOAT32_OVERFLOW})
 
 
 def test_eval_of_a_non_run_exits_2(tmp_path):
@@ -1098,7 +1115,7 @@ def test_more_threads_than_cores_is_trained_with_a_note(tmp_path, capsys, monkey
 def test_kernels_slow_on_this_machine_are_trained_with_a_note(tmp_path, capsys, monkeypatch):
     """A bfloat16 run resumed on a machine without bfloat16 units keeps its precision (its
     numbers depend on it) and says how much slower it is there, from the kernel timings."""
-    from sili_robots.agent.matmul import machine_key
+    from sili_robots.agent.matmul import machine_key, onednn_available
 
     monkeypatch.setenv("SILI_ROBOTS_CACHE", str(tmp_path / "cache"))
     (tmp_path / "cache").mkdir()
@@ -1122,7 +1139,10 @@ def test_kernels_slow_on_this_machine_are_trained_with_a_note(tmp_path, capsys, 
     assert json.loads((run / "config.json").read_text())["run"]["agent"]["sac"]["precision"] == (
         "bfloat16"
     )
-    assert main([*args, "--set", "matmul=onednn", "--out", str(tmp_path / "plain")]) == 0
+    assert main(["train", "--resume", str(run)]) == 0
+    assert "as slow as" not in capsys.readouterr().err  # done: nothing trains
+    library = "onednn" if onednn_available() else "aten"
+    assert main([*args, "--set", f"matmul={library}", "--out", str(tmp_path / "plain")]) == 0
     assert "as slow as" not in capsys.readouterr().err  # float32 by default, oneDNN 1.2x
 
 

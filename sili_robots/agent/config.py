@@ -224,16 +224,16 @@ def check(obj: Any, prefix: str) -> None:
         convert(name, hints[f.name], value)  # type and Literal membership
         low, high = f.metadata.get("low", -math.inf), f.metadata.get("high", math.inf)
         if isinstance(value, Schedule):
-            value.check(name, max(low, -LARGEST_FLOAT), min(high, LARGEST_FLOAT))
+            value.check(name, max(low, -FLOAT32_MAX), min(high, FLOAT32_MAX))
         elif isinstance(value, int | float) and not isinstance(value, bool):
             if math.isinf(value):  # no setting is unbounded in use (inf updates, inf entropy)
                 raise ConfigError(f"{name} must be a finite number, got {value}")
             if hints[f.name] is int and value > LARGEST_INT:  # beyond, torch's sizes overflow
                 raise ConfigError(f"{name} must be at most {LARGEST_INT}, got {value:.6g}")
-            if abs(value) > LARGEST_FLOAT:
+            if abs(value) >= FLOAT32_OVERFLOW:
                 raise ConfigError(
-                    f"{name} must be at most {LARGEST_FLOAT:.6g} in size (the networks compute "
-                    f"in float32, where it is infinite), got {value:.6g}"
+                    f"{name} must be at most {FLOAT32_MAX!r} in size (the networks compute in "
+                    f"float32, where {value!r} is infinite)"
                 )
             if not (low <= value <= high):
                 raise ConfigError(f"{name} must be {_range(low, high, hints[f.name])}, got {value}")
@@ -241,8 +241,9 @@ def check(obj: Any, prefix: str) -> None:
 
 #: the largest whole-number setting (a size or a count) a run can have
 LARGEST_INT = 2**31 - 1
-#: the largest magnitude of a setting: float32's largest number
-LARGEST_FLOAT = 3.4028234663852886e38
+#: float32's largest number, and the least magnitude that rounds past it, to infinity
+FLOAT32_MAX = 3.4028234663852886e38
+FLOAT32_OVERFLOW = 2.0**128 - 2.0**103
 
 
 def _range(low: float, high: float, tp: Any) -> str:

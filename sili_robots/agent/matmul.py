@@ -139,10 +139,17 @@ def time_precisions(matmul: str, updates: int = 10, rounds: int = 3) -> dict[str
     return best
 
 
+#: this process's timings where the cache could not be written, by (cache file, machine key,
+#: choice): timed once per process, not at every run a sweep plans
+_MEASURED: dict[tuple[str, str, str], tuple[str, dict[str, float]]] = {}
+
+
 def _cached_choice(name: str, measure: Callable[[], tuple[str, dict[str, float]]]) -> str:
     """The choice ``name`` for this machine from ``kernels.json``, else ``measure()``d at one
     thread (as training runs) and cached with its timings."""
     path, key = cache_dir() / "kernels.json", machine_key()
+    if (str(path), key, name) in _MEASURED:
+        return _MEASURED[str(path), key, name][0]
     try:
         cached = json.loads(path.read_text())
     except (OSError, ValueError):
@@ -160,8 +167,8 @@ def _cached_choice(name: str, measure: Callable[[], tuple[str, dict[str, float]]
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         write_text(path, json.dumps(cached, indent=2), shared=True)
-    except OSError:
-        pass  # an unwritable cache only means measuring again next time
+    except OSError:  # an unwritable cache only means measuring again in the next process
+        _MEASURED[str(path), key, name] = choice, times
     return choice
 
 
@@ -171,14 +178,17 @@ def _seconds_key(name: str) -> str:
 
 def choice_timings(name: str) -> dict[str, float]:
     """Seconds per option behind this machine's choice ``name`` (``matmul``: a layer's forward
-    and backward; ``precision``: a SAC update), measured first if need be; {} where nothing was
-    timed (no oneDNN op) or the cache cannot be written."""
+    and backward; ``precision``: a SAC update), measured first if need be (once per process);
+    {} where nothing was timed (no oneDNN op)."""
     (default_matmul if name == "matmul" else default_precision)()
-    try:
-        entry = json.loads((cache_dir() / "kernels.json").read_text()).get(machine_key(), {})
-    except (OSError, ValueError, AttributeError):
-        return {}
-    times = entry.get(_seconds_key(name))
+    path, key = cache_dir() / "kernels.json", machine_key()
+    if (str(path), key, name) in _MEASURED:
+        times = _MEASURED[str(path), key, name][1]
+    else:
+        try:
+            times = json.loads(path.read_text())[key].get(_seconds_key(name))
+        except (OSError, ValueError, KeyError, TypeError, AttributeError):
+            return {}
     return times if isinstance(times, dict) else {}
 
 

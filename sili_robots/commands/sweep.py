@@ -322,7 +322,7 @@ def _note_slow_kernels(specs: list[SweepSpec], sweep_dir: Path) -> None:
         planned = as_made(sweep_dir, plan(specs))
     except ConfigError:
         return  # the sweep itself says why
-    found: Counter[tuple[str, float, str]] = Counter()
+    kinds: Counter[tuple[str, str]] = Counter()
     for run_ in planned:
         folder = run_path(sweep_dir, as_found(sweep_dir, run_).name)  # (an earlier version's)
         with contextlib.suppress(ConfigError):  # (a damaged record: the sweep says so)
@@ -330,8 +330,11 @@ def _note_slow_kernels(specs: list[SweepSpec], sweep_dir: Path) -> None:
                 run_.config.interactions
             ):
                 continue  # nothing to train
-            agent = run_.config.agent
-            found.update(slow_kernels(agent.matmul, agent.sac.precision))
+            kinds[run_.config.agent.matmul, run_.config.agent.sac.precision] += 1
+    found: Counter[tuple[str, float, str]] = Counter()
+    for (matmul, precision), count in kinds.items():
+        for slow in slow_kernels(matmul, precision):
+            found[slow] += count
     for (setting, ratio, fastest), count in found.items():
         runs = "1 run trains" if count == 1 else f"{count} runs train"
         print(
@@ -355,7 +358,7 @@ def run(args: argparse.Namespace) -> int:
     writable_dir(sweep_dir, "--resume" if args.resume else "--out")  # creates nothing
     if args.dry_run:
         return _dry_run(args, specs, sweep_dir)
-    if not args.ray_address:  # (a cluster's machines time their own)
+    if args.backend == "local":  # (Ray's may be a cluster's machines, which time their own)
         _note_slow_kernels(specs, sweep_dir)
     report = run_sweep(
         specs,

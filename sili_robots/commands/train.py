@@ -237,14 +237,16 @@ def run(args: argparse.Namespace) -> int:
                 f"--resume continues {args.resume} as its config.json records it; with it give "
                 f"only --interactions (to extend it) and --no-progress, not {', '.join(ignored)}"
             )
-        if args.interactions is None and run_state(args.resume) == "done":
+        done = args.interactions is None and run_state(args.resume) == "done"
+        if done:
             print(
                 f"{args.resume} has already trained all {read_config(args.resume).interactions} "
                 "of its interactions; --interactions N extends it",
                 file=sys.stderr,
             )
         _note_threads_beyond_cores(read_config(args.resume).threads)
-        _note_slow_kernels(read_config(args.resume))
+        if not done:
+            _note_slow_kernels(read_config(args.resume))
         scalars = _keeps_scalars(args.resume)
         with (
             _resume_hint(args.resume),

@@ -49,6 +49,9 @@ _TOKENS = itertools.count(1)
 #: file in it that the session keeps locked while its process lives
 WORKDIR_PREFIX = "sili-driving-"
 WORKDIR_LOCK = "session.lock"
+#: this process's live session folders: never taken for leftovers (on NFS, flock is a POSIX
+#: lock, which the process holding it takes again, and loses on closing any descriptor)
+_OWN_WORKDIRS: set[Path] = set()
 
 
 def _sumo_exceptions() -> tuple[type[BaseException], ...]:
@@ -156,6 +159,8 @@ def _make_workdir() -> tuple[Path, int | None]:
 
     root = Path(tempfile.gettempdir())
     for folder in root.glob(f"{WORKDIR_PREFIX}*"):
+        if folder in _OWN_WORKDIRS:
+            continue
         try:
             held = os.open(folder / WORKDIR_LOCK, os.O_WRONLY)
         except OSError:
@@ -177,6 +182,7 @@ def _make_workdir() -> tuple[Path, int | None]:
         (new / WORKDIR_LOCK).unlink()
     workdir = new.with_name(new.name.removeprefix("."))
     new.rename(workdir)
+    _OWN_WORKDIRS.add(workdir)
     return workdir, lock
 
 
@@ -236,6 +242,7 @@ def _shutdown(
             connection.close()
     if not keep_workdir:
         shutil.rmtree(workdir, ignore_errors=True)
+    _OWN_WORKDIRS.discard(workdir)
     _release(lock)
 
 
