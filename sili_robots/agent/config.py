@@ -224,17 +224,15 @@ def check(obj: Any, prefix: str) -> None:
         convert(name, hints[f.name], value)  # type and Literal membership
         low, high = f.metadata.get("low", -math.inf), f.metadata.get("high", math.inf)
         if isinstance(value, Schedule):
-            value.check(name, max(low, -FLOAT32_MAX), min(high, FLOAT32_MAX))
+            value.check(name, low, high)
+            for _, point in value.points:
+                _check_float32(f"schedule of {name}: a value", point)
         elif isinstance(value, int | float) and not isinstance(value, bool):
             if math.isinf(value):  # no setting is unbounded in use (inf updates, inf entropy)
                 raise ConfigError(f"{name} must be a finite number, got {value}")
             if hints[f.name] is int and value > LARGEST_INT:  # beyond, torch's sizes overflow
                 raise ConfigError(f"{name} must be at most {LARGEST_INT}, got {value:.6g}")
-            if abs(value) >= FLOAT32_OVERFLOW:
-                raise ConfigError(
-                    f"{name} must be at most {FLOAT32_MAX!r} in size (the networks compute in "
-                    f"float32, where {value!r} is infinite)"
-                )
+            _check_float32(name, value)
             if not (low <= value <= high):
                 raise ConfigError(f"{name} must be {_range(low, high, hints[f.name])}, got {value}")
 
@@ -244,6 +242,14 @@ LARGEST_INT = 2**31 - 1
 #: float32's largest number, and the least magnitude that rounds past it, to infinity
 FLOAT32_MAX = 3.4028234663852886e38
 FLOAT32_OVERFLOW = 2.0**128 - 2.0**103
+
+
+def _check_float32(name: str, value: float) -> None:
+    if abs(value) >= FLOAT32_OVERFLOW:
+        raise ConfigError(
+            f"{name} must be at most {FLOAT32_MAX!r} in size (the networks compute in float32, "
+            f"where {value!r} is infinite)"
+        )
 
 
 def _range(low: float, high: float, tp: Any) -> str:
