@@ -569,3 +569,34 @@ def test_evaluate_on_a_task_instance_refuses_another_task_as_load_does(tmp_path)
     with pytest.raises(ConfigError, match="interactions must be an integer >= 1, got 0"):
         evaluate(run, 0)
     assert evaluate(run, 2, make_task("circle-3", outside_margin=0.3))["interactions"] == 2
+
+
+def test_a_new_model_over_another_run_has_nothing_to_save_or_evaluate_before_it_learns(tmp_path):
+    run = tmp_path / "run"
+    SILI("sili/Circle3-v0", seed=0, settings=FAST_AGENT, run_dir=run).learn(3).close()
+    model = SILI("sili/Circle3-v0", seed=1, settings=FAST_AGENT, run_dir=run, overwrite=True)
+    with pytest.raises(ConfigError, match="nothing to save yet"):
+        model.save(tmp_path / "copy")
+    with pytest.raises(ConfigError, match="nothing to evaluate yet"):
+        model.evaluate(1)
+    assert not (tmp_path / "copy").exists()
+
+
+def test_a_forked_childs_copy_of_a_model_leaves_its_temporary_run():
+    """A forked worker's copy of the model goes away with the worker: the parent's temporary
+    run folder stays, as the parent still trains in it."""
+    import os
+
+    from sili_robots import api
+
+    model = SILI("sili/Circle3-v0", settings=FAST_AGENT)
+    finalizer = api._TEMPORARY[model.run_dir.resolve()]
+    pid = os.fork()
+    if pid == 0:
+        try:
+            finalizer()
+        finally:
+            os._exit(0)
+    os.waitpid(pid, 0)
+    assert model.run_dir.is_dir()
+    model.close()

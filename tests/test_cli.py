@@ -535,3 +535,12 @@ def test_ctrl_c_while_the_commands_load_is_one_line(monkeypatch, capsys):
     monkeypatch.setattr(cli, "build_parser", loading)
     assert cli.main(["runs", "."]) == 130
     assert capsys.readouterr().err == "sili: interrupted\n"
+
+
+def test_beta_anneal_refuses_a_fifth_word():
+    from sili_robots.commands.train import beta_anneal
+    from sili_robots.errors import ConfigError
+
+    beta_anneal([["0", "0.5", "100", "10"]])
+    with pytest.raises(ConfigError, match="START END LENGTH"):
+        beta_anneal([["0", "0.5", "100", "10", "99"]])

@@ -322,3 +322,48 @@ def test_cli_writes_html(tmp_path):
     again = ["preview", "circle-3", "--interactions", "1", "--out", str(tmp_path / "c.html")]
     assert main(again) == 0  # a preview replaces its own page (only)
     assert (tmp_path / "c.html").read_text() != html
+
+
+@pytest.fixture(scope="module")
+def two_interactions() -> Preview:
+    env = make_task("circle-3")
+    try:
+        yield Preview.record(env, scripted_policy(env, "stabilizing"), 2, task="circle-3")
+    finally:
+        env.close()
+
+
+def test_the_frame_one_past_the_last_is_refused(two_interactions):
+    frames = len(two_interactions.recording)
+    assert two_interactions.frame(frames - 1) == frames - 1
+    with pytest.raises(ConfigError, match="outside the recording"):
+        two_interactions.frame(frames)
+
+
+def test_the_return_so_far_starts_at_zero_in_every_interaction(two_interactions):
+    firsts = [f for f in two_interactions.recording.frames if f["t"] == 0]
+    assert len(firsts) == 2 and all(f["interaction_return"] == 0.0 for f in firsts)
+
+
+def test_an_animation_keys_the_frame_before_each_change():
+    """A jump is drawn as a jump, not faded in over the frames before it."""
+    from sili_robots.preview.scenes.base import change_frames
+
+    assert change_frames([0, 0, 0, 1, 1, 1]) == [0, 2, 3, 5]
+
+
+def test_page_data_cannot_close_its_script_and_legend_labels_are_escaped():
+    from sili_robots.preview.html import Overlay, SceneRecorder, _js, scene_html
+
+    assert "</" not in _js(["a</script><b>"])
+    page = scene_html(SceneRecorder(), Overlay("t", captions=["x</script>y"]))
+    assert page.count("</script>") == page.count("<script")
+    page = scene_html(SceneRecorder(), Overlay("t", legend=[("#fff", "a<b>&c")]))
+    assert "a&lt;b&gt;&amp;c" in page
+
+
+def test_colours_are_red_green_blue():
+    from sili_robots.preview.shapes import hex_rgb, rgb_hex
+
+    assert rgb_hex((1.0, 0.5, 0.0)) == 0xFF8000
+    assert hex_rgb(rgb_hex((0.0, 0.0, 1.0))) == (0, 0, 255)

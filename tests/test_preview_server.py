@@ -198,3 +198,19 @@ def test_server_dies_with_a_killed_parent(tmp_path):
     proc.kill()  # no cleanup code runs in the parent
     proc.wait(timeout=30)
     assert _wait_dead(server)
+
+
+def test_serve_puts_the_callers_sigterm_handler_back():
+    def mine(signum, frame):  # never called
+        pass
+
+    previous = signal.signal(signal.SIGTERM, mine)
+    server = LiveServer()
+    server.proc = subprocess.Popen(["sleep", "30"])  # stands for the meshcat server
+    try:
+        server.serve(0.3)
+        assert signal.getsignal(signal.SIGTERM) is mine
+    finally:
+        server.proc.kill()
+        server.proc.wait()
+        signal.signal(signal.SIGTERM, previous)

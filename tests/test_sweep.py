@@ -1110,3 +1110,19 @@ def test_progress_counts_runs_under_way_as_running_not_pending(tmp_path):
     display.started(jobs[1])
     counts = display._counts()
     assert "2 running" in counts and "1 pending (of 3)" in counts
+
+
+def test_a_claim_is_recognised_while_the_trainer_grows(tmp_path):
+    """A process is told by its start time, not by anything that changes as it runs (its size)."""
+    import mmap
+
+    from sili_robots.sweep.state import process_started, training_claim, training_worker
+
+    before = process_started(os.getpid())
+    with training_claim(tmp_path):
+        grown = mmap.mmap(-1, 256 * 1024 * 1024)
+        try:
+            assert process_started(os.getpid()) == before
+            assert training_worker(tmp_path) == os.getpid()
+        finally:
+            grown.close()

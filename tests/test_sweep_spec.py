@@ -300,3 +300,25 @@ def test_a_new_sweep_never_goes_into_a_folder_of_other_files(tmp_path, capsys):
         assert main([*args, *dry]) == 2
         assert "is not a sweep or a results collection but holds files" in capsys.readouterr().err
     assert (out / "results.csv").read_text() == "my own table\n"
+
+
+def _one_task(**kw) -> SweepSpec:
+    return SweepSpec(**{"tasks": ["circle-3"], "methods": ["sili"], "seeds": [0], **kw})
+
+
+def test_smirl_starts_from_the_package_profile_where_sili_starts_from_the_papers():
+    (run,) = expand(_one_task(tasks=["driving"], methods=["smirl"], interactions=10))
+    assert run.config.agent.profile == "package" and "-paper" not in run.name
+
+
+def test_a_b_schedule_applies_to_smirl_too():
+    (run,) = expand(
+        _one_task(methods=["smirl"], interactions=10, beta_schedule=[(0, 0.0), (5, 0.5)])
+    )
+    assert isinstance(run.config.agent.sili.beta, Schedule)
+    assert run.name == "circle-3__smirl-bschedule__s0"
+
+
+def test_b_values_equal_as_numbers_are_one_b():
+    assert parse_betas("0.5,0.50,5e-1") == [0.5]
+    assert len(expand(_one_task(interactions=10, betas=parse_betas("0.5,0.50")))) == 1

@@ -501,3 +501,18 @@ def test_a_restored_game_reports_the_change_at_its_boundary(task):
     assert info["strategy_changed"]
     _, restored = make_task(task).unwrapped.restore_game_state(env.game_state())
     assert restored["strategy_changed"]
+
+
+class _Overshooting(gym.ObservationWrapper):
+    """A user's task whose observations leave the space it declares."""
+
+    def observation(self, obs):
+        return np.asarray(obs, np.float32) * 100.0
+
+
+@pytest.mark.parametrize("wrap", [OracleObservation, StrategyFlag])
+def test_wrapped_observations_stay_within_the_declared_space(wrap):
+    env = wrap(_Overshooting(TwoDoorsEnv(horizon=4)))
+    obs, _ = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
+    assert env.observation_space.contains(env.step(env.action_space.sample())[0])
