@@ -593,10 +593,12 @@ def test_a_forked_childs_copy_of_a_model_leaves_its_temporary_run():
     finalizer = api._TEMPORARY[model.run_dir.resolve()]
     pid = os.fork()
     if pid == 0:
+        code = 1
         try:
             finalizer()
+            code = 0
         finally:
-            os._exit(0)
-    os.waitpid(pid, 0)
+            os._exit(code)
+    assert os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) == 0
     assert model.run_dir.is_dir()
     model.close()

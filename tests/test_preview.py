@@ -5,6 +5,7 @@ import json
 import re
 import subprocess
 import sys
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -325,7 +326,7 @@ def test_cli_writes_html(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def two_interactions() -> Preview:
+def two_interactions() -> Iterator[Preview]:
     env = make_task("circle-3")
     try:
         yield Preview.record(env, scripted_policy(env, "stabilizing"), 2, task="circle-3")

@@ -1121,6 +1121,7 @@ def test_a_claim_is_recognised_while_the_trainer_grows(tmp_path):
     before = process_started(os.getpid())
     with training_claim(tmp_path):
         grown = mmap.mmap(-1, 256 * 1024 * 1024)
+        grown.write(b"\1" * (64 << 20))  # resident too, not only mapped
         try:
             assert process_started(os.getpid()) == before
             assert training_worker(tmp_path) == os.getpid()

@@ -309,13 +309,14 @@ def test_every_latent_kind_trains(tmp_path, latent):
         (["--task", "circle-3", "--set", "hidden=1e300"], "hidden must be at most 2147483647"),
         (
             ["--task", "circle-3", "--set", "sili.scale=1e39"],
-            "sili.scale must be at most 3.4028234663852886e+38 in size (the networks compute in "
+            "sili.scale must be less than 3.4028235677973366e+38 in size (the networks compute in "
             "float32, where 1e+39 is infinite)",
         ),
         (["--task", "circle-3", "--set", "sac.target_entropy=-1e39"], "where -1e+39 is infinite"),
+        (["--task", "circle-3", "--set", "hidden=-1e39"], "hidden must be >= 1, got"),
         (
             ["--task", "circle-3", "--set", 'model.usage_bonus={"points": [[0, 1e39]]}'],
-            "schedule of model.usage_bonus: a value must be at most 3.4028234663852886e+38",
+            "schedule of model.usage_bonus: a value must be less than 3.4028235677973366e+38",
         ),
         (["--task", "circle-3", "--set", "sac.lr.x=1"], "unknown setting 'sac.lr.x'"),
         (["--task", "circle-3", "--set", 'sac.lr={"start": 0}'], "sac.lr: a schedule is"),
@@ -1142,8 +1143,9 @@ def test_kernels_slow_on_this_machine_are_trained_with_a_note(tmp_path, capsys, 
     assert json.loads((run / "config.json").read_text())["run"]["agent"]["sac"]["precision"] == (
         "bfloat16"
     )
-    assert main(["train", "--resume", str(run)]) == 0
-    assert "as slow as" not in capsys.readouterr().err  # done: nothing trains
+    for again in ([], ["--interactions", "2"]):
+        assert main(["train", "--resume", str(run), *again]) == 0
+        assert "as slow as" not in capsys.readouterr().err  # done: nothing trains
     library = "onednn" if onednn_available() else "aten"
     assert main([*args, "--set", f"matmul={library}", "--out", str(tmp_path / "plain")]) == 0
     assert "as slow as" not in capsys.readouterr().err  # float32 by default, oneDNN 1.2x

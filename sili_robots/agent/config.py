@@ -232,23 +232,23 @@ def check(obj: Any, prefix: str) -> None:
                 raise ConfigError(f"{name} must be a finite number, got {value}")
             if hints[f.name] is int and value > LARGEST_INT:  # beyond, torch's sizes overflow
                 raise ConfigError(f"{name} must be at most {LARGEST_INT}, got {value:.6g}")
-            _check_float32(name, value)
+            if hints[f.name] is not int:  # (a count is held to its own range)
+                _check_float32(name, value)
             if not (low <= value <= high):
                 raise ConfigError(f"{name} must be {_range(low, high, hints[f.name])}, got {value}")
 
 
 #: the largest whole-number setting (a size or a count) a run can have
 LARGEST_INT = 2**31 - 1
-#: float32's largest number, and the least magnitude that rounds past it, to infinity
-FLOAT32_MAX = 3.4028234663852886e38
+#: the least magnitude float32 rounds to infinity (just past its largest, 3.4028235e+38)
 FLOAT32_OVERFLOW = 2.0**128 - 2.0**103
 
 
 def _check_float32(name: str, value: float) -> None:
     if abs(value) >= FLOAT32_OVERFLOW:
         raise ConfigError(
-            f"{name} must be at most {FLOAT32_MAX!r} in size (the networks compute in float32, "
-            f"where {value!r} is infinite)"
+            f"{name} must be less than {FLOAT32_OVERFLOW!r} in size (the networks compute in "
+            f"float32, where {value!r} is infinite)"
         )
 
 

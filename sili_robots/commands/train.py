@@ -237,15 +237,16 @@ def run(args: argparse.Namespace) -> int:
                 f"--resume continues {args.resume} as its config.json records it; with it give "
                 f"only --interactions (to extend it) and --no-progress, not {', '.join(ignored)}"
             )
-        done = args.interactions is None and run_state(args.resume) == "done"
-        if done:
+        target = read_config(args.resume).interactions
+        done = run_state(args.resume) == "done" and (args.interactions or target) <= target
+        if args.interactions is None and done:
             print(
-                f"{args.resume} has already trained all {read_config(args.resume).interactions} "
-                "of its interactions; --interactions N extends it",
+                f"{args.resume} has already trained all {target} of its interactions; "
+                "--interactions N extends it",
                 file=sys.stderr,
             )
-        _note_threads_beyond_cores(read_config(args.resume).threads)
-        if not done:
+        if not done:  # (nothing to train, nothing to say of its speed)
+            _note_threads_beyond_cores(read_config(args.resume).threads)
             _note_slow_kernels(read_config(args.resume))
         scalars = _keeps_scalars(args.resume)
         with (
