@@ -35,6 +35,7 @@ import platform
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import torch
 import torch.nn.functional as F
@@ -144,26 +145,43 @@ def time_precisions(matmul: str, updates: int = 10, rounds: int = 3) -> dict[str
 _MEASURED: dict[tuple[str, str, str], tuple[str, dict[str, float]]] = {}
 
 
-def _cached_choice(name: str, measure: Callable[[], tuple[str, dict[str, float]]]) -> str:
-    """The choice ``name`` for this machine from ``kernels.json``, else ``measure()``d at one
-    thread (as training runs) and cached with its timings."""
+def _cache() -> tuple[Path, str, dict[str, Any]]:
+    """``kernels.json``, this machine's key in it, and all it holds ({} when unreadable)."""
     path, key = cache_dir() / "kernels.json", machine_key()
-    if (str(path), key, name) in _MEASURED:
-        return _MEASURED[str(path), key, name][0]
     try:
         cached = json.loads(path.read_text())
     except (OSError, ValueError):
         cached = {}
+    return path, key, cached
+
+
+def _recorded(name: str) -> tuple[str, dict[str, float]] | None:
+    """This machine's choice ``name`` and the timings behind it (this process's where the cache
+    could not be written); None before it is timed."""
+    path, key, cached = _cache()
+    if (str(path), key, name) in _MEASURED:
+        return _MEASURED[str(path), key, name]
     entry = cached.get(key, {})
-    if name in entry:
-        return entry[name]
+    if name not in entry:
+        return None
+    times = entry.get(_seconds_key(name))
+    return entry[name], times if isinstance(times, dict) else {}
+
+
+def _cached_choice(name: str, measure: Callable[[], tuple[str, dict[str, float]]]) -> str:
+    """The choice ``name`` for this machine from ``kernels.json``, else ``measure()``d at one
+    thread (as training runs) and cached with its timings."""
+    found = _recorded(name)
+    if found is not None:
+        return found[0]
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # as training runs
     try:
         choice, times = measure()
     finally:
         torch.set_num_threads(threads)
-    cached[key] = {**entry, name: choice, _seconds_key(name): times}
+    path, key, cached = _cache()
+    cached[key] = {**cached.get(key, {}), name: choice, _seconds_key(name): times}
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         write_text(path, json.dumps(cached, indent=2), shared=True)
@@ -181,15 +199,8 @@ def choice_timings(name: str) -> dict[str, float]:
     and backward; ``precision``: a SAC update), measured first if need be (once per process);
     {} where nothing was timed (no oneDNN op)."""
     (default_matmul if name == "matmul" else default_precision)()
-    path, key = cache_dir() / "kernels.json", machine_key()
-    if (str(path), key, name) in _MEASURED:
-        times = _MEASURED[str(path), key, name][1]
-    else:
-        try:
-            times = json.loads(path.read_text())[key].get(_seconds_key(name))
-        except (OSError, ValueError, KeyError, TypeError, AttributeError):
-            return {}
-    return times if isinstance(times, dict) else {}
+    found = _recorded(name)
+    return {} if found is None else found[1]
 
 
 #: how much slower than this machine's choice a run's kernels are before a note says so
