@@ -226,7 +226,7 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.verdict import verdict
 
     if args.resume is not None:
-        read_config(args.resume)  # a clear error when it is not a run
+        recorded = read_config(args.resume)  # a clear error when it is not a run
         check_resumable(args.resume)
         writable_dir(args.resume, "--resume")
         by = " (a sweep's worker, which sili sweep --resume goes on with, or another sili train)"
@@ -237,7 +237,7 @@ def run(args: argparse.Namespace) -> int:
                 f"--resume continues {args.resume} as its config.json records it; with it give "
                 f"only --interactions (to extend it) and --no-progress, not {', '.join(ignored)}"
             )
-        target = read_config(args.resume).interactions
+        target = recorded.interactions
         done = run_state(args.resume) == "done" and (args.interactions or target) <= target
         if args.interactions is None and done:
             print(
@@ -246,8 +246,8 @@ def run(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
         if not done:  # (nothing to train, nothing to say of its speed)
-            _note_threads_beyond_cores(read_config(args.resume).threads)
-            _note_slow_kernels(read_config(args.resume))
+            _note_threads_beyond_cores(recorded.threads)
+            _note_slow_kernels(recorded)
         scalars = _keeps_scalars(args.resume)
         with (
             _resume_hint(args.resume),
