@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
+
+import pytest
 
 from sili_robots.addons import build_addons
 from sili_robots.agent import SILIAgent
@@ -56,3 +59,22 @@ def flat_layout(run: dict[str, Any]) -> dict[str, Any]:
     leaves({k: run["agent"][k] for k in ("sac", "model", "sili")}, "")
     leaves(run["addons"], "addons.")
     return {**{k: v for k, v in run.items() if k != "addons"}, "agent": flat}
+
+
+def timed_kernels(
+    monkeypatch: pytest.MonkeyPatch,
+    cache: Path,
+    matmul: dict[str, float],
+    precision: dict[str, float],
+) -> None:
+    """A kernel cache at ``cache`` (``$SILI_ROBOTS_CACHE``) where this machine chose aten and
+    float32 from these timings (seconds per option), as if it had timed them."""
+    import json
+
+    from sili_robots.agent.matmul import machine_key
+
+    monkeypatch.setenv("SILI_ROBOTS_CACHE", str(cache))
+    cache.mkdir(parents=True)
+    entry = {"matmul": "aten", "seconds": matmul}
+    entry |= {"precision": "float32", "precision_seconds": precision}
+    (cache / "kernels.json").write_text(json.dumps({machine_key(): entry}))

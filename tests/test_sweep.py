@@ -1032,17 +1032,10 @@ def test_the_runs_table_tells_a_run_not_started_from_one_under_way(tiny_sweep, t
 def test_a_sweep_notes_runs_whose_kernels_are_slow_on_this_machine(tmp_path, monkeypatch):
     """As ``sili train`` does, once per kind, for the runs it will train: a sweep made on a
     machine with bfloat16 units and resumed on one without goes on ~10x slower."""
-    from sili_robots.agent.matmul import machine_key
+    from agent_helpers import timed_kernels
 
-    monkeypatch.setenv("SILI_ROBOTS_CACHE", str(tmp_path / "cache"))
-    (tmp_path / "cache").mkdir()
-    timed = {
-        "matmul": "aten",
-        "seconds": {"onednn": 1e-3, "aten": 1e-3},
-        "precision": "float32",
-        "precision_seconds": {"float32": 1e-3, "bfloat16": 4.2e-3},
-    }
-    (tmp_path / "cache" / "kernels.json").write_text(json.dumps({machine_key(): timed}))
+    even = {"onednn": 1e-3, "aten": 1e-3}
+    timed_kernels(monkeypatch, tmp_path / "cache", even, {"float32": 1e-3, "bfloat16": 4.2e-3})
     out = tmp_path / "sweep"
     args = ["sweep", "--tasks", "circle-3", "--methods", "sac", "--seeds", "0-1", *FAST_ARGS]
     args += ["--interactions", "1", "--no-progress", "--no-tensorboard", "--workers", "1"]

@@ -1119,17 +1119,12 @@ def test_more_threads_than_cores_is_trained_with_a_note(tmp_path, capsys, monkey
 def test_kernels_slow_on_this_machine_are_trained_with_a_note(tmp_path, capsys, monkeypatch):
     """A bfloat16 run resumed on a machine without bfloat16 units keeps its precision (its
     numbers depend on it) and says how much slower it is there, from the kernel timings."""
-    from sili_robots.agent.matmul import machine_key, onednn_available
+    from agent_helpers import timed_kernels
 
-    monkeypatch.setenv("SILI_ROBOTS_CACHE", str(tmp_path / "cache"))
-    (tmp_path / "cache").mkdir()
-    timed = {
-        "matmul": "aten",
-        "seconds": {"onednn": 1.2e-3, "aten": 1e-3},  # close: no note
-        "precision": "float32",
-        "precision_seconds": {"float32": 1e-3, "bfloat16": 1.03e-2},
-    }
-    (tmp_path / "cache" / "kernels.json").write_text(json.dumps({machine_key(): timed}))
+    from sili_robots.agent.matmul import onednn_available
+
+    close = {"onednn": 1.2e-3, "aten": 1e-3}  # no note
+    timed_kernels(monkeypatch, tmp_path / "cache", close, {"float32": 1e-3, "bfloat16": 1.03e-2})
     args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "1", *FAST]
     run = tmp_path / "bf16"
     assert main([*args, "--set", "sac.precision=bfloat16", "--out", str(run)]) == 0
