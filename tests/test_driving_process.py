@@ -8,6 +8,7 @@ import os
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import gymnasium as gym
@@ -217,3 +218,39 @@ def test_a_second_session_keeps_the_first_ones_folder_where_locks_are_posix_lock
     )
     assert out.returncode == 0, out.stderr
     assert "FIRST KEPT: True" in out.stdout and out.stdout.strip().endswith("OK")
+
+
+def test_a_hidden_folder_of_a_process_killed_before_its_lock_is_removed(tmp_path, monkeypatch):
+    """A folder stays hidden only until it is locked: one hidden for an hour was left by a kill
+    in between, one hidden for a moment may be another process's about to be locked."""
+    import tempfile
+
+    from sili_robots.tasks import sumo_session
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    old, fresh = tmp_path / ".sili-driving-old", tmp_path / ".sili-driving-fresh"
+    for folder in (old, fresh):
+        folder.mkdir()
+        (folder / sumo_session.WORKDIR_LOCK).touch()
+    hour_ago = time.time() - sumo_session.HIDDEN_LEFTOVER_AGE - 60
+    os.utime(old, (hour_ago, hour_ago))
+    workdir, lock = sumo_session._make_workdir()
+    try:
+        assert not old.exists() and fresh.is_dir()
+        assert workdir.parent == tmp_path and not workdir.name.startswith(".")
+    finally:
+        sumo_session._shutdown("traci", None, 0, workdir, lock, keep_workdir=False)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [fresh.name]
+
+
+def test_a_sumo_failure_quotes_the_latest_error_sumo_logged(tmp_path):
+    """SUMO's error log grows over a session: the failure at hand is its last Error: line."""
+    from sili_robots.tasks.sumo_session import SumoSession
+
+    session = SumoSession.__new__(SumoSession)  # the message reads only the session's logs
+    session.workdir, session.error_log = tmp_path, tmp_path / "sumo-errors.log"
+    session.error_log.write_text(
+        "Error: an earlier problem, recovered\nWarning: noise\nError: the vehicle vanished\n"
+    )
+    message = session._sumo_message(RuntimeError("connection lost"))
+    assert message == "connection lost; SUMO said: Error: the vehicle vanished"

@@ -22,6 +22,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import time
 import warnings
 import weakref
 from collections.abc import Iterator
@@ -49,6 +50,9 @@ _TOKENS = itertools.count(1)
 #: file in it that the session keeps locked while its process lives
 WORKDIR_PREFIX = "sili-driving-"
 WORKDIR_LOCK = "session.lock"
+#: a folder is hidden (a leading dot) only between its creation and its lock, microseconds; one
+#: hidden for longer than this (seconds) was left by a process killed in between
+HIDDEN_LEFTOVER_AGE = 3600.0
 #: this process's live session folders: never taken for leftovers (on NFS, flock is a POSIX
 #: lock, which the process holding it takes again, and loses on closing any descriptor)
 _OWN_WORKDIRS: set[Path] = set()
@@ -154,7 +158,8 @@ class SumoSession:
 def _make_workdir() -> tuple[Path, int | None]:
     """A new session folder, locked (the descriptor returned) while this process lives: the
     kernel drops the lock when the process dies, also on a kill, which runs no clean-up. The
-    folders whose lock nobody holds were left so, and are removed first."""
+    folders whose lock nobody holds were left so, and are removed first, with the hidden ones
+    of a process killed before it locked its folder."""
     import fcntl
 
     root = Path(tempfile.gettempdir())
@@ -172,6 +177,10 @@ def _make_workdir() -> tuple[Path, int | None]:
         finally:
             os.close(held)  # (the lock, if taken, goes with it)
         shutil.rmtree(folder, ignore_errors=True)
+    for folder in root.glob(f".{WORKDIR_PREFIX}*"):
+        with contextlib.suppress(OSError):
+            if time.time() - folder.stat().st_mtime > HIDDEN_LEFTOVER_AGE:
+                shutil.rmtree(folder, ignore_errors=True)
     new = Path(tempfile.mkdtemp(prefix=f".{WORKDIR_PREFIX}"))  # hidden from the scan until
     lock: int | None = os.open(new / WORKDIR_LOCK, os.O_CREAT | os.O_WRONLY, 0o600)  # locked
     try:
