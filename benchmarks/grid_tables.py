@@ -19,7 +19,7 @@ import pandas as pd
 from sili_robots.claims import run_finals
 from sili_robots.errors import one_line_errors
 from sili_robots.paper_grid import TASKS
-from sili_robots.plotting import load_results
+from sili_robots.plot_data import load_results
 
 NAMES = {
     "sili": "SILI",

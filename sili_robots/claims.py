@@ -348,7 +348,7 @@ def _default_profile(task: str, finals: pd.DataFrame) -> Claim:
 
 
 def claims_table(df: pd.DataFrame) -> list[Claim]:
-    """The claims from a results table (``plotting.load_results`` of a collection)."""
+    """The claims from a results table (``plot_data.load_results`` of a collection)."""
     return decide(run_finals(df), df)
 
 

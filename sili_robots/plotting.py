@@ -19,12 +19,12 @@ controller, a margin) get none, and curves that differ only in them are drawn ap
 
 Figures are built on ``matplotlib.figure.Figure`` (no pyplot state, no display needed); each
 curve is a ``Line2D`` labelled with its variant, and each bound a ``LineCollection`` labelled
-``bound: KIND`` (gid ``bound``), so what is drawn can be read back and checked.
+``bound: KIND`` (gid ``bound``), so what is drawn can be read back and checked. The rows they
+draw come from ``plot_data``, the bounds from ``plot_bounds``.
 """
 
 from __future__ import annotations
 
-import json
 from collections.abc import Collection, Hashable, Sequence
 from pathlib import Path
 
@@ -37,6 +37,19 @@ from matplotlib.figure import Figure
 from sili_robots.atomic import replacing
 from sili_robots.errors import ConfigError
 from sili_robots.labels import METHOD_NAMES, VARIANT_KEYS, file_stem
+from sili_robots.plot_bounds import bound_ids, draw_bounds
+from sili_robots.plot_data import (
+    FINAL_METRICS,
+    arguments_label,
+    b_sweep_rows,
+    curve,
+    curve_rows,
+    default_smoothing,
+    final_values,
+    load_results,
+    variant_labels,
+    with_profile,
+)
 from sili_robots.sweep.state import FIGURES
 
 TASK_TITLES = {
@@ -67,7 +80,6 @@ CURVE_METRICS = (
     ("true_stability", "true stability\n(1 − P[strategy changed])"),
     ("stability_reward", "stability term, before b\n(−latent change, or −flagged steps)"),
 )
-FINAL_METRICS = (("task_reward", "final task reward"), ("true_stability", "final true stability"))
 
 #: metrics that are fractions: their seed band is clipped to the range (a mean +- std of a
 #: fraction can leave it, which would draw a stability below 0 or above 1)
@@ -80,19 +92,6 @@ def spread(metric: str, mean: np.ndarray, std: np.ndarray) -> tuple[np.ndarray, 
     return np.clip(mean - std, low, high), np.clip(mean + std, low, high)
 
 
-#: the panels that show reference bounds, and the bound each one reads
-BOUND_METRICS = {"task_reward": "task_reward", "true_stability": "stability"}
-#: (colour, dash pattern) of each bound kind's line
-BOUND_STYLES = {
-    "random": ("0.6", (0, (1, 2))),
-    "still": ("tab:olive", (0, (1, 2))),
-    "oracle": ("0.4", (0, (6, 2, 1, 2))),  # apart from the Oracle method's black
-    "stabilizing": ("tab:cyan", (0, (6, 2, 1, 2))),
-    "blind": ("tab:pink", (0, (3, 2))),
-    "tracking": ("tab:brown", (0, (3, 2))),
-}
-
-
 def task_title(task: str) -> str:
     """The paper's name of a task; an earlier version gets its version appended."""
     if task in TASK_TITLES:
@@ -103,187 +102,6 @@ def task_title(task: str) -> str:
     if spec is not None and spec.family in TASK_TITLES:
         return f"{TASK_TITLES[spec.family]} (v{spec.version})"
     return task
-
-
-def _task_ids(rows: pd.DataFrame, task: str) -> list[str]:
-    """The task versions the rows' runs built (the current one when the table has no column)."""
-    if "task_id" in rows and rows["task_id"].notna().any():
-        return sorted(str(t) for t in rows["task_id"].dropna().unique())
-    from sili_robots.tasks import task_spec
-
-    try:
-        return [task_spec(task).gym_id]
-    except ConfigError:
-        return []
-
-
-def _bound_ids(rows: pd.DataFrame, task: str) -> list[str]:
-    """The task versions whose stored bounds hold for ``rows``: those of the runs built with
-    their version's default arguments (bounds were measured with them; none for the others)."""
-    default = rows[rows["task_args"] == ""]
-    return _task_ids(default, task) if len(default) else []
-
-
-def draw_bounds(ax: Axes, metric: str, task_ids: Sequence[str], note: str = "") -> None:
-    """The stored bounds of ``task_ids`` as labelled horizontal lines across ``ax`` (a panel of
-    ``BOUND_METRICS``), all kept in view; bounds close together share one label at the right
-    edge, each kind with its value and ``note`` (e.g. that they hold for the default task
-    arguments only, on a panel that also has runs given others)."""
-    from matplotlib.collections import LineCollection
-    from matplotlib.transforms import blended_transform_factory
-
-    from sili_robots.bounds import stored_bounds
-
-    key = BOUND_METRICS.get(metric)
-    if key is None:
-        return
-    trans = blended_transform_factory(ax.transAxes, ax.transData)
-    drawn: list[tuple[float, str]] = []
-    for task_id in task_ids:
-        suffix = f" ({task_id.rsplit('-', 1)[-1]})" if len(task_ids) > 1 else ""
-        for kind, values in stored_bounds(task_id).items():
-            y = float(values[key])
-            color, dashes = BOUND_STYLES.get(kind, ("0.5", (0, (2, 2))))
-            lines = LineCollection(
-                [[(0.0, y), (1.0, y)]],
-                colors=[color],
-                linestyles=[dashes],
-                linewidths=1.1,
-                transform=trans,
-                label=f"bound: {kind}{suffix}",
-                zorder=1.5,
-            )
-            lines.set_gid("bound")
-            ax.add_collection(lines, autolim=False)
-            ax.update_datalim([(ax.dataLim.x0 if ax.dataLim.width else 0.0, y)], updatex=False)
-            drawn.append((y, f"{kind}{suffix}{note}"))
-    if not drawn:
-        return
-    ax.autoscale_view()
-    lo, hi = ax.get_ylim()
-    for cluster in _clusters(sorted(drawn), 0.07 * (hi - lo)):
-        ys = [y for y, _ in cluster]
-        at = float(np.mean(ys))
-        by_value: dict[str, list[str]] = {}
-        for y, kind in cluster:
-            by_value.setdefault(f"{y:.2f}", []).append(kind)
-        text = "; ".join(f"{', '.join(kinds)} {v}" for v, kinds in by_value.items())
-        upper = (at - lo) > 0.5 * (hi - lo)
-        ax.annotate(
-            text,
-            xy=(0.995, at),
-            xycoords=trans,
-            xytext=(0, -3 if upper else 3),
-            textcoords="offset points",
-            ha="right",
-            va="top" if upper else "bottom",
-            fontsize=6.5,
-            color="0.25",
-            bbox={"boxstyle": "square,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.5},
-            gid="bound_label",
-            zorder=1.6,  # over the bound lines and the runs' spreads, under their curves
-        )
-
-
-def _clusters(points: list[tuple[float, str]], gap: float) -> list[list[tuple[float, str]]]:
-    """Sorted ``(y, name)`` points grouped where consecutive ys are within ``gap``."""
-    out: list[list[tuple[float, str]]] = []
-    for point in points:
-        if out and point[0] - out[-1][-1][0] <= gap:
-            out[-1].append(point)
-        else:
-            out.append([point])
-    return out
-
-
-def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFrame:
-    """The tidy table of a sweep (rebuilt from its run directories and written to results.csv)
-    or of a results collection (``sili collect``: read only, nothing written)."""
-    from sili_robots.sweep.results import check_exists, results_table, run_dirs, write_tables
-    from sili_robots.sweep.state import SWEEP_FILE
-
-    check_exists(sweep_dir)
-    if (Path(sweep_dir) / SWEEP_FILE).is_file():
-        try:
-            df, _ = write_tables(sweep_dir)
-        except OSError:  # a sweep one may read but not write (or on a read-only disk)
-            df = results_table(sweep_dir)
-    elif run_dirs(sweep_dir):
-        df = results_table(sweep_dir)
-    else:
-        raise ConfigError(
-            f"{sweep_dir} holds no runs (no {SWEEP_FILE} and no runs/*/config.json); give a "
-            "directory written by `sili sweep --out` or `sili collect`"
-        )
-    if not include_unfinished:
-        df = df[df["finished"].astype(bool)]
-    if df.empty:
-        raise ConfigError(
-            f"{sweep_dir} has no finished runs yet (sili plot --include-unfinished plots "
-            "partial runs)"
-        )
-    return df
-
-
-def with_profile(df: pd.DataFrame) -> pd.DataFrame:
-    """Tables written before profiles, b schedules and other task arguments were recorded: the
-    package's settings, a constant b, and the task arguments the controller column names."""
-    if "profile" not in df:
-        df = df.assign(profile="package")
-    if "beta_scheduled" not in df:
-        df = df.assign(beta_scheduled=False)
-    if "task_id" not in df:
-        df = df.assign(task_id="")
-    if "task_args" not in df:  # tables before other task arguments were told apart
-        from sili_robots.tasks.registry import task_arguments_key
-
-        keys = df[["task_id", "controller"]].fillna("")
-        args = {
-            (t, c): task_arguments_key(t or None, {"controller": c} if c else {})
-            for t, c in keys.drop_duplicates().itertuples(index=False, name=None)
-        }
-        df = df.assign(task_args=[args[k] for k in keys.itertuples(index=False, name=None)])
-    return df.assign(task_args=df["task_args"].fillna(""))
-
-
-def variant_labels(df: pd.DataFrame, profiled: Collection[str] | None = None) -> pd.Series:
-    """A label per row naming its method, plus b / controller / latent where the rows of the
-    same method differ in them (e.g. ``SILI b=0.2``, ``SAC [osc]``). The profile is named for
-    the methods in ``profiled`` (default: those that ran in more than one profile in ``df``)
-    and wherever it is not the package's."""
-    df = with_profile(df)
-    labels = pd.Series([METHOD_NAMES.get(m, m) for m in df["method"]], index=df.index)
-    if profiled is None:
-        several = df.groupby("method")["profile"].transform("nunique") > 1
-    else:
-        several = df["method"].isin(list(profiled))
-    named = several | (df["profile"] != "package")
-    labels[named] += " (" + df.loc[named, "profile"] + ")"
-    for _, rows in df.groupby(["method", "profile"]):
-        idx = rows.index
-        if rows[["config_beta", "beta_scheduled"]].drop_duplicates().shape[0] > 1:
-            labels[idx] += [
-                f" b→{b:g}" if scheduled else f" b={b:g}"
-                for b, scheduled in zip(rows["config_beta"], rows["beta_scheduled"], strict=True)
-            ]
-        if rows["controller"].fillna("").nunique() > 1:
-            labels[idx] += rows["controller"].fillna("").map(lambda c: f" [{c or 'default'}]")
-        if rows["task_args"].nunique() > 1:  # other task arguments than the controller
-            labels[idx] += rows["task_args"].map(_arguments_label)
-        if rows["latent"].nunique() > 1:
-            labels[idx] += rows["latent"].map(lambda k: f" ({k})")
-    versions = df["task_id"].fillna("")
-    if versions.nunique() > 1:  # e.g. "SAC (v0)" beside "SAC (v1)"
-        labels += versions.map(lambda t: f" ({t.rsplit('-', 1)[-1]})" if t else "")
-    return labels
-
-
-def _arguments_label(task_args: str) -> str:
-    """`` [outside_margin=0.2]`` for a run given other task arguments (the controller is named
-    on its own), ``""`` for none."""
-    args = json.loads(task_args) if task_args else {}
-    args.pop("controller", None)
-    return f" [{', '.join(f'{k}={v}' for k, v in sorted(args.items()))}]" if args else ""
 
 
 def _variant_order(df: pd.DataFrame) -> list[tuple]:
@@ -339,32 +157,6 @@ def _label_palette(
     )
 
 
-def default_smoothing(n_interactions: int) -> int:
-    """About 2% of the run length (at least 1): enough to read a trend, not to hide a jump."""
-    return max(1, round(n_interactions / 50))
-
-
-def curve(rows: pd.DataFrame, metric: str, window: int) -> pd.DataFrame:
-    """Mean and std across runs (seeds) per interaction of each run's trailing moving average."""
-    smoothed = (
-        rows.sort_values("interaction")
-        .groupby("run")[metric]
-        .transform(lambda s: s.rolling(window, min_periods=1).mean())
-    )
-    per_run = (
-        rows.assign(value=smoothed)
-        .pivot_table(index="interaction", columns="run", values="value", aggfunc="first")
-        .sort_index()
-    )
-    return pd.DataFrame(
-        {
-            "mean": per_run.mean(axis=1),
-            "std": per_run.std(axis=1, ddof=0),
-            "seeds": per_run.notna().sum(axis=1),
-        }
-    )
-
-
 def _draw_curves(
     axes: Sequence[Axes],
     task_rows: pd.DataFrame,
@@ -388,7 +180,7 @@ def _draw_curves(
             mean, std = stats["mean"].to_numpy(), stats["std"].to_numpy()
             ax.plot(x, mean, style, color=color, label=label, lw=1.6)
             ax.fill_between(x, *spread(metric, mean, std), color=color, alpha=0.18, lw=0)
-    task_ids = _bound_ids(task_rows, str(task_rows["task"].iloc[0]))
+    task_ids = bound_ids(task_rows, str(task_rows["task"].iloc[0]))
     mixed = (task_rows["task_args"] != "").any()  # the bounds hold for some curves only
     for ax, (metric, ylabel) in zip(axes, metrics, strict=True):
         draw_bounds(ax, metric, task_ids, " [default task args]" if mixed else "")
@@ -424,7 +216,7 @@ def learning_curves(df: pd.DataFrame, task: str, smooth: int | None = None) -> F
     _draw_curves(axes, rows, CURVE_METRICS, window)
     for ax in axes:
         ax.set_xlabel("interaction")
-    ids = ", ".join(_bound_ids(rows, task))
+    ids = ", ".join(bound_ids(rows, task))
     if ids and (rows["task_args"] != "").any():
         ids += " (its default task arguments)"
     fig.suptitle(
@@ -434,43 +226,6 @@ def learning_curves(df: pd.DataFrame, task: str, smooth: int | None = None) -> F
     )
     fig.legend(*axes[0].get_legend_handles_labels(), loc="outside right upper")
     return fig
-
-
-def final_values(df: pd.DataFrame, window: int = 100) -> pd.DataFrame:
-    """Per run: the mean of each metric over its last ``window`` interactions."""
-    df = with_profile(df)
-    tail = df.sort_values("interaction").groupby("run").tail(window)
-    cols = [m for m, _ in FINAL_METRICS]
-    ident = tail.groupby("run")[["task", *VARIANT_KEYS, "seed"]].first()
-    return ident.join(tail.groupby("run")[cols].mean()).reset_index()
-
-
-def b_sweep_rows(df: pd.DataFrame, task: str, method: str = "sili") -> pd.DataFrame:
-    """The runs of a b sweep: ``method`` on ``task`` at a constant b in the package profile, of
-    the run length most of them have (so a longer run at one b is not pooled with the sweep)."""
-    rows = df[
-        (df["task"] == task)
-        & (df["method"] == method)
-        & (df["profile"] == "package")
-        & ~df["beta_scheduled"].astype(bool)
-    ]
-    if rows.empty:
-        return rows
-    lengths = rows.groupby("run").size()
-    keep = lengths[lengths == lengths.mode().max()].index
-    return rows[rows["run"].isin(keep)]
-
-
-def curve_rows(df: pd.DataFrame, task: str) -> pd.DataFrame:
-    """The rows a task's learning curves draw: all of them, except the runs of a b sweep of a
-    method that also has runs outside it (the paper grid's SILI next to its b sweep): those
-    have their own figure against b, and six more curves would hide the methods'."""
-    rows = df[df["task"] == task]
-    sweep = b_sweep_rows(rows, task)
-    if sweep["config_beta"].nunique() < 2:
-        return rows
-    others = rows[(rows["method"] == "sili") & ~rows["run"].isin(sweep["run"])]
-    return rows[~rows["run"].isin(sweep["run"])] if len(others) else rows
 
 
 def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "sili") -> Figure:
@@ -492,7 +247,7 @@ def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "si
         label = METHOD_NAMES.get(method, method)  # plus what sets the lines apart
         if len({g[0] for g in groups}) > 1:
             label += f" [{controller or 'default'}]"
-        label += _arguments_label(task_args) if len({g[1] for g in groups}) > 1 else ""
+        label += arguments_label(task_args) if len({g[1] for g in groups}) > 1 else ""
         label += f" ({latent})" if len({g[2] for g in groups}) > 1 else ""
         for ax, (metric, ylabel) in zip(axes, FINAL_METRICS, strict=True):
             stats = part.groupby("config_beta")[metric].agg(["mean", lambda s: s.std(ddof=0)])

@@ -492,7 +492,7 @@ def test_read_outs_name_a_damaged_summary_and_read_a_sweep_they_cannot_write(tmp
     import json
     import shutil
 
-    from sili_robots.plotting import load_results
+    from sili_robots.plot_data import load_results
     from sili_robots.sweep import results
 
     collection = tmp_path / "collection"

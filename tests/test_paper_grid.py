@@ -25,7 +25,7 @@ from sili_robots.claims import (
 from sili_robots.cli import main
 from sili_robots.commands.claims import END, START
 from sili_robots.paper_grid import BLOCKS, TASK_BUDGETS, block
-from sili_robots.plotting import load_results
+from sili_robots.plot_data import load_results
 from sili_robots.sweep import LocalBackend, SweepSpec, expand, run_name, run_sweep
 from sili_robots.sweep.results import results_table
 from sili_robots.sweep.runner import plan
@@ -654,7 +654,7 @@ def test_claims_write_replaces_the_readme_block(sweep_and_collection, tmp_path, 
 
 
 def test_the_b_sweep_pools_only_constant_b_runs_of_the_sweeps_length():
-    from sili_robots.plotting import b_sweep_rows, curve_rows, variant_labels
+    from sili_robots.plot_data import b_sweep_rows, curve_rows, variant_labels
 
     def run(beta, n, name, scheduled=False, profile="package"):
         rows = _rows("circle-3", "sili/Circle3-v1", "sili", 0, _const(n, -5), _const(n, 1),

@@ -12,14 +12,8 @@ from matplotlib.collections import PolyCollection
 from matplotlib.colors import to_rgb
 
 from sili_robots.cli import main
-from sili_robots.plotting import (
-    METHOD_COLORS,
-    beta_sweep,
-    default_smoothing,
-    learning_curves,
-    load_results,
-    overview,
-)
+from sili_robots.plot_data import default_smoothing, load_results
+from sili_robots.plotting import METHOD_COLORS, beta_sweep, learning_curves, overview
 from sili_robots.sweep import LocalBackend, SweepSpec, run_sweep
 
 
@@ -366,7 +360,7 @@ def test_curves_are_smoothed_over_about_two_percent_of_the_run_by_default(sweep_
 
 
 def test_a_method_run_in_one_profile_other_than_the_packages_is_labelled_with_it():
-    from sili_robots.plotting import variant_labels
+    from sili_robots.plot_data import variant_labels
 
     rows = pd.DataFrame(
         {
@@ -384,7 +378,7 @@ def test_a_method_run_in_one_profile_other_than_the_packages_is_labelled_with_it
 
 
 def test_bound_labels_within_the_gap_of_the_one_before_share_a_cluster():
-    from sili_robots.plotting import _clusters
+    from sili_robots.plot_bounds import _clusters
 
     points = [(0.0, "a"), (0.06, "b"), (0.12, "c")]
     assert _clusters(points, 0.07) == [points]

@@ -44,7 +44,7 @@ def test_the_readme_is_a_guide_not_a_notebook():
 def test_the_claims_table_is_generated_from_the_committed_results():
     from sili_robots.claims import claims_table, markdown
     from sili_robots.commands.claims import END, START
-    from sili_robots.plotting import load_results
+    from sili_robots.plot_data import load_results
 
     grid = README.parent / "results" / "paper-grid"
     table = markdown(claims_table(load_results(grid)))

@@ -35,7 +35,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.claims import claims_table, markdown, other_dynamics
-    from sili_robots.plotting import load_results
+    from sili_robots.plot_data import load_results
 
     if args.write is not None:
         _claims_block(args.write)  # a wrong file is named before the results are read
