@@ -41,7 +41,7 @@ from sili_robots.build import (
     task_kwargs_of,
     task_name_of,
 )
-from sili_robots.errors import ConfigError, check_count
+from sili_robots.errors import ConfigError, check_count, first_line
 from sili_robots.evaluation import AgentFeedback, check_same_task, evaluate, fitting
 from sili_robots.metrics import COMPRESSED_METRICS, METRICS, MetricsWriter
 from sili_robots.runs import (
@@ -119,10 +119,9 @@ class SILI:
         )
         if run_dir is None:  # removed with the model, unless saved or loaded where it is
             run_dir = tempfile.mkdtemp(prefix="sili-run-")
-            _TEMPORARY[Path(run_dir).resolve()] = weakref.finalize(
-                self, _remove_temporary, Path(run_dir), os.getpid()
-            )
+            _remove_with(self, Path(run_dir))
         self.run_dir, self._overwrite = Path(run_dir), overwrite
+        self._kept = False  # a temporary run kept by a refused save
         self._saved: dict[Path, tuple] = {}  # where this model saved, and what it left there
         self._check_run_dir()
         self.cfg = cfg
@@ -176,7 +175,7 @@ class SILI:
             check_same_task(path, cfg, env)
         model = cls.__new__(cls)
         model.cfg, model.run_dir, model._task_env, model._overwrite = cfg, path, env, False
-        model._saved = {}
+        model._saved, model._kept = {}, False
         with fitting(path, cfg, env):
             model._setup(state)
         _keep_temporary(path)  # another model's temporary run, now the user's to keep
@@ -271,6 +270,26 @@ class SILI:
         path = Path(path)
         self._refresh()
         self._check_trained("save")
+        try:
+            self._copy_to(path, overwrite)
+        except (ConfigError, OSError) as exc:  # a script ends here: its training must stay
+            if Path(self.run_dir).resolve() not in _TEMPORARY:
+                raise
+            _keep_temporary(self.run_dir)
+            self._kept = True
+            raise ConfigError(
+                f"{exc if isinstance(exc, ConfigError) else first_line(exc)}; the model's "
+                f"training is kept in {self.run_dir} "
+                f"(SILI.load({str(self.run_dir)!r}) continues it)"
+            ) from exc
+        if self._kept and path.resolve() != self.run_dir.resolve():  # saved after all
+            _remove_with(self, self.run_dir)
+            self._kept = False
+        _keep_temporary(path)
+        self._saved[path.resolve()] = _stamp(path)
+        return path
+
+    def _copy_to(self, path: Path, overwrite: bool) -> None:
         if path.exists() and not path.is_dir():
             raise ConfigError(f"cannot save to {path}: it is a file; give a directory")
         if path.resolve() != self.run_dir.resolve():
@@ -291,9 +310,6 @@ class SILI:
                     shutil.copy2(self.run_dir / name, path / name)
             if (path / METRICS).is_file():  # the checkpoint's rows only (a stop writes more)
                 MetricsWriter(path, self.cfg.metric_columns(), keep_rows=self._done).close()
-        _keep_temporary(path)
-        self._saved[path.resolve()] = _stamp(path)
-        return path
 
     def evaluate(self, interactions: int = 100) -> dict[str, Any]:
         """Greedy play continuing the saved game: mean task reward, and stability after the first
@@ -325,6 +341,11 @@ class SILI:
 
 #: temporary run directories of live models, removed with their model
 _TEMPORARY: dict[Path, weakref.finalize] = {}
+
+
+def _remove_with(model: SILI, run_dir: Path) -> None:
+    """``run_dir``, a temporary run, removed when ``model`` goes."""
+    _TEMPORARY[run_dir.resolve()] = weakref.finalize(model, _remove_temporary, run_dir, os.getpid())
 
 
 def _remove_temporary(path: Path, owner: int) -> None:

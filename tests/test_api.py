@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import gc
 import json
+import re
 import shutil
 import sys
 
@@ -214,6 +215,31 @@ def test_save_replaces_its_own_saves_and_another_run_only_with_overwrite(tmp_pat
     (tmp_path / "file").write_text("")
     with pytest.raises(ConfigError, match=r"cannot save to .*file: it is a file; give a directory"):
         model.save(tmp_path / "file")
+    for refused in (model, other):  # (kept by the refusals: see the next test)
+        shutil.rmtree(refused.run_dir)
+
+
+def test_a_refused_save_keeps_the_training_and_says_where(tmp_path):
+    """A script whose save is refused ends there: its temporary run must outlive the model."""
+    taken = tmp_path / "taken"
+    SILI("circle-3", method="sac", settings=FAST_AGENT).learn(1).save(taken)
+    model = SILI("circle-3", method="sac", seed=1, settings=FAST_AGENT).learn(1)
+    run_dir = model.run_dir
+    kept = rf"already holds a run.*; the model's training is kept in {re.escape(str(run_dir))} "
+    with pytest.raises(ConfigError, match=kept + r"\(SILI.load\(.*\) continues it\)"):
+        model.save(taken)
+    del model
+    gc.collect()
+    assert SILI.load(run_dir).cfg.seed == 1
+    shutil.rmtree(run_dir)
+    model = SILI("circle-3", method="sac", seed=2, settings=FAST_AGENT).learn(1)
+    run_dir = model.run_dir
+    with pytest.raises(ConfigError, match="training is kept in"):
+        model.save(taken)
+    model.save(tmp_path / "elsewhere")  # saved after all: the temporary run goes with the model
+    del model
+    gc.collect()
+    assert not run_dir.exists() and SILI.load(tmp_path / "elsewhere").cfg.seed == 2
 
 
 def test_a_task_module_in_the_current_directory_trains_and_a_scripts_class_is_explained(
