@@ -119,6 +119,11 @@ def test_bad_input_a_user_types_names_the_command_the_value_and_what_is_allowed(
             "sili eval: error: argument run_dir: an empty path; give a directory or file name",
         ),
         (
+            ["eval", "~nosuchuser-sili/run"],  # the shell leaves ~NAME of no user as it is
+            "sili eval: error: argument run_dir: ~nosuchuser-sili/run: '~nosuchuser-sili' names no "
+            "user with a home on this machine",
+        ),
+        (
             ["bounds", "circle-3", "--write", ""],  # before its games, not a table and no file
             "sili bounds: error: argument --write: an empty path; give a directory or file name",
         ),

@@ -10,6 +10,7 @@ import pytest
 
 from sili_robots.agent import matmul
 from sili_robots.agent.config import AgentConfig
+from sili_robots.errors import ConfigError
 
 
 @pytest.fixture
@@ -33,6 +34,15 @@ def test_the_faster_library_is_chosen_and_the_choice_cached(cache, monkeypatch):
     entry = json.loads(cache.read_text())[matmul.machine_key()]
     assert entry == {"matmul": "aten", "seconds": {"onednn": 2e-3, "aten": 1e-3}}
     assert AgentConfig().matmul == "aten"  # what a new run records in config.json
+
+
+@pytest.mark.parametrize("damaged", ["[1, 2]", '{"KEY": [1]}', '{"KEY": "aten"}'])
+def test_a_damaged_cache_is_timed_again_and_rewritten(cache, monkeypatch, damaged):
+    """Valid JSON of another shape (a file written by hand, say) is as good as none."""
+    monkeypatch.setattr(matmul, "time_matmuls", lambda: {"onednn": 2e-3, "aten": 1e-3})
+    cache.write_text(damaged.replace("KEY", matmul.machine_key()))
+    assert matmul.default_matmul() == "aten"
+    assert json.loads(cache.read_text())[matmul.machine_key()]["matmul"] == "aten"
 
 
 @pytest.mark.parametrize(("onednn", "chosen"), [(0.99e-3, "aten"), (0.9e-3, "onednn")])
@@ -128,6 +138,9 @@ def test_the_cache_is_never_a_tilde_folder_in_the_current_directory(monkeypatch,
     assert cache_dir() == tmp_path / "home" / ".cache" / "sili-robots"
     monkeypatch.setenv("SILI_ROBOTS_CACHE", "~/c")  # a quoted ~ too
     assert cache_dir() == tmp_path / "home" / "c"
+    monkeypatch.setenv("SILI_ROBOTS_CACHE", "~nosuchuser-sili/c")
+    with pytest.raises(ConfigError, match=r"SILI_ROBOTS_CACHE is '~nosuchuser-sili/c', whose '~' "):
+        cache_dir()
 
 
 def test_caching_the_precision_keeps_the_cached_library(cache, monkeypatch):

@@ -146,12 +146,17 @@ _MEASURED: dict[tuple[str, str, str], tuple[str, dict[str, float]]] = {}
 
 
 def _cache() -> tuple[Path, str, dict[str, Any]]:
-    """``kernels.json``, this machine's key in it, and all it holds ({} when unreadable)."""
+    """``kernels.json``, this machine's key in it, and all it holds ({} when unreadable; a
+    damaged entry of this machine left out, so its choices are timed again)."""
     path, key = cache_dir() / "kernels.json", machine_key()
     try:
         cached = json.loads(path.read_text())
     except (OSError, ValueError):
         cached = {}
+    if not isinstance(cached, dict):
+        cached = {}
+    if not isinstance(cached.get(key, {}), dict):
+        del cached[key]
     return path, key, cached
 
 

@@ -75,7 +75,13 @@ def path_arg(text: str) -> Path:
     (``--out ""``, a variable left unset) is refused rather than read as the current directory."""
     if not text.strip():
         raise argparse.ArgumentTypeError("an empty path; give a directory or file name")
-    path = Path(text).expanduser()
+    try:
+        path = Path(text).expanduser()
+    except RuntimeError:  # ~name of no user here (the shell leaves it as it is)
+        user = text.split(os.sep, 1)[0]
+        raise argparse.ArgumentTypeError(
+            f"{text}: '{user}' names no user with a home on this machine"
+        ) from None
     longest = max((len(os.fsencode(part)) for part in path.parts), default=0)  # ".": no parts
     if longest > NAME_MAX:  # found here: pathlib's checks return False
         raise argparse.ArgumentTypeError(
