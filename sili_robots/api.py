@@ -30,6 +30,7 @@ import numpy as np
 import torch
 
 from sili_robots.agent import SILIAgent
+from sili_robots.agent.config import LARGEST_INT
 from sili_robots.build import (
     build_agent,
     canonical_task,
@@ -186,9 +187,9 @@ class SILI:
         """Train ``interactions`` more interactions from the model's checkpoint, in
         ``run_dir`` (a loaded run trains where it lies). Stopped (Ctrl-C) or failed, the model
         is its run's last checkpoint, and the next ``learn`` counts from there."""
-        interactions = check_count("interactions", interactions)
         self._refresh()
         done = self._done
+        interactions = check_count("interactions", interactions, high=LARGEST_INT - done)
         if done == 0:  # as when the model was made (nothing came in since), before any change
             self._check_run_dir()
         check_not_trained(self.run_dir)  # overwrite=True too: never under a trainer

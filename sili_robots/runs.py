@@ -22,7 +22,7 @@ from typing import Any
 import torch
 
 from sili_robots.addons.config import AddonsConfig
-from sili_robots.agent.config import AgentConfig, set_path
+from sili_robots.agent.config import LARGEST_INT, AgentConfig, set_path
 from sili_robots.atomic import write_bytes, write_text
 from sili_robots.errors import ConfigError, check_count, check_seed, first_line
 from sili_robots.metrics import COMPRESSED_METRICS, METRIC_COLUMNS, METRICS
@@ -36,6 +36,11 @@ DAMAGED_SUMMARY = (
     "delete it, then resume the run from its checkpoint (sili train --resume or sili sweep "
     "--resume), or collect a collected one again"
 )
+
+
+#: the most torch threads a run may ask for (more than any processor's cores; far more fail in
+#: OpenMP's thread creation, without a word of which setting asked)
+MAX_THREADS = 1024
 
 
 @dataclass
@@ -61,8 +66,12 @@ class RunConfig:
         from sili_robots.agent.methods import PRESETS
 
         self.seed = check_seed(self.seed)
-        for name, low in (("interactions", 0), ("checkpoint_every", 1), ("threads", 1)):
-            setattr(self, name, check_count(name, getattr(self, name), low))
+        for name, low, high in (
+            ("interactions", 0, LARGEST_INT),
+            ("checkpoint_every", 1, LARGEST_INT),
+            ("threads", 1, MAX_THREADS),
+        ):
+            setattr(self, name, check_count(name, getattr(self, name), low, high))
         if self.method not in PRESETS:
             raise ConfigError(f"unknown method {self.method!r}; allowed: {', '.join(PRESETS)}")
         if not isinstance(self.env_kwargs, dict) or not isinstance(self.task, str):

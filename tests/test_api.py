@@ -81,11 +81,13 @@ def test_api_refuses_what_it_cannot_use(tmp_path):
     model = SILI("circle-3", method="sac", settings=FAST_AGENT)
     with pytest.raises(ConfigError, match="nothing to save yet"):
         model.save(tmp_path / "x")
-    with pytest.raises(ConfigError, match="interactions must be an integer >= 1, got 0"):
+    with pytest.raises(ConfigError, match=r"interactions must be an integer in \[1, 2147483647\]"):
         model.learn(0)
     with pytest.raises(ConfigError, match="nothing to evaluate yet: call learn"):
         model.evaluate(2)
     model.learn(1)
+    with pytest.raises(ConfigError, match=r"in \[1, 2147483646\], got 2147483647"):
+        model.learn(2**31 - 1)  # a run's count stays within what its tables hold
     for bad in (0, -2, 1.5):  # no NaN summaries of nothing
         with pytest.raises(ConfigError, match=f"interactions must be an integer >= 1, got {bad}"):
             model.evaluate(bad)

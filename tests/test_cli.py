@@ -119,6 +119,20 @@ def test_bad_input_a_user_types_names_the_command_the_value_and_what_is_allowed(
             "sili eval: error: argument run_dir: an empty path; give a directory or file name",
         ),
         (
+            ["train", "--task", "circle-3", "--interactions", "99999999999999999999"],
+            "sili train: error: argument --interactions: 99999999999999999999 is not allowed: "
+            "need an integer <= 2147483647",
+        ),
+        (
+            ["train", "--task", "circle-3", "--threads", "1025"],  # OpenMP dies on far more
+            "sili train: error: argument --threads: 1025 is not allowed: need an integer <= 1024",
+        ),
+        (
+            ["plot", str(tmp_path), "--smooth", str(2**63)],
+            f"sili plot: error: argument --smooth: {2**63} is not allowed: need an integer <= "
+            "2147483647",
+        ),
+        (
             ["eval", "~nosuchuser-sili/run"],  # the shell leaves ~NAME of no user as it is
             "sili eval: error: argument run_dir: ~nosuchuser-sili/run: '~nosuchuser-sili' names no "
             "user with a home on this machine",
@@ -190,11 +204,19 @@ def test_the_largest_seed_is_taken_and_a_bool_is_no_count():
 
     code, _, err = _main("rollout", "circle-3", "--seed", str(2**32 - 1), "--interactions", "1")
     assert code == 0, err
-    with pytest.raises(ConfigError, match="interactions must be an integer >= 0, got True"):
+    with pytest.raises(ConfigError, match=r"interactions must be an integer in \[0, 2147483647\]"):
         make_run_config("circle-3", "sac", 0, True)
     record = make_run_config("circle-3", "sac", 0, 5).to_dict()
-    with pytest.raises(ConfigError, match="checkpoint_every must be an integer >= 1, got True"):
+    with pytest.raises(ConfigError, match=r"checkpoint_every must be an integer in \[1, 2147483"):
         RunConfig.from_dict({**record, "checkpoint_every": True})
+    for name, high in (
+        ("interactions", 2**31 - 1),
+        ("checkpoint_every", 2**31 - 1),
+        ("threads", 1024),
+    ):
+        assert getattr(RunConfig.from_dict({**record, name: high}), name) == high
+        with pytest.raises(ConfigError, match=rf"{name} must be an integer in \[., {high}\]"):
+            RunConfig.from_dict({**record, name: high + 1})  # a damaged config.json, say
 
 
 def test_sweep_refuses_bad_seeds_a_task_twice_and_a_latent_no_method_takes(tmp_path):

@@ -11,17 +11,20 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
+from sili_robots.agent.config import LARGEST_INT
 from sili_robots.agent.schedule import Schedule
 from sili_robots.build import canonical_task, is_class_path
 from sili_robots.errors import MAX_SEED, ConfigError, check_seed
 from sili_robots.migrations import setting_path
+from sili_robots.runs import MAX_THREADS
 from sili_robots.tasks import task_spec
 
 #: the longest name (a path's part) in bytes that most file systems allow
 NAME_MAX = 255
 
 
-def _int_at_least(text: str, minimum: int) -> int:
+def _int_in(text: str, minimum: int, maximum: int = LARGEST_INT) -> int:
+    """An integer option's value; the largest a run's counts and sizes can hold by default."""
     try:
         value = int(text)
     except ValueError:
@@ -30,15 +33,21 @@ def _int_at_least(text: str, minimum: int) -> int:
         ) from None
     if value < minimum:
         raise argparse.ArgumentTypeError(f"{value} is not allowed: need an integer >= {minimum}")
+    if value > maximum:
+        raise argparse.ArgumentTypeError(f"{value} is not allowed: need an integer <= {maximum}")
     return value
 
 
 def positive_int(text: str) -> int:
-    return _int_at_least(text, 1)
+    return _int_in(text, 1)
 
 
 def non_negative_int(text: str) -> int:
-    return _int_at_least(text, 0)
+    return _int_in(text, 0)
+
+
+def threads_arg(text: str) -> int:
+    return _int_in(text, 1, MAX_THREADS)
 
 
 def seed(text: str) -> int:

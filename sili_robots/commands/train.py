@@ -28,6 +28,7 @@ from sili_robots.commands.common import (
     seed,
     task_arguments_given,
     task_name,
+    threads_arg,
     track_typed_options,
     unit_float,
     writable_dir,
@@ -106,7 +107,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--threads",
-        type=positive_int,
+        type=threads_arg,
         default=1,
         help="torch threads for this run (default 1; recorded, as it changes the summation order)",
     )
