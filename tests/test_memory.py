@@ -51,6 +51,19 @@ def test_training_past_the_memory_left_exits_1_with_one_line(tmp_path, monkeypat
     assert resource.getrlimit(resource.RLIMIT_DATA) == before
 
 
+def test_overwrite_keeps_the_run_when_the_new_agent_does_not_fit(tmp_path, monkeypatch, capsys):
+    """The agent is built before --overwrite removes the run there, not after."""
+    run = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--interactions", "2", *FAST_ARGS, "--no-progress"]
+    assert main([*args, "--out", str(run)]) == 0
+    before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+    monkeypatch.setattr(memory, "available_memory", lambda: 100 * MIB)
+    huge = ["--set", "hidden=20000", "--overwrite"]  # a 1.6 GB layer
+    assert main([*args, *huge, "--out", str(run)]) == 1
+    assert "sili train: error: out of memory (" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()} == before
+
+
 def test_a_lower_limit_already_set_stays(monkeypatch):
     """``ulimit -d`` below what the machine has free is the user's: the cap never raises it."""
     before = resource.getrlimit(resource.RLIMIT_DATA)

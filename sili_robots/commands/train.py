@@ -38,6 +38,7 @@ from sili_robots.labels import shell_path
 from sili_robots.migrations import setting_path
 from sili_robots.runs import (
     CHECKPOINT,
+    CONFIG,
     TB_DIR,
     RunConfig,
     check_new_run_dir,
@@ -266,7 +267,7 @@ def run(args: argparse.Namespace) -> int:
         check_new_run_dir(args.out, args.overwrite, resume=f"--resume {quoted}")
         if args.out.is_dir():  # an existing folder (one to be made: make_run_dir says why not)
             writable_dir(args.out, "--out")
-        _check_env_builds(cfg)
+        _check_builds(cfg, agent=args.overwrite and (args.out / CONFIG).is_file())
         make_run_dir(args.out)
         _note_threads_beyond_cores(cfg.threads)
         _note_slow_kernels(cfg)
@@ -347,9 +348,18 @@ def _resume_hint(run_dir: Path) -> Iterator[None]:
         raise
 
 
-def _check_env_builds(cfg: RunConfig) -> None:
-    """Fail fast, with the task's own message, on bad task arguments (e.g. a controller)."""
-    from sili_robots.build import check_task_builds
+def _check_builds(cfg: RunConfig, agent: bool) -> None:
+    """Fail fast, with the task's own message, on bad task arguments (e.g. a controller); with
+    ``agent`` build the agent too, before ``--overwrite`` removes a run (a network too large
+    for this machine would fail only after)."""
+    from sili_robots.build import build_agent, built_task, observed_as
+    from sili_robots.memory import capped_at_available
 
     # a new run's task_id is its name's version, so the name builds the version it trains
-    check_task_builds(cfg.task, cfg.env_kwargs, "--controller, --env-kwarg")
+    env = built_task(cfg.task, cfg.env_kwargs, "--controller, --env-kwarg")
+    try:
+        if agent:
+            with capped_at_available():  # as in training: an error, not the kernel's OOM kill
+                build_agent(cfg, observed_as(env, cfg))
+    finally:
+        env.close()
