@@ -262,8 +262,9 @@ def observed_as(env: gym.Env, cfg: RunConfig) -> gym.Env:
 
 
 def make_run_env(cfg: RunConfig) -> gym.Env:
-    """The run's task version (``task_id``, else its name) as its method observes it."""
-    return observed_as(make_env(cfg.task_id or cfg.task, **cfg.env_kwargs), cfg)
+    """The run's task version (``task_id``, else its name) as its method observes it; one its
+    recorded arguments do not build (a damaged record) is a ConfigError naming them."""
+    return observed_as(built_task(cfg.task_id or cfg.task, cfg.env_kwargs), cfg)
 
 
 def build_agent(cfg: RunConfig, env: gym.Env) -> SILIAgent:

@@ -23,6 +23,7 @@ import torch
 
 from sili_robots.addons.config import AddonsConfig
 from sili_robots.agent.config import LARGEST_INT, AgentConfig, set_path
+from sili_robots.agent.config import check as check_ranges
 from sili_robots.atomic import write_bytes, write_text
 from sili_robots.errors import ConfigError, check_count, check_seed, first_line
 from sili_robots.metrics import COMPRESSED_METRICS, METRIC_COLUMNS, METRICS
@@ -98,6 +99,7 @@ class RunConfig:
         the task's first."""
         d = dict(migrate_run(d))
         d["agent"] = AgentConfig.from_dict(d["agent"])
+        check_ranges(d["agent"], "")  # a damaged value named here (with the file), not in use
         d["addons"] = AddonsConfig.from_dict(d.get("addons", {}))
         if d.get("task_id") is None:
             d["task_id"] = recorded_task_id(d)

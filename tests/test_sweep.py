@@ -181,8 +181,8 @@ def test_failing_run_is_reported_and_the_others_complete(tmp_path):
     )
     assert report.outcomes["circle-3__sac__s0"].status == "done"
     assert report.failed == {
-        "sawyer-reach-bogus__sac__s0": "ConfigError: unknown controller 'bogus'; "
-        "allowed: mink, osc, joint_velocity"
+        "sawyer-reach-bogus__sac__s0": "ConfigError: task 'sili/SawyerReach-v1' with "
+        "controller='bogus': unknown controller 'bogus'; allowed: mink, osc, joint_velocity"
     }
     assert len(pd.read_csv(out / "runs" / "circle-3__sac__s0" / "metrics.csv")) == 4
     assert (
@@ -199,7 +199,11 @@ def test_failing_run_is_reported_and_the_others_complete(tmp_path):
     res = _sili("sweep", "--resume", out, "--workers", 1, "--no-progress")
     assert res.returncode == 1, res.stderr
     assert json.loads(res.stdout)["failed"] == report.failed
-    assert "failed sawyer-reach-bogus__sac__s0: ConfigError: unknown controller" in res.stderr
+    assert (
+        "failed sawyer-reach-bogus__sac__s0: ConfigError: task 'sili/SawyerReach-v1' with "
+        + ("controller='bogus': unknown controller")
+        in res.stderr
+    )
     assert "Traceback" not in res.stderr
 
 
@@ -449,6 +453,14 @@ def test_a_record_that_cannot_run_is_named_and_a_dry_run_refuses_it_too(tmp_path
             assert main([*again, *dry]) == 2
             err = capsys.readouterr().err
             assert f"{record} records a sweep that cannot run: --beta applies to" in err, err
+    first = {**kept["invocations"][0], "betas": None}
+    for edit, said in (
+        ({"seeds": [-1]}, "seed -1 is not allowed"),  # found where its runs are made
+        ({"agent_overrides": {"sac.lr": "x"}}, "setting sac.lr must be a number, got 'x'"),
+    ):
+        record.write_text(json.dumps({"invocations": [{**first, **edit}]}))
+        assert main(["sweep", "--resume", str(out), "--dry-run"]) == 2
+        assert f"{record} records a sweep that cannot run: {said}" in capsys.readouterr().err
     record.write_text("{")
     for dry in (["--dry-run"], []):  # a new invocation is added to the record: it must read
         assert main([*base, "--interactions", "2", *dry]) == 2

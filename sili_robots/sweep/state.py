@@ -40,7 +40,7 @@ from sili_robots.runs import (
     read_json,
     recorded_run,
 )
-from sili_robots.sweep.spec import PlannedRun, SweepSpec, validate
+from sili_robots.sweep.spec import PlannedRun, SweepSpec, expand
 
 SWEEP_FILE, RUNS_DIR, RESULTS, RUNS_TABLE, LOCK, FIGURES = (
     "sweep.json",
@@ -312,7 +312,7 @@ def recorded_specs(sweep_dir: Path) -> list[SweepSpec]:
     try:
         specs = [SweepSpec.from_dict(d) for d in invocations]
         for spec in specs:
-            validate(spec)  # a value no sweep can have (a hand edit)
+            expand(spec)  # each run's config built: a value no run can have (a hand edit)
         return specs
     except ConfigError as err:  # named with the file: the value is in it, not on the command line
         raise ConfigError(f"{path} records a sweep that cannot run: {err}") from None
