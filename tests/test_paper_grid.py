@@ -820,6 +820,10 @@ def test_collect_replaces_a_damaged_copy_and_never_copies_a_damaged_run(
     (run / "summary.json").write_text(json.dumps({**summary, "interactions": "abc"}))
     assert main(["collect", str(source), "--into", str(into)]) == 2
     assert "is damaged (interactions 'abc' is not a count)" in capsys.readouterr().err
+    (run / "summary.json").write_text(json.dumps({**summary, "final_task_reward": "abc"}))
+    assert main(["collect", str(source), "--into", str(into)]) == 2  # which every table refuses
+    assert "summary.json is damaged (a value of final_task_reward" in capsys.readouterr().err
+    assert not (into / "runs").exists()
     (run / "summary.json").write_text(json.dumps(summary))
     config = json.loads((run / "config.json").read_text())
     del config["run"]["agent"]

@@ -37,7 +37,7 @@ from sili_robots.runs import (
     read_json,
     recorded_run,
 )
-from sili_robots.sweep.results import run_identity, runs_of
+from sili_robots.sweep.results import finished_summary, run_identity, runs_of
 from sili_robots.sweep.state import RUNS_DIR
 
 
@@ -131,7 +131,9 @@ def _rows_trained(run_dir: Path) -> int:
 
 
 def _length(run_dir: Path) -> int:
+    """The run's length from its summary, whose numbers must read too (every table reads them)."""
     path = run_dir / SUMMARY
+    finished_summary(run_dir)
     length = read_json(path, DAMAGED_SUMMARY, "interactions")["interactions"]
     if not isinstance(length, int) or isinstance(length, bool) or length < 1:
         raise ConfigError(
