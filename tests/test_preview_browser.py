@@ -261,7 +261,8 @@ def test_a_browser_that_fails_to_start_is_reported_with_what_it_wrote(tmp_path):
     fake.write_text("#!/bin/sh\necho 'error while loading shared libraries: libnss3.so' >&2\n"
                     "exit 127\n")  # fmt: skip
     fake.chmod(0o755)
-    with pytest.raises(BrowserError, match=r"(exited|closed).*it said: error while loading .*nss3"):
+    said = rf"(exited|closed).* \({re.escape(str(fake))}\); it said: error while loading .*nss3"
+    with pytest.raises(BrowserError, match=said):  # named: SILI_CHROMIUM may name another
         Browser(executable=str(fake), timeout=20).start()
 
 

@@ -213,6 +213,7 @@ class Browser:
         except OSError:
             lines = []
         said = " | ".join(line.strip() for line in lines[-3:] if line.strip())
+        what = f"{what} ({self.executable})"  # SILI_CHROMIUM may name something else
         return BrowserError((f"{what}; it said: {said}" if said else what) + _address_limit())
 
     def _read_message(self, deadline: float) -> dict[str, Any]:
