@@ -38,11 +38,11 @@ def test_a_run_finished_in_the_folder_while_the_task_was_built_is_not_trained_ov
     out = tmp_path / "run"
     theirs = '{"run": "another run"}'
 
-    def meanwhile(cfg):  # a slow task constructor; another `sili train` starts and ends
+    def meanwhile(cfg, agent):  # a slow task constructor; another `sili train` starts and ends
         out.mkdir(exist_ok=True)
         (out / "config.json").write_text(theirs)
 
-    monkeypatch.setattr(train_command, "_check_env_builds", meanwhile)
+    monkeypatch.setattr(train_command, "_check_builds", meanwhile)
     args = ["train", "--task", "circle-3", "--interactions", "2", "--out", str(out), *FAST_ARGS]
     assert main([*args, "--no-progress"]) == 2
     assert f"{out} already holds a run" in capsys.readouterr().err
@@ -57,10 +57,10 @@ def test_overwrite_does_not_clear_a_folder_another_trainer_claimed_meanwhile(
     out.mkdir()
     (out / "config.json").write_text("{}")
 
-    def meanwhile(cfg):  # another trainer claims the folder while the task builds
+    def meanwhile(cfg, agent):  # another trainer claims the folder while the task builds
         _claim(out, other_process)
 
-    monkeypatch.setattr(train_command, "_check_env_builds", meanwhile)
+    monkeypatch.setattr(train_command, "_check_builds", meanwhile)
     args = ["train", "--task", "circle-3", "--interactions", "2", "--out", str(out), *FAST_ARGS]
     assert main([*args, "--overwrite", "--no-progress"]) == 2
     assert f"being trained by process {other_process}" in capsys.readouterr().err
