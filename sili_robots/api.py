@@ -22,6 +22,7 @@ import os
 import shutil
 import tempfile
 import weakref
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +43,7 @@ from sili_robots.build import (
     task_kwargs_of,
     task_name_of,
 )
-from sili_robots.errors import ConfigError, check_count, first_line
+from sili_robots.errors import ConfigError, check_count, check_flag, first_line
 from sili_robots.evaluation import AgentFeedback, check_same_task, evaluate, fitting
 from sili_robots.metrics import COMPRESSED_METRICS, METRICS, MetricsWriter
 from sili_robots.runs import (
@@ -91,6 +92,8 @@ class SILI:
         overwrite: bool = False,
     ) -> None:
         self._task_env: gym.Env | None = None
+        _check_arguments(env, settings, env_kwargs)
+        overwrite = check_flag("overwrite", overwrite)
         if isinstance(env, gym.Env):
             if not isinstance(env.unwrapped, RepeatedInteractionEnv):
                 raise ConfigError(
@@ -173,6 +176,8 @@ class SILI:
         cfg = read_run_config(path)
         state = require_checkpoint(path)
         if env is not None:
+            if not isinstance(env, gym.Env):
+                raise ConfigError(f"env must be a task instance (or None), got {env!r}")
             check_same_task(path, cfg, env)
         model = cls.__new__(cls)
         model.cfg, model.run_dir, model._task_env, model._overwrite = cfg, path, env, False
@@ -187,6 +192,7 @@ class SILI:
         """Train ``interactions`` more interactions from the model's checkpoint, in
         ``run_dir`` (a loaded run trains where it lies). Stopped (Ctrl-C) or failed, the model
         is its run's last checkpoint, and the next ``learn`` counts from there."""
+        progress_bar = check_flag("progress_bar", progress_bar)
         self._refresh()
         done = self._done
         interactions = check_count("interactions", interactions, high=LARGEST_INT - done)
@@ -248,6 +254,9 @@ class SILI:
     def predict(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
         """The action (alone; greedy unless ``deterministic=False``) for one observation of
         the interaction being played on ``model.env``."""
+        deterministic = check_flag("deterministic", deterministic)
+        if isinstance(obs, tuple) and len(obs) == 2 and isinstance(obs[1], dict):
+            raise ConfigError("obs is reset()'s (obs, info) pair; give its obs alone")
         obs = np.asarray(obs, np.float32)
         expected = self.env.observation_space.shape
         if not np.isfinite(obs).all():
@@ -271,6 +280,7 @@ class SILI:
         path = Path(path)
         self._refresh()
         self._check_trained("save")
+        overwrite = check_flag("overwrite", overwrite)
         try:
             self._copy_to(path, overwrite)
         except (ConfigError, OSError) as exc:  # a script ends here: its training must stay
@@ -342,6 +352,22 @@ class SILI:
 
 #: temporary run directories of live models, removed with their model
 _TEMPORARY: dict[Path, weakref.finalize] = {}
+
+
+def _check_arguments(env: object, settings: object, env_kwargs: object) -> None:
+    """What ``SILI(...)`` takes, named, instead of an error from deep inside."""
+    if not isinstance(env, str | gym.Env):
+        hint = " (a class: give an instance, or its 'package.module:ClassName')"
+        raise ConfigError(
+            "env must be a task name or id ('circle-3', 'sili/Circle3-v1'), a "
+            "'package.module:ClassName' or a task instance, got "
+            f"{env!r}{hint if isinstance(env, type) else ''}"
+        )
+    for name, given in (("settings", settings), ("env_kwargs", env_kwargs)):
+        if given is not None and not (
+            isinstance(given, Mapping) and all(isinstance(k, str) for k in given)
+        ):
+            raise ConfigError(f"{name} must be a dict of names to values, got {given!r}")
 
 
 def _remove_with(model: SILI, run_dir: Path) -> None:

@@ -302,6 +302,11 @@ def make_run_config(
     for name, value in (settings or {}).items():
         path = setting_path(name)
         (addon_settings if path.startswith("addons.") else agent_settings)[path] = value
+    if latent is not None and agent_settings.get("latent", latent) != latent:
+        raise ConfigError(
+            f"the latent kind is given twice: latent {latent!r} and setting latent "
+            f"{agent_settings['latent']!r}; give it once"
+        )
     try:
         cfg = RunConfig(
             task=task,

@@ -75,6 +75,14 @@ def first_line(err: Exception) -> str:
     return f"{type(err).__name__}: {str(err).split('. ')[0]}"
 
 
+def check_flag(name: str, value: object) -> bool:
+    """``value`` as a bool (numpy's too), or ``ConfigError``: a string such as ``"no"`` would
+    count as true, and ``overwrite="no"`` replace a run."""
+    if type(value).__name__ not in ("bool", "bool_"):
+        raise ConfigError(f"{name} must be True or False, got {value!r}")
+    return bool(value)
+
+
 def is_number(value: object) -> bool:
     """A real number, numpy's too (``np.float32(0.1)``), and not a bool."""
     return not isinstance(value, bool) and isinstance(value, numbers.Real)

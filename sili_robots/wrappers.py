@@ -14,11 +14,27 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from sili_robots.errors import ConfigError
+
+
+def _task_of(env: Any, wrapper: str) -> Any:
+    """The sili task under ``env``: the wrappers read what only a task's ``info`` carries."""
+    from sili_robots.tasks.base import RepeatedInteractionEnv
+
+    task = env.unwrapped if isinstance(env, gym.Env) else None
+    if not isinstance(task, RepeatedInteractionEnv):
+        raise ConfigError(
+            f"{wrapper} wraps a sili task (a RepeatedInteractionEnv, e.g. "
+            f"gym.make('sili/Circle3-v1')), got {env!r}"
+        )
+    return task
+
 
 class _AppendFromInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Appends ``_extra(info)`` to every observation, within ``low``/``high``."""
 
     def __init__(self, env: gym.Env, low: np.ndarray, high: np.ndarray) -> None:
+        _task_of(env, type(self).__name__)
         gym.utils.RecordConstructorArgs.__init__(self)
         gym.Wrapper.__init__(self, env)
         base = env.observation_space
@@ -47,7 +63,7 @@ class OracleObservation(_AppendFromInfo):
     """Appends the true strategy's encoding (``info["strategy"]``)."""
 
     def __init__(self, env: gym.Env) -> None:
-        task = env.unwrapped
+        task = _task_of(env, "OracleObservation")
         n = task.strategy_dim
         super().__init__(
             env,

@@ -630,3 +630,34 @@ def test_a_forked_childs_copy_of_a_model_leaves_its_temporary_run():
     assert os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]) == 0
     assert model.run_dir.is_dir()
     model.close()
+
+
+def test_what_sili_takes_is_named_and_a_string_is_no_flag(tmp_path):
+    """A string such as "no" counted as true: overwrite="no" replaced a trained run."""
+    kept = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=tmp_path / "kept").learn(2)
+    for make, said in (
+        (lambda: SILI(None), "env must be a task name or id .* got None"),
+        (lambda: SILI(TwoDoorsEnv), r"got <class .*TwoDoorsEnv'> \(a class: give an instance"),
+        (lambda: SILI("circle-3", settings=[("hidden", 16)]), "settings must be a dict of names"),
+        (lambda: SILI("circle-3", env_kwargs="horizon"), "env_kwargs must be a dict of names"),
+        (lambda: SILI("circle-3", latent="discrete", settings={"latent": "partial"}), "given twi"),
+        (
+            lambda: SILI("circle-3", settings=FAST_AGENT, run_dir=kept.run_dir, overwrite="no"),
+            "overwrite must be True or False, got 'no'",
+        ),
+        (lambda: kept.save(tmp_path / "x", overwrite="no"), "overwrite must be True or False"),
+        (lambda: kept.predict(kept.env.reset()), r"reset\(\)'s \(obs, info\) pair; give its obs"),
+        (lambda: kept.predict(kept.env.reset()[0], deterministic="no"), "deterministic must be"),
+        (lambda: kept.learn(1, progress_bar="yes"), "progress_bar must be True or False"),
+        (lambda: SILI.load(kept.run_dir, env="circle-3"), "env must be a task instance"),
+    ):
+        with pytest.raises(ConfigError, match=said):
+            make()
+    assert SILI.load(kept.run_dir).cfg.interactions == 2  # nothing replaced or trained
+
+
+def test_numpy_numbers_are_settings_as_pythons_are():
+    settings = {**FAST_AGENT, "sac.lr": np.float32(0.5), "hidden": np.int64(16)}
+    cfg = SILI("circle-3", settings={**settings, "model.sample": np.bool_(True)}).cfg.agent
+    assert (cfg.sac.lr, cfg.hidden, cfg.model.sample) == (0.5, 16, True)
+    assert type(cfg.hidden) is int and type(cfg.model.sample) is bool  # as config.json keeps

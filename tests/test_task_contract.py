@@ -164,6 +164,46 @@ def test_bad_arguments_are_named():
         env.step(np.zeros(3))
     with pytest.raises(ConfigError, match="finite"):
         env.step(np.array([np.nan, 0.0]))
+    with pytest.raises(ConfigError, match=r"'circle-3' takes no argument foo; its arguments: var"):
+        make_task("circle-3", foo=1)  # gymnasium's own TypeError names neither
+    assert make_task("circle-3", max_episode_steps=5, render_mode=None).spec.max_episode_steps == 5
+    for wrapper in (OracleObservation, StrategyFlag):  # they read what only a task's info has
+        with pytest.raises(ConfigError, match=f"{wrapper.__name__} wraps a sili task .* got <"):
+            wrapper(gym.make("CartPole-v1"))
+
+
+@pytest.mark.parametrize("make", [make_task, lambda n: gym.make(TASKS[n].gym_id)])
+def test_a_refused_first_reset_leaves_the_task_to_play(make):
+    """gymnasium's checker (which the base class's own checks replace) took a refused first
+    reset for a done one and failed every step after it."""
+    env = make("circle-3")
+    with pytest.raises(ConfigError, match="unknown strategy 9; allowed: 0, 1, 2"):
+        env.reset(options={"strategy": 9})
+    env.reset(seed=0)
+    for _ in range(3):
+        assert env.step(np.zeros(2))[1] == pytest.approx(-1.0)
+
+
+def test_bad_reset_options_are_named_and_change_nothing():
+    env = make_task("circle-3")
+    env.reset(seed=0)
+    env.step(np.ones(2))
+    task = env.unwrapped
+    saved, where = task.game_state(), (task.location, task.t, task.interaction)
+    for options, said in (
+        (
+            ["restart"],
+            r"reset options must be a dict \(keys restart, restore, strategy\), got list",
+        ),
+        ({"restart": "no"}, "reset option restart must be True or False, got 'no'"),  # not truthy
+        ({"restore": {"fields": {"location": 1}}}, r"a saved game must be what game_state\(\) "),
+        ({"restore": "yes"}, r"returns \(keys fields, rng, interaction, last_strategy_id; fie"),
+        ({"restore": {**saved, "interaction": -1}}, "interaction must be a count, got -1"),
+        ({"restore": {**saved, "fields": {"location": 0}, "rng": {}}}, "rng is not this"),
+    ):
+        with pytest.raises(ConfigError, match=said):
+            env.reset(options=options)
+        assert (task.location, task.t, task.interaction) == where, options
 
 
 def test_a_users_gymnasium_id_of_a_task_is_answered_with_its_class():

@@ -19,7 +19,7 @@ from typing import Any, Literal
 
 from sili_robots.agent.matmul import default_matmul, default_precision, onednn_available
 from sili_robots.agent.schedule import Schedule, Scheduled, span
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, is_number
 
 Method = Literal["sili", "lili", "stable", "sac", "oracle", "smirl"]
 #: ``none``: no latent (SAC, Oracle, SMiRL); ``true``: the diagnostic that feeds the true strategy
@@ -188,19 +188,19 @@ def convert(name: str, tp: Any, value: Any) -> Any:
             f"setting {name} takes one number, not a schedule ({value}); the settings that take "
             f"schedules: {', '.join(paths(AgentConfig, schedulable=True))}"
         )
-    is_number = isinstance(value, int | float) and not isinstance(value, bool)
+    number = is_number(value)  # numpy's too: np.float32(3e-4) is a learning rate
     if tp is float:
-        if not is_number:
+        if not number:
             raise ConfigError(f"setting {name} must be a number, got {value!r}")
         return float(value)
     if tp is int:
-        if not (is_number and float(value).is_integer()):
+        if not (number and float(value).is_integer()):
             raise ConfigError(f"setting {name} must be a whole number, got {value!r}")
         return int(value)
     if tp is bool:
-        if not isinstance(value, bool):
+        if type(value).__name__ not in ("bool", "bool_"):
             raise ConfigError(f"setting {name} must be true or false, got {value!r}")
-        return value
+        return bool(value)
     if tp is str:
         if not isinstance(value, str):
             raise ConfigError(f"setting {name} must be a string, got {value!r}")

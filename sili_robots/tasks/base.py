@@ -23,17 +23,20 @@ import inspect
 import math
 import warnings
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from sili_robots.errors import ConfigError, RenderModeRefused, check_count
+from sili_robots.errors import ConfigError, RenderModeRefused, check_count, check_flag, is_number
 
 StrategyId = int | float
 #: what ``reset(options=...)`` takes: restart the game, restore a saved one, start from z
 RESET_OPTIONS = ("restart", "restore", "strategy")
+#: what ``game_state()`` holds: the ``restore`` reset option takes it back
+GAME_STATE_KEYS = ("fields", "rng", "interaction", "last_strategy_id")
 #: the longest interaction a task takes (steps): far beyond the paper's (50), and small enough
 #: that a slip (1e11) is named here, not met as a failed allocation of the history's arrays
 LONGEST_HORIZON = 10_000
@@ -169,6 +172,11 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        if options is not None and not isinstance(options, Mapping):
+            raise ConfigError(
+                f"reset options must be a dict (keys {', '.join(RESET_OPTIONS)}), got "
+                f"{type(options).__name__}"
+            )
         options = dict(options or {})
         unknown = set(options) - set(RESET_OPTIONS)
         if unknown:
@@ -176,6 +184,9 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
                 f"unknown reset options {sorted(unknown)}; allowed: {list(RESET_OPTIONS)}"
             )
         start = self._check_start(options["strategy"]) if "strategy" in options else None
+        check_flag("reset option restart", options.get("restart", False))
+        if options.get("restore") is not None:
+            self._check_game_state(options["restore"])
         if not self._started and self.spec is not None and self.spec.id.startswith("sili/"):
             from sili_robots.tasks.registry import check_identity
 
@@ -257,11 +268,17 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
 
     def restore_game_state(self, state: dict[str, Any]) -> tuple[np.ndarray, dict[str, Any]]:
         """Continue a saved game: start its current interaction again; returns reset's output."""
+        self._check_game_state(state)
         if not self._started:
             self.reset(seed=0)
+        try:  # numpy checks the generator's state: before any field changes
+            self.np_random.bit_generator.state = state["rng"]
+        except (TypeError, ValueError, KeyError) as err:
+            raise ConfigError(
+                f"a saved game's rng is not this task's generator state: {err}"
+            ) from None
         for k, v in state["fields"].items():
             setattr(self, k, _copy(v))
-        self.np_random.bit_generator.state = state["rng"]
         self.interaction = int(state["interaction"])
         self._trajectory = []
         self.t = 0
@@ -280,6 +297,21 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         self._changed_since_last_step = prev is not None and not _same(sid, prev)
         self._last_strategy_id = sid
         return self._observation(), self._info()
+
+    def _check_game_state(self, state: Any) -> None:
+        """A saved game is what ``game_state()`` returns, checked whole before any of it is set."""
+        fields = state.get("fields") if isinstance(state, Mapping) else None
+        whole = isinstance(fields, Mapping) and all(k in state for k in GAME_STATE_KEYS)
+        if not whole or set(fields) - set(self.game_state_fields):
+            raise ConfigError(
+                f"a saved game must be what game_state() returns (keys {', '.join(GAME_STATE_KEYS)}"
+                f"; fields among {', '.join(self.game_state_fields) or 'none'}), got "
+                f"{type(state).__name__}"
+                + (f" with keys {', '.join(map(str, state))}" if isinstance(state, Mapping) else "")
+            )
+        interaction = state["interaction"]
+        if not is_number(interaction) or int(interaction) != interaction or interaction < 0:
+            raise ConfigError(f"a saved game's interaction must be a count, got {interaction!r}")
 
     def render(self) -> None:
         """No frames (gymnasium's ``render``): ``sili_robots.preview`` records a task's scene."""
