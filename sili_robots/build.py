@@ -267,6 +267,16 @@ def make_run_env(cfg: RunConfig) -> gym.Env:
     return observed_as(built_task(cfg.task_id or cfg.task, cfg.env_kwargs), cfg)
 
 
+def check_agent_builds(cfg: RunConfig, task: gym.Env) -> None:
+    """Build the run's agent once, on ``task`` (the run's task, unwrapped or not), under the
+    memory cap training runs under: a network too large for this machine fails here, before a
+    command removes the run it replaces, not after."""
+    from sili_robots.memory import capped_at_available
+
+    with capped_at_available():  # as in training: an error, not the kernel's OOM kill
+        build_agent(cfg, observed_as(task.unwrapped, cfg))
+
+
 def build_agent(cfg: RunConfig, env: gym.Env) -> SILIAgent:
     task = env.unwrapped
     return SILIAgent(

@@ -64,6 +64,17 @@ def test_overwrite_keeps_the_run_when_the_new_agent_does_not_fit(tmp_path, monke
     assert {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()} == before
 
 
+def test_a_sweep_overwrite_keeps_its_runs_when_a_new_agent_does_not_fit(tmp_path, monkeypatch):
+    out = tmp_path / "sweep"
+    args = ["sweep", "--tasks", "circle-3", "--methods", "sac", "--seeds", "0-1", *FAST_ARGS]
+    args += ["--interactions", "2", "--no-progress", "--workers", "1", "--out", str(out)]
+    assert main(args) == 0
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file() and "tb" not in p.parts}
+    monkeypatch.setattr(memory, "available_memory", lambda: 100 * MIB)
+    assert main([*args, "--set", "hidden=20000", "--overwrite"]) == 1
+    assert {p: p.read_bytes() for p in before} == before and all(p.exists() for p in before)
+
+
 def test_a_lower_limit_already_set_stays(monkeypatch):
     """``ulimit -d`` below what the machine has free is the user's: the cap never raises it."""
     before = resource.getrlimit(resource.RLIMIT_DATA)

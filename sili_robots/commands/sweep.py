@@ -308,6 +308,27 @@ def _backend(args: argparse.Namespace):
     return LocalBackend(args.workers or os.cpu_count() or 1, args.retries)
 
 
+def _check_agents_build(specs: list[SweepSpec]) -> None:
+    """Each planned run's agent built once per kind (runs apart by their seed alone are one), as
+    ``sili train --overwrite`` does: a network too large fails before any run is removed."""
+    from sili_robots.build import built_task, check_agent_builds
+    from sili_robots.sweep.runner import plan
+
+    kinds: set[str] = set()
+    for run_ in plan(specs):
+        cfg = run_.config
+        task = cfg.task_id or cfg.task
+        kind = json.dumps([task, cfg.env_kwargs, cfg.method, cfg.agent.to_dict()], default=str)
+        if kind in kinds:
+            continue
+        kinds.add(kind)
+        env = built_task(task, cfg.env_kwargs)
+        try:
+            check_agent_builds(cfg, env)
+        finally:
+            env.close()
+
+
 def _note_slow_kernels(specs: list[SweepSpec], sweep_dir: Path) -> None:
     """Runs to train whose kernels are slow on this machine (``sili train``'s note, once per
     kind): a run made elsewhere keeps the kernels it began with."""
@@ -358,6 +379,8 @@ def run(args: argparse.Namespace) -> int:
     writable_dir(sweep_dir, "--resume" if args.resume else "--out")  # creates nothing
     if args.dry_run:
         return _dry_run(args, specs, sweep_dir)
+    if args.overwrite:  # before the sweep removes the runs it replaces
+        _check_agents_build(specs)
     if args.backend == "local":  # (Ray's may be a cluster's machines, which time their own)
         _note_slow_kernels(specs, sweep_dir)
     report = run_sweep(

@@ -352,14 +352,12 @@ def _check_builds(cfg: RunConfig, agent: bool) -> None:
     """Fail fast, with the task's own message, on bad task arguments (e.g. a controller); with
     ``agent`` build the agent too, before ``--overwrite`` removes a run (a network too large
     for this machine would fail only after)."""
-    from sili_robots.build import build_agent, built_task, observed_as
-    from sili_robots.memory import capped_at_available
+    from sili_robots.build import built_task, check_agent_builds
 
     # a new run's task_id is its name's version, so the name builds the version it trains
     env = built_task(cfg.task, cfg.env_kwargs, "--controller, --env-kwarg")
     try:
         if agent:
-            with capped_at_available():  # as in training: an error, not the kernel's OOM kill
-                build_agent(cfg, observed_as(env, cfg))
+            check_agent_builds(cfg, env)
     finally:
         env.close()
