@@ -125,7 +125,6 @@ class SILI:
             run_dir = tempfile.mkdtemp(prefix="sili-run-")
             _remove_with(self, Path(run_dir))
         self.run_dir, self._overwrite = Path(run_dir), overwrite
-        self._kept = False  # a temporary run kept by a refused save
         self._saved: dict[Path, tuple] = {}  # where this model saved, and what it left there
         self._check_run_dir()
         self.cfg = cfg
@@ -181,7 +180,7 @@ class SILI:
             check_same_task(path, cfg, env)
         model = cls.__new__(cls)
         model.cfg, model.run_dir, model._task_env, model._overwrite = cfg, path, env, False
-        model._saved, model._kept = {}, False
+        model._saved = {}
         with fitting(path, cfg, env):
             model._setup(state)
         _keep_temporary(path)  # another model's temporary run, now the user's to keep
@@ -284,18 +283,20 @@ class SILI:
         try:
             self._copy_to(path, overwrite)
         except (ConfigError, OSError) as exc:  # a script ends here: its training must stay
-            if Path(self.run_dir).resolve() not in _TEMPORARY:
+            own = Path(self.run_dir).resolve()
+            if own not in _TEMPORARY and own not in _KEPT:
                 raise
             _keep_temporary(self.run_dir)
-            self._kept = True
+            _KEPT.add(own)
             raise ConfigError(
                 f"{exc if isinstance(exc, ConfigError) else first_line(exc)}; the model's "
                 f"training is kept in {self.run_dir} "
                 f"(SILI.load({str(self.run_dir)!r}) continues it)"
             ) from exc
-        if self._kept and path.resolve() != self.run_dir.resolve():  # saved after all
+        own = self.run_dir.resolve()
+        if own in _KEPT and path.resolve() != own:  # saved after all, and loaded by no other
+            _KEPT.discard(own)
             _remove_with(self, self.run_dir)
-            self._kept = False
         _keep_temporary(path)
         self._saved[path.resolve()] = _stamp(path)
         return path
@@ -352,6 +353,8 @@ class SILI:
 
 #: temporary run directories of live models, removed with their model
 _TEMPORARY: dict[Path, weakref.finalize] = {}
+#: temporary runs a refused save kept (the error named them), until a save of their model
+_KEPT: set[Path] = set()
 
 
 def _check_arguments(env: object, settings: object, env_kwargs: object) -> None:
@@ -383,6 +386,7 @@ def _remove_temporary(path: Path, owner: int) -> None:
 
 def _keep_temporary(path: Path) -> None:
     """A temporary run saved or loaded where it is stays after its model."""
+    _KEPT.discard(Path(path).resolve())  # loaded or saved where it is: the user's now
     finalizer = _TEMPORARY.pop(Path(path).resolve(), None)
     if finalizer is not None:
         finalizer.detach()

@@ -236,12 +236,22 @@ def test_a_refused_save_keeps_the_training_and_says_where(tmp_path):
     shutil.rmtree(run_dir)
     model = SILI("circle-3", method="sac", seed=2, settings=FAST_AGENT).learn(1)
     run_dir = model.run_dir
-    with pytest.raises(ConfigError, match="training is kept in"):
-        model.save(taken)
+    for _ in range(2):  # refused again, it says so again
+        with pytest.raises(ConfigError, match="training is kept in"):
+            model.save(taken)
     model.save(tmp_path / "elsewhere")  # saved after all: the temporary run goes with the model
     del model
     gc.collect()
     assert not run_dir.exists() and SILI.load(tmp_path / "elsewhere").cfg.seed == 2
+    model = SILI("circle-3", method="sac", seed=3, settings=FAST_AGENT).learn(1)
+    with pytest.raises(ConfigError, match="training is kept in"):
+        model.save(taken)
+    run_dir, loaded = model.run_dir, SILI.load(model.run_dir)  # as the refusal says
+    model.save(tmp_path / "third")
+    del model
+    gc.collect()
+    assert loaded.learn(1).cfg.interactions == 2  # its folder stays: the loaded model's now
+    shutil.rmtree(run_dir)
 
 
 def test_a_task_module_in_the_current_directory_trains_and_a_scripts_class_is_explained(
