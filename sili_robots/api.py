@@ -35,7 +35,6 @@ from sili_robots.agent.config import LARGEST_INT
 from sili_robots.build import (
     build_agent,
     canonical_task,
-    check_argument_names,
     make_run_config,
     make_run_env,
     observed_as,
@@ -63,6 +62,7 @@ from sili_robots.runs import read_config as read_run_config
 from sili_robots.stopping import HeldStops
 from sili_robots.sweep.state import check_not_trained, training_claim
 from sili_robots.tasks import RepeatedInteractionEnv
+from sili_robots.tasks.registry import check_argument_names
 from sili_robots.training import resume, train
 
 

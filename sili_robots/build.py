@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import inspect
 import json
-from collections.abc import Iterable
-from functools import cache
 from typing import Any
 
 import gymnasium as gym
@@ -23,20 +21,17 @@ from sili_robots.agent import SILIAgent, method_config
 from sili_robots.agent.config import AgentConfig, UnknownSetting, paths
 from sili_robots.errors import ConfigError
 from sili_robots.migrations import LEGACY_SETTINGS, setting_path
-from sili_robots.plugins import load_class
 from sili_robots.runs import RunConfig
-from sili_robots.tasks import RepeatedInteractionEnv, make_task, task_spec
-from sili_robots.tasks.registry import identity_conflict, same_argument
+from sili_robots.tasks import make_task, task_spec
+from sili_robots.tasks.registry import (
+    check_argument_names,
+    identity_conflict,
+    is_class_path,
+    same_argument,
+    task_arguments,
+    task_class,
+)
 from sili_robots.wrappers import OracleObservation, StrategyFlag
-
-
-def task_class(path: str) -> type[RepeatedInteractionEnv]:
-    """A user's task class from ``package.module:ClassName``."""
-    return load_class(path, RepeatedInteractionEnv, "task", instead="a registered task or ")
-
-
-def is_class_path(task: str) -> bool:
-    return ":" in task and "/" not in task
 
 
 def canonical_task(task: str) -> str:
@@ -188,36 +183,6 @@ def make_env(task: str, **kwargs: Any) -> gym.Env:
     return make_task(task, **kwargs)
 
 
-def _task_parameters(task: str) -> dict[str, inspect.Parameter]:
-    path = task if is_class_path(task) else task_spec(task).entry_point
-    return dict(inspect.signature(task_class(path).__init__).parameters)
-
-
-def task_arguments(task: str) -> list[str]:
-    """The constructor arguments a task takes (``--env-kwarg``, ``--controller``), by name."""
-    kinds = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
-    return [n for n, q in _task_parameters(task).items() if n != "self" and q.kind in kinds]
-
-
-@cache
-def task_accepts(task: str, argument: str) -> bool:
-    """Whether the task's constructor takes ``argument`` (e.g. ``controller``): by name, or
-    through ``**kwargs`` (a user's task class may pass them on)."""
-    params = _task_parameters(task).values()
-    return argument in task_arguments(task) or any(q.kind == q.VAR_KEYWORD for q in params)
-
-
-def check_argument_names(task: str, names: Iterable[str], options: str) -> None:
-    """ConfigError naming the arguments ``task`` does not take and those it does (``options``:
-    where they were given, e.g. ``--env-kwarg``)."""
-    unknown = [k for k in names if not task_accepts(task, k)]
-    if unknown:
-        raise ConfigError(
-            f"task {task!r} takes no argument {', '.join(unknown)} ({options}); its arguments: "
-            f"{', '.join(task_arguments(task)) or 'none'}"
-        )
-
-
 def check_task_builds(task: str, kwargs: dict[str, Any], options: str | None = None) -> None:
     """Construct (not reset: no simulation starts) ``task`` with ``kwargs``, so bad task input
     stops a command before any run starts."""
@@ -262,9 +227,8 @@ def observed_as(env: gym.Env, cfg: RunConfig) -> gym.Env:
 
 
 def make_run_env(cfg: RunConfig) -> gym.Env:
-    """The run's task version (``task_id``, else its name) as its method observes it; one its
-    recorded arguments do not build (a damaged record) is a ConfigError naming them."""
-    return observed_as(built_task(cfg.task_id or cfg.task, cfg.env_kwargs), cfg)
+    """The run's task version (``task_id``, else its name) as its method observes it."""
+    return observed_as(make_env(cfg.task_id or cfg.task, **cfg.env_kwargs), cfg)
 
 
 def check_agent_builds(cfg: RunConfig, task: gym.Env) -> None:

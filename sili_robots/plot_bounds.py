@@ -4,12 +4,15 @@ versions the runs built, as labelled horizontal lines, labels of lines close tog
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
-from matplotlib.axes import Axes
 
 from sili_robots.errors import ConfigError
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 #: the panels that show reference bounds, and the bound each one reads
 BOUND_METRICS = {"task_reward": "task_reward", "true_stability": "stability"}

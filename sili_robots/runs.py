@@ -19,6 +19,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import torch
 
 from sili_robots.addons.config import AddonsConfig
@@ -29,6 +30,7 @@ from sili_robots.errors import ConfigError, check_count, check_seed, first_line
 from sili_robots.metrics import COMPRESSED_METRICS, METRIC_COLUMNS, METRICS
 from sili_robots.migrations import migrate_agent_state, migrate_run, setting_path
 from sili_robots.provenance import REVISION, versions
+from sili_robots.tasks.registry import check_argument_names
 
 CONFIG, CHECKPOINT, SUMMARY = "config.json", "checkpoint.pt", "summary.json"
 #: what to do about a damaged file (``read_json``)
@@ -316,7 +318,10 @@ def read_config(run_dir: Path) -> RunConfig:
         )
     data = read_json(path, DAMAGED_CONFIG, "run")
     try:
-        return RunConfig.from_dict(data["run"])
+        cfg = RunConfig.from_dict(data["run"])
+        if cfg.task_id in gym.registry:  # a registered task's arguments (a class's may change)
+            check_argument_names(cfg.task_id, cfg.env_kwargs, "env_kwargs")
+        return cfg
     except (ConfigError, TypeError, KeyError, AttributeError, ValueError) as err:
         import sili_robots
 

@@ -45,6 +45,13 @@ def test_a_damaged_cache_is_timed_again_and_rewritten(cache, monkeypatch, damage
     assert json.loads(cache.read_text())[matmul.machine_key()]["matmul"] == "aten"
 
 
+def test_damaged_timings_in_the_cache_give_no_note(cache):
+    entry = {"matmul": "aten", "seconds": {"aten": "1e-3", "onednn": "2e-3"}}
+    cache.write_text(json.dumps({matmul.machine_key(): entry}))
+    assert matmul.default_matmul() == "aten"  # the choice stands; its timings are not read
+    assert matmul.slow_kernels("onednn", "float32") == []
+
+
 @pytest.mark.parametrize(("onednn", "chosen"), [(0.99e-3, "aten"), (0.9e-3, "onednn")])
 def test_onednn_is_chosen_only_where_clearly_faster(cache, monkeypatch, onednn, chosen):
     """A near tie takes ATen, so a timing under load does not flip a fresh cache's choice

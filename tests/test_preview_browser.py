@@ -266,6 +266,16 @@ def test_a_browser_that_fails_to_start_is_reported_with_what_it_wrote(tmp_path):
         Browser(executable=str(fake), timeout=20).start()
 
 
+def test_a_browser_that_never_answers_is_named(tmp_path):
+    fake = tmp_path / "not-chromium"  # SILI_CHROMIUM naming some other program
+    fake.write_text("#!/bin/sh\nsleep 30\n")
+    fake.chmod(0o755)
+    with pytest.raises(
+        BrowserError, match=rf"timed out waiting for Chromium \({re.escape(str(fake))}"
+    ):
+        Browser(executable=str(fake), timeout=1).start()
+
+
 def test_a_browser_stopped_by_an_address_space_limit_is_reported_with_the_limit():
     """Chromium reserves far more virtual memory than it uses: under ``ulimit -v`` it stops
     at start saying only something cryptic, so the error names the limit."""

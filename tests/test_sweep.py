@@ -181,8 +181,8 @@ def test_failing_run_is_reported_and_the_others_complete(tmp_path):
     )
     assert report.outcomes["circle-3__sac__s0"].status == "done"
     assert report.failed == {
-        "sawyer-reach-bogus__sac__s0": "ConfigError: task 'sili/SawyerReach-v1' with "
-        "controller='bogus': unknown controller 'bogus'; allowed: mink, osc, joint_velocity"
+        "sawyer-reach-bogus__sac__s0": "ConfigError: unknown controller 'bogus'; "
+        "allowed: mink, osc, joint_velocity"
     }
     assert len(pd.read_csv(out / "runs" / "circle-3__sac__s0" / "metrics.csv")) == 4
     assert (
@@ -199,11 +199,7 @@ def test_failing_run_is_reported_and_the_others_complete(tmp_path):
     res = _sili("sweep", "--resume", out, "--workers", 1, "--no-progress")
     assert res.returncode == 1, res.stderr
     assert json.loads(res.stdout)["failed"] == report.failed
-    assert (
-        "failed sawyer-reach-bogus__sac__s0: ConfigError: task 'sili/SawyerReach-v1' with "
-        + ("controller='bogus': unknown controller")
-        in res.stderr
-    )
+    assert "failed sawyer-reach-bogus__sac__s0: ConfigError: unknown controller" in res.stderr
     assert "Traceback" not in res.stderr
 
 

@@ -164,7 +164,7 @@ def test_bad_arguments_are_named():
         env.step(np.zeros(3))
     with pytest.raises(ConfigError, match="finite"):
         env.step(np.array([np.nan, 0.0]))
-    with pytest.raises(ConfigError, match=r"'circle-3' takes no argument foo; its arguments: var"):
+    with pytest.raises(ConfigError, match=r"takes no argument foo \(make_task\); its arguments: v"):
         make_task("circle-3", foo=1)  # gymnasium's own TypeError names neither
     assert make_task("circle-3", max_episode_steps=5, render_mode=None).spec.max_episode_steps == 5
     for wrapper in (OracleObservation, StrategyFlag):  # they read what only a task's info has
@@ -189,7 +189,12 @@ def test_bad_reset_options_are_named_and_change_nothing():
     env.reset(seed=0)
     env.step(np.ones(2))
     task = env.unwrapped
-    saved, where = task.game_state(), (task.location, task.t, task.interaction)
+    saved = task.game_state()
+
+    def where():
+        return task.location, task.t, task.interaction, task.np_random.bit_generator.state
+
+    before = where()
     for options, said in (
         (
             ["restart"],
@@ -199,11 +204,14 @@ def test_bad_reset_options_are_named_and_change_nothing():
         ({"restore": {"fields": {"location": 1}}}, r"a saved game must be what game_state\(\) "),
         ({"restore": "yes"}, r"returns \(keys fields, rng, interaction, last_strategy_id; fie"),
         ({"restore": {**saved, "interaction": -1}}, "interaction must be a count, got -1"),
+        ({"restore": {**saved, "interaction": np.nan}}, "interaction must be a count, got nan"),
         ({"restore": {**saved, "fields": {"location": 0}, "rng": {}}}, "rng is not this"),
     ):
-        with pytest.raises(ConfigError, match=said):
-            env.reset(options=options)
-        assert (task.location, task.t, task.interaction) == where, options
+        for seed in (None, 123):  # a seed given too: the generator is not re-seeded first
+            with pytest.raises(ConfigError, match=said):
+                env.reset(seed=seed, options=options)
+            assert where() == before, options
+    env.reset(options={"restart": None})  # as not given
 
 
 def test_a_users_gymnasium_id_of_a_task_is_answered_with_its_class():

@@ -43,6 +43,7 @@ from torch import nn
 
 from sili_robots.atomic import write_text
 from sili_robots.cache import cache_dir
+from sili_robots.errors import is_number
 
 MATMULS = ("onednn", "aten")
 #: oneDNN is chosen over ATen (torch's own path) only when clearly faster: on a near tie a
@@ -170,7 +171,8 @@ def _recorded(name: str) -> tuple[str, dict[str, float]] | None:
     if name not in entry:
         return None
     times = entry.get(_seconds_key(name))
-    return entry[name], times if isinstance(times, dict) else {}
+    sound = isinstance(times, dict) and all(is_number(t) for t in times.values())
+    return entry[name], times if sound else {}  # (damaged timings: no note, not a traceback)
 
 
 def _cached_choice(name: str, measure: Callable[[], tuple[str, dict[str, float]]]) -> str:

@@ -222,7 +222,7 @@ class Browser:
         while b"\0" not in self._buffer:
             left = deadline - time.monotonic()
             if left <= 0:
-                raise BrowserError("timed out waiting for Chromium")
+                raise BrowserError(f"timed out waiting for Chromium ({self.executable})")
             ready, _, _ = select.select([self._read_fd], [], [], min(left, 0.5))
             if not ready:
                 if self._proc is not None and self._proc.poll() is not None:

@@ -18,20 +18,22 @@ from sili_robots.agent.matmul import default_matmul
 from sili_robots.agent.methods import LATENT_METHODS, PRESETS
 from sili_robots.build import (
     canonical_task,
-    check_argument_names,
     check_task_builds,
     default_latent,
     default_profile,
-    is_class_path,
     make_run_config,
-    task_accepts,
 )
 from sili_robots.errors import ConfigError, check_choice, check_seed
 from sili_robots.labels import file_stem
 from sili_robots.migrations import setting_path
 from sili_robots.runs import RunConfig
 from sili_robots.tasks import TASKS, TaskSpec, task_spec
-from sili_robots.tasks.registry import first_version
+from sili_robots.tasks.registry import (
+    check_argument_names,
+    first_version,
+    is_class_path,
+    task_accepts,
+)
 
 
 @dataclass

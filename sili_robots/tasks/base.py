@@ -184,7 +184,8 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
                 f"unknown reset options {sorted(unknown)}; allowed: {list(RESET_OPTIONS)}"
             )
         start = self._check_start(options["strategy"]) if "strategy" in options else None
-        check_flag("reset option restart", options.get("restart", False))
+        if options.get("restart") is not None:
+            check_flag("reset option restart", options["restart"])
         if options.get("restore") is not None:
             self._check_game_state(options["restore"])
         if not self._started and self.spec is not None and self.spec.id.startswith("sili/"):
@@ -271,12 +272,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         self._check_game_state(state)
         if not self._started:
             self.reset(seed=0)
-        try:  # numpy checks the generator's state: before any field changes
-            self.np_random.bit_generator.state = state["rng"]
-        except (TypeError, ValueError, KeyError) as err:
-            raise ConfigError(
-                f"a saved game's rng is not this task's generator state: {err}"
-            ) from None
+        self.np_random.bit_generator.state = state["rng"]
         for k, v in state["fields"].items():
             setattr(self, k, _copy(v))
         self.interaction = int(state["interaction"])
@@ -310,8 +306,14 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
                 + (f" with keys {', '.join(map(str, state))}" if isinstance(state, Mapping) else "")
             )
         interaction = state["interaction"]
-        if not is_number(interaction) or int(interaction) != interaction or interaction < 0:
+        if not (is_number(interaction) and math.isfinite(interaction)) or (
+            int(interaction) != interaction or interaction < 0
+        ):
             raise ConfigError(f"a saved game's interaction must be a count, got {interaction!r}")
+        try:  # numpy checks a generator's state: on a new one, before this game's changes
+            type(self.np_random.bit_generator)().state = state["rng"]
+        except (TypeError, ValueError, KeyError) as err:
+            raise ConfigError(f"a saved game's rng is not this generator's state: {err}") from None
 
     def render(self) -> None:
         """No frames (gymnasium's ``render``): ``sili_robots.preview`` records a task's scene."""

@@ -17,6 +17,7 @@ import functools
 import inspect
 import json
 import warnings
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -210,6 +211,45 @@ def check_identity(name: str, kwargs: dict[str, Any]) -> None:
         )
 
 
+def task_class(path: str) -> type[RepeatedInteractionEnv]:
+    """A user's task class from ``package.module:ClassName``."""
+    return load_class(path, RepeatedInteractionEnv, "task", instead="a registered task or ")
+
+
+def is_class_path(task: str) -> bool:
+    return ":" in task and "/" not in task
+
+
+def _task_parameters(task: str) -> dict[str, inspect.Parameter]:
+    path = task if is_class_path(task) else task_spec(task).entry_point
+    return dict(inspect.signature(task_class(path).__init__).parameters)
+
+
+def task_arguments(task: str) -> list[str]:
+    """The constructor arguments a task takes (``--env-kwarg``, ``--controller``), by name."""
+    kinds = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    return [n for n, q in _task_parameters(task).items() if n != "self" and q.kind in kinds]
+
+
+@functools.cache
+def task_accepts(task: str, argument: str) -> bool:
+    """Whether the task's constructor takes ``argument`` (e.g. ``controller``): by name, or
+    through ``**kwargs`` (a user's task class may pass them on)."""
+    params = _task_parameters(task).values()
+    return argument in task_arguments(task) or any(q.kind == q.VAR_KEYWORD for q in params)
+
+
+def check_argument_names(task: str, names: Iterable[str], options: str) -> None:
+    """ConfigError naming the arguments ``task`` does not take and those it does (``options``:
+    where they were given, e.g. ``--env-kwarg``)."""
+    unknown = [k for k in names if not task_accepts(task, k)]
+    if unknown:
+        raise ConfigError(
+            f"task {task!r} takes no argument {', '.join(unknown)} ({options}); its arguments: "
+            f"{', '.join(task_arguments(task)) or 'none'}"
+        )
+
+
 def make_task(name: str, **kwargs: Any) -> gym.Env:
     """Build a task by CLI name or gymnasium id; ``kwargs`` go to the task's constructor."""
     spec = task_spec(name)
@@ -217,23 +257,9 @@ def make_task(name: str, **kwargs: Any) -> gym.Env:
     with warnings.catch_warnings():
         if spec.name in EARLIER_VERSIONS:  # asked for by its version: no "out of date" warning
             warnings.filterwarnings("ignore", ".*The environment .* is out of date", Warning)
-        _check_argument_names(spec, kwargs)
+        own = {*inspect.signature(gym.make).parameters, "render_mode"}  # gymnasium's, passed on
+        check_argument_names(spec.name, [k for k in kwargs if k not in own], "make_task")
         return gym.make(spec.gym_id, **kwargs)
-
-
-def _check_argument_names(spec: TaskSpec, kwargs: dict[str, Any]) -> None:
-    """The arguments the task's class takes, named (gymnasium's TypeError names neither)."""
-    creator = load_env_creator(spec.entry_point)
-    params = inspect.signature(creator).parameters
-    if any(p.kind == p.VAR_KEYWORD for p in params.values()):
-        return
-    own = {*inspect.signature(gym.make).parameters, "render_mode"}  # gymnasium's, passed on
-    unknown = [k for k in kwargs if k not in params and k not in own]
-    if unknown:
-        raise ConfigError(
-            f"task {spec.name!r} takes no argument {', '.join(unknown)}; its arguments: "
-            f"{', '.join(params) or 'none'}"
-        )
 
 
 def _register(
