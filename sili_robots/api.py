@@ -353,7 +353,8 @@ class SILI:
 
 #: temporary run directories of live models, removed with their model
 _TEMPORARY: dict[Path, weakref.finalize] = {}
-#: temporary runs a refused save kept (the error named them), until a save of their model
+#: temporary runs a refused save kept (the error named them), until their model saves or another
+#: model loads them
 _KEPT: set[Path] = set()
 
 

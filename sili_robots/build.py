@@ -227,8 +227,11 @@ def observed_as(env: gym.Env, cfg: RunConfig) -> gym.Env:
 
 
 def make_run_env(cfg: RunConfig) -> gym.Env:
-    """The run's task version (``task_id``, else its name) as its method observes it."""
-    return observed_as(make_env(cfg.task_id or cfg.task, **cfg.env_kwargs), cfg)
+    """The run's task version (``task_id``, else its name) as its method observes it; recorded
+    arguments the task does not take (a damaged record, a class changed since) are named."""
+    task = cfg.task_id or cfg.task
+    check_argument_names(task, cfg.env_kwargs, "the run's env_kwargs")
+    return observed_as(make_env(task, **cfg.env_kwargs), cfg)
 
 
 def check_agent_builds(cfg: RunConfig, task: gym.Env) -> None:

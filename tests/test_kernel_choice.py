@@ -45,8 +45,9 @@ def test_a_damaged_cache_is_timed_again_and_rewritten(cache, monkeypatch, damage
     assert json.loads(cache.read_text())[matmul.machine_key()]["matmul"] == "aten"
 
 
-def test_damaged_timings_in_the_cache_give_no_note(cache):
-    entry = {"matmul": "aten", "seconds": {"aten": "1e-3", "onednn": "2e-3"}}
+@pytest.mark.parametrize("aten", ["1e-3", 0, -1e-3])
+def test_damaged_timings_in_the_cache_give_no_note(cache, aten):
+    entry = {"matmul": "aten", "seconds": {"aten": aten, "onednn": 2e-3}}
     cache.write_text(json.dumps({matmul.machine_key(): entry}))
     assert matmul.default_matmul() == "aten"  # the choice stands; its timings are not read
     assert matmul.slow_kernels("onednn", "float32") == []

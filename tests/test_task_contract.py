@@ -206,6 +206,7 @@ def test_bad_reset_options_are_named_and_change_nothing():
         ({"restore": {**saved, "interaction": -1}}, "interaction must be a count, got -1"),
         ({"restore": {**saved, "interaction": np.nan}}, "interaction must be a count, got nan"),
         ({"restore": {**saved, "fields": {"location": 0}, "rng": {}}}, "rng is not this"),
+        ({"restore": {**saved, "rng": {**saved["rng"], "uinteger": 2**200}}}, "rng is not this"),
     ):
         for seed in (None, 123):  # a seed given too: the generator is not re-seeded first
             with pytest.raises(ConfigError, match=said):

@@ -1167,6 +1167,15 @@ def test_a_record_or_history_damaged_in_its_content_exits_2_naming_the_file(tmp_
             res = _sili(*command)
             assert res.returncode == 2, (damage, res.stderr)
             assert f"{run / 'config.json'} is damaged" in res.stderr, (damage, res.stderr)
+    doors = tmp_path / "doors"  # a task class's run: its arguments named where it is built
+    train_doors = ["--task", "sili_robots.examples.two_doors:TwoDoorsEnv", "--method", "sac"]
+    assert _sili("train", *train_doors, "--interactions", 1, *FAST, "--out", doors).returncode == 0
+    kept = json.loads((doors / "config.json").read_text())
+    kept["run"]["env_kwargs"] = {"bogus": 1}  # (or an argument the class dropped since)
+    (doors / "config.json").write_text(json.dumps(kept))
+    res = _sili("eval", doors)
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
+    assert "takes no argument bogus (the run's env_kwargs); its arguments: horizon" in res.stderr
     # a setting this version does not know, from a newer one: not damage, and no retraining
     newer = {"run": {**record["run"], "later_setting": 1}, "versions": {"sili_robots": "9.0.0"}}
     (run / "config.json").write_text(json.dumps(newer))

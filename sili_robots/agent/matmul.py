@@ -30,6 +30,7 @@ kernels it was trained with.
 from __future__ import annotations
 
 import json
+import math
 import os
 import platform
 import time
@@ -171,7 +172,9 @@ def _recorded(name: str) -> tuple[str, dict[str, float]] | None:
     if name not in entry:
         return None
     times = entry.get(_seconds_key(name))
-    sound = isinstance(times, dict) and all(is_number(t) for t in times.values())
+    sound = isinstance(times, dict) and all(
+        is_number(t) and 0 < t < math.inf for t in times.values()
+    )
     return entry[name], times if sound else {}  # (damaged timings: no note, not a traceback)
 
 

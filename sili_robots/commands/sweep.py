@@ -308,24 +308,32 @@ def _backend(args: argparse.Namespace):
     return LocalBackend(args.workers or os.cpu_count() or 1, args.retries)
 
 
-def _check_agents_build(specs: list[SweepSpec]) -> None:
-    """Each planned run's agent built once per kind (runs apart by their seed alone are one), as
-    ``sili train --overwrite`` does: a network too large fails before any run is removed."""
+def _check_agents_build(specs: list[SweepSpec], sweep_dir: Path) -> None:
+    """Where ``--overwrite`` would remove runs, each planned run's agent built once per kind
+    (runs apart by their seed alone are one), as ``sili train --overwrite`` does: a network too
+    large for this machine fails before any run is removed."""
     from sili_robots.build import built_task, check_agent_builds
-    from sili_robots.sweep.runner import plan
+    from sili_robots.sweep.runner import plan, replaced_runs
+    from sili_robots.sweep.state import run_path
 
+    planned = plan(specs)
+    if not any(run_path(sweep_dir, n).is_dir() for n in replaced_runs(sweep_dir, planned)):
+        return
     kinds: set[str] = set()
-    for run_ in plan(specs):
-        cfg = run_.config
-        task = cfg.task_id or cfg.task
-        kind = json.dumps([task, cfg.env_kwargs, cfg.method, cfg.agent.to_dict()], default=str)
-        if kind in kinds:
-            continue
-        kinds.add(kind)
-        env = built_task(task, cfg.env_kwargs)
-        try:
-            check_agent_builds(cfg, env)
-        finally:
+    tasks: dict[str, Any] = {}  # built once per task and arguments
+    try:
+        for run_ in planned:
+            cfg = run_.config
+            task = cfg.task_id or cfg.task
+            kind = json.dumps([task, cfg.env_kwargs, cfg.method, cfg.agent.to_dict()], default=str)
+            if kind not in kinds:
+                kinds.add(kind)
+                built = json.dumps([task, cfg.env_kwargs], default=str)
+                if built not in tasks:
+                    tasks[built] = built_task(task, cfg.env_kwargs)
+                check_agent_builds(cfg, tasks[built])
+    finally:
+        for env in tasks.values():
             env.close()
 
 
@@ -379,9 +387,9 @@ def run(args: argparse.Namespace) -> int:
     writable_dir(sweep_dir, "--resume" if args.resume else "--out")  # creates nothing
     if args.dry_run:
         return _dry_run(args, specs, sweep_dir)
-    if args.overwrite:  # before the sweep removes the runs it replaces
-        _check_agents_build(specs)
-    if args.backend == "local":  # (Ray's may be a cluster's machines, which time their own)
+    if args.backend == "local":  # (Ray's may be a cluster's machines, with memory of their own)
+        if args.overwrite:  # before the sweep removes the runs it replaces
+            _check_agents_build(specs, sweep_dir)
         _note_slow_kernels(specs, sweep_dir)
     report = run_sweep(
         specs,

@@ -312,7 +312,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
             raise ConfigError(f"a saved game's interaction must be a count, got {interaction!r}")
         try:  # numpy checks a generator's state: on a new one, before this game's changes
             type(self.np_random.bit_generator)().state = state["rng"]
-        except (TypeError, ValueError, KeyError) as err:
+        except (TypeError, ValueError, KeyError, OverflowError) as err:
             raise ConfigError(f"a saved game's rng is not this generator's state: {err}") from None
 
     def render(self) -> None:
