@@ -60,7 +60,7 @@ from sili_robots.runs import (
 )
 from sili_robots.runs import read_config as read_run_config
 from sili_robots.stopping import HeldStops
-from sili_robots.sweep.state import check_not_trained, training_claim
+from sili_robots.sweep.state import check_not_in_a_sweep, check_not_trained, training_claim
 from sili_robots.tasks import RepeatedInteractionEnv
 from sili_robots.tasks.registry import check_argument_names
 from sili_robots.training import resume, train
@@ -124,6 +124,8 @@ class SILI:
         if run_dir is None:  # removed with the model, unless saved or loaded where it is
             run_dir = tempfile.mkdtemp(prefix="sili-run-")
             _remove_with(self, Path(run_dir))
+        else:
+            check_not_in_a_sweep(run_dir, "run_dir")
         self.run_dir, self._overwrite = Path(run_dir), overwrite
         self._saved: dict[Path, tuple] = {}  # where this model saved, and what it left there
         self._check_run_dir()

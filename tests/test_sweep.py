@@ -19,7 +19,9 @@ from fast_settings import FAST_AGENT as FAST
 from fast_settings import FAST_ARGS
 from process_helpers import killing_its_worker_once, metrics_rows, signal_when, wait_for
 
+from sili_robots import SILI
 from sili_robots.cli import main
+from sili_robots.errors import ConfigError
 from sili_robots.evaluation import load_trained
 from sili_robots.runs import RunConfig
 from sili_robots.sweep import LocalBackend, SweepSpec, expand, run_sweep
@@ -461,6 +463,30 @@ def test_a_record_that_cannot_run_is_named_and_a_dry_run_refuses_it_too(tmp_path
     for dry in (["--dry-run"], []):  # a new invocation is added to the record: it must read
         assert main([*base, "--interactions", "2", *dry]) == 2
         assert f"{record} is damaged" in capsys.readouterr().err
+
+
+def test_a_new_run_is_not_made_in_a_sweeps_or_a_collections_runs(tmp_path, capsys):
+    """The sweep plans its own settings under a run's name (and would not resume another
+    task's run there); a collection holds finished runs."""
+    out = tmp_path / "sweep"
+    base = ["sweep", "--tasks", "circle-3", "--methods", "sac", "--out", str(out), *FAST_ARGS]
+    assert main([*base, "--interactions", "2", "--no-progress"]) == 0
+    run = out / "runs" / "circle-3__sac__s0"
+    kept = (run / "metrics.csv").read_bytes()
+    train = ["train", "--task", "circle-8", "--method", "oracle", "--interactions", "1"]
+    for into in (run, out / "runs" / "mine"):
+        assert main([*train, "--out", str(into), "--overwrite"]) == 2
+        assert (
+            f"--out {into} is in the sweep {out}: `sili sweep --resume" in capsys.readouterr().err
+        )
+    with pytest.raises(ConfigError, match=r"run_dir .* is in the sweep .*: `sili sweep --resume"):
+        SILI("circle-8", run_dir=run, overwrite=True)
+    assert (run / "metrics.csv").read_bytes() == kept and not (out / "runs" / "mine").exists()
+    assert main(["collect", str(out), "--into", str(tmp_path / "c")]) == 0
+    new = tmp_path / "c" / "runs" / "mine"
+    assert main([*train, "--out", str(new)]) == 2
+    assert "is in the results collection" in capsys.readouterr().err and not new.exists()
+    assert main(["train", "--resume", str(run), "--interactions", "3", "--no-progress"]) == 0
 
 
 def test_overwrite_starts_the_sweep_anew_and_keeps_a_users_files(tmp_path, capsys):

@@ -223,7 +223,12 @@ def _rebuild_sweep_tables(run_dir: Path) -> None:
 def run(args: argparse.Namespace) -> int:
     from sili_robots.runs import check_resumable
     from sili_robots.sweep import tensorboard
-    from sili_robots.sweep.state import check_not_trained, run_state, training_claim
+    from sili_robots.sweep.state import (
+        check_not_in_a_sweep,
+        check_not_trained,
+        run_state,
+        training_claim,
+    )
     from sili_robots.training import resume, train, write_summary
     from sili_robots.verdict import verdict
 
@@ -264,6 +269,7 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError("--out RUN_DIR is required for a new run")
         quoted = shell_path(args.out)
         check_not_trained(args.out)  # --overwrite too: never under a live trainer
+        check_not_in_a_sweep(args.out, "--out")
         check_new_run_dir(args.out, args.overwrite, resume=f"--resume {quoted}")
         if args.out.is_dir():  # an existing folder (one to be made: make_run_dir says why not)
             writable_dir(args.out, "--out")

@@ -27,6 +27,7 @@ from typing import Literal
 from sili_robots.atomic import write_text
 from sili_robots.errors import ConfigError
 from sili_robots.labels import file_stem, shell_path
+from sili_robots.metrics import COMPRESSED_METRICS
 from sili_robots.runs import (
     CHECKPOINT,
     CONFIG,
@@ -80,6 +81,25 @@ def check_collection_dir(path: Path, option: str) -> None:
         raise ConfigError(
             f"{option} {path} is a sweep; collect into a results collection or a new or empty "
             "directory"
+        )
+
+
+def check_not_in_a_sweep(path: Path, option: str) -> None:
+    """A new run is never made in a sweep's or a collection's ``runs/``: the sweep plans its
+    own settings under that name (and would not resume it), a collection holds finished runs."""
+    runs, holder = Path(path).absolute().parent, Path(path).absolute().parent.parent
+    if runs.name != RUNS_DIR or not runs.is_dir():
+        return
+    if (holder / SWEEP_FILE).is_file():
+        raise ConfigError(
+            f"{option} {path} is in the sweep {holder}: `sili sweep --resume {holder}` trains "
+            "its runs; give a folder outside it"
+        )
+    others = [p for p in runs.iterdir() if p.name != Path(path).name]
+    if any((p / COMPRESSED_METRICS).is_file() for p in others):
+        raise ConfigError(
+            f"{option} {path} is in the results collection {holder} (`sili collect`), which "
+            "holds finished runs; give a folder outside it"
         )
 
 
