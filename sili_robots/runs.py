@@ -30,7 +30,7 @@ from sili_robots.errors import ConfigError, check_count, check_seed, first_line
 from sili_robots.metrics import COMPRESSED_METRICS, METRIC_COLUMNS, METRICS
 from sili_robots.migrations import migrate_agent_state, migrate_run, setting_path
 from sili_robots.provenance import REVISION, versions
-from sili_robots.tasks.registry import check_argument_names
+from sili_robots.tasks.registry import check_argument_names, is_class_path, task_spec
 
 CONFIG, CHECKPOINT, SUMMARY = "config.json", "checkpoint.pt", "summary.json"
 #: what to do about a damaged file (``read_json``)
@@ -319,6 +319,8 @@ def read_config(run_dir: Path) -> RunConfig:
     data = read_json(path, DAMAGED_CONFIG, "run")
     try:
         cfg = RunConfig.from_dict(data["run"])
+        if not is_class_path(cfg.task):
+            task_spec(cfg.task)  # a name this package registers: the tables group runs by it
         if cfg.task_id in gym.registry:  # a registered task's arguments (a class's may change)
             check_argument_names(cfg.task_id, cfg.env_kwargs, "env_kwargs")
         return cfg

@@ -1159,6 +1159,7 @@ def test_a_record_or_history_damaged_in_its_content_exits_2_naming_the_file(tmp_
         {"method": "foo"},
         {"env_kwargs": [1]},
         {"env_kwargs": {"bogus": 1}},  # (was a TypeError from the task's constructor)
+        {"task": "nosuch-task"},  # beside a valid task_id: the tables would list "nosuch-task"
         {"agent": {**record["run"]["agent"], "sac": {"lr": {"points": [[0, "a"]]}}}},
         {"agent": {**record["run"]["agent"], "sac": {**record["run"]["agent"]["sac"], "lr": -5}}},
     ):
