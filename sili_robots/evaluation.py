@@ -157,7 +157,11 @@ def evaluate(run_dir: Path, interactions: int, task_env: gym.Env | None = None) 
     acting deterministically (no exploration, no learning), from the checkpoint's interaction
     (``trained_interactions``); on ``task_env``, the task instance, when given (left open)."""
     interactions = check_count("interactions", interactions)
-    _, env, agent, state = load_trained(run_dir, task_env)
+    if not isinstance(run_dir, str | Path):
+        raise ConfigError(f"run_dir must be a run's folder, got {run_dir!r}")
+    if task_env is not None and not isinstance(task_env, gym.Env):
+        raise ConfigError(f"task_env must be a task instance (or None), got {task_env!r}")
+    _, env, agent, state = load_trained(Path(run_dir), task_env)
     wrapped = AgentFeedback(env, agent, state["game"])
     try:
         summary = run_interactions(

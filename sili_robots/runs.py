@@ -119,6 +119,14 @@ class RunConfig:
         """``metrics.csv``'s columns: ``METRIC_COLUMNS``, then those its own add-ons declare."""
         own: dict[str, None] = {}
         for cls in self.addons.plugin_classes():
+            declared = cls.metric_columns
+            if not isinstance(declared, tuple | list) or not all(
+                isinstance(c, str) and c.strip() for c in declared
+            ):
+                raise ConfigError(
+                    f"add-on {cls.__module__}:{cls.__qualname__} declares metric_columns "
+                    f"{declared!r}; give a tuple of column names, e.g. ('score',)"
+                )
             taken = [c for c in cls.metric_columns if c in METRIC_COLUMNS]
             if taken:
                 raise ConfigError(

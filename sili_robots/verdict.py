@@ -9,7 +9,7 @@ from typing import Any
 import pandas as pd
 
 from sili_robots.bounds import stored_bounds
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, check_count
 from sili_robots.labels import METHOD_NAMES
 from sili_robots.metrics import HOLDING, METRICS, kept_fraction, run_metrics
 from sili_robots.runs import MACHINE_SETTINGS, RunConfig, differences, read_config
@@ -27,7 +27,7 @@ def _rows(run_dir: Path) -> pd.DataFrame:
 
 
 def _last(run_dir: Path, window: int) -> pd.DataFrame:
-    return _rows(run_dir).tail(window)
+    return _rows(run_dir).tail(check_count("window", window))
 
 
 def random_only(cfg: RunConfig, interactions: int) -> str:
@@ -80,7 +80,7 @@ def verdict(run_dir: Path, window: int = 50) -> str:
     stabilizing policy that sees z: -4.0)"."""
     cfg = read_config(run_dir)
     rows = _rows(run_dir)
-    tail = rows.tail(window)
+    tail = rows.tail(check_count("window", window))
     stability = kept_fraction(tail)
     reward = float(tail["task_reward"].mean())
     bounds = _references(cfg)
@@ -119,8 +119,8 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
     standing still's -50.0): seed 1 (100%, -25.9 per interaction); not seed 0 (0%, -17.1 per
     interaction)", and the run to look at further: the best-earning one that worked, else the
     first seed's."""
-    if not run_dirs:
-        raise ConfigError("no runs to judge")
+    if isinstance(run_dirs, str | Path) or not run_dirs:
+        raise ConfigError(f"give a list of run directories to judge, got {run_dirs!r}")
     configs = sorted(((read_config(d), Path(d)) for d in run_dirs), key=lambda c: c[0].seed)
     runs = [(c.seed, d) for c, d in configs]
     cfg = configs[0][0]

@@ -57,6 +57,18 @@ class Scalar(AgentAddon):
         return 0.5  # not one per interaction j
 
 
+class Letters(Constant):
+    metric_columns = "score"  # a string, not a tuple of names
+
+
+class Unnamed(Constant):
+    metric_columns = ("",)
+
+
+class Twin(Constant):
+    pass  # named "addon" as Constant is
+
+
 class NaN(AgentAddon):
     def stability_distance(self, j):
         return np.full(j.shape, np.nan)
@@ -116,6 +128,12 @@ def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, caps
         capsys.readouterr().err
     )
     assert not (tmp_path / "u" / "config.json").exists()  # refused before a run was written
+    for bad in ("Letters", "Unnamed"):  # "score" wrote the columns s, c, o, r, e
+        assert main([*fresh, "--set", f"addons.plugins=my_addons:{bad}"]) == 2
+        assert f"my_addons:{bad} declares metric_columns" in capsys.readouterr().err
+    plugins = "addons.plugins=my_addons:Constant,my_addons:Twin"  # one checkpoint entry by name
+    assert main([*fresh, *FAST_ARGS, "--interactions", "1", "--set", plugins]) == 2
+    assert "my_addons:Constant, my_addons:Twin are all named 'addon'" in capsys.readouterr().err
     wrong = {
         "my_addons:Scalar": "add-on Scalar: stability_distance must return finite values of j's "
         "shape (1,), got shape ()",

@@ -18,6 +18,7 @@ from sili_robots import SILI
 from sili_robots.build import task_class
 from sili_robots.cli import main
 from sili_robots.errors import ConfigError
+from sili_robots.evaluation import evaluate
 from sili_robots.examples.two_doors import TwoDoorsEnv
 from sili_robots.tasks import make_task
 
@@ -592,7 +593,6 @@ def test_another_game_on_model_env_starts_the_agent_with_no_history(tmp_path):
 def test_evaluate_on_a_task_instance_refuses_another_task_as_load_does(tmp_path):
     """evaluation.evaluate restored a Circle (3 Goals) game into Circle (8 Goals) and returned
     its numbers; a task of other sizes raised numpy's or torch's error."""
-    from sili_robots.evaluation import evaluate
 
     run = tmp_path / "run"
     SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run).learn(2)
@@ -660,6 +660,8 @@ def test_what_sili_takes_is_named_and_a_string_is_no_flag(tmp_path):
         (lambda: kept.predict(kept.env.reset()[0], deterministic="no"), "deterministic must be"),
         (lambda: kept.learn(1, progress_bar="yes"), "progress_bar must be True or False"),
         (lambda: SILI.load(kept.run_dir, env="circle-3"), "env must be a task instance"),
+        (lambda: evaluate(kept.run_dir, 1, task_env="circle-3"), "task_env must be a task inst"),
+        (lambda: evaluate(None, 1), "run_dir must be a run's folder, got None"),
     ):
         with pytest.raises(ConfigError, match=said):
             make()

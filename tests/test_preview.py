@@ -135,6 +135,8 @@ def test_scene_for_unknown_env_names_the_known_ones():
         ({"seed": -1}, "seed -1 is not allowed: give an integer in [0,"),
         ({"seed": 1.5}, "seed 1.5 is not an integer"),
         ({"policy": "random", "checkpoint": "/x"}, "'/x': a preview plays one of them"),
+        ({"serve": "no"}, "serve must be True or False, got 'no'"),  # started a server
+        ({"serve": True, "serve_seconds": "1"}, "serve_seconds must be a number >= 0"),
     ],
 )
 def test_bad_preview_arguments_raise_config_error(kwargs, message, tmp_path):

@@ -1154,3 +1154,33 @@ def test_a_claim_is_recognised_while_the_trainer_grows(tmp_path):
             assert training_worker(tmp_path) == os.getpid()
         finally:
             grown.close()
+
+
+def test_a_sweep_given_through_python_names_what_each_field_takes(tmp_path):
+    """A string where a list belongs was split into letters (controllers="osc" planned three
+    runs), numpy numbers planned and then failed to record, and overwrite="no" retrained."""
+    for fields, said in (
+        ({"tasks": "circle-3"}, "SweepSpec tasks must be a non-empty list of task names, got 'c"),
+        ({"controllers": "osc", "tasks": ["sawyer-reach"]}, "controllers must be a non-empty"),
+        ({"seeds": []}, "SweepSpec seeds must be a non-empty list of seeds, got"),
+        ({"seeds": [0, 0]}, "SweepSpec seeds gives 0 twice"),
+        ({"interactions": "1"}, "interactions must be an integer >= 1, got '1'"),
+        ({"beta_schedule": "0:0.5"}, "beta_schedule must be a list of \\(interaction, value\\)"),
+        ({"agent_overrides": {1: 2}}, "agent_overrides must be a dict of names to values"),
+    ):
+        with pytest.raises(ConfigError, match=said):
+            _spec(**fields)
+    numpy = _spec(seeds=np.arange(1), interactions=np.int64(2), agent_overrides=FAST)
+    assert run_sweep(numpy, tmp_path, LocalBackend(workers=1), progress=False).ok
+    assert json.loads((tmp_path / "sweep.json").read_text())["invocations"][0]["seeds"] == [0]
+    kept = (tmp_path / "runs" / "circle-3__sac__s0" / "config.json").stat().st_mtime_ns
+    for call, said in (
+        (lambda: run_sweep(numpy, tmp_path, overwrite="no"), "overwrite must be True or False"),
+        (lambda: run_sweep([], tmp_path), "specs must be a SweepSpec or a non-empty list"),
+        (lambda: run_sweep(numpy, tmp_path, backend="local"), "backend must be a sweep backend"),
+        (lambda: LocalBackend(workers=1.5), r"workers must be an integer >= 1, got 1\.5"),
+        (lambda: LocalBackend(retries="1"), "retries must be an integer >= 0, got '1'"),
+    ):
+        with pytest.raises(ConfigError, match=said):
+            call()
+    assert (tmp_path / "runs" / "circle-3__sac__s0" / "config.json").stat().st_mtime_ns == kept

@@ -6,9 +6,11 @@ import json
 
 import numpy as np
 import pandas as pd
+import pytest
 from fast_settings import FAST_ARGS
 
 from sili_robots.cli import main
+from sili_robots.errors import ConfigError
 from sili_robots.verdict import NONE_WORKED, across_seeds, held, verdict, worked
 from sili_robots.verdict import main as verdict_main
 
@@ -28,6 +30,11 @@ def test_train_prints_the_verdict_against_the_stored_references(tmp_path, capsys
     assert "standing still: -50.0" in last
     assert "the scripted stabilizing policy that sees z: -4.0" in last
     assert "random actions" not in last  # 3 random interactions, then 1 of its policy
+    for window in (0, -1, 2.5, "5"):  # 0 earned nan, -1 read all but the first
+        with pytest.raises(ConfigError, match=f"window must be an integer >= 1, got {window!r}"):
+            verdict(run, window)
+    with pytest.raises(ConfigError, match="give a list of run directories to judge, got"):
+        across_seeds(str(run))  # (was walked letter by letter)
     metrics = pd.read_csv(run / "metrics.csv")
     metrics["strategy_changed"] = 0
     metrics["task_reward"] = -7.25

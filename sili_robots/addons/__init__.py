@@ -52,6 +52,16 @@ def build_addons(addons: AddonsConfig, agent: AgentConfig) -> list[AgentAddon]:
                 "give its settings as class attributes, a subclass per variant"
             ) from None
         out.append(cls())
+    names = [a.name for a in out]
+    twice = [a for i, a in enumerate(out) if a.name in names[:i]]
+    if twice:  # one checkpoint entry per name: the later would overwrite the earlier's state
+        same = [
+            f"{type(a).__module__}:{type(a).__qualname__}" for a in out if a.name == twice[0].name
+        ]
+        raise ConfigError(
+            f"add-ons {', '.join(same)} are all named {twice[0].name!r}; give each its own "
+            "`name` (their saved states are kept by name)"
+        )
     return out
 
 

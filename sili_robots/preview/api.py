@@ -22,7 +22,14 @@ import meshcat
 import numpy as np
 
 from sili_robots.atomic import write_bytes
-from sili_robots.errors import ConfigError, check_choice, check_count, check_seed
+from sili_robots.errors import (
+    ConfigError,
+    check_choice,
+    check_count,
+    check_flag,
+    check_seed,
+    is_number,
+)
 from sili_robots.preview.browser import Browser
 from sili_robots.preview.build import overlay, populate, world_point
 from sili_robots.preview.html import PREVIEW_MARK, SceneRecorder, scene_html, write_html
@@ -246,6 +253,9 @@ def preview(
     """
     from sili_robots.preview.server import LiveServer
 
+    serve = check_flag("serve", serve)
+    if serve_seconds is not None and not (is_number(serve_seconds) and serve_seconds >= 0):
+        raise ConfigError(f"serve_seconds must be a number >= 0 (or None), got {serve_seconds!r}")
     for path, option in ((out, "out"), (png, "png")):
         if path is not None:
             check_output(path, option)

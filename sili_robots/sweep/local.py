@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
 from pathlib import Path
 
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, check_count
 from sili_robots.runs import RUNNING_FILE, STOP_FILE
 from sili_robots.sweep.backend import STOP_GRACE_S, Monitor, describe_exit
 from sili_robots.sweep.worker import (
@@ -106,8 +106,7 @@ class LocalBackend:
     def __init__(
         self, workers: int = 1, retries: int = 0, start_method: str = "forkserver"
     ) -> None:
-        if workers < 1:
-            raise ConfigError(f"workers must be >= 1, got {workers}")
+        workers, retries = check_count("workers", workers), check_count("retries", retries, 0)
         if start_method not in ("spawn", "forkserver"):
             raise ConfigError(
                 f"start method {start_method!r} is not allowed; use spawn or forkserver "

@@ -7,7 +7,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, check_flag
 from sili_robots.runs import (
     CONFIG,
     STOP_FILE,
@@ -199,9 +199,18 @@ def run_sweep(
     from sili_robots.sweep.results import write_tables
 
     specs = [specs] if isinstance(specs, SweepSpec) else list(specs)
+    if not specs or not all(isinstance(s, SweepSpec) for s in specs):
+        raise ConfigError(f"specs must be a SweepSpec or a non-empty list of them, got {specs!r}")
     sweep_dir = Path(sweep_dir)
     planned = plan(specs)
     backend = backend or LocalBackend()
+    for name, given, needs in (("backend", backend, "run"), ("monitor", monitor, "finished")):
+        if given is not None and not callable(getattr(given, needs, None)):
+            raise ConfigError(f"{name} must be a sweep {name} (LocalBackend, ...), got {given!r}")
+    progress = check_flag("progress", progress)
+    overwrite, recorded = check_flag("overwrite", overwrite), check_flag("recorded", recorded)
+    if tensorboard_scalars is not None:
+        tensorboard_scalars = check_flag("tensorboard_scalars", tensorboard_scalars)
     if tensorboard_scalars is None:
         tensorboard_scalars = tensorboard.available()
     elif tensorboard_scalars and not tensorboard.available():

@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import contextlib
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
+
+import numpy as np
 
 from sili_robots.agent import BETA_METHODS, LATENT_KINDS, METHODS, PROFILES, Schedule
 from sili_robots.agent.matmul import default_matmul
@@ -23,7 +25,7 @@ from sili_robots.build import (
     default_profile,
     make_run_config,
 )
-from sili_robots.errors import ConfigError, check_choice, check_seed
+from sili_robots.errors import ConfigError, check_choice, check_count, check_seed, is_number
 from sili_robots.labels import file_stem
 from sili_robots.migrations import setting_path
 from sili_robots.runs import RunConfig
@@ -76,6 +78,7 @@ class SweepSpec:
     timed: list[str] | None = None
 
     def __post_init__(self) -> None:
+        _check_fields(self)
         # the kernel library is resolved once, when the sweep is planned, and recorded with it
         # (as a run's config.json records it), so ``--resume`` keeps it on any machine; so are
         # the defaults that have changed since sweeps were first recorded
@@ -347,6 +350,79 @@ def validate(spec: SweepSpec) -> None:
             f"--controller applies to tasks {', '.join(with_ctrl)} only, none of which is in "
             f"the sweep ({', '.join(spec.tasks)})"
         )
+
+
+def _plain(value: Any) -> Any:
+    """``value`` as JSON keeps it (numpy's numbers and arrays as Python's), for ``sweep.json``."""
+    if isinstance(value, np.generic | np.ndarray):
+        return value.tolist()
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    return value
+
+
+def _axis(spec: SweepSpec, name: str, what: str, check: Callable[[Any], Any]) -> None:
+    """The axis ``name`` as a non-empty list of ``check``-ed values (a string is one value, not
+    a list of letters), or ConfigError naming it."""
+    given = getattr(spec, name)
+    if given is None and name not in ("tasks", "methods", "seeds"):
+        return
+    if isinstance(given, str | bytes | dict) or not isinstance(given, Iterable):
+        raise ConfigError(f"SweepSpec {name} must be a non-empty list of {what}, got {given!r}")
+    given = list(given)
+    if not given and name not in ("tasks", "methods"):  # (none of those: validate lists them)
+        raise ConfigError(f"SweepSpec {name} must be a non-empty list of {what}, got []")
+    values = [check(_plain(v)) for v in given]
+    twice = [v for i, v in enumerate(values) if v in values[:i]]
+    if twice and name in ("methods", "seeds", "controllers"):  # (equal b values are one b)
+        raise ConfigError(f"SweepSpec {name} gives {twice[0]!r} twice; give each once")
+    setattr(spec, name, values)
+
+
+def _name(value: Any) -> str:
+    if not isinstance(value, str):
+        raise ConfigError(f"a name must be a string, got {value!r}")
+    return value
+
+
+def _number(value: Any) -> float:
+    if not is_number(value):
+        raise ConfigError(f"b must be a number, got {value!r}")
+    return float(value)
+
+
+def _check_fields(spec: SweepSpec) -> None:
+    """Each field of the type it is recorded as, before it is planned (numpy's numbers are
+    taken as Python's; ``sweep.json`` keeps them)."""
+    _axis(spec, "tasks", "task names", _name)
+    _axis(spec, "methods", "method names", _name)
+    _axis(spec, "seeds", "seeds", check_seed)
+    _axis(spec, "betas", "b values", _number)
+    _axis(spec, "controllers", "controller names", _name)
+    spec.interactions = check_count("interactions", _plain(spec.interactions))
+    spec.checkpoint_every = check_count("checkpoint_every", _plain(spec.checkpoint_every))
+    for name in ("latent", "profile"):
+        if getattr(spec, name) is not None:
+            _name(getattr(spec, name))
+    for name in ("agent_overrides", "env_kwargs"):
+        given = getattr(spec, name)
+        if not isinstance(given, dict) or not all(isinstance(k, str) for k in given):
+            raise ConfigError(f"SweepSpec {name} must be a dict of names to values, got {given!r}")
+        setattr(spec, name, _plain(given))
+    for name in SWEEP_SCHEDULES:
+        points = getattr(spec, name)
+        if points is None:
+            continue
+        pairs = _plain(points) if isinstance(points, list | tuple) else None
+        if not pairs or not all(
+            isinstance(p, list) and len(p) == 2 and all(is_number(x) for x in p) for p in pairs
+        ):
+            raise ConfigError(
+                f"SweepSpec {name} must be a list of (interaction, value) pairs, got {points!r}"
+            )
+        setattr(spec, name, [tuple(p) for p in pairs])
 
 
 def _latent_of(latent: str | None, method: str) -> str | None:
