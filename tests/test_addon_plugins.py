@@ -133,7 +133,7 @@ def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, caps
         assert f"my_addons:{bad} declares metric_columns" in capsys.readouterr().err
     plugins = "addons.plugins=my_addons:Constant,my_addons:Twin"  # one checkpoint entry by name
     assert main([*fresh, *FAST_ARGS, "--interactions", "1", "--set", plugins]) == 2
-    assert "my_addons:Constant, my_addons:Twin are all named 'addon'" in capsys.readouterr().err
+    assert "my_addons:Constant and my_addons:Twin are both named 'addon'" in capsys.readouterr().err
     wrong = {
         "my_addons:Scalar": "add-on Scalar: stability_distance must return finite values of j's "
         "shape (1,), got shape ()",

@@ -52,17 +52,19 @@ def build_addons(addons: AddonsConfig, agent: AgentConfig) -> list[AgentAddon]:
                 "give its settings as class attributes, a subclass per variant"
             ) from None
         out.append(cls())
-    names = [a.name for a in out]
-    twice = [a for i, a in enumerate(out) if a.name in names[:i]]
-    if twice:  # one checkpoint entry per name: the later would overwrite the earlier's state
-        same = [
-            f"{type(a).__module__}:{type(a).__qualname__}" for a in out if a.name == twice[0].name
-        ]
-        raise ConfigError(
-            f"add-ons {', '.join(same)} are all named {twice[0].name!r}; give each its own "
-            "`name` (their saved states are kept by name)"
-        )
+    named: dict[str, AgentAddon] = {}  # one checkpoint entry per name: a second would replace
+    for addon in out:
+        first = named.setdefault(addon.name, addon)
+        if first is not addon:
+            raise ConfigError(
+                f"add-ons {_class_path(first)} and {_class_path(addon)} are both named "
+                f"{addon.name!r}; give each its own `name` (their saved states are kept by name)"
+            )
     return out
+
+
+def _class_path(addon: AgentAddon) -> str:
+    return f"{type(addon).__module__}:{type(addon).__qualname__}"
 
 
 __all__ = [
