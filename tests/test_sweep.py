@@ -474,7 +474,7 @@ def test_a_new_run_is_not_made_in_a_sweeps_or_a_collections_runs(tmp_path, capsy
     run = out / "runs" / "circle-3__sac__s0"
     kept = (run / "metrics.csv").read_bytes()
     train = ["train", "--task", "circle-8", "--method", "oracle", "--interactions", "1"]
-    for into in (run, out / "runs" / "mine"):
+    for into in (run, out / "runs" / "mine", out / "runs" / "x" / ".." / "mine"):
         assert main([*train, "--out", str(into), "--overwrite"]) == 2
         assert (
             f"--out {into} is in the sweep {out}: `sili sweep --resume" in capsys.readouterr().err

@@ -87,7 +87,7 @@ def check_collection_dir(path: Path, option: str) -> None:
 def check_not_in_a_sweep(path: Path, option: str) -> None:
     """A new run is never made in a sweep's or a collection's ``runs/``: the sweep plans its
     own settings under that name (and would not resume it), a collection holds finished runs."""
-    runs, holder = Path(path).absolute().parent, Path(path).absolute().parent.parent
+    runs, holder = Path(path).resolve().parent, Path(path).resolve().parent.parent
     if runs.name != RUNS_DIR or not runs.is_dir():
         return
     if (holder / SWEEP_FILE).is_file():
