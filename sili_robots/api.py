@@ -22,7 +22,6 @@ import os
 import shutil
 import tempfile
 import weakref
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +41,7 @@ from sili_robots.build import (
     task_kwargs_of,
     task_name_of,
 )
-from sili_robots.errors import ConfigError, check_count, check_flag, first_line
+from sili_robots.errors import ConfigError, check_count, check_flag, check_names, first_line
 from sili_robots.evaluation import AgentFeedback, check_same_task, evaluate, fitting
 from sili_robots.metrics import COMPRESSED_METRICS, METRICS, MetricsWriter
 from sili_robots.runs import (
@@ -370,10 +369,8 @@ def _check_arguments(env: object, settings: object, env_kwargs: object) -> None:
             f"{env!r}{hint if isinstance(env, type) else ''}"
         )
     for name, given in (("settings", settings), ("env_kwargs", env_kwargs)):
-        if given is not None and not (
-            isinstance(given, Mapping) and all(isinstance(k, str) for k in given)
-        ):
-            raise ConfigError(f"{name} must be a dict of names to values, got {given!r}")
+        if given is not None:
+            check_names(name, given)
 
 
 def _remove_with(model: SILI, run_dir: Path) -> None:

@@ -6,7 +6,7 @@ import contextlib
 import errno
 import numbers
 import sys
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
 
@@ -81,6 +81,13 @@ def check_flag(name: str, value: object) -> bool:
     if type(value).__name__ not in ("bool", "bool_"):
         raise ConfigError(f"{name} must be True or False, got {value!r}")
     return bool(value)
+
+
+def check_names(name: str, value: object) -> dict:
+    """``value`` as a dict keyed by names (settings, task arguments), or ``ConfigError``."""
+    if not isinstance(value, Mapping) or not all(isinstance(k, str) for k in value):
+        raise ConfigError(f"{name} must be a dict of names to values, got {value!r}")
+    return dict(value)
 
 
 def is_number(value: object) -> bool:

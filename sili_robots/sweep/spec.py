@@ -25,7 +25,14 @@ from sili_robots.build import (
     default_profile,
     make_run_config,
 )
-from sili_robots.errors import ConfigError, check_choice, check_count, check_seed, is_number
+from sili_robots.errors import (
+    ConfigError,
+    check_choice,
+    check_count,
+    check_names,
+    check_seed,
+    is_number,
+)
 from sili_robots.labels import file_stem
 from sili_robots.migrations import setting_path
 from sili_robots.runs import RunConfig
@@ -407,10 +414,7 @@ def _check_fields(spec: SweepSpec) -> None:
         if getattr(spec, name) is not None:
             _name(getattr(spec, name))
     for name in ("agent_overrides", "env_kwargs"):
-        given = getattr(spec, name)
-        if not isinstance(given, dict) or not all(isinstance(k, str) for k in given):
-            raise ConfigError(f"SweepSpec {name} must be a dict of names to values, got {given!r}")
-        setattr(spec, name, _plain(given))
+        setattr(spec, name, _plain(check_names(f"SweepSpec {name}", getattr(spec, name))))
     for name in SWEEP_SCHEDULES:
         points = getattr(spec, name)
         if points is None:
