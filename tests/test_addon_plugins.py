@@ -72,6 +72,36 @@ class Twin(Constant):
 class NaN(AgentAddon):
     def stability_distance(self, j):
         return np.full(j.shape, np.nan)
+
+
+class NoValues(AgentAddon):
+    def interaction_stored(self, j):
+        self.last = j  # returns None, not its columns' values
+
+
+class ShortLatent(AgentAddon):
+    def acting_latent(self):
+        return np.zeros(3, np.float32)  # the latent has 10 entries
+
+
+class PastTheEnd(AgentAddon):
+    def latent_pairs(self, j):
+        return j + self.agent.buffer.n  # rows not stored yet: the buffer's zeros, without a word
+
+
+class BeforeTheFirst(AgentAddon):
+    def rl_interactions(self, j):
+        return j - 1  # -1 is numpy's last row, without a word
+
+
+class FloatPairs(AgentAddon):
+    def latent_pairs(self, j):
+        return j.astype(float)
+
+
+class OneLatent(AgentAddon):
+    def batch_latents(self, j, t, z):
+        return z  # not the pair (steps t, t + 1)
 '''
 
 
@@ -150,6 +180,29 @@ def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, caps
     with pytest.raises(TypeError, match="has no len"):  # its own error, as itself
         make_run_config("circle-3", "sili", settings={"addons.plugins": "my_addons:Buggy"})
         main([*args, "--set", "addons.plugins=my_addons:Buggy", "--overwrite"])
+
+
+def test_a_hook_that_returns_the_wrong_thing_is_named_with_what_it_must_return(
+    tmp_path, monkeypatch, capsys
+):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "my_addons.py").write_text(textwrap.dedent(PLUGIN))
+    wrong = {
+        "NoValues": "interaction_stored must return a dict of its metric_columns' values, got None",
+        "ShortLatent": "acting_latent must return None or an array of shape (10,), got an array "
+        "of shape (3,) and dtype float32",
+        "PastTheEnd": "latent_pairs must return an integer array of shape (32,) in [1, ",
+        "BeforeTheFirst": "rl_interactions must return an integer array of shape (",
+        "FloatPairs": "latent_pairs must return an integer array of shape (32,) in [1, ",
+        "OneLatent": "batch_latents must return None or two arrays of shape (",
+    }
+    for name, message in wrong.items():
+        run = ["train", "--task", "circle-3", "--out", str(tmp_path / name), "--no-progress"]
+        plugin = ["--set", f"addons.plugins=my_addons:{name}"]
+        assert main([*run, *FAST_ARGS, "--interactions", "5", *plugin]) == 2, name
+        err = capsys.readouterr().err
+        assert f"add-on {name}: {message}" in err
+        assert "Traceback" not in err
 
 
 def test_a_history_with_a_column_of_no_add_on_is_damaged_unless_the_run_has_add_ons(tmp_path):

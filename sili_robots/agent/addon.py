@@ -24,6 +24,9 @@ Hooks, in the order the agent calls them:
 - ``latent_pairs`` / ``rl_interactions``: which stored interactions a batch draws.
 - ``batch_latents``: z^j per sampled step as the policy acted on it (the last add-on's).
 - ``state_dict`` / ``load_state_dict``: checkpoints.
+
+What a hook returns is checked where the agent reads it (its type, its shape, indices within the
+stored interactions); a wrong one is refused with the add-on's name and what the hook must return.
 """
 
 from __future__ import annotations
@@ -33,6 +36,8 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 import torch
+
+from sili_robots.errors import ConfigError
 
 if TYPE_CHECKING:
     from sili_robots.agent.agent import SILIAgent
@@ -121,3 +126,24 @@ def overriding(addons: list[AgentAddon], hook: str) -> list[AgentAddon]:
     """The add-ons whose class overrides ``hook``."""
     base = getattr(AgentAddon, hook)
     return [a for a in addons if getattr(type(a), hook) is not base]
+
+
+def refused(addon: AgentAddon, hook: str, value: object, wanted: str) -> ConfigError:
+    """The error for a hook's wrong return, naming the add-on: it failed deep in the agent with
+    numpy's or torch's words, and an index past the stored interactions read empty rows."""
+    shown = (
+        f"an array of shape {value.shape} and dtype {value.dtype}"
+        if isinstance(value, np.ndarray)
+        else f"{value!r:.80}"
+    )
+    return ConfigError(f"add-on {type(addon).__name__}: {hook} must return {wanted}, got {shown}")
+
+
+def indices_within(value: object, shape: tuple[int, ...], low: int, high: int) -> bool:
+    """Whether ``value`` is an integer array of ``shape`` with entries in [low, high)."""
+    return (
+        isinstance(value, np.ndarray)
+        and value.shape == shape
+        and value.dtype.kind in "iu"
+        and (value.size == 0 or (int(value.min()) >= low and int(value.max()) < high))
+    )

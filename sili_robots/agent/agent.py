@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from sili_robots.agent import stability
-from sili_robots.agent.addon import HOOKS, AgentAddon, overriding
+from sili_robots.agent.addon import HOOKS, AgentAddon, indices_within, overriding, refused
 from sili_robots.agent.buffer import InteractionBuffer
 from sili_robots.agent.config import AgentConfig
 from sili_robots.agent.latent import LatentModel, transitions
@@ -180,7 +180,11 @@ class SILIAgent:
             if live:
                 for addon in self.hooks["acting_latent"]:
                     acted = addon.acting_latent()
-                    z = z if acted is None else acted
+                    if acted is not None:
+                        if np.shape(acted) != (self.zdim,):
+                            wanted = f"None or an array of shape ({self.zdim},)"
+                            raise refused(addon, "acting_latent", acted, wanted)
+                        z = acted
             parts.append(z)
         if self.n_latents == 2:
             earlier = j > self.game_start  # z^{j-1} of this game
@@ -246,7 +250,11 @@ class SILIAgent:
         self.latents.append(z_next)
         extra: dict[str, float] = {}
         for addon in self.hooks["interaction_stored"]:
-            extra.update(addon.interaction_stored(j))
+            values = addon.interaction_stored(j)
+            if not isinstance(values, dict):
+                wanted = "a dict of its metric_columns' values"
+                raise refused(addon, "interaction_stored", values, wanted)
+            extra.update(values)
         if refresh and self.model is not None and (j + 1) % self.cfg.model.refresh_every == 0:
             self.refresh_latents()
         self.begin_interaction()
@@ -325,7 +333,11 @@ class SILIAgent:
         for _ in range(steps):
             j = self.rng.integers(1, b.n, self.cfg.model.batch)
             for addon in self.hooks["latent_pairs"]:
-                j = addon.latent_pairs(j)
+                given = addon.latent_pairs(j)
+                if not indices_within(given, j.shape, 1, b.n):
+                    wanted = f"an integer array of shape {j.shape} in [1, {b.n})"
+                    raise refused(addon, "latent_pairs", given, wanted)
+                j = given
             prev = transitions(
                 torch.from_numpy(b.obs[j - 1]),
                 torch.from_numpy(b.act[j - 1]),
@@ -348,7 +360,11 @@ class SILIAgent:
         m, k = self.cfg.sac.batch_interactions, self.cfg.sac.batch_steps
         j = self.rng.integers(0, b.n, (n_updates, m))  # [U, M]
         for addon in self.hooks["rl_interactions"]:
-            j = addon.rl_interactions(j)
+            given = addon.rl_interactions(j)
+            if not indices_within(given, j.shape, 0, b.n):
+                wanted = f"an integer array of shape {j.shape} in [0, {b.n})"
+                raise refused(addon, "rl_interactions", given, wanted)
+            j = given
         t = self.rng.integers(0, h, (n_updates, m, k))  # [U, M, K]
         j = np.broadcast_to(j[..., None], t.shape)
         last = t == h - 1
@@ -363,7 +379,16 @@ class SILIAgent:
             z_prev, z_cur, z_next = zpad[j], zpad[j + 1], zpad[j + 2]  # z^{j-1}, z^j, z^{j+1}
             z_acted, z2_acted = z_cur, z_cur
             for addon in self.hooks["batch_latents"]:
-                z_acted, z2_acted = addon.batch_latents(j, t, z_cur) or (z_acted, z2_acted)
+                given = addon.batch_latents(j, t, z_cur)
+                if given is not None:
+                    if not (
+                        isinstance(given, tuple)
+                        and len(given) == 2
+                        and all(np.shape(z) == z_cur.shape for z in given)
+                    ):
+                        wanted = f"None or two arrays of shape {z_cur.shape}"
+                        raise refused(addon, "batch_latents", given, wanted)
+                    z_acted, z2_acted = given
             lz = last[..., None]
             pair = self.n_latents == 2
             x = np.concatenate([s, z_acted] + ([z_prev] if pair else []), -1)
