@@ -14,6 +14,8 @@ from sili_robots.cli import main
 from sili_robots.errors import ConfigError
 
 PLUGIN = '''
+import types
+
 import numpy as np
 from sili_robots.agent.addon import AgentAddon
 
@@ -102,6 +104,22 @@ class FloatPairs(AgentAddon):
 class OneLatent(AgentAddon):
     def batch_latents(self, j, t, z):
         return z  # not the pair (steps t, t + 1)
+
+
+class OtherTypes(AgentAddon):
+    """Returns of other types that hold what each hook needs: taken."""
+
+    def acting_latent(self):
+        return np.zeros(10)  # float64
+
+    def interaction_stored(self, j):
+        return types.MappingProxyType({})
+
+    def rl_interactions(self, j):
+        return j.tolist()
+
+    def batch_latents(self, j, t, z):
+        return [z, z]
 '''
 
 
@@ -191,7 +209,8 @@ def test_a_hook_that_returns_the_wrong_thing_is_named_with_what_it_must_return(
         "NoValues": "interaction_stored must return a dict of its metric_columns' values, got None",
         "ShortLatent": "acting_latent must return None or an array of shape (10,), got an array "
         "of shape (3,) and dtype float32",
-        "PastTheEnd": "latent_pairs must return an integer array of shape (32,) in [1, ",
+        "PastTheEnd": "latent_pairs must return an integer array of shape (32,) in [1, 2), got "
+        "an array of shape (32,) and dtype int64, entries 3 to 3",  # at the first update
         "BeforeTheFirst": "rl_interactions must return an integer array of shape (",
         "FloatPairs": "latent_pairs must return an integer array of shape (32,) in [1, ",
         "OneLatent": "batch_latents must return None or two arrays of shape (",
@@ -203,6 +222,9 @@ def test_a_hook_that_returns_the_wrong_thing_is_named_with_what_it_must_return(
         err = capsys.readouterr().err
         assert f"add-on {name}: {message}" in err
         assert "Traceback" not in err
+    run = ["train", "--task", "circle-3", "--out", str(tmp_path / "other"), "--no-progress"]
+    other = ["--set", "addons.plugins=my_addons:OtherTypes"]
+    assert main([*run, *FAST_ARGS, "--interactions", "5", *other]) == 0
 
 
 def test_a_history_with_a_column_of_no_add_on_is_damaged_unless_the_run_has_add_ons(tmp_path):

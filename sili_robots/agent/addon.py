@@ -131,19 +131,20 @@ def overriding(addons: list[AgentAddon], hook: str) -> list[AgentAddon]:
 def refused(addon: AgentAddon, hook: str, value: object, wanted: str) -> ConfigError:
     """The error for a hook's wrong return, naming the add-on: it failed deep in the agent with
     numpy's or torch's words, and an index past the stored interactions read empty rows."""
-    shown = (
-        f"an array of shape {value.shape} and dtype {value.dtype}"
-        if isinstance(value, np.ndarray)
-        else f"{value!r:.80}"
-    )
+    shown = f"{value!r:.80}"
+    if isinstance(value, np.ndarray):
+        shown = f"an array of shape {value.shape} and dtype {value.dtype}"
+        if value.dtype.kind in "iu" and value.size:
+            shown += f", entries {value.min()} to {value.max()}"
     return ConfigError(f"add-on {type(addon).__name__}: {hook} must return {wanted}, got {shown}")
 
 
-def indices_within(value: object, shape: tuple[int, ...], low: int, high: int) -> bool:
-    """Whether ``value`` is an integer array of ``shape`` with entries in [low, high)."""
-    return (
-        isinstance(value, np.ndarray)
-        and value.shape == shape
-        and value.dtype.kind in "iu"
-        and (value.size == 0 or (int(value.min()) >= low and int(value.max()) < high))
-    )
+def as_indices(value: object, shape: tuple[int, ...], low: int, high: int) -> np.ndarray | None:
+    """``value`` (an array, list or tensor) as integers of ``shape`` in [low, high), or None."""
+    try:
+        j = np.asarray(value)
+    except (TypeError, ValueError):  # e.g. a ragged list
+        return None
+    if j.shape != shape or j.dtype.kind not in "iu":
+        return None
+    return j if j.size == 0 or (int(j.min()) >= low and int(j.max()) < high) else None

@@ -16,6 +16,7 @@ Every method of the paper is a configuration (``methods.py``). Research variants
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -23,7 +24,7 @@ import numpy as np
 import torch
 
 from sili_robots.agent import stability
-from sili_robots.agent.addon import HOOKS, AgentAddon, indices_within, overriding, refused
+from sili_robots.agent.addon import HOOKS, AgentAddon, as_indices, overriding, refused
 from sili_robots.agent.buffer import InteractionBuffer
 from sili_robots.agent.config import AgentConfig
 from sili_robots.agent.latent import LatentModel, transitions
@@ -184,7 +185,7 @@ class SILIAgent:
                         if np.shape(acted) != (self.zdim,):
                             wanted = f"None or an array of shape ({self.zdim},)"
                             raise refused(addon, "acting_latent", acted, wanted)
-                        z = acted
+                        z = np.asarray(acted, np.float32)  # the policy's dtype (float64 failed)
             parts.append(z)
         if self.n_latents == 2:
             earlier = j > self.game_start  # z^{j-1} of this game
@@ -251,7 +252,7 @@ class SILIAgent:
         extra: dict[str, float] = {}
         for addon in self.hooks["interaction_stored"]:
             values = addon.interaction_stored(j)
-            if not isinstance(values, dict):
+            if not isinstance(values, Mapping):
                 wanted = "a dict of its metric_columns' values"
                 raise refused(addon, "interaction_stored", values, wanted)
             extra.update(values)
@@ -334,10 +335,11 @@ class SILIAgent:
             j = self.rng.integers(1, b.n, self.cfg.model.batch)
             for addon in self.hooks["latent_pairs"]:
                 given = addon.latent_pairs(j)
-                if not indices_within(given, j.shape, 1, b.n):
+                checked = as_indices(given, j.shape, 1, b.n)
+                if checked is None:
                     wanted = f"an integer array of shape {j.shape} in [1, {b.n})"
                     raise refused(addon, "latent_pairs", given, wanted)
-                j = given
+                j = checked
             prev = transitions(
                 torch.from_numpy(b.obs[j - 1]),
                 torch.from_numpy(b.act[j - 1]),
@@ -361,10 +363,11 @@ class SILIAgent:
         j = self.rng.integers(0, b.n, (n_updates, m))  # [U, M]
         for addon in self.hooks["rl_interactions"]:
             given = addon.rl_interactions(j)
-            if not indices_within(given, j.shape, 0, b.n):
+            checked = as_indices(given, j.shape, 0, b.n)
+            if checked is None:
                 wanted = f"an integer array of shape {j.shape} in [0, {b.n})"
                 raise refused(addon, "rl_interactions", given, wanted)
-            j = given
+            j = checked
         t = self.rng.integers(0, h, (n_updates, m, k))  # [U, M, K]
         j = np.broadcast_to(j[..., None], t.shape)
         last = t == h - 1
@@ -382,7 +385,7 @@ class SILIAgent:
                 given = addon.batch_latents(j, t, z_cur)
                 if given is not None:
                     if not (
-                        isinstance(given, tuple)
+                        isinstance(given, (tuple, list))
                         and len(given) == 2
                         and all(np.shape(z) == z_cur.shape for z in given)
                     ):
