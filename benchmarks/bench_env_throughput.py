@@ -58,6 +58,8 @@ def main() -> None:
     p.add_argument("--steps", type=positive_int, default=20_000)
     p.add_argument("--num-envs", type=positive_int, default=4)
     args = p.parse_args()
+    if args.steps < args.num_envs:  # each vector step takes one step of every env
+        p.error(f"--steps {args.steps} is fewer than --num-envs {args.num_envs}")
     print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
     ids = [("Pendulum-v1 (reference)", "Pendulum-v1")]
     ids += [

@@ -23,11 +23,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from sili_robots.agent.config import check as check_settings
 from sili_robots.agent.matmul import machine_key
 from sili_robots.build import build_agent, make_run_env
 from sili_robots.commands.common import positive_int
 from sili_robots.diagnostics import change_agreement, purity
-from sili_robots.errors import one_line_errors
+from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.runs import load_checkpoint, read_config
 from sili_robots.sweep import parse_seeds
 
@@ -60,10 +61,10 @@ def main() -> None:
     print(f"machine: {machine_key()}", flush=True)  # the seconds' CPU
     cfg = read_config(args.run_dir)
     if cfg.agent.latent != "discrete":
-        raise SystemExit(f"{args.run_dir} has {cfg.agent.latent!r} latents; need discrete")
+        raise ConfigError(f"{args.run_dir} has {cfg.agent.latent!r} latents; need discrete")
     stored = load_checkpoint(args.run_dir)
     if stored is None:
-        raise SystemExit(f"{args.run_dir} has no checkpoint")
+        raise ConfigError(f"{args.run_dir} has no checkpoint")
     truth = stored["agent"]["buffer"]
     n = int(truth["n"])
     true = np.asarray(truth["strategy_id"]).astype(int)
@@ -72,6 +73,10 @@ def main() -> None:
         (f"bonus {args.bonus:g}, raw", args.bonus, 0.0),
         (f"bonus {args.bonus:g}, grouped at {args.threshold:g}", args.bonus, args.threshold),
     ]
+    for _, bonus, threshold in variants:  # every fit's settings, before the first (minutes)
+        cfg.set("model.usage_bonus", bonus)
+        cfg.set("model.merge_threshold", threshold)
+        check_settings(cfg.agent, "")
     print(f"{args.run_dir}: {n} interactions, {args.steps} latent-model updates per fit")
     print(f"{'variant':38s} {'seed':>4s} {'purity':>7s} {'change agr.':>11s} {'categories':>10s}")
     rows: dict[str, list[tuple[float, float]]] = {}

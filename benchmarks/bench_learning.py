@@ -41,8 +41,17 @@ from sili_robots.diagnostics import latent_diagnostics
 from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.metrics import HOLDING, first_stable, kept, kept_fraction, run_metrics
 from sili_robots.migrations import migrate_run, setting_path
-from sili_robots.runs import MACHINE_SETTINGS
+from sili_robots.runs import (
+    CONFIG,
+    DAMAGED_CONFIG,
+    DAMAGED_SUMMARY,
+    MACHINE_SETTINGS,
+    SUMMARY,
+    read_config,
+    read_json,
+)
 from sili_robots.sweep import parse_seeds
+from sili_robots.sweep.results import finished_summary
 
 MARKS = {True: "MET    ", False: "NOT MET", None: "N/A    "}
 #: the methods the targets compare
@@ -53,11 +62,14 @@ def run_one(task: str, method: str, seed: int, args: argparse.Namespace) -> Path
     """Train (or finish) one run; a run stopped midway resumes as its config.json records it,
     and a finished shorter one is extended to ``--interactions``."""
     out = Path(args.out) / f"{task}-{method}-s{seed}"
-    summary = out / "summary.json"
-    if summary.exists() and json.loads(summary.read_text())["interactions"] == args.interactions:
+    summary = out / SUMMARY
+    if (
+        summary.exists()
+        and read_json(summary, DAMAGED_SUMMARY, "interactions")["interactions"] == args.interactions
+    ):
         return out
     cli = [sys.executable, "-m", "sili_robots.cli", "train"]
-    if (out / "config.json").exists():  # recorded: only these options may go with --resume
+    if (out / CONFIG).exists():  # recorded: only these options may go with --resume
         cmd = [*cli, "--resume", str(out), "--interactions", str(args.interactions)]
     else:
         cmd = [*cli, "--task", task, "--method", method, "--seed", str(seed), "--out", str(out)]
@@ -95,23 +107,27 @@ def variant_of(run: dict) -> str:
 
 def table(run_dirs: list[Path], window: int) -> pd.DataFrame:
     rows = []
-    for d in run_dirs:
-        cfg = json.loads((d / "config.json").read_text())["run"]
-        summary = json.loads((d / "summary.json").read_text())
-        df = run_metrics(d)  # metrics.csv, or a collected run's .csv.gz, checked
+    for d in run_dirs:  # each file read checked: a damaged one is named
+        run = read_config(d)
+        summary = finished_summary(d)
+        if summary is None:
+            raise ConfigError(f"{d} has not finished (no {SUMMARY})")
+        df = run_metrics(d)  # metrics.csv, or a collected run's .csv.gz
+        if df is None:
+            raise ConfigError(f"{d} has logged no interaction (no metrics.csv)")
         rows.append(
             {
-                "task": cfg["task"],
-                "method": cfg["method"],
-                "latent": cfg["agent"]["latent"],
-                "seed": cfg["seed"],
+                "task": run.task,
+                "method": run.method,
+                "latent": run.agent.latent,
+                "seed": run.seed,
                 "interactions": len(df),
                 "final_task_reward": df["task_reward"].tail(window).mean(),
                 "final_stability": kept_fraction(df.tail(window)),
                 "first_stable_0.9": stable_by(df, window),
                 "latent_purity": latent_diagnostics(df, window).get("latent_purity", float("nan")),
                 "wall_min": summary["wall_time_s"] / 60,
-                "variant": variant_of(cfg),
+                "variant": variant_of(read_json(d / CONFIG, DAMAGED_CONFIG, "run")["run"]),
             }
         )
     return pd.DataFrame(rows)
@@ -208,9 +224,9 @@ def main() -> None:
     else:
         jobs = [(args.task, m, s) for m, s in itertools.product(*checked_jobs(p, args))]
         for task, method, seed in jobs:  # before any run starts: a run is never shortened
-            config = Path(args.out) / f"{task}-{method}-s{seed}" / "config.json"
+            config = Path(args.out) / f"{task}-{method}-s{seed}" / CONFIG
             if config.exists():
-                recorded = json.loads(config.read_text())["run"]["interactions"]
+                recorded = read_config(config.parent).interactions
                 if recorded > args.interactions:
                     p.error(
                         f"--interactions {args.interactions}: {config.parent} is set to "
@@ -246,6 +262,9 @@ def checked_jobs(p: argparse.ArgumentParser, args: argparse.Namespace) -> tuple[
     if args.latent and any(setting_path(name) == "latent" for name in settings):
         p.error("give one of --latent and --set latent, not both")  # as sili train says
     methods = [m.strip() for m in args.methods.split(",")]
+    twice = sorted({m for m in methods if methods.count(m) > 1})
+    if twice:  # one run folder each: the second would find the first training there
+        p.error(f"--methods {args.methods}: {', '.join(twice)} given twice")
     for m in methods:
         latent = args.latent if m in LATENT_METHODS else None  # as run_one passes it on
         given = [f"--set {' '.join(args.set)}"] if args.set else []

@@ -102,11 +102,13 @@ def main() -> None:
         config, padded, n = args.child
         print(json.dumps(measure(config, padded == "1", int(n), args.matmul)))
         return
-    print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
-    print(f"the latent model's products on {args.matmul or default_matmul()}", flush=True)
-    for config in args.configs.split(","):
+    configs = args.configs.split(",")
+    for config in configs:  # all before the first measurement (minutes each)
         if config not in CONFIGS:
             p.error(f"unknown config {config!r}; allowed: {', '.join(CONFIGS)}")
+    print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
+    print(f"the latent model's products on {args.matmul or default_matmul()}", flush=True)
+    for config in configs:
         ref = run_child(config, False, args.interactions, args.matmul)
         new = run_child(config, True, args.interactions, args.matmul)
         print(f"{config}: resident MiB after N interactions (unpadded reference -> padded)")

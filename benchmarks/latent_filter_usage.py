@@ -17,8 +17,8 @@ import pandas as pd
 
 from sili_robots.commands.common import non_negative_int, positive_int
 from sili_robots.diagnostics import filter_corrections
-from sili_robots.errors import one_line_errors
-from sili_robots.metrics import METRICS
+from sili_robots.errors import ConfigError, one_line_errors
+from sili_robots.metrics import run_metrics
 from sili_robots.runs import read_config
 
 
@@ -35,7 +35,9 @@ def main() -> None:
     rows = []
     for run in args.runs:
         read_config(run)  # a run directory, or a one-line error naming it
-        df = pd.read_csv(run / METRICS)
+        df = run_metrics(run)  # metrics.csv, or a collected run's .csv.gz, checked
+        if df is None:
+            raise ConfigError(f"{run} has logged no interaction (no metrics.csv)")
         out = filter_corrections(df, args.start)
         rows.append(
             {

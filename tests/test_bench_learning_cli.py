@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from argparse import Namespace
@@ -36,6 +37,36 @@ def test_from_runs_missing_folder_exits_2(tmp_path: Path) -> None:
     assert result.returncode == 2
     assert "not a folder" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_damaged_files_of_a_run_are_named_not_a_traceback(tmp_path: Path) -> None:
+    collected = Path(__file__).resolve().parents[1] / "results" / "main-r-avx2" / "runs"
+    run = tmp_path / "runs" / "r0"
+    shutil.copytree(collected / "circle-3__sili-bschedule__s0", run)
+    assert run_script("--from-runs", str(tmp_path / "runs")).returncode == 0  # a collected run
+    for name, text, why in [
+        ("summary.json", "{bad", "summary.json is damaged (JSONDecodeError"),
+        ("summary.json", "{}", "summary.json is damaged (no final_task_reward"),
+        ("config.json", "{bad", "config.json is damaged (JSONDecodeError"),
+    ]:
+        kept = (run / name).read_text()
+        (run / name).write_text(text)
+        result = run_script("--from-runs", str(tmp_path / "runs"))
+        assert result.returncode == 2 and why in result.stderr, result.stderr
+        assert "Traceback" not in result.stderr
+        (run / name).write_text(kept)
+    out = tmp_path / "out" / "circle-3-sili-s0"  # where --out would train seed 0
+    out.mkdir(parents=True)
+    (out / "config.json").write_text("{bad")
+    result = run_script("--methods", "sili", "--seeds", "0", "--out", str(out.parent))
+    assert result.returncode == 2 and "config.json is damaged" in result.stderr
+
+
+def test_a_method_given_twice_is_refused_before_training(tmp_path: Path) -> None:
+    result = run_script("--methods", "sili,sac,sili", "--out", str(tmp_path / "out"))
+    assert result.returncode == 2
+    assert "--methods sili,sac,sili: sili given twice" in result.stderr
+    assert not (tmp_path / "out").exists()
 
 
 def test_run_one_resumes_and_extends_a_recorded_run(tmp_path: Path) -> None:

@@ -1,5 +1,7 @@
 """Controllers on the real Sawyer scene: reaching, joint limits, numerical health, the registry."""
 
+import re
+
 import numpy as np
 import pytest
 
@@ -125,6 +127,28 @@ def test_no_nan_over_long_random_rollouts(controller):
             worst = max(worst, _joint_limit_violation(env.unwrapped))
             assert trunc == (t == 49)
     assert worst < ARM_LIMIT_TOL
+
+
+@pytest.mark.parametrize("controller", CONTROLLER_NAMES)
+def test_a_controller_refuses_a_velocity_that_is_not_three_finite_numbers(controller):
+    """Driven directly (not through the task, which checks its action): a NaN velocity made the
+    target NaN for the rest of the interaction, the arm frozen without a word."""
+    env = make_task("sawyer-reach", controller=controller).unwrapped
+    env.reset(seed=0)
+    ctl = env.controller
+    before = ctl.target.copy()
+    for bad, shown in [
+        ([np.nan, 0, 0], "[nan, 0.0, 0.0]"),
+        ([np.inf, 0, 0], "[inf, 0.0, 0.0]"),
+        ([0.1, 0.0], "shape (2,)"),
+    ]:
+        with pytest.raises(
+            ConfigError, match=rf"velocity must be 3 finite numbers \(m/s\), got {re.escape(shown)}"
+        ):
+            ctl.step(np.array(bad))
+    np.testing.assert_array_equal(ctl.target, before)  # refused before anything moved
+    ctl.step(np.array([0.2, 0.0, 0.0]))
+    assert np.isfinite(ctl.target).all() and ctl.target[0] > before[0]
 
 
 @pytest.mark.parametrize("controller", CONTROLLER_NAMES)

@@ -20,6 +20,8 @@ from typing import ClassVar
 import mujoco
 import numpy as np
 
+from sili_robots.errors import ConfigError
+
 #: largest distance (m) the Cartesian target may lead the measured end effector
 LEASH = 0.05
 
@@ -69,6 +71,9 @@ class EndEffectorController(ABC):
         Expects ``data`` forwarded (as after ``mj_forward``) and leaves it forwarded.
         """
         velocity = np.asarray(velocity, float)
+        if velocity.shape != (3,) or not np.isfinite(velocity).all():  # a NaN target stays NaN
+            got = velocity.tolist() if velocity.shape == (3,) else f"shape {velocity.shape}"
+            raise ConfigError(f"velocity must be 3 finite numbers (m/s), got {got}")
         ee = self.data.site_xpos[self.arm.ee_site_id]
         target = self.target + velocity * self.arm.control_dt
         lead = target - ee

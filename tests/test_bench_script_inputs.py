@@ -1,0 +1,57 @@
+"""Benchmark scripts refuse bad input before they measure anything, and read collected runs."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+from fast_settings import FAST_ARGS
+
+from sili_robots.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+COLLECTED_RUN = ROOT / "results" / "main-r-avx2" / "runs" / "circle-3__sili-bschedule__s0"
+
+
+def run_script(name: str, *args: str) -> subprocess.CompletedProcess[str]:
+    script = ROOT / "benchmarks" / name
+    return subprocess.run(
+        [sys.executable, str(script), *args], capture_output=True, text=True, timeout=300
+    )
+
+
+def test_filter_usage_reads_a_collected_runs_gzipped_metrics() -> None:
+    result = run_script("latent_filter_usage.py", str(COLLECTED_RUN), "--start", "0")
+    assert result.returncode == 0, result.stderr  # it read metrics.csv alone
+    run, interactions = result.stdout.splitlines()[-1].split()[:2]
+    assert run == str(COLLECTED_RUN) and interactions == "1000"
+
+
+def test_fewer_steps_than_environments_is_refused() -> None:
+    result = run_script("bench_env_throughput.py", "--steps", "3", "--num-envs", "4")
+    assert result.returncode == 2  # every vectorised rate was 0 steps/s
+    assert "--steps 3 is fewer than --num-envs 4" in result.stderr
+
+
+def test_an_unknown_memory_config_is_refused_before_the_first_measurement() -> None:
+    result = run_script("bench_refresh_memory.py", "--configs", "continuous,nope")
+    assert result.returncode == 2
+    assert "unknown config 'nope'; allowed: continuous, filter" in result.stderr
+    assert "continuous:" not in result.stdout  # nothing measured (minutes at the default)
+
+
+def test_grouping_settings_are_checked_before_the_first_fit(tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--out", str(run), "--no-progress", *FAST_ARGS]
+    assert main([*args, "--interactions", "4"]) == 0
+    for bad, why in [
+        (["--threshold", "-5"], "model.merge_threshold must be >= 0, got -5.0"),
+        (["--bonus", "nan"], "model.usage_bonus must be >= 0, got nan"),
+    ]:
+        result = run_script("bench_latent_grouping.py", str(run), "--steps", "1", *bad)
+        assert result.returncode == 2 and why in result.stderr, result.stderr
+        assert "reference" not in result.stdout  # no fit ran
+    (run / "checkpoint.pt").unlink()
+    result = run_script("bench_latent_grouping.py", str(run), "--steps", "1")
+    assert result.returncode == 2 and "has no checkpoint" in result.stderr
