@@ -225,6 +225,8 @@ def main() -> None:
         jobs = [(args.task, m, s) for m, s in itertools.product(*checked_jobs(p, args))]
         for task, method, seed in jobs:  # before any run starts: a run is never shortened
             config = Path(args.out) / f"{task}-{method}-s{seed}" / CONFIG
+            if (config.parent / SUMMARY).exists():  # damaged: named now, not after the others
+                read_json(config.parent / SUMMARY, DAMAGED_SUMMARY, "interactions")
             if config.exists():
                 recorded = read_config(config.parent).interactions
                 if recorded > args.interactions:

@@ -57,9 +57,13 @@ def test_damaged_files_of_a_run_are_named_not_a_traceback(tmp_path: Path) -> Non
         (run / name).write_text(kept)
     out = tmp_path / "out" / "circle-3-sili-s0"  # where --out would train seed 0
     out.mkdir(parents=True)
-    (out / "config.json").write_text("{bad")
-    result = run_script("--methods", "sili", "--seeds", "0", "--out", str(out.parent))
-    assert result.returncode == 2 and "config.json is damaged" in result.stderr
+    for name in ("config.json", "summary.json"):  # named before any run trains
+        (out / name).write_text("{bad")
+        both = ["--methods", "sili", "--seeds", "0,1", "--interactions", "2"]
+        result = run_script(*both, "--out", str(out.parent))
+        assert result.returncode == 2 and f"{name} is damaged" in result.stderr
+        assert not (out.parent / "circle-3-sili-s1").exists()  # seed 1 did not train first
+        (out / name).unlink()
 
 
 def test_a_method_given_twice_is_refused_before_training(tmp_path: Path) -> None:

@@ -148,3 +148,11 @@ def as_indices(value: object, shape: tuple[int, ...], low: int, high: int) -> np
     if j.shape != shape or j.dtype.kind not in "iu":
         return None
     return j if j.size == 0 or (int(j.min()) >= low and int(j.max()) < high) else None
+
+
+def shape_of(value: object) -> tuple[int, ...] | None:
+    """``value``'s array shape; None for a ragged one (numpy refuses to make it an array)."""
+    try:
+        return np.shape(value)
+    except ValueError:
+        return None

@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from sili_robots.agent import stability
-from sili_robots.agent.addon import HOOKS, AgentAddon, as_indices, overriding, refused
+from sili_robots.agent.addon import HOOKS, AgentAddon, as_indices, overriding, refused, shape_of
 from sili_robots.agent.buffer import InteractionBuffer
 from sili_robots.agent.config import AgentConfig
 from sili_robots.agent.latent import LatentModel, transitions
@@ -182,7 +182,7 @@ class SILIAgent:
                 for addon in self.hooks["acting_latent"]:
                     acted = addon.acting_latent()
                     if acted is not None:
-                        if np.shape(acted) != (self.zdim,):
+                        if shape_of(acted) != (self.zdim,):
                             wanted = f"None or an array of shape ({self.zdim},)"
                             raise refused(addon, "acting_latent", acted, wanted)
                         z = np.asarray(acted, np.float32)  # the policy's dtype (float64 failed)
@@ -387,7 +387,7 @@ class SILIAgent:
                     if not (
                         isinstance(given, (tuple, list))
                         and len(given) == 2
-                        and all(np.shape(z) == z_cur.shape for z in given)
+                        and all(shape_of(z) == z_cur.shape for z in given)
                     ):
                         wanted = f"None or two arrays of shape {z_cur.shape}"
                         raise refused(addon, "batch_latents", given, wanted)
