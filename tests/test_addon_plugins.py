@@ -4,6 +4,7 @@ agent, its metric columns written, kept through a resume and named when it canno
 from __future__ import annotations
 
 import csv
+import re
 import textwrap
 
 import pytest
@@ -93,7 +94,7 @@ class PastTheEnd(AgentAddon):
 
 class BeforeTheFirst(AgentAddon):
     def rl_interactions(self, j):
-        return j - 1  # -1 is numpy's last row, without a word
+        return (j - 1).tolist()  # -1 is numpy's last row, without a word
 
 
 class Ragged(AgentAddon):
@@ -222,13 +223,20 @@ def test_a_hook_that_returns_the_wrong_thing_is_named_with_what_it_must_return(
         "FloatPairs": "latent_pairs must return an integer array of shape (32,) in [1, ",
         "OneLatent": "batch_latents must return None or two arrays of shape (",
     }
+    errors = {}
     for name, message in wrong.items():
         run = ["train", "--task", "circle-3", "--out", str(tmp_path / name), "--no-progress"]
         plugin = ["--set", f"addons.plugins=my_addons:{name}"]
         assert main([*run, *FAST_ARGS, "--interactions", "5", *plugin]) == 2, name
-        err = capsys.readouterr().err
+        errors[name] = err = capsys.readouterr().err
         assert f"add-on {name}: {message}" in err
         assert "Traceback" not in err
+    # a list of indices is shown as the array it makes, with its range
+    assert re.search(
+        r"in \[0, (\d+)\), got an array of shape \(\d+, \d+\) and dtype int64, "
+        r"entries -1 to \d+$",
+        errors["BeforeTheFirst"].strip(),
+    ), errors["BeforeTheFirst"]
     run = ["train", "--task", "circle-3", "--out", str(tmp_path / "other"), "--no-progress"]
     other = ["--set", "addons.plugins=my_addons:OtherTypes"]
     assert main([*run, *FAST_ARGS, "--interactions", "5", *other]) == 0

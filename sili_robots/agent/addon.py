@@ -132,10 +132,11 @@ def refused(addon: AgentAddon, hook: str, value: object, wanted: str) -> ConfigE
     """The error for a hook's wrong return, naming the add-on: it failed deep in the agent with
     numpy's or torch's words, and an index past the stored interactions read empty rows."""
     shown = f"{value!r:.80}"
-    if isinstance(value, np.ndarray):
-        shown = f"an array of shape {value.shape} and dtype {value.dtype}"
-        if value.dtype.kind in "iu" and value.size:
-            shown += f", entries {value.min()} to {value.max()}"
+    if isinstance(value, (np.ndarray, list)) and shape_of(value) is not None:
+        array = np.asarray(value)  # a list of indices is shown as the array it makes
+        shown = f"an array of shape {array.shape} and dtype {array.dtype}"
+        if array.dtype.kind in "iu" and array.size:
+            shown += f", entries {array.min()} to {array.max()}"
     return ConfigError(f"add-on {type(addon).__name__}: {hook} must return {wanted}, got {shown}")
 
 
