@@ -151,6 +151,19 @@ def as_indices(value: object, shape: tuple[int, ...], low: int, high: int) -> np
     return j if j.size == 0 or (int(j.min()) >= low and int(j.max()) < high) else None
 
 
+def redrawn(addons: list[AgentAddon], hook: str, j: np.ndarray, low: int, high: int) -> np.ndarray:
+    """Stored interactions ``j`` as the add-ons of ``hook`` (``latent_pairs``,
+    ``rl_interactions``) redraw them in turn, each return checked to lie in [low, high)."""
+    for addon in addons:
+        given = getattr(addon, hook)(j)
+        checked = as_indices(given, j.shape, low, high)
+        if checked is None:
+            wanted = f"an integer array of shape {j.shape} in [{low}, {high})"
+            raise refused(addon, hook, given, wanted)
+        j = checked
+    return j
+
+
 def shape_of(value: object) -> tuple[int, ...] | None:
     """``value``'s array shape; None for a ragged one (numpy refuses to make it an array)."""
     try:

@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from sili_robots.agent import stability
-from sili_robots.agent.addon import HOOKS, AgentAddon, as_indices, overriding, refused, shape_of
+from sili_robots.agent.addon import HOOKS, AgentAddon, overriding, redrawn, refused, shape_of
 from sili_robots.agent.buffer import InteractionBuffer
 from sili_robots.agent.config import AgentConfig
 from sili_robots.agent.latent import LatentModel, transitions
@@ -333,13 +333,8 @@ class SILIAgent:
         total = 0.0
         for _ in range(steps):
             j = self.rng.integers(1, b.n, self.cfg.model.batch)
-            for addon in self.hooks["latent_pairs"]:
-                given = addon.latent_pairs(j)
-                checked = as_indices(given, j.shape, 1, b.n)
-                if checked is None:
-                    wanted = f"an integer array of shape {j.shape} in [1, {b.n})"
-                    raise refused(addon, "latent_pairs", given, wanted)
-                j = checked
+            if self.hooks["latent_pairs"]:
+                j = redrawn(self.hooks["latent_pairs"], "latent_pairs", j, 1, b.n)
             prev = transitions(
                 torch.from_numpy(b.obs[j - 1]),
                 torch.from_numpy(b.act[j - 1]),
@@ -361,13 +356,8 @@ class SILIAgent:
         b, h = self.buffer, self.horizon
         m, k = self.cfg.sac.batch_interactions, self.cfg.sac.batch_steps
         j = self.rng.integers(0, b.n, (n_updates, m))  # [U, M]
-        for addon in self.hooks["rl_interactions"]:
-            given = addon.rl_interactions(j)
-            checked = as_indices(given, j.shape, 0, b.n)
-            if checked is None:
-                wanted = f"an integer array of shape {j.shape} in [0, {b.n})"
-                raise refused(addon, "rl_interactions", given, wanted)
-            j = checked
+        if self.hooks["rl_interactions"]:
+            j = redrawn(self.hooks["rl_interactions"], "rl_interactions", j, 0, b.n)
         t = self.rng.integers(0, h, (n_updates, m, k))  # [U, M, K]
         j = np.broadcast_to(j[..., None], t.shape)
         last = t == h - 1
