@@ -79,7 +79,7 @@ def run_one(task: str, method: str, seed: int, args: argparse.Namespace) -> Path
         for item in args.set:
             cmd += ["--set", item]
     cmd.append("--no-progress")
-    done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    done = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     if done.returncode != 0:
         raise SystemExit(f"{out}: sili train failed:\n{done.stderr.strip()}")
     return out
@@ -223,6 +223,8 @@ def main() -> None:
             )
     else:
         jobs = [(args.task, m, s) for m, s in itertools.product(*checked_jobs(p, args))]
+        if Path(args.out).exists() and not Path(args.out).is_dir():
+            p.error(f"--out {args.out}: not a folder (the runs go in folders inside it)")
         for task, method, seed in jobs:  # before any run starts: a run is never shortened
             config = Path(args.out) / f"{task}-{method}-s{seed}" / CONFIG
             if (config.parent / SUMMARY).exists():  # damaged: named now, not after the others

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import pandas as pd
@@ -84,9 +85,17 @@ def main() -> None:
     p.add_argument("--tasks", nargs="+", choices=list(TASKS), default=list(TASKS))
     args = p.parse_args()
     df = load_results(args.source)
-    for task in args.tasks:
-        if (df.task == task).any():
-            print(task_table(df, args.source, task), end="\n\n")
+    found = [task for task in args.tasks if (df.task == task).any()]
+    if not found:
+        p.error(
+            f"{args.source} has no runs of {', '.join(args.tasks)}; its tasks: "
+            f"{', '.join(sorted(df.task.unique()))}"
+        )
+    for task in found:
+        print(task_table(df, args.source, task), end="\n\n")
+    missing = [task for task in args.tasks if task not in found]
+    if missing:  # a partial collection: said, not skipped in silence
+        print(f"no runs of {', '.join(missing)} in {args.source}", file=sys.stderr)
 
 
 if __name__ == "__main__":

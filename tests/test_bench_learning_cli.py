@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pytest
 from benchmark_scripts import load_script
 from fast_settings import FAST_AGENT
 
@@ -134,3 +135,24 @@ def test_stable_by_is_the_interaction_ending_the_first_held_window() -> None:
     assert bench.stable_by(df[:100], 100) != bench.stable_by(df[:100], 100)  # 0 is in no window
     df["strategy_changed"] = [i % 5 == 0 for i in range(130)]  # 80% kept
     assert np.isnan(bench.stable_by(df, 10))
+
+
+def test_out_that_is_a_file_is_refused_before_training(tmp_path: Path) -> None:
+    taken = tmp_path / "notes.txt"
+    taken.write_text("mine")
+    result = run_script(
+        "--methods", "sac", "--seeds", "0", "--interactions", "2", "--out", str(taken)
+    )
+    assert result.returncode == 2
+    assert f"--out {taken}: not a folder" in result.stderr
+    assert "Traceback" not in result.stderr and taken.read_text() == "mine"
+
+
+def test_a_failed_run_shows_the_trainers_error_as_text(tmp_path: Path) -> None:
+    bench = load_script("bench_learning")
+    args = Namespace(out=str(tmp_path), interactions=2, latent=None, set=["no_such_setting=1"])
+    with pytest.raises(SystemExit) as failed:
+        bench.run_one("circle-3", "sac", 0, args)
+    message = str(failed.value.code)
+    # the trainer's own line, not a bytes object's repr (b"sili train: ...")
+    assert "sili train failed:\nsili train: error: unknown setting 'no_such_setting'" in message

@@ -26,3 +26,20 @@ def test_tables_come_from_the_committed_collection() -> None:
     assert "-16.93, -15.86, -8.32 | -13.70 | 0.79" in rows["SILI"]
     assert "| 16 min |" in rows["SILI (paper)"]  # all three seeds took 16 minutes: no "16-16"
     assert "circle-8" not in out
+
+
+def test_tasks_without_runs_are_said_not_skipped_in_silence() -> None:
+    script = ROOT / "benchmarks" / "grid_tables.py"
+    collection = str(ROOT / "results" / "main-r-avx2")  # Circle (3 Goals) runs only
+
+    def tables(*tasks: str) -> subprocess.CompletedProcess[str]:
+        args = [sys.executable, str(script), collection, "--tasks", *tasks]
+        return subprocess.run(args, capture_output=True, text=True, timeout=120)
+
+    none = tables("driving")
+    assert none.returncode == 2 and none.stdout == ""
+    assert "has no runs of driving; its tasks: circle-3" in none.stderr
+    assert "Traceback" not in none.stderr
+    some = tables("circle-3", "driving")
+    assert some.returncode == 0 and "**circle-3**" in some.stdout
+    assert "no runs of driving in" in some.stderr
