@@ -41,7 +41,14 @@ from sili_robots.build import (
     task_kwargs_of,
     task_name_of,
 )
-from sili_robots.errors import ConfigError, check_count, check_flag, check_names, first_line
+from sili_robots.errors import (
+    ConfigError,
+    check_count,
+    check_flag,
+    check_names,
+    check_path,
+    first_line,
+)
 from sili_robots.evaluation import AgentFeedback, check_same_task, evaluate, fitting
 from sili_robots.metrics import COMPRESSED_METRICS, METRICS, MetricsWriter
 from sili_robots.runs import (
@@ -124,6 +131,7 @@ class SILI:
             run_dir = tempfile.mkdtemp(prefix="sili-run-")
             _remove_with(self, Path(run_dir))
         else:
+            run_dir = check_path("run_dir", run_dir)
             check_not_in_a_sweep(run_dir, "run_dir")
         self.run_dir, self._overwrite = Path(run_dir), overwrite
         self._saved: dict[Path, tuple] = {}  # where this model saved, and what it left there
@@ -172,7 +180,7 @@ class SILI:
     def load(cls, path: str | Path, env: gym.Env | None = None) -> SILI:
         """A model saved by ``save`` or a run directory of ``sili train``; ``env``: the task
         instance for a run of a user's task class that cannot be imported by name."""
-        path = Path(path)
+        path = check_path("path", path)
         cfg = read_run_config(path)
         state = require_checkpoint(path)
         if env is not None:
@@ -277,11 +285,11 @@ class SILI:
         """Copy the run (config, metrics, checkpoint, summary) to ``path``: a new or empty
         directory, or one this model saved to before (replaced, as stable-baselines3's ``save``
         replaces its file); another run there is replaced only with ``overwrite``."""
-        path = Path(path)
         self._refresh()
         self._check_trained("save")
-        overwrite = check_flag("overwrite", overwrite)
         try:
+            path = check_path("save path", path)
+            overwrite = check_flag("overwrite", overwrite)
             self._copy_to(path, overwrite)
         except (ConfigError, OSError) as exc:  # a script ends here: its training must stay
             own = Path(self.run_dir).resolve()

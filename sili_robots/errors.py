@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import numbers
+import os
 import sys
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
@@ -67,6 +68,17 @@ def check_count(name: str, value: object, low: int = 1, high: int | None = None)
         allowed = f">= {low}" if high is None else f"in [{low}, {high}]"
         raise ConfigError(f"{name} must be an integer {allowed}, got {value!r}")
     return int(value)
+
+
+def check_path(name: str, value: object) -> Path:
+    """``value`` (a string or path-like) as a ``Path``, or ``ConfigError``: pathlib's own
+    ``TypeError`` or NUL-byte ``ValueError`` would escape a check that catches ``OSError``."""
+    if isinstance(value, bytes) or not isinstance(value, (str, os.PathLike)):
+        raise ConfigError(f"{name} must be a path (a string or pathlib.Path), got {value!r}")
+    path = Path(value)
+    if "\0" in str(path) or not str(value).strip():
+        raise ConfigError(f"{name} {str(value)!r} is not a usable path (empty or with a NUL byte)")
+    return path
 
 
 def first_line(err: Exception) -> str:

@@ -255,6 +255,29 @@ def test_a_refused_save_keeps_the_training_and_says_where(tmp_path):
     shutil.rmtree(run_dir)
 
 
+def test_a_path_that_is_not_one_is_refused_and_a_refused_save_keeps_the_training(tmp_path):
+    for bad in (5, b"run", ""):  # None is a temporary run
+        with pytest.raises(ConfigError, match=r"run_dir (must be a path|'' is not a usable)"):
+            SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=bad)
+    for bad in (5, None, b"run"):
+        with pytest.raises(ConfigError, match=re.escape("path must be a path (a string or")):
+            SILI.load(bad)
+    model = SILI("circle-3", method="sac", seed=1, settings=FAST_AGENT).learn(1)
+    run_dir = model.run_dir
+    for bad, why in [
+        (None, "save path must be a path (a string or pathlib.Path), got None"),
+        (5, "save path must be a path (a string or pathlib.Path), got 5"),
+        (str(tmp_path / "x\0y"), "is not a usable path (empty or with a NUL byte)"),
+        ("", "save path '' is not a usable path"),
+    ]:
+        with pytest.raises(ConfigError, match=re.escape(why) + ".*training is kept in"):
+            model.save(bad)
+    del model
+    gc.collect()
+    assert SILI.load(run_dir).cfg.seed == 1  # the script's training outlived the model
+    shutil.rmtree(run_dir)
+
+
 def test_a_task_module_in_the_current_directory_trains_and_a_scripts_class_is_explained(
     tmp_path, monkeypatch, capsys
 ):
@@ -481,6 +504,8 @@ def test_predict_env_and_learn_as_a_user_of_numpy_and_torch_expects(tmp_path):
             model.env.reset(options={"strategy": 99})  # refused: the game is as it was
         with pytest.raises(ConfigError, match=r"unknown reset options \['Strategy'\]"):
             model.env.reset(options={"Strategy": 0})  # a slip, not the old game unasked
+        with pytest.raises(ConfigError, match=r"reset options must be a dict .*, got str"):
+            model.env.reset(options="restart")  # the task's own refusal, not AttributeError
         assert model.env.reset(options=first)[1]["interaction"] == 3
     model = SILI.load(run)
     obs, info = model.env.reset(seed=5, options={"strategy": 0})  # another game, as asked
