@@ -137,6 +137,7 @@ def test_scene_for_unknown_env_names_the_known_ones():
         ({"policy": "random", "checkpoint": "/x"}, "'/x': a preview plays one of them"),
         ({"serve": "no"}, "serve must be True or False, got 'no'"),  # started a server
         ({"serve": True, "serve_seconds": "1"}, "serve_seconds must be a number >= 0"),
+        ({"env_kwargs": [1]}, "env_kwargs must be a dict of names to values, got [1]"),
     ],
 )
 def test_bad_preview_arguments_raise_config_error(kwargs, message, tmp_path):
@@ -149,6 +150,57 @@ def test_bad_frame_is_a_config_error(tmp_path):
     prev = _record("circle-3", interactions=1)
     with pytest.raises(ConfigError, match="frame 999 is outside the recording"):
         prev.render(tmp_path / "x.html", frame=999)
+    for frame in (1.5, "a", float("nan"), True):  # not cut to 1, nor int()'s error
+        with pytest.raises(ConfigError, match=f"frame {re.escape(str(frame))} is outside"):
+            prev.frame(frame)
+    assert prev.frame(np.int64(1)) == 1
+
+
+def test_an_output_under_a_file_or_that_is_a_folder_is_refused_before_the_rollout(
+    tmp_path, monkeypatch
+):
+    def no_rollout(*_args, **_kwargs):
+        raise AssertionError("the rollout began before the output was checked")
+
+    monkeypatch.setattr(Preview, "record", no_rollout)
+    (tmp_path / "afile").write_text("mine")
+    (tmp_path / "page.html").mkdir()
+    for out, why in [
+        (tmp_path / "afile" / "p.html", "afile is a file, so no folder can be made there"),
+        (tmp_path / "afile" / "deeper" / "p.html", "afile is a file, so no folder can be made"),
+        (tmp_path / "page.html", "page.html is a folder; give a file name in it"),
+    ]:
+        with pytest.raises(ConfigError, match=re.escape(why)):
+            preview("circle-3", interactions=1, out=out)
+    with pytest.raises(
+        ConfigError, match=re.escape("png must be a path (a string or pathlib.Path), got 5")
+    ):
+        preview("circle-3", interactions=1, out=tmp_path / "p.html", png=5)
+    assert (tmp_path / "afile").read_text() == "mine" and not (tmp_path / "p.html").exists()
+
+
+def test_write_html_never_replaces_a_users_file(tmp_path):
+    prev = _record("circle-3", interactions=1)
+    notes = tmp_path / "notes.html"
+    notes.write_text("my notes")
+    with pytest.raises(ConfigError, match=r"notes\.html exists and is not a preview"):
+        prev.write_html(notes)
+    with pytest.raises(ConfigError, match=re.escape("give a file name ending in .html or .htm")):
+        prev.write_html(tmp_path / "notes.txt")
+    assert notes.read_text() == "my notes" and not (tmp_path / "notes.txt").exists()
+    page = prev.write_html(tmp_path / "p.html")
+    assert prev.write_html(page) == page  # an earlier preview is replaced
+
+
+def test_record_refuses_a_task_name_or_a_policy_that_is_not_a_function():
+    env = make_task("circle-3")
+    try:
+        with pytest.raises(ConfigError, match=r"env must be a task instance.*got 'circle-3'"):
+            Preview.record("circle-3", scripted_policy(env, "stabilizing"), 1)
+        with pytest.raises(ConfigError, match=r"policy must be a function.*got 'scripted'"):
+            Preview.record(env, "scripted", 1)
+    finally:
+        env.close()
 
 
 def test_missing_chromium_is_reported_with_the_install_hint(monkeypatch, tmp_path):

@@ -10,6 +10,7 @@ trained agent (``checkpoint=RUN_DIR``, through ``sili_robots.evaluation.policy_f
 
 from __future__ import annotations
 
+import numbers
 import time
 import zlib
 from collections.abc import Callable
@@ -27,6 +28,8 @@ from sili_robots.errors import (
     check_choice,
     check_count,
     check_flag,
+    check_names,
+    check_path,
     check_seed,
     is_number,
 )
@@ -75,6 +78,12 @@ class Preview:
     ) -> Preview:
         """Roll ``policy`` out on ``env`` and build the scene (also into ``live`` if given)."""
         interactions, seed = check_count("interactions", interactions), check_seed(seed)
+        if not isinstance(env, gym.Env):  # a task's name goes to preview(), which builds it
+            raise ConfigError(f"env must be a task instance (preview() takes names), got {env!r}")
+        if not callable(policy):
+            raise ConfigError(
+                f"policy must be a function policy(env, obs) -> action, got {policy!r}"
+            )
         scene = scene_for(env)
         rec = record_rollout(
             env,
@@ -95,6 +104,11 @@ class Preview:
         return scene_html(self.recorder, overlay(self.scene, self.recording))
 
     def write_html(self, path: str | Path) -> Path:
+        """Write the page to ``path``: a new file or an earlier preview, never another file."""
+        check_output(path, "path")
+        return self._write_page(path)
+
+    def _write_page(self, path: str | Path) -> Path:
         return write_html(self.recorder, overlay(self.scene, self.recording), path)
 
     def markers(self, frame: int | None = None) -> list[tuple[Marker, tuple[float, ...]]]:
@@ -109,7 +123,8 @@ class Preview:
         """``frame``, or the scene's default picture frame; ConfigError when out of range."""
         if frame is None:
             return self.scene.picture_frame(self.recording)
-        if isinstance(frame, bool) or not 0 <= int(frame) < len(self.recording):
+        whole = isinstance(frame, numbers.Integral) and not isinstance(frame, bool)
+        if not whole or not 0 <= int(frame) < len(self.recording):
             raise ConfigError(
                 f"frame {frame} is outside the recording (0 to {len(self.recording) - 1})"
             )
@@ -148,6 +163,8 @@ def make_env_and_policy(
     from sili_robots.tasks import make_task, task_spec
 
     name = task_spec(task).name
+    if env_kwargs is not None:
+        env_kwargs = check_names("env_kwargs", env_kwargs)
     if checkpoint is not None and env_kwargs:
         given = ", ".join(f"{k}={v!r}" for k, v in env_kwargs.items())
         raise ConfigError(
@@ -322,8 +339,8 @@ def marked_png(png: bytes) -> bytes:
 def check_output(path: str | Path, option: str) -> None:
     """An output a preview may write (``option``: how the caller names it): an HTML or PNG
     name (Chromium opens a page by its suffix), and an existing file only if a preview wrote
-    it: a run's or a user's file is never replaced."""
-    path = Path(path)
+    it: a run's or a user's file is never replaced; its folder must be one or be creatable."""
+    path = check_path(option, path)
     suffixes = (".png",) if option.endswith("png") else (".html", ".htm")
     if path.suffix.lower() not in suffixes:
         raise ConfigError(f"{option} {path}: give a file name ending in {' or '.join(suffixes)}")
@@ -334,6 +351,13 @@ def check_output(path: str | Path, option: str) -> None:
             if path.suffix.lower() == ".png"
             else f"{option} {path} exists and is not a preview; give another file name"
         )
+    if path.is_dir():
+        raise ConfigError(f"{option} {path} is a folder; give a file name in it")
+    folder = path.parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    if not folder.is_dir():  # checked before the rollout, not at the write after it
+        raise ConfigError(f"{option} {path}: {folder} is a file, so no folder can be made there")
 
 
 def _written_by_a_preview(path: Path) -> bool:
@@ -346,11 +370,11 @@ def _written_by_a_preview(path: Path) -> bool:
 
 def _write(prev: Preview, out: str | Path | None) -> Path:
     if out is not None:
-        return prev.write_html(out)
+        return prev._write_page(out)  # checked by preview() before the rollout
     import tempfile
 
     fd, tmp = tempfile.mkstemp(prefix="sili-preview-", suffix=".html")
     import os
 
     os.close(fd)
-    return prev.write_html(tmp)
+    return prev._write_page(tmp)
