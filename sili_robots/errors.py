@@ -73,11 +73,17 @@ def check_count(name: str, value: object, low: int = 1, high: int | None = None)
 def check_path(name: str, value: object) -> Path:
     """``value`` (a string or path-like) as a ``Path``, or ``ConfigError``: pathlib's own
     ``TypeError`` or NUL-byte ``ValueError`` would escape a check that catches ``OSError``."""
+    wrong = ConfigError(f"{name} must be a path (a string or pathlib.Path), got {value!r}")
     if isinstance(value, bytes) or not isinstance(value, (str, os.PathLike)):
-        raise ConfigError(f"{name} must be a path (a string or pathlib.Path), got {value!r}")
-    path = Path(value)
-    if "\0" in str(path) or not str(value).strip():
-        raise ConfigError(f"{name} {str(value)!r} is not a usable path (empty or with a NUL byte)")
+        raise wrong
+    try:
+        path = Path(value)
+    except TypeError:  # a path-like giving bytes
+        raise wrong from None
+    if "\0" in str(path) or not str(value).strip():  # blank: as the CLI's path options
+        raise ConfigError(
+            f"{name} {str(value)!r} is not a usable path (empty, blank or with a NUL byte)"
+        )
     return path
 
 

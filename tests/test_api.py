@@ -255,6 +255,16 @@ def test_a_refused_save_keeps_the_training_and_says_where(tmp_path):
     shutil.rmtree(run_dir)
 
 
+class BytesPath:
+    """A path-like whose path is bytes, which pathlib refuses with a TypeError."""
+
+    def __fspath__(self) -> bytes:
+        return b"run"
+
+    def __repr__(self) -> str:
+        return "<BytesPath>"
+
+
 def test_a_path_that_is_not_one_is_refused_and_a_refused_save_keeps_the_training(tmp_path):
     for bad in (5, b"run", ""):  # None is a temporary run
         with pytest.raises(ConfigError, match=r"run_dir (must be a path|'' is not a usable)"):
@@ -267,8 +277,10 @@ def test_a_path_that_is_not_one_is_refused_and_a_refused_save_keeps_the_training
     for bad, why in [
         (None, "save path must be a path (a string or pathlib.Path), got None"),
         (5, "save path must be a path (a string or pathlib.Path), got 5"),
-        (str(tmp_path / "x\0y"), "is not a usable path (empty or with a NUL byte)"),
+        (str(tmp_path / "x\0y"), "is not a usable path (empty, blank or with a NUL byte)"),
         ("", "save path '' is not a usable path"),
+        ("  ", "save path '  ' is not a usable path (empty, blank"),
+        (BytesPath(), "save path must be a path (a string or pathlib.Path), got <BytesPath>"),
     ]:
         with pytest.raises(ConfigError, match=re.escape(why) + ".*training is kept in"):
             model.save(bad)

@@ -150,10 +150,12 @@ def test_bad_frame_is_a_config_error(tmp_path):
     prev = _record("circle-3", interactions=1)
     with pytest.raises(ConfigError, match="frame 999 is outside the recording"):
         prev.render(tmp_path / "x.html", frame=999)
-    for frame in (1.5, "a", float("nan"), True):  # not cut to 1, nor int()'s error
-        with pytest.raises(ConfigError, match=f"frame {re.escape(str(frame))} is outside"):
+    last = len(prev.recording) - 1
+    for frame in (1.5, 2.0, "a", float("nan"), True):  # not cut to 1, nor int()'s error
+        expected = f"frame must be an integer from 0 to {last}, got {frame!r}"
+        with pytest.raises(ConfigError, match=re.escape(expected)):
             prev.frame(frame)
-    assert prev.frame(np.int64(1)) == 1
+    assert prev.frame(np.int64(1)) == 1 and prev.frame(np.array(2)) == 2
 
 
 def test_an_output_under_a_file_or_that_is_a_folder_is_refused_before_the_rollout(
@@ -190,6 +192,9 @@ def test_write_html_never_replaces_a_users_file(tmp_path):
     assert notes.read_text() == "my notes" and not (tmp_path / "notes.txt").exists()
     page = prev.write_html(tmp_path / "p.html")
     assert prev.write_html(page) == page  # an earlier preview is replaced
+    empty = tmp_path / "empty.html"
+    empty.touch()  # as tempfile.mkstemp(suffix=".html") leaves it: nothing to lose
+    assert PREVIEW_MARK in prev.write_html(empty).read_text()
 
 
 def test_record_refuses_a_task_name_or_a_policy_that_is_not_a_function():

@@ -10,7 +10,7 @@ trained agent (``checkpoint=RUN_DIR``, through ``sili_robots.evaluation.policy_f
 
 from __future__ import annotations
 
-import numbers
+import operator
 import time
 import zlib
 from collections.abc import Callable
@@ -106,9 +106,6 @@ class Preview:
     def write_html(self, path: str | Path) -> Path:
         """Write the page to ``path``: a new file or an earlier preview, never another file."""
         check_output(path, "path")
-        return self._write_page(path)
-
-    def _write_page(self, path: str | Path) -> Path:
         return write_html(self.recorder, overlay(self.scene, self.recording), path)
 
     def markers(self, frame: int | None = None) -> list[tuple[Marker, tuple[float, ...]]]:
@@ -123,12 +120,16 @@ class Preview:
         """``frame``, or the scene's default picture frame; ConfigError when out of range."""
         if frame is None:
             return self.scene.picture_frame(self.recording)
-        whole = isinstance(frame, numbers.Integral) and not isinstance(frame, bool)
-        if not whole or not 0 <= int(frame) < len(self.recording):
-            raise ConfigError(
-                f"frame {frame} is outside the recording (0 to {len(self.recording) - 1})"
-            )
-        return int(frame)
+        last = len(self.recording) - 1
+        try:  # an int, numpy's too (a 0-d integer array as well), never a bool
+            index = operator.index(frame) if not isinstance(frame, bool) else None
+        except TypeError:
+            index = None
+        if index is None:
+            raise ConfigError(f"frame must be an integer from 0 to {last}, got {frame!r}")
+        if not 0 <= index <= last:
+            raise ConfigError(f"frame {index} is outside the recording (0 to {last})")
+        return index
 
     def render(
         self,
@@ -339,12 +340,13 @@ def marked_png(png: bytes) -> bytes:
 def check_output(path: str | Path, option: str) -> None:
     """An output a preview may write (``option``: how the caller names it): an HTML or PNG
     name (Chromium opens a page by its suffix), and an existing file only if a preview wrote
-    it: a run's or a user's file is never replaced; its folder must be one or be creatable."""
+    it or it is empty (as ``tempfile`` makes one): a run's or a user's file is never replaced;
+    its folder must be one or be creatable."""
     path = check_path(option, path)
     suffixes = (".png",) if option.endswith("png") else (".html", ".htm")
     if path.suffix.lower() not in suffixes:
         raise ConfigError(f"{option} {path}: give a file name ending in {' or '.join(suffixes)}")
-    if path.is_file() and not _written_by_a_preview(path):
+    if path.is_file() and path.stat().st_size and not _written_by_a_preview(path):
         raise ConfigError(
             f"{option} {path} exists and is not a preview (or a picture of a version that did "
             "not mark its own); remove it or give another file name"
@@ -370,11 +372,11 @@ def _written_by_a_preview(path: Path) -> bool:
 
 def _write(prev: Preview, out: str | Path | None) -> Path:
     if out is not None:
-        return prev._write_page(out)  # checked by preview() before the rollout
+        return prev.write_html(out)
     import tempfile
 
     fd, tmp = tempfile.mkstemp(prefix="sili-preview-", suffix=".html")
     import os
 
     os.close(fd)
-    return prev._write_page(tmp)
+    return prev.write_html(tmp)
