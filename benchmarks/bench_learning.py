@@ -223,8 +223,11 @@ def main() -> None:
             )
     else:
         jobs = [(args.task, m, s) for m, s in itertools.product(*checked_jobs(p, args))]
-        if Path(args.out).exists() and not Path(args.out).is_dir():
-            p.error(f"--out {args.out}: not a folder (the runs go in folders inside it)")
+        folder = Path(args.out)
+        while not folder.exists() and folder != folder.parent:  # the part that exists
+            folder = folder.parent
+        if not folder.is_dir():
+            p.error(f"--out {args.out}: {folder} is not a folder (the runs go in folders inside)")
         for task, method, seed in jobs:  # before any run starts: a run is never shortened
             config = Path(args.out) / f"{task}-{method}-s{seed}" / CONFIG
             if (config.parent / SUMMARY).exists():  # damaged: named now, not after the others

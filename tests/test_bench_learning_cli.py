@@ -140,12 +140,13 @@ def test_stable_by_is_the_interaction_ending_the_first_held_window() -> None:
 def test_out_that_is_a_file_is_refused_before_training(tmp_path: Path) -> None:
     taken = tmp_path / "notes.txt"
     taken.write_text("mine")
-    result = run_script(
-        "--methods", "sac", "--seeds", "0", "--interactions", "2", "--out", str(taken)
-    )
-    assert result.returncode == 2
-    assert f"--out {taken}: not a folder" in result.stderr
-    assert "Traceback" not in result.stderr and taken.read_text() == "mine"
+    for out in (taken, taken / "sub"):  # a folder inside a file cannot be made either
+        result = run_script(
+            "--methods", "sac", "--seeds", "0", "--interactions", "2", "--out", str(out)
+        )
+        assert result.returncode == 2
+        assert f"--out {out}: {taken} is not a folder" in result.stderr
+        assert "Traceback" not in result.stderr and taken.read_text() == "mine"
 
 
 def test_a_failed_run_shows_the_trainers_error_as_text(tmp_path: Path) -> None:
