@@ -80,9 +80,10 @@ def check_path(name: str, value: object) -> Path:
         path = Path(value)
     except TypeError:  # a path-like giving bytes
         raise wrong from None
-    if "\0" in str(path) or not str(value).strip():  # blank: as the CLI's path options
+    given = os.fspath(value)
+    if "\0" in given or not given.strip():  # blank: as the CLI's path options
         raise ConfigError(
-            f"{name} {str(value)!r} is not a usable path (empty, blank or with a NUL byte)"
+            f"{name} {given!r} is not a usable path (empty, blank or with a NUL byte)"
         )
     return path
 

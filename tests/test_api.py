@@ -265,6 +265,13 @@ class BytesPath:
         return "<BytesPath>"
 
 
+class BlankPath:
+    """A path-like whose path is blank, which pathlib takes as the current directory."""
+
+    def __fspath__(self) -> str:
+        return ""
+
+
 def test_a_path_that_is_not_one_is_refused_and_a_refused_save_keeps_the_training(tmp_path):
     for bad in (5, b"run", ""):  # None is a temporary run
         with pytest.raises(ConfigError, match=r"run_dir (must be a path|'' is not a usable)"):
@@ -281,6 +288,7 @@ def test_a_path_that_is_not_one_is_refused_and_a_refused_save_keeps_the_training
         ("", "save path '' is not a usable path"),
         ("  ", "save path '  ' is not a usable path (empty, blank"),
         (BytesPath(), "save path must be a path (a string or pathlib.Path), got <BytesPath>"),
+        (BlankPath(), "save path '' is not a usable path (empty, blank"),
     ]:
         with pytest.raises(ConfigError, match=re.escape(why) + ".*training is kept in"):
             model.save(bad)

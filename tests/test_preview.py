@@ -151,7 +151,7 @@ def test_bad_frame_is_a_config_error(tmp_path):
     with pytest.raises(ConfigError, match="frame 999 is outside the recording"):
         prev.render(tmp_path / "x.html", frame=999)
     last = len(prev.recording) - 1
-    for frame in (1.5, 2.0, "a", float("nan"), True):  # not cut to 1, nor int()'s error
+    for frame in (1.5, 2.0, "a", float("nan"), True, np.True_):  # not cut to 1, nor int()'s error
         expected = f"frame must be an integer from 0 to {last}, got {frame!r}"
         with pytest.raises(ConfigError, match=re.escape(expected)):
             prev.frame(frame)
@@ -223,6 +223,21 @@ def test_a_failed_render_leaves_no_temporary_page(monkeypatch, tmp_path):
     monkeypatch.setenv("SILI_CHROMIUM", "false")  # an executable that exits at once
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     with pytest.raises(BrowserError):
+        preview("circle-3", interactions=1, out=None, png=tmp_path / "p.png")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_failed_write_leaves_no_temporary_page(monkeypatch, tmp_path):
+    import tempfile
+
+    import sili_robots.preview.api as preview_api
+
+    def full_disk(*_args):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    monkeypatch.setattr(preview_api, "write_html", full_disk)
+    with pytest.raises(OSError, match="No space left"):
         preview("circle-3", interactions=1, out=None, png=tmp_path / "p.png")
     assert list(tmp_path.iterdir()) == []
 

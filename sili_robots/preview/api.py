@@ -122,7 +122,7 @@ class Preview:
             return self.scene.picture_frame(self.recording)
         last = len(self.recording) - 1
         try:  # an int, numpy's too (a 0-d integer array as well), never a bool
-            index = operator.index(frame) if not isinstance(frame, bool) else None
+            index = None if isinstance(frame, (bool, np.bool_)) else operator.index(frame)
         except TypeError:
             index = None
         if index is None:
@@ -379,4 +379,8 @@ def _write(prev: Preview, out: str | Path | None) -> Path:
     import os
 
     os.close(fd)
-    return prev.write_html(tmp)
+    try:
+        return prev.write_html(tmp)
+    except BaseException:  # a full disk: the caller never learns the name, so it goes here
+        Path(tmp).unlink(missing_ok=True)
+        raise
