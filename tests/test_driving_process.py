@@ -43,8 +43,13 @@ def test_second_live_simulation_in_a_process_is_refused_until_close():
         except ConfigError as exc:
             assert isinstance(exc, RuntimeError)
             print("REFUSED:", exc)
+        try:
+            b.step(np.array([0.5], np.float32))
+        except RuntimeError as exc:
+            print("NOT STARTED:", exc)  # the refused reset began nothing
         a.step(np.array([0.5], np.float32))  # the first simulation is untouched
         a.close()
+        print("FIRST:", b.reset()[1]["interaction"])  # no interaction was played before
         b.reset(seed=0)  # the slot is free again
         b.step(np.array([0.5], np.float32))
         del b
@@ -63,6 +68,8 @@ def test_second_live_simulation_in_a_process_is_refused_until_close():
     assert "REFUSED: libsumo runs one SUMO simulation per process" in out.stdout
     assert "call close() on that environment first" in out.stdout
     assert "CLOSED: this Driving environment was closed" in out.stdout
+    assert "NOT STARTED: call reset() before step()" in out.stdout
+    assert "FIRST: 0" in out.stdout
     assert out.stdout.strip().endswith("OK")
 
 

@@ -184,6 +184,53 @@ def test_a_refused_first_reset_leaves_the_task_to_play(make):
         assert env.step(np.zeros(2))[1] == pytest.approx(-1.0)
 
 
+def test_a_reset_that_fails_midway_leaves_the_game_as_it_was(monkeypatch):
+    """A task whose interaction cannot begin (Driving's SUMO refused a start) raises from
+    ``reset`` after the game had moved on: the next reset must play the interaction it would
+    have played, and ``step`` must not act on a half-begun one."""
+    env = make_task("circle-3")
+    task = env.unwrapped
+    env.reset(seed=0)
+    env.step(np.ones(2))
+    twin = make_task("circle-3")  # the same game, never refused
+    twin.reset(seed=0)
+    twin.step(np.ones(2))
+
+    def where():
+        rng = task.np_random.bit_generator.state
+        return task.location, task.t, task.interaction, task._trajectory, rng, task._started
+
+    before = where()
+    begin = task._begin_interaction
+
+    def fails() -> None:
+        raise RuntimeError("the simulator did not start")
+
+    monkeypatch.setattr(task, "_begin_interaction", fails)
+    for seed, options in ((None, None), (7, None), (None, {"strategy": 1})):
+        with pytest.raises(RuntimeError, match="did not start"):
+            env.reset(seed=seed, options=options)
+        assert where() == before
+    monkeypatch.setattr(task, "_begin_interaction", begin)
+    for _ in range(3):  # it goes on as the game refused nothing goes on
+        (obs, info), (twin_obs, twin_info) = env.reset(), twin.reset()
+        np.testing.assert_array_equal(obs, twin_obs)
+        assert info["interaction"] == twin_info["interaction"]
+        assert info["strategy_id"] == twin_info["strategy_id"]
+        env.step(np.zeros(2))  # inside the circle: the opponent moves on
+        twin.step(np.zeros(2))
+    fresh = CircleEnv("3")
+    monkeypatch.setattr(fresh, "_begin_interaction", fails)
+    with pytest.raises(RuntimeError, match="did not start"):
+        fresh.reset(seed=0)
+    with pytest.raises(RuntimeError, match=r"call reset\(\) before step\(\)"):
+        fresh.step(np.zeros(2))
+    monkeypatch.setattr(
+        fresh, "_begin_interaction", functools.partial(CircleEnv._begin_interaction, fresh)
+    )
+    assert fresh.reset()[1]["interaction"] == 0
+
+
 def test_bad_reset_options_are_named_and_change_nothing():
     env = make_task("circle-3")
     env.reset(seed=0)

@@ -192,6 +192,45 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
             from sili_robots.tasks.registry import check_identity
 
             check_identity(self.spec.id, self.spec.kwargs)  # gym.make(id, variant=another)
+        before = self._game_before_reset()
+        try:
+            return self._reset(seed, options, start)
+        except BaseException:  # e.g. a simulator that would not start: the game is as it was
+            self._roll_back(before)
+            raise
+
+    #: what ``reset`` changes besides the task's ``game_state_fields`` and the generator's state
+    RESET_CHANGES = (
+        "interaction",
+        "t",
+        "_trajectory",
+        "_started",
+        "_last_strategy_id",
+        "_changed_since_last_step",
+        "_boundary_state",
+        "_np_random",
+        "_np_random_seed",
+    )
+
+    def _game_before_reset(self) -> tuple[dict[str, Any], Any]:
+        names = (*self.RESET_CHANGES, *self.game_state_fields)
+        kept = {k: _copy(getattr(self, k)) for k in names if hasattr(self, k)}
+        rng = kept.get("_np_random")
+        return kept, None if rng is None else rng.bit_generator.state
+
+    def _roll_back(self, before: tuple[dict[str, Any], Any]) -> None:
+        kept, rng_state = before
+        for name in (*self.RESET_CHANGES, *self.game_state_fields):
+            if name in kept:
+                setattr(self, name, kept[name])
+            elif hasattr(self, name):
+                delattr(self, name)
+        if rng_state is not None:  # its draws moved the same generator on
+            self._np_random.bit_generator.state = rng_state
+
+    def _reset(
+        self, seed: int | None, options: dict[str, Any], start: StrategyId | None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         if options.get("restore") is not None:
             return self.restore_game_state(options["restore"])
