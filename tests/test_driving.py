@@ -239,8 +239,9 @@ def test_check_env_passes(make_env, wrap):
 
 
 def test_bad_arguments_are_named(env):
-    with pytest.raises(ConfigError, match=r"horizon must be an integer from 1 to 30.*got 31"):
-        DrivingEnv(horizon=31)
+    for horizon in (31, 0, 2.5, True):  # one range named, not every task's [1, 10000]
+        with pytest.raises(ConfigError, match=rf"integer from 1 to 30.*got {horizon!r}$"):
+            DrivingEnv(horizon=horizon)
     with pytest.raises(ConfigError, match=r"unknown SUMO backend 'sumo'; allowed: libsumo, traci"):
         DrivingEnv(backend="sumo")
     env.reset(seed=0)

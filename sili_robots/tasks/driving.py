@@ -19,7 +19,8 @@ following never brakes for anyone). One decision step is 1 s (10 SUMO steps of 0
 The opponent (strategy z = the lane it intends to merge into, right or left) drives straight
 until the ego's front is within 8 m of its own front, then cuts into lane z at 3 m/s. That is
 0.3 s before the cars overlap lengthwise: too late for the ego to react, so it has to commit
-to a side before it sees anything; an ego still in the centre lane or in lane z is hit.
+to a side before it sees anything; an ego in lane z, or in the centre lane less than 1 m off its
+middle away from lane z, is hit (leaning 1 m away gets by it, not yet by the hazard).
 Strategy dynamics (the paper's): if the ego's centre is in the left lane when its front crosses
 the red line (40 m past its start, 2 decision steps in: early enough for the opponent to take
 note) the opponent merges right in the next interaction ("faster vehicles pass on the left").
@@ -46,7 +47,7 @@ from typing import Any, ClassVar
 import numpy as np
 from gymnasium import spaces
 
-from sili_robots.errors import ConfigError, check_choice
+from sili_robots.errors import ConfigError, check_choice, check_count
 from sili_robots.tasks import sumo_scenario as sc
 from sili_robots.tasks.base import RepeatedInteractionEnv
 from sili_robots.tasks.sumo_session import BACKENDS, SumoSession
@@ -85,12 +86,13 @@ class DrivingEnv(RepeatedInteractionEnv):
         horizon: int = 10,
         backend: str = "libsumo",
     ) -> None:
-        integer = isinstance(horizon, (int, np.integer)) and not isinstance(horizon, bool)
-        if integer and horizon > MAX_HORIZON:
+        try:  # the base class checks against every task's longest, not this road's
+            check_count("horizon", horizon, 1, MAX_HORIZON)
+        except ConfigError:
             raise ConfigError(
                 f"horizon must be an integer from 1 to {MAX_HORIZON} for Driving (the road "
                 f"ends), got {horizon!r}"
-            )
+            ) from None
         self.target_lane = LEFT
         self.ego_x = self.ego_y = self.opp_x = self.opp_y = 0.0  # metres, see _read_positions
         self._reset_interaction_flags()
