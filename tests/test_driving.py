@@ -238,6 +238,29 @@ def test_check_env_passes(make_env, wrap):
     check_env(wrap(make_env()), skip_render_check=True)
 
 
+def test_a_failed_start_keeps_what_the_next_strategy_is_drawn_from(env, monkeypatch):
+    """SUMO refusing to start an interaction must not wipe the finished one's flags, which
+    T^z reads at the next reset: in the left lane before the red line, the opponent goes right."""
+    from sili_robots.tasks.sumo_session import SumoError
+
+    env.reset(seed=0, options={"strategy": LEFT})
+    for t in range(env.horizon):
+        env.step(np.array([to_lane(LEFT)(env, t)], np.float32))
+    assert env.left_before_red_line
+    api = env.session.api
+
+    def refused(_path: str) -> None:
+        raise api.TraCIException("state file unreadable")
+
+    monkeypatch.setattr(api.simulation, "loadState", refused)
+    with pytest.raises(SumoError, match="state file unreadable"):
+        env.reset()
+    monkeypatch.undo()
+    assert env.left_before_red_line and (env.interaction, env.t) == (0, env.horizon)
+    _, info = env.reset()
+    assert (info["interaction"], info["strategy_id"]) == (1, RIGHT)
+
+
 def test_bad_arguments_are_named(env):
     for horizon in (31, 0, 2.5, True):  # one range named, not every task's [1, 10000]
         with pytest.raises(ConfigError, match=rf"integer from 1 to 30.*got {horizon!r}$"):

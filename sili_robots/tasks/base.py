@@ -200,7 +200,8 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
             raise
 
     #: what ``reset`` changes besides the task's ``game_state_fields`` and the generator's state
-    RESET_CHANGES = (
+    #: (a task adds what its ``_begin_interaction`` clears that the next T^z reads)
+    RESET_CHANGES: ClassVar[tuple[str, ...]] = (
         "interaction",
         "t",
         "_trajectory",

@@ -79,6 +79,19 @@ class DrivingEnv(RepeatedInteractionEnv):
     strategy_dim: ClassVar[int] = 2  # one-hot of the opponent's intended lane (right, left)
     #: all the game carries between interactions (SUMO restarts from the same saved state)
     game_state_fields: ClassVar[tuple[str, ...]] = ("target_lane",)
+    #: the flags ``_reset_interaction_flags`` clears before SUMO is asked to start the next
+    #: interaction: T^z reads the finished one's, so a failed start must give them back
+    RESET_CHANGES: ClassVar[tuple[str, ...]] = (
+        *RepeatedInteractionEnv.RESET_CHANGES,
+        "left_before_red_line",
+        "red_line_crossed",
+        "passed",
+        "passing_offset",
+        "opponent_reacted",
+        "collided",
+        "collision_partners",
+        "substeps",
+    )
     same_dynamics_arguments: ClassVar[frozenset[str]] = frozenset({"backend"})  # one SUMO
 
     def __init__(
