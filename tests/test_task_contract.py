@@ -260,6 +260,17 @@ def test_bad_reset_options_are_named_and_change_nothing():
                 env.reset(seed=seed, options=options)
             assert where() == before, options
     env.reset(options={"restart": None})  # as not given
+    saved = task.game_state()
+    for seed, options, said in (
+        (123, {}, "not with seed=123"),
+        (None, {"strategy": 1}, "not with strategy"),
+        (0, {"strategy": 1, "restart": True}, "not with seed=0 and strategy and restart=True"),
+    ):
+        before = where()
+        with pytest.raises(ConfigError, match=f"restore continues the saved game .*{said}$"):
+            env.reset(seed=seed, options={"restore": saved, **options})
+        assert where() == before
+    assert env.reset(options={"restore": saved, "restart": False})[1]["interaction"] == 1
 
 
 def test_a_users_gymnasium_id_of_a_task_is_answered_with_its_class():

@@ -188,6 +188,14 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
             check_flag("reset option restart", options["restart"])
         if options.get("restore") is not None:
             self._check_game_state(options["restore"])
+            ignored = [f"seed={seed}"] if seed is not None else []
+            ignored += ["strategy"] if "strategy" in options else []
+            ignored += ["restart=True"] if options.get("restart") else []
+            if ignored:  # each would start another game than the saved one
+                raise ConfigError(
+                    f"reset option restore continues the saved game as it was: give it alone, "
+                    f"not with {' and '.join(ignored)}"
+                )
         if not self._started and self.spec is not None and self.spec.id.startswith("sili/"):
             from sili_robots.tasks.registry import check_identity
 
