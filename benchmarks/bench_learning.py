@@ -35,6 +35,7 @@ import pandas as pd
 
 from sili_robots.agent.matmul import machine_key
 from sili_robots.agent.methods import LATENT_METHODS
+from sili_robots.atomic import nearest_existing
 from sili_robots.build import make_run_config
 from sili_robots.commands.common import parse_settings, positive_int, task_name
 from sili_robots.diagnostics import latent_diagnostics
@@ -223,9 +224,7 @@ def main() -> None:
             )
     else:
         jobs = [(args.task, m, s) for m, s in itertools.product(*checked_jobs(p, args))]
-        folder = Path(args.out)
-        while not folder.exists() and folder != folder.parent:  # the part that exists
-            folder = folder.parent
+        folder = nearest_existing(Path(args.out))
         if not folder.is_dir():
             p.error(f"--out {args.out}: {folder} is not a folder (the runs go in folders inside)")
         for task, method, seed in jobs:  # before any run starts: a run is never shortened

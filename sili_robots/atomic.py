@@ -59,3 +59,12 @@ def write_bytes(path: Path, data: bytes, shared: bool = False) -> None:
     """``path`` replaced whole by ``data`` (``replacing``)."""
     with replacing(path, shared) as tmp:
         tmp.write_bytes(data)
+
+
+def nearest_existing(path: Path) -> Path:
+    """``path`` or its nearest ancestor that exists: where a write would create folders from,
+    so a file there (not a folder) refuses the write before any work is done for it."""
+    base = Path(path)
+    while not base.exists() and base != base.parent:
+        base = base.parent
+    return base

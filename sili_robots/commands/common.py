@@ -13,6 +13,7 @@ from typing import Any
 
 from sili_robots.agent.config import LARGEST_INT
 from sili_robots.agent.schedule import Schedule
+from sili_robots.atomic import nearest_existing
 from sili_robots.build import canonical_task, is_class_path
 from sili_robots.errors import MAX_SEED, ConfigError, check_seed
 from sili_robots.migrations import setting_path
@@ -64,9 +65,7 @@ def _check_can_create(path: Path, option: str, given: Path, what: str) -> None:
     """ConfigError naming ``given`` unless ``path`` (a directory) exists or can be created:
     the nearest existing ancestor must be a directory a file can be written in. Nothing is
     created, so input found bad later leaves no trace."""
-    base = path
-    while not base.exists() and base != base.parent:
-        base = base.parent
+    base = nearest_existing(path)
     try:
         if not base.is_dir():
             raise NotADirectoryError(0, f"{base} is a file")

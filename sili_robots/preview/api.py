@@ -22,7 +22,7 @@ import gymnasium as gym
 import meshcat
 import numpy as np
 
-from sili_robots.atomic import write_bytes
+from sili_robots.atomic import nearest_existing, write_bytes
 from sili_robots.errors import (
     ConfigError,
     check_choice,
@@ -355,9 +355,7 @@ def check_output(path: str | Path, option: str) -> None:
         )
     if path.is_dir():
         raise ConfigError(f"{option} {path} is a folder; give a file name in it")
-    folder = path.parent
-    while not folder.exists() and folder != folder.parent:
-        folder = folder.parent
+    folder = nearest_existing(path.parent)
     if not folder.is_dir():  # checked before the rollout, not at the write after it
         raise ConfigError(f"{option} {path}: {folder} is a file, so no folder can be made there")
 
