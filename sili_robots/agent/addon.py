@@ -31,7 +31,7 @@ stored interactions); a wrong one is refused with the add-on's name and what the
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
@@ -162,6 +162,32 @@ def redrawn(addons: list[AgentAddon], hook: str, j: np.ndarray, low: int, high: 
             raise refused(addon, hook, given, wanted)
         j = checked
     return j
+
+
+def stored_values(addon: AgentAddon, given: object) -> Mapping[str, float]:
+    """An ``interaction_stored`` return checked: a mapping of metric values."""
+    if not isinstance(given, Mapping):
+        raise refused(addon, "interaction_stored", given, "a dict of its metric_columns' values")
+    return given
+
+
+def acting_latent(addon: AgentAddon, given: object, zdim: int) -> np.ndarray:
+    """An ``acting_latent`` return (not None) checked: shape (zdim,), as float32 (the policy's
+    dtype; float64 failed in torch)."""
+    if shape_of(given) != (zdim,):
+        raise refused(addon, "acting_latent", given, f"None or an array of shape ({zdim},)")
+    return np.asarray(given, np.float32)
+
+
+def latent_pair(addon: AgentAddon, given: object, shape: tuple[int, ...]) -> tuple[Any, Any]:
+    """A ``batch_latents`` return (not None) checked: a pair of arrays of ``shape``."""
+    if not (
+        isinstance(given, (tuple, list))
+        and len(given) == 2
+        and all(shape_of(z) == shape for z in given)
+    ):
+        raise refused(addon, "batch_latents", given, f"None or two arrays of shape {shape}")
+    return given[0], given[1]
 
 
 def shape_of(value: object) -> tuple[int, ...] | None:

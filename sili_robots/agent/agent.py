@@ -16,15 +16,15 @@ Every method of the paper is a configuration (``methods.py``). Research variants
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import torch
 
+from sili_robots.agent import addon as addon_checks
 from sili_robots.agent import stability
-from sili_robots.agent.addon import HOOKS, AgentAddon, overriding, redrawn, refused, shape_of
+from sili_robots.agent.addon import HOOKS, AgentAddon, overriding
 from sili_robots.agent.buffer import InteractionBuffer
 from sili_robots.agent.config import AgentConfig
 from sili_robots.agent.latent import LatentModel, transitions
@@ -182,10 +182,7 @@ class SILIAgent:
                 for addon in self.hooks["acting_latent"]:
                     acted = addon.acting_latent()
                     if acted is not None:
-                        if shape_of(acted) != (self.zdim,):
-                            wanted = f"None or an array of shape ({self.zdim},)"
-                            raise refused(addon, "acting_latent", acted, wanted)
-                        z = np.asarray(acted, np.float32)  # the policy's dtype (float64 failed)
+                        z = addon_checks.acting_latent(addon, acted, self.zdim)
             parts.append(z)
         if self.n_latents == 2:
             earlier = j > self.game_start  # z^{j-1} of this game
@@ -251,11 +248,7 @@ class SILIAgent:
         self.latents.append(z_next)
         extra: dict[str, float] = {}
         for addon in self.hooks["interaction_stored"]:
-            values = addon.interaction_stored(j)
-            if not isinstance(values, Mapping):
-                wanted = "a dict of its metric_columns' values"
-                raise refused(addon, "interaction_stored", values, wanted)
-            extra.update(values)
+            extra.update(addon_checks.stored_values(addon, addon.interaction_stored(j)))
         if refresh and self.model is not None and (j + 1) % self.cfg.model.refresh_every == 0:
             self.refresh_latents()
         self.begin_interaction()
@@ -334,7 +327,7 @@ class SILIAgent:
         for _ in range(steps):
             j = self.rng.integers(1, b.n, self.cfg.model.batch)
             if self.hooks["latent_pairs"]:
-                j = redrawn(self.hooks["latent_pairs"], "latent_pairs", j, 1, b.n)
+                j = addon_checks.redrawn(self.hooks["latent_pairs"], "latent_pairs", j, 1, b.n)
             prev = transitions(
                 torch.from_numpy(b.obs[j - 1]),
                 torch.from_numpy(b.act[j - 1]),
@@ -357,7 +350,7 @@ class SILIAgent:
         m, k = self.cfg.sac.batch_interactions, self.cfg.sac.batch_steps
         j = self.rng.integers(0, b.n, (n_updates, m))  # [U, M]
         if self.hooks["rl_interactions"]:
-            j = redrawn(self.hooks["rl_interactions"], "rl_interactions", j, 0, b.n)
+            j = addon_checks.redrawn(self.hooks["rl_interactions"], "rl_interactions", j, 0, b.n)
         t = self.rng.integers(0, h, (n_updates, m, k))  # [U, M, K]
         j = np.broadcast_to(j[..., None], t.shape)
         last = t == h - 1
@@ -374,14 +367,7 @@ class SILIAgent:
             for addon in self.hooks["batch_latents"]:
                 given = addon.batch_latents(j, t, z_cur)
                 if given is not None:
-                    if not (
-                        isinstance(given, (tuple, list))
-                        and len(given) == 2
-                        and all(shape_of(z) == z_cur.shape for z in given)
-                    ):
-                        wanted = f"None or two arrays of shape {z_cur.shape}"
-                        raise refused(addon, "batch_latents", given, wanted)
-                    z_acted, z2_acted = given
+                    z_acted, z2_acted = addon_checks.latent_pair(addon, given, z_cur.shape)
             lz = last[..., None]
             pair = self.n_latents == 2
             x = np.concatenate([s, z_acted] + ([z_prev] if pair else []), -1)
