@@ -265,7 +265,12 @@ class SILI:
         deterministic = check_flag("deterministic", deterministic)
         if isinstance(obs, tuple) and len(obs) == 2 and isinstance(obs[1], dict):
             raise ConfigError("obs is reset()'s (obs, info) pair; give its obs alone")
-        obs = np.asarray(obs, np.float32)
+        try:
+            obs = np.asarray(obs, np.float32)
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(
+                f"obs {obs!r} is not an array of numbers ({exc}); give one observation of model.env"
+            ) from None
         expected = self.env.observation_space.shape
         if not np.isfinite(obs).all():
             raise ConfigError(f"obs {obs} is not finite; the agent acts on finite observations")

@@ -518,6 +518,9 @@ def test_predict_env_and_learn_as_a_user_of_numpy_and_torch_expects(tmp_path):
     assert info["interaction"] == 3
     with pytest.raises(ConfigError, match="obs is a batch of 4; predict takes one observation"):
         model.predict(np.stack([obs] * 4))
+    for bad in ("abc", [obs[0], "x"], {"obs": obs}):
+        with pytest.raises(ConfigError, match=r"obs .* is not an array of numbers"):
+            model.predict(bad)
     for first in ({"restart": False}, None):  # asks for no other game: the trained one goes on
         model = SILI.load(run)
         with pytest.raises(ConfigError, match="unknown strategy 99"):
