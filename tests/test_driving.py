@@ -305,6 +305,8 @@ def test_game_state_resumes_in_a_fresh_environment(make_env):
     saved = env.game_state()
     expected = tail(env)
     fresh = make_env()  # closes `env`: one libsumo simulation at a time
+    with pytest.raises(ConfigError, match=r"give strategy 5; DrivingEnv's strategies are"):
+        fresh.restore_game_state({**saved, "fields": {"target_lane": 5}})
     fresh.restore_game_state(saved)
     got = tail(fresh)
     for (oa, ra), (ob, rb) in zip(expected, got, strict=True):

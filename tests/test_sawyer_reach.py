@@ -184,6 +184,8 @@ def test_game_state_resumes_the_repeated_game(below_plane_qpos):
 
     a = tail(env)
     fresh = make_task("sawyer-reach").unwrapped
+    with pytest.raises(ConfigError, match=r"give strategy 7; SawyerReachEnv's strategies are 0, 1"):
+        fresh.restore_game_state({**saved, "fields": {"goal": 7}})  # was IndexError, scene moved
     fresh.restore_game_state(saved)
     b = tail(fresh)
     for x, y in zip(a, b, strict=True):

@@ -21,6 +21,7 @@ from __future__ import annotations
 import functools
 import inspect
 import math
+import numbers
 import warnings
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
@@ -242,7 +243,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         if options.get("restore") is not None:
-            return self.restore_game_state(options["restore"])
+            return self._restore_game_state(options["restore"])
         restart = (
             seed is not None
             or bool(options.get("restart", False))
@@ -316,13 +317,23 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         return dict(self._boundary_state)
 
     def restore_game_state(self, state: dict[str, Any]) -> tuple[np.ndarray, dict[str, Any]]:
-        """Continue a saved game: start its current interaction again; returns reset's output."""
-        self._check_game_state(state)
+        """Continue a saved game: start its current interaction again; returns reset's output
+        (it is ``reset(options={"restore": state})``: a refused game leaves this one as it was)."""
+        return self.reset(options={"restore": state})
+
+    def _restore_game_state(self, state: dict[str, Any]) -> tuple[np.ndarray, dict[str, Any]]:
         if not self._started:
             self.reset(seed=0)
         self.np_random.bit_generator.state = state["rng"]
         for k, v in state["fields"].items():
             setattr(self, k, _copy(v))
+        choices = self.strategy_choices()
+        if choices is not None and not any(_same(self.strategy_id(), c) for c in choices):
+            raise ConfigError(  # before the scene is set up for it (an index out of its range)
+                f"a saved game's fields {dict(state['fields'])} give strategy "
+                f"{self.strategy_id()!r}; {type(self).__name__}'s strategies are "
+                f"{', '.join(map(str, choices))}"
+            )
         self.interaction = int(state["interaction"])
         self._trajectory = []
         self.t = 0
@@ -333,8 +344,9 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         if saved is not None and not _same(sid, saved):
             raise ConfigError(
                 f"{type(self).__name__} did not restore its saved game: strategy {saved} came "
-                f"back as {sid}; game_state_fields {self.game_state_fields} must name every "
-                "attribute that holds the opponent's strategy between interactions"
+                f"back as {sid}; the saved game's fields disagree with its strategy_id (an edited "
+                f"save), or game_state_fields {self.game_state_fields} miss an attribute that "
+                "holds the opponent's strategy between interactions"
             )
         self._boundary_state["strategy_id"] = sid
         prev = state["last_strategy_id"]
@@ -353,6 +365,13 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
                 f"{type(state).__name__}"
                 + (f" with keys {', '.join(map(str, state))}" if isinstance(state, Mapping) else "")
             )
+        for name, saved in fields.items():
+            required = _unfit(getattr(self, name, None), saved)
+            if required is not None:
+                raise ConfigError(
+                    f"a saved game's field {name} must be {required}, as {type(self).__name__}'s "
+                    f"is, got {saved!r}"
+                )
         interaction = state["interaction"]
         if not (is_number(interaction) and math.isfinite(interaction)) or (
             int(interaction) != interaction or interaction < 0
@@ -457,6 +476,18 @@ def _checked_action_space(space: Any) -> spaces.Box:
             f"{space.shape}, np.float32) and scale the action to your units in _apply_action"
         )
     return space
+
+
+def _unfit(current: Any, saved: Any) -> str | None:
+    """What a saved game's field must be to stand for the task's ``current`` value, when
+    ``saved`` is not (None: it fits; a field of another type is the task's to read)."""
+    if isinstance(current, (bool, np.bool_)):
+        return None if isinstance(saved, (bool, np.bool_)) else "a bool"
+    if isinstance(current, numbers.Integral):
+        return None if isinstance(saved, numbers.Integral) and is_number(saved) else "an integer"
+    if is_number(current):
+        return None if is_number(saved) and math.isfinite(saved) else "a finite number"
+    return None
 
 
 def _copy(value: Any) -> Any:
