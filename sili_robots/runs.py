@@ -11,6 +11,8 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import math
+import numbers
 import pickle
 import re
 import shutil
@@ -26,7 +28,7 @@ from sili_robots.addons.config import AddonsConfig
 from sili_robots.agent.config import LARGEST_INT, AgentConfig, set_path
 from sili_robots.agent.config import check as check_ranges
 from sili_robots.atomic import write_bytes, write_text
-from sili_robots.errors import ConfigError, check_count, check_seed, first_line
+from sili_robots.errors import ConfigError, check_count, check_seed, first_line, is_number
 from sili_robots.metrics import COMPRESSED_METRICS, METRIC_COLUMNS, METRICS
 from sili_robots.migrations import migrate_agent_state, migrate_run, setting_path
 from sili_robots.provenance import REVISION, versions
@@ -453,13 +455,26 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
             f"{path} is damaged ({first_line(err)}); the run can be neither resumed nor "
             "played from it: train it again (sili train ... --overwrite)"
         ) from None
-    task = state.get("task")  # recorded since checkpoints name their task
-    if task is not None and ":" not in task:  # a registered task (a user's class may be renamed)
-        cfg = read_config(run_dir)
-        if task != (cfg.task_id or cfg.task):
-            raise ConfigError(
-                f"{path} is a checkpoint of {task}, not of {cfg.task_id or cfg.task}, which the "
-                f"run in {run_dir} trains: was it copied from another run? Train this run again "
-                "(sili train ... --overwrite)"
-            )
+    cfg = read_config(run_dir)
+    done, wall = state.get("interaction"), state.get("wall_time")
+    if not (
+        isinstance(done, numbers.Integral) and is_number(done) and 0 <= done <= cfg.interactions
+    ):
+        raise ConfigError(  # e.g. -5: a resume went on from there and wrote over the run's rows
+            f"{path} is damaged (its interaction is {done!r}, not a count within the run's "
+            f"{cfg.interactions}); the run can be neither resumed nor played from it: train it "
+            "again (sili train ... --overwrite)"
+        )
+    if not (is_number(wall) and math.isfinite(wall) and wall >= 0):
+        raise ConfigError(
+            f"{path} is damaged (its wall_time is {wall!r}, not a duration in seconds); the run "
+            "can be neither resumed nor played from it: train it again (sili train ... --overwrite)"
+        )
+    task = state.get("task")  # recorded since checkpoints name their task; a registered one
+    if task is not None and ":" not in task and task != (cfg.task_id or cfg.task):  # (a class
+        raise ConfigError(  # of the user's may be renamed)
+            f"{path} is a checkpoint of {task}, not of {cfg.task_id or cfg.task}, which the "
+            f"run in {run_dir} trains: was it copied from another run? Train this run again "
+            "(sili train ... --overwrite)"
+        )
     return state

@@ -305,6 +305,10 @@ def test_every_latent_kind_trains(tmp_path, latent):
         (["--task", "circle-3", "--interactions", "0"], "need an integer >= 1"),
         (["--task", "circle-3", "--set", "gamma=2"], "sac.gamma must be in [1e-09, 1], got 2"),
         (["--task", "circle-3", "--set", "sac.updates_per_step=Infinity"], "must be a finite"),
+        (
+            ["--task", "circle-3", "--set", "sac.updates_per_step=1e17"],
+            "updates_per_step must be in [0, 10000], got 1e+17",
+        ),
         (["--task", "circle-3", "--set", "sac.target_entropy=-Infinity"], "must be a finite"),
         (["--task", "circle-3", "--set", "hidden=1e300"], "hidden must be at most 2147483647"),
         (
@@ -325,6 +329,11 @@ def test_every_latent_kind_trains(tmp_path, latent):
             ["--task", "circle-3", "--set", 'sac.lr={"points": [[2.7, 1e-3]]}'],
             "whole numbers, got 2.7",
         ),
+        (
+            ["--task", "circle-3", "--set", 'sac.lr={"points": [[Infinity, 1e-3]]}'],
+            "sac.lr: a schedule's interactions are whole numbers, got inf",  # not OverflowError
+        ),
+        (["--task", "circle-3", "--set", 'tau={"start": 0, "end": 1, "length": NaN}'], "got nan"),
         (["--task", "circle-3", "--method", "lili", "--beta", "0.3"], "does not apply to method"),
         (["--task", "circle-3", "--beta-anneal", "2", "0", "10"], "outside the allowed range"),
         (["--task", "circle-3", "--beta-anneal", "0", "0.5"], "START END LENGTH [DELAY]"),
@@ -488,6 +497,32 @@ def test_a_checkpoint_of_another_run_exits_2_and_leaves_the_run_as_it_was(tmp_pa
     assert said in capsys.readouterr().err
     assert json.loads((run / "config.json").read_text())["run"]["interactions"] == 2
     assert run_state(run) == "done"
+
+
+def test_a_checkpoint_with_a_bad_count_is_refused_before_the_run_changes(tmp_path, capsys):
+    """An interaction of -5 was resumed from, writing over the run's rows; "abc" was a
+    traceback; 169 in a run of 2 was evaluated without a word."""
+    run = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--interactions", "2", *FAST, "--out", str(run)]
+    assert main(args) == 0
+    rows = (run / "metrics.csv").read_text()
+    good = torch.load(run / "checkpoint.pt", weights_only=False)
+    for key, bad in [
+        ("interaction", -5),
+        ("interaction", "abc"),
+        ("interaction", 169),
+        ("interaction", True),
+        ("wall_time", "abc"),
+        ("wall_time", float("nan")),
+    ]:
+        torch.save({**good, key: bad}, run / "checkpoint.pt")
+        for command in (["eval", str(run)], ["train", "--resume", str(run), "--interactions", "5"]):
+            assert main([*command, "--no-progress"] if command[0] == "train" else command) == 2
+            assert (
+                f"checkpoint.pt is damaged (its {key} is {bad!r}, not a" in capsys.readouterr().err
+            )
+        assert (run / "metrics.csv").read_text() == rows
+        assert json.loads((run / "config.json").read_text())["run"]["interactions"] == 2
 
 
 def test_training_that_diverges_exits_2_naming_the_losses(tmp_path, capsys, monkeypatch):
@@ -906,7 +941,7 @@ def test_a_checkpoint_write_cut_short_leaves_the_previous_one_and_names_the_file
         save_checkpoint(tmp_path, bigger)
     assert refused.value.filename == str(tmp_path / "checkpoint.pt")
     assert refused.value.strerror == "File too large"
-    assert load_checkpoint(tmp_path)["interaction"] == 5
+    assert torch.load(tmp_path / "checkpoint.pt", weights_only=False)["interaction"] == 5
     assert sorted(p.name for p in tmp_path.iterdir()) == ["checkpoint.pt"]
 
 

@@ -53,7 +53,9 @@ class SACConfig:
     target_entropy: Scheduled | None = None
     batch_interactions: int = setting(16, 1)  # an RL batch = this many interactions ...
     batch_steps: int = setting(16, 1)  # ... times this many timesteps from each
-    updates_per_step: Scheduled = setting(1.0, 0.0)
+    #: at most 10,000 (half a million updates per 50-step interaction: hours each, and numpy
+    #: refuses the index arrays of far more with an error that names no setting)
+    updates_per_step: Scheduled = setting(1.0, 0.0, 1e4)
     random_interactions: int = setting(20, 0)  # interactions of uniform random actions first
     #: ``bfloat16``: forward passes under CPU autocast (weights, gradients stay float32); by
     #: default chosen per machine by a timing (agent/matmul.py), recorded with each run

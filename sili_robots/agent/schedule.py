@@ -24,6 +24,9 @@ class Schedule:
     points: tuple[tuple[int, float], ...]
 
     def __post_init__(self) -> None:
+        infinite = [i for i, _ in self.points if isinstance(i, float) and not math.isfinite(i)]
+        if infinite:  # int() would raise OverflowError (inf) or ValueError (nan) unnamed
+            raise ConfigError(f"a schedule's interactions are whole numbers, got {infinite[0]}")
         points = tuple((int(i), float(v)) for i, v in self.points)
         fractional = [i for (i, _), (n, _) in zip(self.points, points, strict=True) if i != n]
         if fractional:
