@@ -152,7 +152,7 @@ class SILI:
         if self._task_env is not None:
             base = observed_as(self._task_env, self.cfg)
         else:
-            base = make_run_env(self.cfg)
+            base = make_run_env(self.cfg, None if state is None else self.run_dir)
         self.agent: SILIAgent = build_agent(self.cfg, base)
         game = None
         if state is not None:

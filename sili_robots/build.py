@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import inspect
 import json
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -21,7 +22,7 @@ from sili_robots.agent import SILIAgent, method_config
 from sili_robots.agent.config import AgentConfig, UnknownSetting, paths
 from sili_robots.errors import ConfigError
 from sili_robots.migrations import LEGACY_SETTINGS, setting_path
-from sili_robots.runs import RunConfig
+from sili_robots.runs import CONFIG, RunConfig
 from sili_robots.tasks import make_task, task_spec
 from sili_robots.tasks.registry import (
     check_argument_names,
@@ -226,12 +227,22 @@ def observed_as(env: gym.Env, cfg: RunConfig) -> gym.Env:
     return env
 
 
-def make_run_env(cfg: RunConfig) -> gym.Env:
+def make_run_env(cfg: RunConfig, recorded_in: Path | None = None) -> gym.Env:
     """The run's task version (``task_id``, else its name) as its method observes it; recorded
-    arguments the task does not take (a damaged record, a class changed since) are named."""
+    arguments the task does not take (a damaged record, a class changed since) are named.
+    ``recorded_in``: the run's folder, when ``cfg`` was read from it: a refusal of the task's
+    arguments then names the file that records them (an edited one, or a class changed since)."""
     task = cfg.task_id or cfg.task
     check_argument_names(task, cfg.env_kwargs, "the run's env_kwargs")
-    return observed_as(make_env(task, **cfg.env_kwargs), cfg)
+    try:
+        return observed_as(make_env(task, **cfg.env_kwargs), cfg)
+    except ConfigError as err:
+        if recorded_in is None or not cfg.env_kwargs:
+            raise
+        raise ConfigError(
+            f"the run in {recorded_in} records task {task} with arguments {cfg.env_kwargs} "
+            f"({Path(recorded_in) / CONFIG}), which does not build here: {err}"
+        ) from None
 
 
 def check_agent_builds(cfg: RunConfig, task: gym.Env) -> None:

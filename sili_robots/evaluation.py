@@ -130,7 +130,7 @@ def load_trained(
     if task_env is not None:
         check_same_task(run_dir, cfg, task_env)
     with fitting(run_dir, cfg, task_env):
-        env = make_run_env(cfg) if task_env is None else observed_as(task_env, cfg)
+        env = make_run_env(cfg, run_dir) if task_env is None else observed_as(task_env, cfg)
         agent = build_agent(cfg, env)
         agent.load_state_dict(state["agent"])
     return cfg, env, agent, state

@@ -321,6 +321,9 @@ def read_config(run_dir: Path) -> RunConfig:
     path = Path(run_dir) / CONFIG
     if not Path(run_dir).exists():
         raise ConfigError(f"{run_dir} does not exist; give a run directory (`sili train --out`)")
+    if Path(run_dir).is_file():
+        folder = f": give {Path(run_dir).parent}" if Path(run_dir).name == CONFIG else ""
+        raise ConfigError(f"{run_dir} is a file, not a run directory{folder}")
     if not path.is_file():
         raise ConfigError(
             f"{run_dir} is not a run directory (no {CONFIG}); "

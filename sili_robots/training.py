@@ -55,7 +55,7 @@ def train(
         check_history(run_dir, int(state["interaction"]), cfg.metric_columns(), cfg.addons.plugins)
     torch.set_num_threads(cfg.threads)
     own_env = env is None
-    env = make_run_env(cfg) if env is None else env
+    env = make_run_env(cfg, run_dir if resume else None) if env is None else env
     try:
         agent, obs, info, start, metrics = _start_or_resume(
             cfg, run_dir, env, state, None if own_env else env

@@ -442,6 +442,10 @@ def test_float32s_largest_number_is_a_setting_and_one_that_rounds_past_it_is_not
 def test_eval_of_a_non_run_exits_2(tmp_path):
     res = _sili("eval", tmp_path)
     assert res.returncode == 2 and "is not a run directory" in res.stderr
+    (tmp_path / "config.json").write_text("{}")  # a run's file, given for its folder
+    res = _sili("eval", tmp_path / "config.json")
+    said = f"{tmp_path / 'config.json'} is a file, not a run directory: give {tmp_path}\n"
+    assert res.returncode == 2 and res.stderr.endswith(said), res.stderr
 
 
 def test_a_damaged_checkpoint_or_config_exits_2_naming_the_file(tmp_path):
@@ -523,6 +527,24 @@ def test_a_checkpoint_with_a_bad_count_is_refused_before_the_run_changes(tmp_pat
             )
         assert (run / "metrics.csv").read_text() == rows
         assert json.loads((run / "config.json").read_text())["run"]["interactions"] == 2
+
+
+def test_a_recorded_task_argument_the_task_refuses_names_the_run_s_config(tmp_path, capsys):
+    run = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--interactions", "2", *FAST, "--out", str(run)]
+    assert main(args) == 0
+    record = json.loads((run / "config.json").read_text())
+    record["run"]["env_kwargs"] = {"horizon": 0}  # edited by hand
+    (run / "config.json").write_text(json.dumps(record))
+    said = (
+        f"the run in {run} records task sili/Circle3-v1 with arguments {{'horizon': 0}} "
+        f"({run / 'config.json'}), which does not build here: horizon must be an integer in"
+    )
+    for command in (["eval", str(run)], ["train", "--resume", str(run), "--no-progress"]):
+        assert main(command) == 2
+        assert said in capsys.readouterr().err
+    with pytest.raises(ConfigError, match=re.escape(said)):
+        SILI.load(run)
 
 
 def test_training_that_diverges_exits_2_naming_the_losses(tmp_path, capsys, monkeypatch):
@@ -1004,8 +1026,8 @@ def test_a_history_the_disk_refuses_still_closes_the_task(tmp_path, monkeypatch)
     closed = []
     built = training.make_run_env
 
-    def tracked(cfg):
-        env = built(cfg)
+    def tracked(cfg, recorded_in=None):
+        env = built(cfg, recorded_in)
         original = env.close
         env.close = lambda: closed.append(1) or original()
         return env
