@@ -786,6 +786,43 @@ def test_progress_display_counts_runs_and_interactions(tmp_path):
     assert "sweep: 2 done (1 of them earlier), 1 failed, 1 not run" in out
 
 
+def test_a_stopped_sweep_calls_resumable_only_the_runs_with_a_checkpoint(tmp_path):
+    """A run stopped while its worker started has no checkpoint: a resume trains it again."""
+    import io
+
+    from rich.console import Console
+
+    from sili_robots.sweep.progress import SweepProgress
+    from sili_robots.sweep.worker import Job
+
+    jobs = [Job(f"r{i}", {}, str(tmp_path / f"r{i}")) for i in range(3)]
+    for job in jobs:
+        (tmp_path / job.name).mkdir()
+    (tmp_path / "r0" / "checkpoint.pt").write_bytes(b"")
+
+    def stopped(running: list[Job]) -> str:
+        buf = io.StringIO()
+        display = SweepProgress(
+            jobs,
+            dict.fromkeys(("r0", "r1", "r2"), 10),
+            already_done=0,
+            console=Console(file=buf, width=200),
+        )
+        with display:
+            for job in running:
+                display.started(job)
+        return buf.getvalue()
+
+    assert "3 not run (1 stopped midway, resumable)" in stopped(jobs[:1])
+    said = (
+        "3 not run (3 stopped midway: 1 resumable, 2 before a first checkpoint, they start again)"
+    )
+    assert said in stopped(jobs)
+    assert "(1 stopped midway: 0 resumable, 1 before a first checkpoint, it starts again)" in (
+        stopped(jobs[1:2])
+    )
+
+
 @pytest.mark.slow
 def test_driving_and_sawyer_runs_sweep_side_by_side(tmp_path):
     """Two Driving runs at once (libsumo: one simulation per process, so one run per worker)

@@ -28,6 +28,7 @@ from rich.text import Text
 
 from sili_robots.metrics import METRICS
 from sili_robots.progress import numbers_column
+from sili_robots.runs import CHECKPOINT
 from sili_robots.sweep.worker import Job, Outcome
 
 
@@ -178,10 +179,26 @@ class SweepProgress:
             self._live.stop()
             if not self.console.is_terminal:  # a log: end the display's last line (as
                 self.console.line()  # rich's Progress.stop does), before the closing one
-        stopped = f" ({len(self.running)} stopped midway, resumable)" if self.running else ""
+        stopped = _stopped_midway([Path(job.run_dir) for job in self.running.values()])
         not_run = self.total_runs - self.done - self.failed
         earlier = f" ({self.already_done} of them earlier)" if self.already_done else ""
         self._log(
             f"sweep: {self.done} done{earlier}, {self.failed} failed, {not_run} not run{stopped}, "
             f"{time.perf_counter() - self._t0:.1f} s"
         )
+
+
+def _stopped_midway(run_dirs: list[Path]) -> str:
+    """The stopped runs, as a resume will find them: one stopped before its first checkpoint
+    (e.g. while its worker was starting) trains again from the start."""
+    if not run_dirs:
+        return ""
+    resumable = sum((run_dir / CHECKPOINT).is_file() for run_dir in run_dirs)
+    if resumable == len(run_dirs):
+        return f" ({resumable} stopped midway, resumable)"
+    again = len(run_dirs) - resumable
+    before = "it starts" if again == 1 else "they start"
+    return (
+        f" ({len(run_dirs)} stopped midway: {resumable} resumable, {again} before a first "
+        f"checkpoint, {before} again)"
+    )
