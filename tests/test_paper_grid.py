@@ -83,6 +83,20 @@ def test_collection_keeps_finished_runs_small_and_identical(sweep_and_collection
     assert gzip.decompress(before).startswith(b"interaction,")
 
 
+def test_collect_reports_each_unfinished_run_once_and_not_one_collected_from_another_source(
+    sweep_and_collection, tmp_path
+):
+    from sili_robots.sweep.collect import collect
+
+    sweep, collection = sweep_and_collection
+    copy = tmp_path / "sweep"
+    shutil.copytree(sweep, copy)
+    (copy / "runs" / "circle-3__sili-bschedule__s0" / "summary.json").unlink()
+    report = collect([copy, collection, copy], tmp_path / "into")
+    assert report.unfinished == ["circle-3__sac__s0"]  # was listed per source, and bschedule too
+    assert sorted(report.added) == ["circle-3__sili-bschedule__s0", "circle-3__sili-paper-b0.5__s0"]
+
+
 def test_collect_refuses_a_different_run_of_the_same_name(sweep_and_collection, tmp_path, capsys):
     sweep, collection = sweep_and_collection
     other = tmp_path / "other"

@@ -68,13 +68,14 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
     collection never mixes two versions of a run."""
     report = CollectReport()
     chosen: dict[str, tuple[Path, dict, int]] = {}  # name -> source run, identity, length
+    unfinished: dict[str, None] = {}  # (in order, once each)
     for source in sources:
         for run_dir in runs_of(source):
             name = run_dir.name
             if names is not None and name not in names:
                 continue
             if not (run_dir / SUMMARY).is_file() or metrics_file(run_dir) is None:
-                report.unfinished.append(name)
+                unfinished[name] = None
                 continue
             length = _length(run_dir)
             _check_sound(run_dir, length)  # a damaged copy never replaces a sound one
@@ -86,6 +87,8 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
                 _check_same_run(name, target, _identity(target), run_dir, ident)
             if name not in chosen or length > chosen[name][2]:
                 chosen[name] = (run_dir, ident, length)
+    # a run unfinished in one source and finished in another is collected, not unfinished
+    report.unfinished = [name for name in unfinished if name not in chosen]
     for name, (run_dir, _, length) in chosen.items():
         target = Path(dest) / RUNS_DIR / name
         finished = (target / SUMMARY).is_file() and metrics_file(target) is not None
