@@ -1,6 +1,7 @@
 """Sweep specs: parsing, expansion into run configs, stable names, what is rejected up front."""
 
 import json
+import re
 
 import pytest
 from agent_helpers import flat_layout
@@ -192,6 +193,20 @@ def test_an_existing_run_with_other_settings_is_refused(tmp_path):
     (path / "config.json").write_text(json.dumps({"run": other}))
     with pytest.raises(ConfigError, match=r"has 99 interactions, more than the 5 asked for now"):
         check_existing(tmp_path, run)
+    with pytest.raises(ConfigError, match=r"ask for 99 \(--interactions 99\)$"):
+        check_existing(tmp_path, run)
+    other["interactions"] = 3  # a shorter run of a sweep: resuming the sweep extends it
+    (path / "config.json").write_text(json.dumps({"run": other}))
+    with pytest.raises(ConfigError, match=r"interactions: 3 on disk, 5 now\): a sweep never"):
+        check_existing(tmp_path, run)  # not a sweep (no sweep.json): no --resume offered
+    (tmp_path / "sweep.json").write_text("{}")
+    said = (
+        f"has 3 interactions, fewer than the 5 asked for now; extend the sweep's runs first "
+        f"(sili sweep --resume {tmp_path} --interactions 5), then run this again"
+    )
+    with pytest.raises(ConfigError, match=re.escape(said)):
+        check_existing(tmp_path, run)
+    other["interactions"] = 99
     other["checkpoint_every"] += 1  # and more: another run
     (path / "config.json").write_text(json.dumps({"run": other}))
     with pytest.raises(ConfigError, match=r"checkpoint_every: .*; interactions: 99 on disk, 5 now"):

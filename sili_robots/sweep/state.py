@@ -269,12 +269,18 @@ def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
     on_disk = recorded_run(path)
     planned_dict = json.loads(json.dumps(planned.config.to_dict()))
     diffs = [f"{k}: {a!r} on disk, {b!r} now" for k, a, b in differences(on_disk, planned_dict)]
-    longer = on_disk.get("interactions")
-    if len(diffs) == 1 and isinstance(longer, int) and longer > planned.config.interactions:
+    held, asked = on_disk.get("interactions"), planned.config.interactions
+    if len(diffs) == 1 and isinstance(held, int) and held > asked:
         raise ConfigError(
-            f"run {planned.name} in {sweep_dir} has {longer} interactions, more than the "
-            f"{planned.config.interactions} asked for now (a run is never shortened); ask for "
-            f"{longer}: sili sweep --resume {shell_path(sweep_dir)} --interactions {longer}"
+            f"run {planned.name} in {sweep_dir} has {held} interactions, more than the "
+            f"{asked} asked for now (a run is never shortened); ask for {held} (--interactions "
+            f"{held})"
+        )
+    if len(diffs) == 1 and isinstance(held, int) and (Path(sweep_dir) / SWEEP_FILE).is_file():
+        raise ConfigError(  # (a run of a collection is extended in a sweep of its own)
+            f"run {planned.name} in {sweep_dir} has {held} interactions, fewer than the {asked} "
+            f"asked for now; extend the sweep's runs first (sili sweep --resume "
+            f"{shell_path(sweep_dir)} --interactions {asked}), then run this again"
         )
     if diffs:
         raise ConfigError(
