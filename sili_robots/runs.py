@@ -32,7 +32,12 @@ from sili_robots.errors import ConfigError, check_count, check_seed, first_line,
 from sili_robots.metrics import COMPRESSED_METRICS, METRIC_COLUMNS, METRICS
 from sili_robots.migrations import migrate_agent_state, migrate_run, setting_path
 from sili_robots.provenance import REVISION, versions
-from sili_robots.tasks.registry import check_argument_names, is_class_path, task_spec
+from sili_robots.tasks.registry import (
+    check_argument_names,
+    is_class_path,
+    task_spec,
+    without_defaults,
+)
 
 CONFIG, CHECKPOINT, SUMMARY = "config.json", "checkpoint.pt", "summary.json"
 #: what to do about a damaged file (``read_json``)
@@ -387,7 +392,22 @@ def with_settings_of(cfg: RunConfig, recorded: dict[str, Any], keys: Collection[
 def same_run(a: RunConfig, b: RunConfig, ignoring: Collection[str]) -> bool:
     """Whether two configs make the same run, whatever each has in the settings ``ignoring``
     (dotted; e.g. those a machine's timing chose)."""
-    return all(key in ignoring for key, _, _ in differences(a.to_dict(), b.to_dict()))
+    return all(key in ignoring for key, _, _ in run_differences(a.to_dict(), b.to_dict()))
+
+
+def run_differences(a: dict[str, Any], b: dict[str, Any]) -> list[tuple[str, Any, Any]]:
+    """``differences`` of two runs' configs (``to_dict``, ``recorded_run``), where a task
+    argument given at the task's default is the same run as one not given (a sweep's
+    ``--controller mink`` on Sawyer-Reach, or none)."""
+    return differences(_as_built(a), _as_built(b))
+
+
+def _as_built(run: dict[str, Any]) -> dict[str, Any]:
+    kwargs, task = run.get("env_kwargs"), run.get("task")
+    if not (isinstance(kwargs, dict) and kwargs and isinstance(task, str)):
+        return run
+    task_id = run.get("task_id") if isinstance(run.get("task_id"), str) else None
+    return {**run, "env_kwargs": without_defaults(task, task_id, kwargs)}
 
 
 def differences(a: Any, b: Any, prefix: str = "") -> list[tuple[str, Any, Any]]:

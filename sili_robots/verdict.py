@@ -12,7 +12,7 @@ from sili_robots.bounds import stored_bounds
 from sili_robots.errors import ConfigError, check_count
 from sili_robots.labels import METHOD_NAMES
 from sili_robots.metrics import HOLDING, METRICS, kept_fraction, run_metrics
-from sili_robots.runs import MACHINE_SETTINGS, RunConfig, differences, read_config
+from sili_robots.runs import MACHINE_SETTINGS, RunConfig, read_config, run_differences
 from sili_robots.tasks.registry import other_task_arguments
 
 
@@ -171,7 +171,7 @@ def _settings_that_differ(a: RunConfig, b: RunConfig) -> list[tuple[str, Any, An
     """(dotted name, value in ``a``, in ``b``) of the settings two runs differ in, other than
     the seed and the per-machine settings; the top-level ones (task, method) first."""
     ignored = {"seed", *MACHINE_SETTINGS}
-    found = [d for d in differences(a.to_dict(), b.to_dict()) if d[0] not in ignored]
+    found = [d for d in run_differences(a.to_dict(), b.to_dict()) if d[0] not in ignored]
     return sorted(found, key=lambda d: d[0].count("."))
 
 

@@ -498,7 +498,9 @@ def test_overwrite_starts_the_sweep_anew_and_keeps_a_users_files(tmp_path, capsy
     (s0 / "plot.png").write_text("mine")
     again = [*base, "--seeds", "0", "--interactions", "3"]
     assert main(again) == 2  # other settings on disk: refused without --overwrite
-    assert "interactions: 2 on disk, 3 now" in capsys.readouterr().err
+    assert "has 2 interactions, fewer than the 3 asked for now; extend the sweep's runs first" in (
+        capsys.readouterr().err
+    )
     assert main([*again, "--overwrite", "--dry-run"]) == 0
     assert capsys.readouterr().out == "circle-3__sac__s0\tnew\ncircle-3__sac__s1\tremoved\n1 runs\n"
     assert len(pd.read_csv(s0 / "metrics.csv")) == 2 and s1.is_dir()  # a dry run changes nothing
@@ -581,6 +583,29 @@ def test_resume_with_interactions_extends_every_run_as_if_started_with_that_budg
     assert json.loads(capsys.readouterr().out)["already_done"] == 2
 
 
+def test_a_run_an_earlier_version_named_after_the_default_controller_is_found(tmp_path, capsys):
+    """Sweeps with --controller mink,osc named the mink runs sawyer-reach-mink__...; the same run
+    is sawyer-reach__... now, with or without --controller, and its folder is taken over."""
+    spec = SweepSpec(
+        tasks=["sawyer-reach"],
+        methods=["sac"],
+        seeds=[0],
+        interactions=2,
+        controllers=["mink", "osc"],
+    )
+    mink = expand(spec)[0]
+    old = tmp_path / "runs" / "sawyer-reach-mink__sac__s0"
+    old.mkdir(parents=True)
+    (old / "config.json").write_text(json.dumps({"run": mink.config.to_dict()}))
+    args = ["sweep", "--tasks", "sawyer-reach", "--methods", "sac", "--interactions", "2"]
+    for controllers in (["--controller", "mink,osc"], []):
+        assert main([*args, *controllers, "--out", str(tmp_path), "--dry-run"]) == 0
+        assert capsys.readouterr().out.splitlines()[0] == (
+            "sawyer-reach__sac__s0\tnew (its folder sawyer-reach-mink__sac__s0 is renamed to it "
+            "first)"
+        )
+
+
 def test_a_run_an_earlier_version_named_after_the_sweeps_latent_is_resumed_not_retrained(
     tmp_path, capsys
 ):
@@ -660,7 +685,10 @@ def test_an_extension_checks_every_run_first_and_one_cut_short_is_finished_by_a_
     # a new invocation with a larger budget is another sweep, not an extension
     capsys.readouterr()
     assert main([*args, "--interactions", "6", *FAST_ARGS, "--out", str(out)]) == 2
-    assert "interactions: 5 on disk, 6 now" in capsys.readouterr().err
+    said = (
+        f"fewer than the 6 asked for now; extend the sweep's runs first (sili sweep --resume {out}"
+    )
+    assert said in capsys.readouterr().err
 
 
 def _alive(pid):
@@ -841,17 +869,17 @@ def test_driving_and_sawyer_runs_sweep_side_by_side(tmp_path):
     assert list(runs.index) == [
         "driving__sac__s0",
         "driving__sac__s1",
-        "sawyer-reach-mink__sac__s0",
-        "sawyer-reach-mink__sac__s1",
         "sawyer-reach-osc__sac__s0",
         "sawyer-reach-osc__sac__s1",
+        "sawyer-reach__sac__s0",  # the default controller: the run without --controller
+        "sawyer-reach__sac__s1",
     ]
     assert (runs["status"] == "done").all()
     assert runs.loc["sawyer-reach-osc__sac__s0", "controller"] == "osc"
     assert runs.loc["sawyer-reach-osc__sac__s0", "task_args"] == '{"controller": "osc"}'
-    assert pd.isna(runs.loc["sawyer-reach-mink__sac__s0", "task_args"])  # the default
+    assert pd.isna(runs.loc["sawyer-reach__sac__s0", "task_args"])  # the default
     table = pd.read_csv(tmp_path / "results.csv")
-    mink = table[table.run == "sawyer-reach-mink__sac__s0"]["task_reward"].to_numpy()
+    mink = table[table.run == "sawyer-reach__sac__s0"]["task_reward"].to_numpy()
     osc = table[table.run == "sawyer-reach-osc__sac__s0"]["task_reward"].to_numpy()
     assert not np.allclose(mink, osc)  # the controller reached the task
 

@@ -12,6 +12,7 @@ from sili_robots.agent.matmul import default_matmul
 from sili_robots.agent.schedule import Schedule, value_at
 from sili_robots.cli import main
 from sili_robots.errors import ConfigError
+from sili_robots.runs import run_differences, same_run
 from sili_robots.sweep import SweepSpec, expand, parse_betas, parse_seeds, plan
 from sili_robots.sweep.state import check_existing, run_path
 
@@ -99,9 +100,27 @@ def test_controllers_multiply_only_tasks_that_take_one():
         _spec(tasks=["circle-3", "sawyer-reach"], methods=["sac"], controllers=["mink", "osc"])
     )
     names = [r.name for r in runs]
-    assert names == ["circle-3__sac__s0", "sawyer-reach-mink__sac__s0", "sawyer-reach-osc__sac__s0"]
+    assert names == ["circle-3__sac__s0", "sawyer-reach__sac__s0", "sawyer-reach-osc__sac__s0"]
     assert runs[0].config.env_kwargs == {}
     assert runs[2].config.env_kwargs == {"controller": "osc"}
+
+
+def test_the_default_controller_swept_is_the_run_without_one():
+    """A sweep's --controller mink,osc named its mink runs sawyer-reach-mink__...: the run a sweep
+    without --controller names sawyer-reach__..., collected and counted as a second seed 0."""
+    (plain,) = expand(_spec(tasks=["sawyer-reach"], methods=["sac"]))
+    mink, osc = expand(_spec(tasks=["sawyer-reach"], methods=["sac"], controllers=["mink", "osc"]))
+    assert mink.name == plain.name == "sawyer-reach__sac__s0"
+    # a sweep made before resumes it, with or without --controller
+    assert mink.former_names == plain.former_names == ("sawyer-reach-mink__sac__s0",)
+    assert same_run(mink.config, plain.config, ())
+    assert not same_run(osc.config, plain.config, ())
+    assert run_differences(osc.config.to_dict(), plain.config.to_dict()) == [
+        ("env_kwargs.controller", "osc", None)
+    ]
+    own = {"task": "sili_robots.examples.two_doors:TwoDoorsEnv", "task_id": None}
+    given = {**own, "env_kwargs": {"horizon": 10}}  # a user's class: every argument counts
+    assert run_differences(given, {**own, "env_kwargs": {}}) == [("env_kwargs.horizon", 10, None)]
 
 
 def test_latent_kind_other_than_the_default_is_named():
@@ -132,14 +151,13 @@ def test_a_run_is_named_by_the_latent_it_learns_not_the_one_the_sweep_asked_for(
         }
         assert runs["sili"].name == f"circle-3__{sili_name}-bschedule__s0"
         assert runs["sac"].name == "circle-3__sac__s0"
-        assert runs["sac"].former_name == f"circle-3__sac-{latent}__s0"
+        assert runs["sac"].former_names == (f"circle-3__sac-{latent}__s0",)
         assert runs["sac"].config.to_dict() == plain["sac"].config.to_dict()
-    assert (
-        runs["lili"].name == "circle-3__lili__s0"
-        and runs["lili"].former_name == "circle-3__lili-partial__s0"
+    assert runs["lili"].name == "circle-3__lili__s0" and runs["lili"].former_names == (
+        "circle-3__lili-partial__s0",
     )
     assert runs["lili"].config.to_dict() == plain["lili"].config.to_dict()
-    assert runs["sili"].former_name is None and plain["sac"].former_name is None
+    assert runs["sili"].former_names == () and plain["sac"].former_names == ()
 
 
 @pytest.mark.parametrize(

@@ -33,9 +33,9 @@ from sili_robots.runs import (
     DAMAGED_SUMMARY,
     ERROR_FILE,
     SUMMARY,
-    differences,
     read_json,
     recorded_run,
+    run_differences,
 )
 from sili_robots.sweep.results import finished_summary, run_identity, runs_of
 from sili_robots.sweep.state import RUNS_DIR
@@ -179,7 +179,7 @@ def _sound(run_dir: Path, length: int) -> bool:
 
 
 def _check_same_run(name: str, there: Path, ident: dict, run_dir: Path, mine: dict) -> None:
-    diffs = [f"{k}: {a!r} there, {b!r} here" for k, a, b in differences(ident, mine)]
+    diffs = [f"{k}: {a!r} there, {b!r} here" for k, a, b in run_differences(ident, mine)]
     if diffs:
         more = f" and {len(diffs) - 3} more" if len(diffs) > 3 else ""
         raise ConfigError(

@@ -88,11 +88,11 @@ def as_made(sweep_dir: Path, planned: Sequence[PlannedRun]) -> list[PlannedRun]:
 
 
 def former_folder(sweep_dir: Path, run: PlannedRun) -> Path | None:
-    """The run's folder under the name an earlier version gave it, when only that one exists."""
-    if run.former_name is None or run_path(sweep_dir, run.name).exists():
+    """The run's folder under a name an earlier version gave it, when only that one exists."""
+    if run_path(sweep_dir, run.name).exists():
         return None
-    former = run_path(sweep_dir, run.former_name)
-    return former if former.is_dir() else None
+    formers = (run_path(sweep_dir, name) for name in run.former_names)
+    return next((folder for folder in formers if folder.is_dir()), None)
 
 
 def as_found(sweep_dir: Path, run: PlannedRun) -> PlannedRun:
@@ -156,8 +156,8 @@ def replaced_runs(sweep_dir: Path, planned: Sequence[PlannedRun]) -> list[str]:
 
 
 def _own_names(planned: Sequence[PlannedRun]) -> list[str]:
-    """The runs' names, and the names earlier versions gave them (``PlannedRun.former_name``)."""
-    return [n for r in planned for n in (r.name, r.former_name) if n is not None]
+    """The runs' names, and the names earlier versions gave them (``PlannedRun.former_names``)."""
+    return [n for r in planned for n in (r.name, *r.former_names)]
 
 
 def extended(specs: Sequence[SweepSpec], interactions: int, sweep_dir: Path) -> list[SweepSpec]:

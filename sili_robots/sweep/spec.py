@@ -41,7 +41,9 @@ from sili_robots.tasks.registry import (
     check_argument_names,
     first_version,
     is_class_path,
+    same_argument,
     task_accepts,
+    task_defaults,
 )
 
 
@@ -170,9 +172,10 @@ class PlannedRun:
 
     name: str
     config: RunConfig
-    #: the name earlier versions gave the same run (they named the sweep's ``--latent`` also
-    #: for methods that take none or take it as another kind); a sweep resumes it under ``name``
-    former_name: str | None = None
+    #: the names earlier versions gave the same run (they named the sweep's ``--latent`` also
+    #: for methods that take none or take it as another kind, and a swept ``--controller`` also
+    #: when it is the task's default); a sweep resumes it under ``name``
+    former_names: tuple[str, ...] = ()
     #: the settings of ``config`` (dotted) this machine's timing chose, not the user
     timed: tuple[str, ...] = ()
 
@@ -429,6 +432,20 @@ def _check_fields(spec: SweepSpec) -> None:
         setattr(spec, name, [tuple(p) for p in pairs])
 
 
+def _controller_names(
+    task: str, task_id: str | None, controller: str | None
+) -> tuple[str | None, str | None]:
+    """(the controller a run is named by, the one earlier versions named it by when swept). A
+    registered task's default is named by neither now: that run is the one without
+    ``--controller`` (``runs.run_differences``); a user's class names every swept one."""
+    if task_id is None or not task_accepts(task, "controller"):
+        return controller, controller
+    default = task_defaults(task_id).get("controller")
+    if controller is None:
+        return None, default
+    return (None if same_argument(default, controller) else controller), controller
+
+
 def _latent_of(latent: str | None, method: str) -> str | None:
     """The sweep's latent kind as ``method`` takes it: none for the methods without a latent;
     LILI, which always learns one, discrete where the sweep says partial (as it always ran)."""
@@ -449,8 +466,10 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
         # has no versions (task_id None: the run builds the class path)
         task_id = None if is_class_path(name) else spec.task_ids.get(task, task_spec(task).gym_id)
         for env_kwargs in task_kwargs_of_runs(spec, name):
-            controller = env_kwargs.get("controller")  # only a swept one: validate() refuses
-            # a controller among the sweep's own task arguments
+            # only a swept one: validate() refuses a controller among the sweep's task arguments
+            controller, former_controller = _controller_names(
+                name, task_id, env_kwargs.get("controller")
+            )
             for method in spec.methods:
                 profile = spec.profile or (
                     spec.sili_profiles.get(task, "package") if method == "sili" else "package"
@@ -484,11 +503,16 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                             method,
                             seed,
                             beta=label if method in BETA_METHODS else None,
-                            controller=controller,
                             profile=profile,
                         )
-                        run = naming(latent=named)
-                        former = naming(latent=None if latent == task_default_latent else latent)
+                        run = naming(latent=named, controller=controller)
+                        asked = None if latent == task_default_latent else latent
+                        formers = (
+                            naming(latent=asked, controller=controller),
+                            naming(latent=named, controller=former_controller),
+                            naming(latent=asked, controller=former_controller),
+                        )
+                        former = tuple(dict.fromkeys(n for n in formers if n != run))
                         cfg = replace(
                             base,
                             task_id=task_id,
@@ -497,7 +521,7 @@ def expand(spec: SweepSpec) -> list[PlannedRun]:
                             checkpoint_every=spec.checkpoint_every,
                         )
                         timed = tuple(f"agent.{k}" for k in spec.timed or ())
-                        runs.append(PlannedRun(run, cfg, former if former != run else None, timed))
+                        runs.append(PlannedRun(run, cfg, former, timed))
     names = [r.name for r in runs]
     clash = sorted({n for n in names if names.count(n) > 1})
     if clash:  # e.g. two b values that print alike (format_beta keeps 6 digits)

@@ -35,11 +35,11 @@ from sili_robots.runs import (
     SUMMARY,
     check_resumable,
     clear_run,
-    differences,
     foreign_files,
     listed,
     read_json,
     recorded_run,
+    run_differences,
 )
 from sili_robots.sweep.spec import PlannedRun, SweepSpec, expand
 
@@ -268,15 +268,18 @@ def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
         return
     on_disk = recorded_run(path)
     planned_dict = json.loads(json.dumps(planned.config.to_dict()))
-    diffs = [f"{k}: {a!r} on disk, {b!r} now" for k, a, b in differences(on_disk, planned_dict)]
+    diffs = [f"{k}: {a!r} on disk, {b!r} now" for k, a, b in run_differences(on_disk, planned_dict)]
     held, asked = on_disk.get("interactions"), planned.config.interactions
-    if len(diffs) == 1 and isinstance(held, int) and held > asked:
+    only_length = len(diffs) == 1 and isinstance(held, int)
+    a_sweep = (Path(sweep_dir) / SWEEP_FILE).is_file()  # a collection has no record to resume
+    if only_length and held > asked:
+        resume = f"; the recorded sweep: sili sweep --resume {shell_path(sweep_dir)}"
         raise ConfigError(
             f"run {planned.name} in {sweep_dir} has {held} interactions, more than the "
             f"{asked} asked for now (a run is never shortened); ask for {held} (--interactions "
-            f"{held})"
+            f"{held}{f'{resume} --interactions {held}' if a_sweep else ''})"
         )
-    if len(diffs) == 1 and isinstance(held, int) and (Path(sweep_dir) / SWEEP_FILE).is_file():
+    if only_length and held < asked and a_sweep:
         raise ConfigError(  # (a run of a collection is extended in a sweep of its own)
             f"run {planned.name} in {sweep_dir} has {held} interactions, fewer than the {asked} "
             f"asked for now; extend the sweep's runs first (sili sweep --resume "

@@ -169,6 +169,19 @@ def _task_class(spec: TaskSpec) -> type:
     return load_env_creator(spec.entry_point)
 
 
+def without_defaults(task: str, task_id: str | None, env_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """``env_kwargs`` without the arguments given at the registered version's default (the run
+    ``task_id`` builds, or the first version of ``task`` for a run recorded before versions):
+    ``controller="mink"`` on Sawyer-Reach builds the run no argument builds. A user's class keeps
+    them all (its defaults may change)."""
+    try:
+        spec = task_spec(task_id) if task_id else first_version(task)
+    except ConfigError:
+        return dict(env_kwargs)
+    defaults, missing = _defaults(spec.gym_id), object()
+    return {k: v for k, v in env_kwargs.items() if not same_argument(defaults.get(k, missing), v)}
+
+
 def same_argument(default: Any, value: Any) -> bool:
     """A default and a value as config.json records it (tuples and arrays as lists)."""
     try:
