@@ -44,7 +44,17 @@ def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFr
             f"{sweep_dir} has no finished runs yet (sili plot --include-unfinished plots "
             "partial runs)"
         )
-    return df
+    return _with_settings(df, sweep_dir)
+
+
+def _with_settings(df: pd.DataFrame, sweep_dir: Path) -> pd.DataFrame:
+    """``df`` with ``settings``: what sets a run apart from the other runs of its variant
+    (``sili runs``' column, e.g. ``agent.hidden=16``), so that they are not averaged as seeds."""
+    from sili_robots.sweep.inventory import settings_apart
+
+    runs = df.groupby("run", sort=False)[["task", *VARIANT_KEYS]].first().reset_index()
+    apart = dict(zip(runs["run"], settings_apart(runs, sweep_dir), strict=True))
+    return df.assign(settings=df["run"].map(apart))
 
 
 def with_profile(df: pd.DataFrame) -> pd.DataFrame:
@@ -56,6 +66,8 @@ def with_profile(df: pd.DataFrame) -> pd.DataFrame:
         df = df.assign(beta_scheduled=False)
     if "task_id" not in df:
         df = df.assign(task_id="")
+    if "settings" not in df:  # a table not read by load_results: its runs as one variant each
+        df = df.assign(settings="")
     if "task_args" not in df:  # tables before other task arguments were told apart
         from sili_robots.tasks.registry import task_arguments_key
 
@@ -94,6 +106,8 @@ def variant_labels(df: pd.DataFrame, profiled: Collection[str] | None = None) ->
             labels[idx] += rows["task_args"].map(arguments_label)
         if rows["latent"].nunique() > 1:
             labels[idx] += rows["latent"].map(lambda k: f" ({k})")
+        if rows["settings"].nunique() > 1:  # e.g. "SAC [agent.hidden=16]"
+            labels[idx] += rows["settings"].map(lambda s: f" [{s}]" if s else "")
     versions = df["task_id"].fillna("")
     if versions.nunique() > 1:  # e.g. "SAC (v0)" beside "SAC (v1)"
         labels += versions.map(lambda t: f" ({t.rsplit('-', 1)[-1]})" if t else "")

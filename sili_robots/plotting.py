@@ -72,8 +72,11 @@ METHOD_COLORS = {
     "sac": "#D55E00",  # vermillion
     "smirl": "#CC79A7",  # reddish purple
 }
-#: where a variant (``VARIANT_KEYS``) says its latent kind
-LATENT_KEY = VARIANT_KEYS.index("latent")
+#: what makes one curve: the variant, and the settings its runs have apart from the
+#: variant's other runs (``plot_data.load_results``: runs of other ``--set`` are no seeds)
+CURVE_KEYS = (*VARIANT_KEYS, "settings")
+#: where a curve (``CURVE_KEYS``) says its latent kind
+LATENT_KEY = CURVE_KEYS.index("latent")
 #: (table column, axis label) of the per-interaction panels
 CURVE_METRICS = (
     ("task_reward", "task reward"),
@@ -105,7 +108,7 @@ def task_title(task: str) -> str:
 
 
 def _variant_order(df: pd.DataFrame) -> list[tuple]:
-    keys = df[list(VARIANT_KEYS)].fillna("").drop_duplicates()
+    keys = df[list(CURVE_KEYS)].fillna("").drop_duplicates()
     rank = {m: i for i, m in enumerate(METHOD_ORDER)}
     return sorted(
         (tuple(r) for r in keys.itertuples(index=False)),
@@ -135,7 +138,7 @@ def _labelled_variants(
 ) -> list[tuple[tuple, str, pd.DataFrame]]:
     """(variant, its label, its rows) of one task, in the figures' method order."""
     labels = variant_labels(task_rows, profiled)
-    keyed = task_rows[list(VARIANT_KEYS)].fillna("").apply(tuple, axis=1)
+    keyed = task_rows[list(CURVE_KEYS)].fillna("").apply(tuple, axis=1)
     out = []
     for variant in _variant_order(task_rows):
         rows = task_rows[keyed == variant]
@@ -178,7 +181,8 @@ def _draw_curves(
             stats = curve(rows, metric, window)
             x = stats.index.to_numpy(float)
             mean, std = stats["mean"].to_numpy(), stats["std"].to_numpy()
-            ax.plot(x, mean, style, color=color, label=label, lw=1.6)
+            marker = "o" if len(x) == 1 else None  # a run of one interaction: a point, not a line
+            ax.plot(x, mean, style, color=color, label=label, lw=1.6, marker=marker)
             ax.fill_between(x, *spread(metric, mean, std), color=color, alpha=0.18, lw=0)
     task_ids = bound_ids(task_rows, str(task_rows["task"].iloc[0]))
     mixed = (task_rows["task_args"] != "").any()  # the bounds hold for some curves only
@@ -192,7 +196,7 @@ def _draw_curves(
 
 def _seed_note(rows: pd.DataFrame) -> str:
     """How many seeds each curve averages; unfinished runs of a variant average fewer late."""
-    keys = list(VARIANT_KEYS)
+    keys = list(CURVE_KEYS)
     seeds = rows.groupby(keys, dropna=False)["seed"].nunique()
     lo, hi = int(seeds.min()), int(seeds.max())
     note = f"{lo} seed{'s' if lo > 1 else ''}" if lo == hi else f"{lo}-{hi} seeds"

@@ -1,6 +1,7 @@
 """``sili plot``: the figures show exactly the sweep's results table (read back from the figure
 objects), and the command writes readable PNG and PDF files."""
 
+import json
 import shutil
 from pathlib import Path
 
@@ -170,6 +171,43 @@ def test_plot_tasks_draws_only_their_figures(sweep_dir, tmp_path, capsys):
     assert "task 'driving' has no runs in" in err and "its tasks: circle-3, speaker-listener" in err
     assert main([*args, "--tasks", ","]) == 2
     assert "--tasks ',' names none" in capsys.readouterr().err
+
+
+def test_runs_of_other_settings_are_curves_of_their_own_not_seeds(sweep_dir, tmp_path):
+    """`sili runs` told SAC at hidden 16 and 32 apart; the plot averaged them as two seeds."""
+    copy = tmp_path / "sweep"
+    shutil.copytree(sweep_dir, copy)
+    config = copy / "runs" / "circle-3__sac__s1" / "config.json"
+    record = json.loads(config.read_text())
+    hidden = record["run"]["agent"]["hidden"]
+    record["run"]["agent"]["hidden"] = hidden + 1
+    config.write_text(json.dumps(record))
+    fig = learning_curves(load_results(copy), "circle-3")
+    ax = next(ax for ax in fig.axes if ax.get_gid() == "task_reward")
+    sac = sorted(ln.get_label() for ln in ax.get_lines() if ln.get_label().startswith("SAC"))
+    assert sac == [f"SAC [agent.hidden={hidden}]", f"SAC [agent.hidden={hidden + 1}]"]
+    assert "over 1-2 seeds" in fig.get_suptitle()  # SAC's curves have one seed each
+    assert [ln.get_label() for ln in ax.get_lines()].count("SILI b=0.5") == 1  # the others: one
+
+
+def test_a_curve_of_one_interaction_is_drawn_as_a_point(tmp_path):
+    run = {"task": "circle-3", "run": "r", "seed": 0, "interaction": 0, "task_reward": -40.0}
+    df = pd.DataFrame([run]).assign(
+        method="sac",
+        profile="package",
+        config_beta=0.0,
+        beta_scheduled=False,
+        controller="",
+        task_args="",
+        latent="none",
+        task_id="sili/Circle3-v1",
+        strategy_changed=0,
+        stability_reward=0.0,
+        true_stability=float("nan"),
+    )
+    ax = learning_curves(df, "circle-3").axes[0]
+    (line,) = [ln for ln in ax.get_lines() if ln.get_label() == "SAC"]
+    assert line.get_marker() == "o"  # a line of one point draws nothing
 
 
 def test_unfinished_runs_are_left_out_unless_asked(sweep_dir, tmp_path):

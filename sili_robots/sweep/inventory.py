@@ -28,7 +28,7 @@ def inventory(directory: Path) -> pd.DataFrame:
     runs = runs_table(directory)
     runs["controller"] = runs["controller"].fillna("")
     runs["task_id"] = runs["task_id"].fillna("") if "task_id" in runs else ""
-    runs["settings"] = _settings_apart(runs, directory)
+    runs["settings"] = settings_apart(runs, directory)
     rows = []
     for key, group in runs.groupby(list(INVENTORY_KEYS), sort=False):
         done = group[group["status"] == "done"]
@@ -52,7 +52,7 @@ def inventory(directory: Path) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _settings_apart(runs: pd.DataFrame, directory: Path) -> pd.Series:
+def settings_apart(runs: pd.DataFrame, directory: Path) -> pd.Series:
     """Per run, the settings (``key=value``) in which it differs from other runs of its task
     and variant; "" when they all agree."""
     flat = {d.name: _flat(recorded_run(d)) for d in run_dirs(directory)}
