@@ -502,7 +502,7 @@ def test_overwrite_starts_the_sweep_anew_and_keeps_a_users_files(tmp_path, capsy
         capsys.readouterr().err
     )
     assert main([*again, "--overwrite", "--dry-run"]) == 0
-    assert capsys.readouterr().out == "circle-3__sac__s0\tnew\ncircle-3__sac__s1\tremoved\n1 runs\n"
+    assert capsys.readouterr().out == "circle-3__sac__s0\tnew\ncircle-3__sac__s1\tremoved\n1 run\n"
     assert len(pd.read_csv(s0 / "metrics.csv")) == 2 and s1.is_dir()  # a dry run changes nothing
     trainer = {"pid": os.getpid(), "host": socket.gethostname()}  # a live process on this host
     (s1 / "worker.json").write_text(json.dumps(trainer))
