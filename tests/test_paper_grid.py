@@ -259,6 +259,22 @@ def test_runs_of_one_variant_with_other_settings_are_rows_of_their_own(
     assert (table.settings == "").all()
 
 
+def test_runs_lists_b_values_in_numeric_order(sweep_and_collection, tmp_path, capsys):
+    """Run names sort b0.5 before b0 and b1 ("." before "_"): the table followed them."""
+    _, collection = sweep_and_collection
+    run = collection / "runs" / "circle-3__sili-bschedule__s0"
+    for b in ("0.5", "0", "1"):
+        copy = tmp_path / "b" / "runs" / f"circle-3__sili-b{b}__s0"
+        shutil.copytree(run, copy)
+        config = json.loads((copy / "config.json").read_text())
+        config["run"]["agent"]["sili"]["beta"] = float(b)
+        (copy / "config.json").write_text(json.dumps(config))
+    assert sorted(p.name for p in (tmp_path / "b" / "runs").iterdir())[0].endswith("b0.5__s0")
+    assert main(["runs", str(tmp_path / "b"), "--csv"]) == 0
+    table = pd.read_csv(__import__("io").StringIO(capsys.readouterr().out))
+    assert table.config_beta.tolist() == [0.0, 0.5, 1.0]
+
+
 def test_plot_reads_a_collection_without_writing_into_it(sweep_and_collection, tmp_path, capsys):
     _, collection = sweep_and_collection
     df = load_results(collection)

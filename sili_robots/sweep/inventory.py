@@ -49,7 +49,12 @@ def inventory(directory: Path) -> pd.DataFrame:
                 "cpu_hours": round(float(done["wall_time_s"].sum()) / 3600, 2),
             }
         )
-    return pd.DataFrame(rows)
+    table = pd.DataFrame(rows)
+    if table.empty:
+        return table
+    # b in numeric order (run names sort b0.8 before b0 and b1)
+    order = ["task", "method", "profile", "beta_scheduled", "config_beta"]
+    return table.sort_values(order, kind="stable").reset_index(drop=True)
 
 
 def settings_apart(runs: pd.DataFrame, directory: Path) -> pd.Series:
