@@ -103,6 +103,9 @@ def test_collect_refuses_a_different_run_of_the_same_name(sweep_and_collection, 
     shutil.copytree(collection, other)
     cfg_path = other / "runs" / "circle-3__sili-bschedule__s0" / "config.json"
     cfg = json.loads(cfg_path.read_text())
+    cfg["run"]["checkpoint_every"] += 5  # saved more often: the same run
+    cfg_path.write_text(json.dumps(cfg))
+    assert main(["collect", str(sweep), "--into", str(other)]) == 0
     cfg["run"]["seed"] = 7
     cfg_path.write_text(json.dumps(cfg))
     assert main(["collect", str(sweep), "--into", str(other)]) == 2

@@ -118,9 +118,11 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
 
 
 def _identity(run_dir: Path) -> dict[str, Any]:
-    """What makes a run the run it is: its config in today's layout, without its length."""
+    """What makes a run the run it is: its config in today's layout, without its length or how
+    often it was saved (which changes no number it logs)."""
     run = recorded_run(run_dir)
     run.pop("interactions")
+    run.pop("checkpoint_every", None)
     return run
 
 
