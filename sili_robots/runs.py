@@ -493,9 +493,10 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
             f"{path} is damaged (its wall_time is {wall!r}, not a duration in seconds); the run "
             "can be neither resumed nor played from it: train it again (sili train ... --overwrite)"
         )
-    task = state.get("task")  # recorded since checkpoints name their task; a registered one
-    if task is not None and ":" not in task and task != (cfg.task_id or cfg.task):  # (a class
-        raise ConfigError(  # of the user's may be renamed)
+    task = state.get("task")  # recorded since checkpoints name their task
+    registered = task is not None and ":" not in task  # (a user's class may be renamed)
+    if registered and task != (cfg.task_id or cfg.task):
+        raise ConfigError(
             f"{path} is a checkpoint of {task}, not of {cfg.task_id or cfg.task}, which the "
             f"run in {run_dir} trains: was it copied from another run? Train this run again "
             "(sili train ... --overwrite)"
