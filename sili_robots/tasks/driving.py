@@ -19,8 +19,8 @@ following never brakes for anyone). One decision step is 1 s (10 SUMO steps of 0
 The opponent (strategy z = the lane it intends to merge into, right or left) drives straight
 until the ego's front is within 8 m of its own front, then cuts into lane z at 3 m/s. That is
 0.3 s before the cars overlap lengthwise: too late for the ego to react, so it has to commit
-to a side before it sees anything; an ego in lane z, or in the centre lane less than 1 m off its
-middle away from lane z, is hit (leaning 1 m away gets by it, not yet by the hazard).
+to a side before it sees anything; an ego in lane z, or in the centre lane less than about 0.9 m
+off its middle away from lane z, is hit (leaning 0.9 m away gets by it, not yet by the hazard).
 Strategy dynamics (the paper's): if the ego's centre is in the left lane when its front crosses
 the red line (40 m past its start, 2 decision steps in: early enough for the opponent to take
 note) the opponent merges right in the next interaction ("faster vehicles pass on the left").

@@ -12,7 +12,7 @@ with probability ``CHANGE_PROBABILITY`` = 0.5, under one of two rules (``change_
 
 - ``"interaction"``: at the end of an interaction in which the ego has not gone near the speaker
   the mapping changes (with probability 0.5); a visit keeps it for the next interaction. At most
-  one change per interaction, seen at its first step.
+  one change per interaction, made by ``reset()``: seen in the observation it returns (t = 0).
 - ``"step"``: within an interaction the mapping is *locked* while the ego has visited the
   speaker in it or in the previous one; while unlocked it changes with probability 0.5 before
   every step (about 25 changes in an unvisited interaction). At the boundary after an
