@@ -495,10 +495,19 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
         )
     task = state.get("task")  # recorded since checkpoints name their task
     registered = task is not None and ":" not in task  # (a user's class may be renamed)
-    if registered and task != (cfg.task_id or cfg.task):
+    theirs = [
+        f"{key} {value!r}"
+        for key, value, ours in (
+            ("task", task if registered else None, cfg.task_id or cfg.task),
+            ("method", state.get("method"), cfg.method),  # (older checkpoints name neither)
+            ("seed", state.get("seed"), cfg.seed),
+        )
+        if value is not None and value != ours
+    ]
+    if theirs:
         raise ConfigError(
-            f"{path} is a checkpoint of {task}, not of {cfg.task_id or cfg.task}, which the "
-            f"run in {run_dir} trains: was it copied from another run? Train this run again "
-            "(sili train ... --overwrite)"
+            f"{path} is a checkpoint of {', '.join(theirs)}, not of the run in {run_dir} "
+            f"({cfg.task_id or cfg.task}, {cfg.method}, seed {cfg.seed}): was it copied from "
+            "another run? Train this run again (sili train ... --overwrite)"
         )
     return state

@@ -127,7 +127,10 @@ def train(
                         run_dir,
                         {
                             "interaction": done,
-                            "task": cfg.task_id or cfg.task,  # a copy into another run is refused
+                            # a copy into another run (task, method or seed) is refused
+                            "task": cfg.task_id or cfg.task,
+                            "method": cfg.method,
+                            "seed": cfg.seed,
                             "agent": agent.state_dict(),
                             "game": env.unwrapped.game_state(),
                             "wall_time": elapsed0 + time.perf_counter() - t0,

@@ -475,6 +475,13 @@ def test_a_checkpoint_of_another_run_exits_2_and_leaves_the_run_as_it_was(tmp_pa
     assert main([*args, "--method", "sac", "--out", str(other)]) == 0
     shutil.copy(other / "checkpoint.pt", run / "checkpoint.pt")  # a SAC agent's networks
     capsys.readouterr()
+    assert main(["train", "--resume", str(run), "--interactions", "3", "--no-progress"]) == 2
+    assert "checkpoint.pt is a checkpoint of method 'sac', not of the run in" in (
+        capsys.readouterr().err
+    )
+    sac = torch.load(other / "checkpoint.pt", weights_only=False)
+    del sac["method"], sac["seed"]  # as checkpoints of earlier versions: its networks are told
+    torch.save(sac, run / "checkpoint.pt")
     said = f"{run / 'checkpoint.pt'} does not fit the agent {run / 'config.json'} describes"
     assert main(["train", "--resume", str(run), "--interactions", "3", "--no-progress"]) == 2
     assert said in capsys.readouterr().err
@@ -497,10 +504,20 @@ def test_a_checkpoint_of_another_run_exits_2_and_leaves_the_run_as_it_was(tmp_pa
     shutil.copy(circle8 / "checkpoint.pt", run / "checkpoint.pt")
     capsys.readouterr()
     assert main(["train", "--resume", str(run), "--interactions", "3", "--no-progress"]) == 2
-    said = "checkpoint.pt is a checkpoint of sili/Circle8-v1, not of sili/Circle3-v1"
+    said = f"checkpoint.pt is a checkpoint of task 'sili/Circle8-v1', not of the run in {run} ("
     assert said in capsys.readouterr().err
     assert json.loads((run / "config.json").read_text())["run"]["interactions"] == 2
     assert run_state(run) == "done"
+    # another seed's agent of the same task and sizes (the networks fit): refused by its seed
+    seed1 = tmp_path / "seed1"
+    assert main([*args, "--seed", "1", "--out", str(seed1)]) == 0
+    shutil.copy(seed1 / "checkpoint.pt", run / "checkpoint.pt")
+    capsys.readouterr()
+    for command in (["eval", str(run)], ["train", "--resume", str(run), "--no-progress"]):
+        assert main(command) == 2
+        assert "checkpoint.pt is a checkpoint of seed 1, not of the run in" in (
+            capsys.readouterr().err
+        )
 
 
 def test_a_checkpoint_with_a_bad_count_is_refused_before_the_run_changes(tmp_path, capsys):
