@@ -180,3 +180,21 @@ def test_an_address_where_no_cluster_listens_is_refused_before_anything_is_writt
     assert out.returncode == 2, out.stderr
     assert "cannot connect to Ray at '127.0.0.1:1': Connection refused" in out.stderr
     assert not (tmp_path / "s").exists()
+
+
+def test_a_sweep_without_an_address_starts_its_own_ray_whatever_ray_address_says(tmp_path):
+    """ray.init reads RAY_ADDRESS when given no address: the sweep failed with "num_cpus ...
+    must not be provided" (a cluster there) or could not connect (none there)."""
+    args = ["sweep", "--backend", "ray", "--tasks", "circle-3", "--methods", "sac"]
+    args += ["--interactions", "1", "--out", str(tmp_path / "s"), "--no-progress"]
+    args += [x for k, v in FAST.items() for x in ("--set", f"{k}={v}")]
+    out = subprocess.run(
+        [sys.executable, "-m", "sili_robots.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**os.environ, "RAY_ADDRESS": "127.0.0.1:1"},
+    )
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout)["failed"] == {}
+    assert "sweep: 1 done, 0 failed" in out.stderr

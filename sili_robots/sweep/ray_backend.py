@@ -65,7 +65,11 @@ class RayBackend:
         if self.address:
             kwargs["address"] = self.address
         else:
-            kwargs.update(num_cpus=self.workers or os.cpu_count() or 1, include_dashboard=False)
+            kwargs.update(  # "local": a new instance even where RAY_ADDRESS names a cluster
+                address="local",
+                num_cpus=self.workers or os.cpu_count() or 1,
+                include_dashboard=False,
+            )
         self.check_reachable()
         try:
             with _keeping_stop_handlers() as handlers:
