@@ -849,6 +849,9 @@ def test_a_stopped_sweep_calls_resumable_only_the_runs_with_a_checkpoint(tmp_pat
     assert "(1 stopped midway: 0 resumable, 1 before a first checkpoint, it starts again)" in (
         stopped(jobs[1:2])
     )
+    # one that ended as the sweep stopped, its outcome never reported (Ray's grace wait): done
+    (tmp_path / "r0" / "summary.json").write_text("{}")
+    assert "sweep: 1 done, 0 failed, 2 not run (2 stopped midway: 0 resumable" in stopped(jobs)
 
 
 @pytest.mark.slow

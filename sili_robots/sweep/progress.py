@@ -29,6 +29,7 @@ from rich.text import Text
 from sili_robots.metrics import METRICS
 from sili_robots.progress import numbers_column
 from sili_robots.runs import CHECKPOINT
+from sili_robots.sweep.state import run_state
 from sili_robots.sweep.worker import Job, Outcome
 
 
@@ -179,6 +180,10 @@ class SweepProgress:
             self._live.stop()
             if not self.console.is_terminal:  # a log: end the display's last line (as
                 self.console.line()  # rich's Progress.stop does), before the closing one
+        for name, job in list(self.running.items()):  # one that ended as the sweep stopped
+            if run_state(Path(job.run_dir)) == "done":  # (its outcome not reported) is done
+                del self.running[name]
+                self.done += 1
         stopped = _stopped_midway([Path(job.run_dir) for job in self.running.values()])
         not_run = self.total_runs - self.done - self.failed
         earlier = f" ({self.already_done} of them earlier)" if self.already_done else ""
