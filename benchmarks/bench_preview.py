@@ -15,6 +15,7 @@ One-off costs of the preview itself (compiling Sawyer's visual model) land on it
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 from tempfile import TemporaryDirectory
@@ -24,7 +25,7 @@ from sili_robots.commands.common import positive_int
 from sili_robots.commands.common import seed as seed_number
 from sili_robots.errors import one_line_errors
 from sili_robots.policies import scripted_policy
-from sili_robots.preview import Browser, Preview, make_env_and_policy
+from sili_robots.preview import Browser, BrowserError, Preview, make_env_and_policy
 from sili_robots.preview.api import marked_png
 from sili_robots.rollout import run_interactions
 from sili_robots.tasks import make_task
@@ -122,4 +123,8 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    one_line_errors(main, Path(__file__).name)
+    try:
+        one_line_errors(main, Path(__file__).name)
+    except BrowserError as err:  # e.g. no Chromium, or too little memory for it: as sili preview
+        print(f"{Path(__file__).name}: error: {err}", file=sys.stderr)
+        raise SystemExit(1) from None

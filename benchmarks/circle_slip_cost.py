@@ -24,11 +24,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from sili_robots.addons.config import AddonsConfig
 from sili_robots.addons.filter_math import first_departure
 from sili_robots.addons.latent_filter import LatentFilter
 from sili_robots.agent import SILIAgent
+from sili_robots.agent.config import check as check_ranges
 from sili_robots.commands.common import positive_int
-from sili_robots.errors import one_line_errors
+from sili_robots.errors import ConfigError, one_line_errors
 from sili_robots.evaluation import load_trained
 from sili_robots.tasks.circle import CircleEnv
 
@@ -92,6 +94,12 @@ def main() -> None:
     parser.add_argument("--noise", type=float, default=0.25, help="latent_filter_noise")
     parser.add_argument("--plays", type=positive_int, default=5, help="sampled plays per case")
     args = parser.parse_args()
+    settings = AddonsConfig().filter  # the run settings' own ranges (NaN and eps >= 1 too)
+    settings.eps, settings.noise = args.eps, args.noise
+    try:
+        check_ranges(settings, "addons.filter.")
+    except ConfigError as err:
+        raise ConfigError(f"--eps / --noise: {err}") from None
     torch.set_num_threads(1)
     for run in args.runs:
         print(f"{run} (filter: eps {args.eps}, noise {args.noise}; last: deterministic)")

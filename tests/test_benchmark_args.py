@@ -47,6 +47,8 @@ def test_every_script_checks_its_numbers_and_reports_bad_input_in_one_line(scrip
         ),
         ("bench_preview.py", ["--tasks", "nope"], "invalid choice: 'nope'"),
         ("latent_filter_usage.py", ["/absent"], "/absent does not exist"),
+        ("circle_slip_cost.py", ["/absent", "--eps", "nan"], "filter.eps must be in [0, 0.99"),
+        ("circle_slip_cost.py", ["/absent", "--noise", "-1"], "filter.noise must be >= 0, got -1"),
     ],
 )
 def test_bad_input_exits_2_before_any_work(
@@ -59,3 +61,20 @@ def test_bad_input_exits_2_before_any_work(
     assert says in result.stderr
     assert "Traceback" not in result.stderr
     assert not out.exists()  # no run was started
+
+
+def test_a_browser_that_will_not_start_is_one_line_as_in_sili_preview() -> None:
+    import os
+
+    result = subprocess.run(
+        [sys.executable, str(BENCHMARKS / "bench_preview.py"), "--tasks", "circle-3"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, "SILI_CHROMIUM": "/bin/false"},  # exits at once
+    )
+    assert result.returncode == 1, result.stderr
+    assert result.stderr.endswith(
+        "bench_preview.py: error: Chromium closed its DevTools pipe (/bin/false)\n"
+    )
+    assert "Traceback" not in result.stderr
