@@ -479,20 +479,6 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
             "played from it: train it again (sili train ... --overwrite)"
         ) from None
     cfg = read_config(run_dir)
-    done, wall = state.get("interaction"), state.get("wall_time")
-    if not (
-        isinstance(done, numbers.Integral) and is_number(done) and 0 <= done <= cfg.interactions
-    ):
-        raise ConfigError(  # e.g. -5: a resume went on from there and wrote over the run's rows
-            f"{path} is damaged (its interaction is {done!r}, not a count within the run's "
-            f"{cfg.interactions}); the run can be neither resumed nor played from it: train it "
-            "again (sili train ... --overwrite)"
-        )
-    if not (is_number(wall) and math.isfinite(wall) and wall >= 0):
-        raise ConfigError(
-            f"{path} is damaged (its wall_time is {wall!r}, not a duration in seconds); the run "
-            "can be neither resumed nor played from it: train it again (sili train ... --overwrite)"
-        )
     task = state.get("task")  # recorded since checkpoints name their task
     registered = task is not None and ":" not in task  # (a user's class may be renamed)
     theirs = [
@@ -509,5 +495,19 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
             f"{path} is a checkpoint of {', '.join(theirs)}, not of the run in {run_dir} "
             f"({cfg.task_id or cfg.task}, {cfg.method}, seed {cfg.seed}): was it copied from "
             "another run? Train this run again (sili train ... --overwrite)"
+        )
+    done, wall = state.get("interaction"), state.get("wall_time")
+    if not (
+        isinstance(done, numbers.Integral) and is_number(done) and 0 <= done <= cfg.interactions
+    ):
+        raise ConfigError(  # e.g. -5: a resume went on from there and wrote over the run's rows
+            f"{path} is damaged (its interaction is {done!r}, not a count within the run's "
+            f"{cfg.interactions}); the run can be neither resumed nor played from it: train it "
+            "again (sili train ... --overwrite)"
+        )
+    if not (is_number(wall) and math.isfinite(wall) and wall >= 0):
+        raise ConfigError(
+            f"{path} is damaged (its wall_time is {wall!r}, not a duration in seconds); the run "
+            "can be neither resumed nor played from it: train it again (sili train ... --overwrite)"
         )
     return state

@@ -509,6 +509,25 @@ def test_an_edited_saved_game_is_refused_by_name_and_the_game_goes_on_as_it_was(
     assert (info["interaction"], info["strategy_id"]) == (1, twin_info["strategy_id"])
 
 
+def test_restore_takes_no_none_and_a_placeholder_of_another_number_type():
+    """restore_game_state(None) was a plain reset (the game went on unasked); a fresh task's
+    placeholder (an int 1 for a door saved as -1.0) is no kind a saved game must have."""
+
+    class IntPlaceholder(TwoDoorsEnv):
+        def __init__(self, **kw):
+            super().__init__(**kw)
+            self.door = 1  # reset sets -1.0 or 1.0
+
+    env = IntPlaceholder()
+    env.reset(seed=0)
+    with pytest.raises(ConfigError, match="a saved game must be what game_state"):
+        env.restore_game_state(None)
+    env.door = -1.0
+    saved = {**env.game_state(), "fields": {"door": -1.0}}
+    saved.pop("strategy_id")
+    assert IntPlaceholder().restore_game_state(saved)[1]["strategy_id"] == -1.0
+
+
 def test_a_game_state_without_the_strategy_s_attributes_is_refused_on_restore():
     """A task that leaves its strategy out of ``game_state_fields`` resumed silently with
     another opponent; games saved before the strategy was kept still restore."""

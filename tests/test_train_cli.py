@@ -426,6 +426,15 @@ def test_bad_input_exits_2_without_traceback(tmp_path, args, message):
     assert "Traceback" not in res.stderr
 
 
+def test_a_schedule_knot_at_numpy_s_infinity_is_named_too():
+    from sili_robots.build import make_run_config
+
+    for knot in (np.float32("inf"), np.float64("nan")):
+        points = {"points": [[0, 1e-3], [knot, 1e-4]]}
+        with pytest.raises(ConfigError, match="a schedule's interactions are whole numbers, got"):
+            make_run_config("circle-3", "sac", settings={"sac.lr": points})
+
+
 def test_float32s_largest_number_is_a_setting_and_one_that_rounds_past_it_is_not():
     from sili_robots.agent.config import FLOAT32_OVERFLOW
     from sili_robots.build import make_run_config
@@ -508,9 +517,10 @@ def test_a_checkpoint_of_another_run_exits_2_and_leaves_the_run_as_it_was(tmp_pa
     assert said in capsys.readouterr().err
     assert json.loads((run / "config.json").read_text())["run"]["interactions"] == 2
     assert run_state(run) == "done"
-    # another seed's agent of the same task and sizes (the networks fit): refused by its seed
+    # another seed's agent of the same task and sizes (the networks fit): refused by its seed,
+    # also from a longer run (named as a copy, not as a damaged count)
     seed1 = tmp_path / "seed1"
-    assert main([*args, "--seed", "1", "--out", str(seed1)]) == 0
+    assert main([*args, "--seed", "1", "--interactions", "3", "--out", str(seed1)]) == 0
     shutil.copy(seed1 / "checkpoint.pt", run / "checkpoint.pt")
     capsys.readouterr()
     for command in (["eval", str(run)], ["train", "--resume", str(run), "--no-progress"]):

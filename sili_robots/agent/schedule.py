@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from itertools import pairwise
 from typing import Any
 
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, is_number
 
 
 @dataclass(frozen=True)
@@ -24,7 +24,7 @@ class Schedule:
     points: tuple[tuple[int, float], ...]
 
     def __post_init__(self) -> None:
-        infinite = [i for i, _ in self.points if isinstance(i, float) and not math.isfinite(i)]
+        infinite = [i for i, _ in self.points if is_number(i) and not math.isfinite(i)]
         if infinite:  # int() would raise OverflowError (inf) or ValueError (nan) unnamed
             raise ConfigError(f"a schedule's interactions are whole numbers, got {infinite[0]}")
         points = tuple((int(i), float(v)) for i, v in self.points)

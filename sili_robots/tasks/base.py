@@ -319,11 +319,19 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     def restore_game_state(self, state: dict[str, Any]) -> tuple[np.ndarray, dict[str, Any]]:
         """Continue a saved game: start its current interaction again; returns reset's output
         (it is ``reset(options={"restore": state})``: a refused game leaves this one as it was)."""
+        self._check_game_state(state)  # None too: reset takes a restore of None for none asked
         return self.reset(options={"restore": state})
 
     def _restore_game_state(self, state: dict[str, Any]) -> tuple[np.ndarray, dict[str, Any]]:
         if not self._started:
             self.reset(seed=0)
+        for name, saved in state["fields"].items():  # against a started game's values, not
+            required = _unfit(getattr(self, name, None), saved)  # a fresh task's placeholders
+            if required is not None:
+                raise ConfigError(
+                    f"a saved game's field {name} must be {required}, as {type(self).__name__}'s "
+                    f"is, got {saved!r}"
+                )
         self.np_random.bit_generator.state = state["rng"]
         for k, v in state["fields"].items():
             setattr(self, k, _copy(v))
@@ -365,13 +373,6 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
                 f"{type(state).__name__}"
                 + (f" with keys {', '.join(map(str, state))}" if isinstance(state, Mapping) else "")
             )
-        for name, saved in fields.items():
-            required = _unfit(getattr(self, name, None), saved)
-            if required is not None:
-                raise ConfigError(
-                    f"a saved game's field {name} must be {required}, as {type(self).__name__}'s "
-                    f"is, got {saved!r}"
-                )
         interaction = state["interaction"]
         if not (is_number(interaction) and math.isfinite(interaction)) or (
             int(interaction) != interaction or interaction < 0
