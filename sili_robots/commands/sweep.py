@@ -270,7 +270,7 @@ def _dry_run(args: argparse.Namespace, specs: list[SweepSpec], sweep_dir: Path) 
                 print(f"{name}\tnew")
             elif run_path(sweep_dir, name).is_dir():
                 print(f"{name}\tremoved")
-        print(f"{len(planned)} run{'' if len(planned) == 1 else 's'}")
+        print(_run_count(planned))
         return 0
     planned = as_made(sweep_dir, planned)
     found, shorter = check_planned(sweep_dir, planned, args.resume is not None)
@@ -286,8 +286,12 @@ def _dry_run(args: argparse.Namespace, specs: list[SweepSpec], sweep_dir: Path) 
             if (path / ERROR_FILE).is_file():  # the run's last attempt failed
                 notes.insert(0, f"failed before, see its {ERROR_FILE}")
         print(f"{run_.name}\t{state}" + (f" ({', '.join(notes)})" if notes else ""))
-    print(f"{len(planned)} run{'' if len(planned) == 1 else 's'}")
+    print(_run_count(planned))
     return 0
+
+
+def _run_count(planned: list) -> str:
+    return f"{len(planned)} run{'' if len(planned) == 1 else 's'}"
 
 
 def _extends(args: argparse.Namespace) -> bool:

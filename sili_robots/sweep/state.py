@@ -274,10 +274,11 @@ def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
     a_sweep = (Path(sweep_dir) / SWEEP_FILE).is_file()  # a collection has no record to resume
     if only_length and held > asked:
         resume = f"; the recorded sweep: sili sweep --resume {shell_path(sweep_dir)}"
+        resume = f"{resume} --interactions {held}" if a_sweep else ""
         raise ConfigError(
             f"run {planned.name} in {sweep_dir} has {held} interactions, more than the "
             f"{asked} asked for now (a run is never shortened); ask for {held} (--interactions "
-            f"{held}{f'{resume} --interactions {held}' if a_sweep else ''})"
+            f"{held}{resume})"
         )
     if only_length and held < asked and a_sweep:
         raise ConfigError(  # (a run of a collection is extended in a sweep of its own)

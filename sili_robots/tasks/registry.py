@@ -156,13 +156,8 @@ def other_task_arguments(task_id: str | None, env_kwargs: dict[str, Any]) -> dic
         spec = task_spec(str(task_id))
     except ConfigError:
         return dict(env_kwargs)
-    defaults, same = task_defaults(spec.gym_id), _task_class(spec).same_dynamics_arguments
-    missing = object()
-    return {
-        k: v
-        for k, v in env_kwargs.items()
-        if k not in same and not same_argument(defaults.get(k, missing), v)
-    }
+    same = _task_class(spec).same_dynamics_arguments
+    return {k: v for k, v in _not_at_defaults(spec, env_kwargs).items() if k not in same}
 
 
 def _task_class(spec: TaskSpec) -> type:
@@ -178,6 +173,10 @@ def without_defaults(task: str, task_id: str | None, env_kwargs: dict[str, Any])
         spec = task_spec(task_id) if task_id else first_version(task)
     except ConfigError:
         return dict(env_kwargs)
+    return _not_at_defaults(spec, env_kwargs)
+
+
+def _not_at_defaults(spec: TaskSpec, env_kwargs: dict[str, Any]) -> dict[str, Any]:
     defaults, missing = _defaults(spec.gym_id), object()
     return {k: v for k, v in env_kwargs.items() if not same_argument(defaults.get(k, missing), v)}
 
