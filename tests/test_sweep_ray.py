@@ -4,6 +4,7 @@ as the local backend, a failing run isolated, a killed worker retried from its c
 import json
 import os
 import signal
+import socket
 import subprocess
 import sys
 
@@ -180,6 +181,23 @@ def test_an_address_where_no_cluster_listens_is_refused_before_anything_is_writt
     assert out.returncode == 2, out.stderr
     assert "cannot connect to Ray at '127.0.0.1:1': Connection refused" in out.stderr
     assert not (tmp_path / "s").exists()
+
+
+def test_an_address_where_another_service_listens_is_refused_not_retried(tmp_path):
+    """Before, the TCP port answering was enough: ``ray.init`` then retried a web server (or any
+    other service) for minutes, printing Ray's log lines, instead of exiting 2."""
+    with socket.create_server(("127.0.0.1", 0)) as other:  # listens, never speaks gRPC
+        address = f"127.0.0.1:{other.getsockname()[1]}"
+        args = ["sweep", "--backend", "ray", "--ray-address", address, "--tasks", "circle-3"]
+        args += ["--methods", "sac", "--interactions", "3", "--out", str(tmp_path / "s")]
+        cmd = [sys.executable, "-m", "sili_robots.cli", *args]
+        out = subprocess.run(cmd, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2, out.stderr
+    assert (
+        f"cannot connect to Ray at '{address}': something listens there but does not answer "
+        "as Ray does (gRPC) in 5 s" in out.stderr
+    )
+    assert "Traceback" not in out.stderr and not (tmp_path / "s").exists()
 
 
 def test_a_sweep_without_an_address_starts_its_own_ray_whatever_ray_address_says(tmp_path):

@@ -139,9 +139,9 @@ class RayBackend:
 
 
 def check_reachable(address: str, timeout: float = 5.0) -> None:
-    """ConfigError when nothing listens at a Ray cluster's ``host:port`` (``ray://`` too), or
-    ``auto`` finds no running cluster: ``ray.init`` would retry its connection forever,
-    printing Ray's log lines, or fail once the sweep is written."""
+    """ConfigError when nothing listens at a Ray cluster's ``host:port`` (``ray://`` too), what
+    listens there is not Ray, or ``auto`` finds no running cluster: ``ray.init`` would retry its
+    connection forever, printing Ray's log lines, or fail once the sweep is written."""
     given = address
     if address == "auto":
         address = _running_cluster()
@@ -156,12 +156,36 @@ def check_reachable(address: str, timeout: float = 5.0) -> None:
     try:
         socket.create_connection((host, int(port)), timeout=timeout).close()
     except OSError as err:
-        raise ConfigError(
-            f"cannot connect to Ray at {address!r}"
-            + (f" (--ray-address {given})" if given != address else "")
-            + f": {err.strerror or err}; is a Ray cluster's "
-            "head (`ray start --head`) running there?"
-        ) from None
+        problem = err.strerror or str(err)
+    else:
+        if _speaks_grpc(f"{host}:{port}" if ":" not in host else f"[{host}]:{port}", timeout):
+            return
+        problem = f"something listens there but does not answer as Ray does (gRPC) in {timeout:g} s"
+    raise ConfigError(
+        f"cannot connect to Ray at {address!r}"
+        + (f" (--ray-address {given})" if given != address else "")
+        + f": {problem}; is a Ray cluster's head (`ray start --head`) running there?"
+    )
+
+
+def _speaks_grpc(hostport: str, timeout: float) -> bool:
+    """Whether ``hostport`` answers a gRPC handshake, as a Ray head's GCS and Ray Client do:
+    ``ray.init`` would retry another service (a web server, say) for minutes, printing its
+    log lines. With Ray's TLS on, or without grpc, the handshake is not tried."""
+    if os.environ.get("RAY_USE_TLS", "0").lower() in ("1", "true"):
+        return True
+    try:
+        import grpc
+    except ImportError:
+        return True
+    channel = grpc.insecure_channel(hostport)
+    try:
+        grpc.channel_ready_future(channel).result(timeout=timeout)
+    except grpc.FutureTimeoutError:
+        return False
+    finally:
+        channel.close()
+    return True
 
 
 def _running_cluster() -> str:
