@@ -16,6 +16,9 @@ from sili_robots.labels import METHOD_NAMES, VARIANT_KEYS
 
 #: (column, axis label) of the values a run ends at (``final_values``)
 FINAL_METRICS = (("task_reward", "final task reward"), ("true_stability", "final true stability"))
+#: a b sweep's line: the variant but its b (the recorded setting ``B_SETTING``)
+B_SWEEP_VARIANT = tuple(k for k in VARIANT_KEYS if k != "config_beta")
+B_SETTING = "agent.sili.beta"
 
 
 def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFrame:
@@ -49,12 +52,17 @@ def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFr
 
 def _with_settings(df: pd.DataFrame, sweep_dir: Path) -> pd.DataFrame:
     """``df`` with ``settings``: what sets a run apart from the other runs of its variant
-    (``sili runs``' column, e.g. ``agent.hidden=16``), so that they are not averaged as seeds."""
+    (``sili runs``' column, e.g. ``agent.hidden=16``), so that they are not averaged as seeds;
+    and ``b_settings``: the same among the runs of its variant at any b, for the b sweep."""
     from sili_robots.sweep.inventory import settings_apart
 
     runs = df.groupby("run", sort=False)[["task", *VARIANT_KEYS]].first().reset_index()
     apart = dict(zip(runs["run"], settings_apart(runs, sweep_dir), strict=True))
-    return df.assign(settings=df["run"].map(apart))
+    across_b = settings_apart(runs, sweep_dir, B_SWEEP_VARIANT, ignore=(B_SETTING,))
+    return df.assign(
+        settings=df["run"].map(apart),
+        b_settings=df["run"].map(dict(zip(runs["run"], across_b, strict=True))),
+    )
 
 
 def with_profile(df: pd.DataFrame) -> pd.DataFrame:
@@ -67,7 +75,7 @@ def with_profile(df: pd.DataFrame) -> pd.DataFrame:
     if "task_id" not in df:
         df = df.assign(task_id="")
     if "settings" not in df:  # a table not read by load_results: its runs as one variant each
-        df = df.assign(settings="")
+        df = df.assign(settings="", b_settings="")
     if "task_args" not in df:  # tables before other task arguments were told apart
         from sili_robots.tasks.registry import task_arguments_key
 
@@ -153,7 +161,7 @@ def final_values(df: pd.DataFrame, window: int = 100) -> pd.DataFrame:
     df = with_profile(df)
     tail = df.sort_values("interaction").groupby("run").tail(window)
     cols = [m for m, _ in FINAL_METRICS]
-    ident = tail.groupby("run")[["task", *VARIANT_KEYS, "seed"]].first()
+    ident = tail.groupby("run")[["task", *VARIANT_KEYS, "settings", "b_settings", "seed"]].first()
     return ident.join(tail.groupby("run")[cols].mean()).reset_index()
 
 

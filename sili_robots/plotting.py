@@ -6,7 +6,7 @@
   by a trailing moving average before averaging.
 - b sweep (``TASK_beta.png/pdf``, tasks where SILI ran with two or more b): final task reward and
   final true stability (mean over each run's last ``window`` interactions) against b, mean and
-  std across seeds.
+  std across seeds; one line per controller, task arguments, latent kind and other settings.
 - ``overview.png/pdf``: every task's task reward and true stability, one row per task (the
   layout of the paper's results figure).
 
@@ -242,17 +242,19 @@ def beta_sweep(df: pd.DataFrame, task: str, window: int = 100, method: str = "si
     finals = final_values(rows, window)
     fig = Figure(figsize=(10, 4.0), layout="constrained")
     axes = fig.subplots(1, len(FINAL_METRICS))
-    keys = ["controller", "task_args", "latent"]
+    keys = ["controller", "task_args", "latent", "b_settings"]
     groups = [tuple(g) for g in finals[keys].fillna("").drop_duplicates().values]
     shades = _shades([(method, g) for g in groups])  # the method's colour, then its tints
-    for controller, task_args, latent in groups:
-        part = finals[(finals[keys].fillna("") == (controller, task_args, latent)).all(axis=1)]
-        color = shades[(controller, task_args, latent)]
+    for group in groups:
+        controller, task_args, latent, settings = group
+        part = finals[(finals[keys].fillna("") == group).all(axis=1)]
+        color = shades[group]
         label = METHOD_NAMES.get(method, method)  # plus what sets the lines apart
         if len({g[0] for g in groups}) > 1:
             label += f" [{controller or 'default'}]"
         label += arguments_label(task_args) if len({g[1] for g in groups}) > 1 else ""
         label += f" ({latent})" if len({g[2] for g in groups}) > 1 else ""
+        label += f" [{settings}]" if len({g[3] for g in groups}) > 1 and settings else ""
         for ax, (metric, ylabel) in zip(axes, FINAL_METRICS, strict=True):
             stats = part.groupby("config_beta")[metric].agg(["mean", lambda s: s.std(ddof=0)])
             stats.columns = ["mean", "std"]

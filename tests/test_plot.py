@@ -190,6 +190,31 @@ def test_runs_of_other_settings_are_curves_of_their_own_not_seeds(sweep_dir, tmp
     assert [ln.get_label() for ln in ax.get_lines()].count("SILI b=0.5") == 1  # the others: one
 
 
+def test_b_sweep_runs_of_other_settings_are_lines_of_their_own_not_seeds(sweep_dir, tmp_path):
+    """The b-sweep figure averaged SILI's seed 1, trained at another hidden size at each b, with
+    seed 0 as if it were a seed; its settings are told apart across b, b itself left out."""
+    copy = tmp_path / "sweep"
+    shutil.copytree(sweep_dir, copy)
+    for run in ("circle-3__sili-b0.5__s1", "circle-3__sili-b1__s1"):
+        config = copy / "runs" / run / "config.json"
+        record = json.loads(config.read_text())
+        hidden = record["run"]["agent"]["hidden"]
+        record["run"]["agent"]["hidden"] = hidden + 1
+        config.write_text(json.dumps(record))
+    fig = beta_sweep(load_results(copy), "circle-3", window=4)
+    ax = next(ax for ax in fig.axes if ax.get_gid() == "task_reward")
+    table = pd.read_csv(sweep_dir / "results.csv")
+    for seed, label in (
+        (0, f"SILI [agent.hidden={hidden}]"),
+        (1, f"SILI [agent.hidden={hidden + 1}]"),
+    ):
+        rows = table[(table.method == "sili") & (table.seed == seed)].sort_values("interaction")
+        finals = rows.groupby("config_beta")["task_reward"].apply(lambda s: s.tail(4).mean())
+        xy = _line(ax, label).get_xydata()
+        np.testing.assert_array_equal(xy[:, 0], [0.5, 1.0])
+        np.testing.assert_allclose(xy[:, 1], finals.to_numpy())
+
+
 def test_a_curve_of_one_interaction_is_drawn_as_a_point(tmp_path):
     run = {"task": "circle-3", "run": "r", "seed": 0, "interaction": 0, "task_reward": -40.0}
     df = pd.DataFrame([run]).assign(

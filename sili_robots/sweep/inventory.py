@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Collection, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -57,14 +58,19 @@ def inventory(directory: Path) -> pd.DataFrame:
     return table.sort_values(order, kind="stable").reset_index(drop=True)
 
 
-def settings_apart(runs: pd.DataFrame, directory: Path) -> pd.Series:
+def settings_apart(
+    runs: pd.DataFrame,
+    directory: Path,
+    variant: Sequence[str] = VARIANT_KEYS,
+    ignore: Collection[str] = (),
+) -> pd.Series:
     """Per run, the settings (``key=value``) in which it differs from other runs of its task
-    and variant; "" when they all agree."""
+    and ``variant``, leaving out the settings in ``ignore``; "" when they all agree."""
     flat = {d.name: _flat(recorded_run(d)) for d in run_dirs(directory)}
     out = pd.Series("", index=runs.index)
-    for _, group in runs.groupby(["task", *VARIANT_KEYS], sort=False, dropna=False):
+    for _, group in runs.groupby(["task", *variant], sort=False, dropna=False):
         configs = [flat[name] for name in group["run"]]
-        keys = sorted({k for c in configs for k in c})
+        keys = sorted({k for c in configs for k in c} - set(ignore))
         apart = [k for k in keys if len({json.dumps(c.get(k)) for c in configs}) > 1]
         for idx, config in zip(group.index, configs, strict=True):
             out[idx] = ", ".join(f"{k}={json.dumps(config.get(k))}" for k in apart)
