@@ -82,8 +82,10 @@ class AgentFeedback(gym.Wrapper):
 
     def step(self, action: np.ndarray):
         obs, r, term, trunc, info = self.env.step(action)
-        self._steps.append((obs, np.asarray(action, np.float32), float(r)))
-        self.agent.observe_step(self._last_obs, action, float(r), obs)
+        space = self.env.action_space  # the agent learns from the action the task applied
+        applied = np.clip(np.asarray(action, np.float32), space.low, space.high)
+        self._steps.append((obs, applied, float(r)))
+        self.agent.observe_step(self._last_obs, applied, float(r), obs)
         self._last_obs = obs
         return obs, r, term, trunc, info
 

@@ -638,6 +638,18 @@ def test_another_game_on_model_env_starts_the_agent_with_no_history(tmp_path):
     np.testing.assert_array_equal(model.agent.policy_input(obs)[len(obs) :], 0.0)
 
 
+def test_model_env_feeds_the_agent_the_action_the_task_applied(tmp_path):
+    """The task clips an action outside its box (as gymnasium's ClipAction); the agent was fed
+    the action as given, so it inferred z from actions that were never played."""
+    model = SILI("circle-3", method="sili", settings=FAST_AGENT, run_dir=tmp_path / "r").learn(2)
+    model.env.reset()
+    for _ in range(model.env.unwrapped.horizon):
+        model.env.step(np.array([5.0, -7.0]))
+    model.env.reset()  # the interaction is fed
+    assert model.agent.buffer.n == 3
+    np.testing.assert_array_equal(model.agent.buffer.act[2], np.tile([1.0, -1.0], (50, 1)))
+
+
 def test_evaluate_on_a_task_instance_refuses_another_task_as_load_does(tmp_path):
     """evaluation.evaluate restored a Circle (3 Goals) game into Circle (8 Goals) and returned
     its numbers; a task of other sizes raised numpy's or torch's error."""
