@@ -36,6 +36,24 @@ def test_the_task_examples_run():
     assert oracle.observation_space.shape[0] == plain.observation_space.shape[0] + 2
 
 
+def test_the_own_task_example_is_a_gymnasium_task_that_trains(tmp_path):
+    from gymnasium.utils.env_checker import check_env
+
+    from sili_robots import SILI
+
+    (block,) = [b for b in _python_blocks() if "class TwoDoorsEnv" in b]
+    scope: dict = {}
+    exec(compile(block, "README.md", "exec"), scope)
+    env = scope["TwoDoorsEnv"]()
+    check_env(env, skip_render_check=True)
+    door = env.reset(seed=0)[1]["strategy"][0]
+    for _ in range(env.horizon):  # staying in the middle switches the door (T^z)
+        env.step([0.0])
+    assert env.reset()[1]["strategy"][0] == -door
+    model = SILI(scope["TwoDoorsEnv"](), method="sili", settings=FAST_AGENT, run_dir=tmp_path / "r")
+    assert model.learn(3).agent.buffer.n == 3
+
+
 def test_the_readme_is_a_guide_not_a_notebook():
     lines = README.read_text().splitlines()
     assert len(lines) <= 350 and max(map(len, lines)) <= 200
