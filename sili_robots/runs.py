@@ -465,6 +465,28 @@ def recorded_run(run_dir: Path) -> dict[str, Any]:
     return json.loads(json.dumps(run))
 
 
+#: what a run's config may say otherwise than its checkpoint: its budget (extended) and its
+#: machine's settings; the task, method and seed are checked on their own, the task arguments
+#: when the task is built (an agent may play on its task built with others)
+NOT_CHECKPOINTED = ("interactions", "task", "task_id", "method", "seed", *MACHINE_SETTINGS)
+
+
+def _other_settings(recorded: Any, cfg: RunConfig) -> list[tuple[str, Any, Any]]:
+    """The settings in which the run a checkpoint recorded differs from ``cfg`` (older
+    checkpoints record none: nothing to compare)."""
+    if not isinstance(recorded, dict):
+        return []
+    try:
+        recorded = RunConfig.from_dict(recorded).to_dict()  # in today's layout, as cfg is
+    except (ConfigError, TypeError, KeyError, AttributeError, ValueError):
+        return []  # another version's layout: the task, method and seed were compared
+    return [
+        d
+        for d in differences(recorded, cfg.to_dict())
+        if d[0] not in NOT_CHECKPOINTED and not d[0].startswith("env_kwargs")
+    ]
+
+
 def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
     """The last checkpoint (in today's layout), or None before the first."""
     path = Path(run_dir) / CHECKPOINT
@@ -495,6 +517,14 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
             f"{path} is a checkpoint of {', '.join(theirs)}, not of the run in {run_dir} "
             f"({cfg.task_id or cfg.task}, {cfg.method}, seed {cfg.seed}): was it copied from "
             "another run? Train this run again (sili train ... --overwrite)"
+        )
+    other = _other_settings(state.get("run"), cfg)
+    if other:
+        shown = "; ".join(f"{key} {theirs!r} there, {ours!r} here" for key, theirs, ours in other)
+        raise ConfigError(
+            f"{path} is a checkpoint of a run with other settings ({shown[:600]}), not of the run "
+            f"{run_dir / CONFIG} describes: was it copied from another run, or the config "
+            "edited? Train this run again (sili train ... --overwrite)"
         )
     done, wall = state.get("interaction"), state.get("wall_time")
     if not (

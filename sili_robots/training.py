@@ -131,6 +131,7 @@ def train(
                             "task": cfg.task_id or cfg.task,
                             "method": cfg.method,
                             "seed": cfg.seed,
+                            "run": cfg.to_dict(),  # and one of other settings
                             "agent": agent.state_dict(),
                             "game": env.unwrapped.game_state(),
                             "wall_time": elapsed0 + time.perf_counter() - t0,

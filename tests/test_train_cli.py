@@ -489,7 +489,7 @@ def test_a_checkpoint_of_another_run_exits_2_and_leaves_the_run_as_it_was(tmp_pa
         capsys.readouterr().err
     )
     sac = torch.load(other / "checkpoint.pt", weights_only=False)
-    del sac["method"], sac["seed"]  # as checkpoints of earlier versions: its networks are told
+    del sac["method"], sac["seed"], sac["run"]  # as earlier versions': its networks are told
     torch.save(sac, run / "checkpoint.pt")
     said = f"{run / 'checkpoint.pt'} does not fit the agent {run / 'config.json'} describes"
     assert main(["train", "--resume", str(run), "--interactions", "3", "--no-progress"]) == 2
@@ -528,6 +528,32 @@ def test_a_checkpoint_of_another_run_exits_2_and_leaves_the_run_as_it_was(tmp_pa
         assert "checkpoint.pt is a checkpoint of seed 1, not of the run in" in (
             capsys.readouterr().err
         )
+
+
+def test_a_checkpoint_of_a_run_of_other_settings_is_refused_by_them(tmp_path, capsys):
+    """Same task, method and seed, networks of the same sizes: a checkpoint copied from a run of
+    another learning rate (or under a config.json edited since) went on as if it were this run's;
+    a longer budget and another machine's settings are the same run."""
+    run, other = tmp_path / "run", tmp_path / "other"
+    args = ["train", "--task", "circle-3", "--interactions", "2", *FAST, "--no-progress"]
+    assert main([*args, "--out", str(run)]) == 0
+    assert main([*args, "--set", "sac.lr=0.001", "--out", str(other)]) == 0
+    shutil.copy(other / "checkpoint.pt", run / "checkpoint.pt")
+    rows = (run / "metrics.csv").read_text()
+    capsys.readouterr()
+    for command in (["eval", str(run)], ["train", "--resume", str(run), "--interactions", "3"]):
+        assert main(command) == 2
+        err = capsys.readouterr().err
+        assert (
+            "checkpoint.pt is a checkpoint of a run with other settings (agent.sac.lr 0.001 " in err
+        )
+        assert "was it copied from another run, or the config edited?" in err
+    assert (run / "metrics.csv").read_text() == rows and run_state(run) == "done"
+    record = json.loads((other / "config.json").read_text())
+    record["run"]["threads"] = 2  # another machine's setting: the same run, extended
+    (other / "config.json").write_text(json.dumps(record))
+    assert main(["train", "--resume", str(other), "--interactions", "3", "--no-progress"]) == 0
+    assert main(["eval", str(other), "--interactions", "1"]) == 0
 
 
 def test_a_checkpoint_with_a_bad_count_is_refused_before_the_run_changes(tmp_path, capsys):
