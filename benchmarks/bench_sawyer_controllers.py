@@ -15,6 +15,11 @@ controller:
   that moved the commanded target;
 - time per control step: wall time of ``env.step`` (controller + 25 physics substeps), mean.
 
+And, pressing into the table: for each goal a fresh interaction reaches it for ``PRESS_AFTER``
+steps, then commands straight down at full speed for the rest (the table stops the hand; an agent
+overshooting a goal does this); reported is the hand's largest sideways slide from where the
+pressing began (mm, worst goal), with no sideways command.
+
     python benchmarks/bench_sawyer_controllers.py [--extra 14] [--seed 0]
 """
 
@@ -38,6 +43,8 @@ from sili_robots.tasks.sawyer_scene import GOALS, PLANE_Z
 BOX_LOW = np.array([-0.25, -0.35, 0.83])
 BOX_HIGH = np.array([0.35, 0.35, 1.25])
 REACHED = 0.01  # m
+PRESS_AFTER = 15  # steps toward a goal before pressing down
+DOWN = np.array([0.0, 0.0, -1.0], np.float32)
 
 
 def targets(extra: int, seed: int) -> np.ndarray:
@@ -83,6 +90,27 @@ def run(controller: str, points: np.ndarray) -> dict[str, object]:
     }
 
 
+def press_slide(controller: str) -> float:
+    """The largest sideways slide (mm, worst goal) while pressing down onto the table."""
+    env = make_task("sawyer-reach", controller=controller)
+    task = env.unwrapped
+    env.reset(seed=0)
+    slides = []
+    for i, goal in enumerate(GOALS):
+        if i:
+            env.reset()
+        for _ in range(PRESS_AFTER):
+            env.step(action_toward(task, goal))
+        start = task.scene.ee_pos[:2].copy()
+        slide = 0.0
+        for _ in range(task.horizon - PRESS_AFTER):
+            env.step(DOWN)
+            slide = max(slide, float(np.linalg.norm(task.scene.ee_pos[:2] - start)))
+        slides.append(slide)
+    env.close()
+    return 1000 * max(slides)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -96,7 +124,7 @@ def main() -> None:
     print(f"{n} targets, H = 50 steps of 50 ms; success = within {REACHED * 100:.0f} cm at the end")
     header = (
         f"{'controller':<15} {'success':>8} {'median mm':>10} {'worst mm':>9} "
-        f"{'steps to 1cm':>13} {'lag mm':>7} {'ms/step':>8}"
+        f"{'steps to 1cm':>13} {'lag mm':>7} {'ms/step':>8} {'press slide mm':>15}"
     )
     print(header)
     results = {}
@@ -105,7 +133,8 @@ def main() -> None:
         results[name] = r
         print(
             f"{name:<15} {r['success']:>5}/{n:<2} {r['median_mm']:>10.2f} {r['worst_mm']:>9.2f} "
-            f"{r['steps_to_1cm']:>13.1f} {r['lag_mm']:>7.1f} {r['ms_per_step']:>8.2f}"
+            f"{r['steps_to_1cm']:>13.1f} {r['lag_mm']:>7.1f} {r['ms_per_step']:>8.2f} "
+            f"{press_slide(name):>15.1f}"
         )
     for name, r in results.items():
         for i in r["failed"]:

@@ -7,8 +7,11 @@ arm's reach does not wind the target up), the target orientation stays the fixed
 pointing down" rotation. Controllers differ only in how they track that pose, which makes the
 ablation a comparison of tracking, as long as the leash does not bind: a controller that lags by
 most of it (robosuite's OSC, about 4 cm) gets its full-speed commands shortened, so there an
-action moves the target less. A controller owns physics stepping for its control step
-because some (robosuite's OSC) must recompute torques at every physics substep.
+action moves the target less. Pressed down onto the table, mink and joint velocity keep the hand
+where it met the table; robosuite's OSC lets it slide sideways across it (its force toward a
+target below the table top; ``benchmarks/bench_sawyer_controllers.py`` measures the slide).
+A controller owns physics stepping for its control step because some (robosuite's OSC) must
+recompute torques at every physics substep.
 """
 
 from __future__ import annotations
