@@ -9,6 +9,7 @@ finished, ``summary.json``.
 from __future__ import annotations
 
 import contextlib
+import errno
 import io
 import json
 import math
@@ -487,6 +488,10 @@ def _other_settings(recorded: Any, cfg: RunConfig) -> list[tuple[str, Any, Any]]
     ]
 
 
+#: what ``torch.load`` raises on a damaged checkpoint (and OSError EINVAL, at some cut lengths)
+UNREADABLE = (pickle.UnpicklingError, RuntimeError, EOFError, ValueError, KeyError, TypeError)
+
+
 def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
     """The last checkpoint (in today's layout), or None before the first."""
     path = Path(run_dir) / CHECKPOINT
@@ -495,8 +500,10 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
     try:
         state = torch.load(path, weights_only=False)
         state["agent"] = migrate_agent_state(state["agent"])
-    except (pickle.UnpicklingError, RuntimeError, EOFError, ValueError, KeyError, TypeError) as err:
-        raise ConfigError(
+    except (*UNREADABLE, OSError) as err:
+        if isinstance(err, OSError) and err.errno != errno.EINVAL:
+            raise  # the disk's (unreadable, refused): named as such by the command
+        raise ConfigError(  # (torch's zip reader raises EINVAL at some cut lengths)
             f"{path} is damaged ({first_line(err)}); the run can be neither resumed nor "
             "played from it: train it again (sili train ... --overwrite)"
         ) from None

@@ -464,7 +464,12 @@ def test_a_damaged_checkpoint_or_config_exits_2_naming_the_file(tmp_path):
         == 0
     )
     ckpt = run / "checkpoint.pt"
-    ckpt.write_bytes(ckpt.read_bytes()[:1000])  # cut short, as by a full disk
+    whole = ckpt.read_bytes()
+    for cut in (5000, 60000):  # torch's zip reader raised OSError (EINVAL): a traceback
+        ckpt.write_bytes(whole[:cut])
+        res = _sili("eval", run, "--interactions", 1)
+        assert res.returncode == 2 and f"{ckpt} is damaged" in res.stderr, res.stderr
+    ckpt.write_bytes(whole[:1000])  # cut short, as by a full disk
     res = _sili("train", "--resume", run, "--interactions", 3)
     assert res.returncode == 2 and f"{ckpt} is damaged" in res.stderr, res.stderr
     # refused before the run changed: still a finished run of 2
