@@ -31,8 +31,9 @@ from typing import Any
 
 import numpy as np
 
+from sili_robots.agent.config import LARGEST_INT
 from sili_robots.atomic import write_text
-from sili_robots.errors import ConfigError, check_seed
+from sili_robots.errors import MAX_SEED, ConfigError, check_seed
 from sili_robots.policies.scripted import KIND_DESCRIPTIONS, available_kinds, scripted_policy
 from sili_robots.rollout import run_interactions
 from sili_robots.tasks import make_task, task_spec
@@ -55,21 +56,33 @@ def default_interactions(task: str) -> int:
 def check_games(games: Any) -> int:
     """A count of games as an integer >= 1, or ConfigError naming it."""
     g = _integer(games)
-    if g is None or g < 1:
-        raise ConfigError(f"--games must be an integer >= 1, got {games!r}")
+    if g is None or not 1 <= g <= LARGEST_INT:
+        raise ConfigError(f"--games must be an integer in [1, {LARGEST_INT}], got {games!r}")
     return g
 
 
-def check_counts(interactions: Any, games: Any = None, strategies: int = 1) -> tuple[int, int]:
+def check_counts(
+    interactions: Any, games: Any = None, strategies: int = 1, seed: int = DEFAULT_SEED
+) -> tuple[int, int]:
     """(interactions, games) as integers: at least two interactions per game (a game's first is
     not counted). ``games=None`` takes the smallest multiple of ``strategies`` (how many first
     strategies the games cycle through) that is at least ``DEFAULT_GAMES``, fewer if the
-    interactions are few."""
-    n = _integer(interactions)
-    if n is None or n < 2:
+    interactions are few. The games' seeds (``seed``, ``seed + 1``, ...) must be seeds."""
+    n, g = _counts(interactions, games, strategies)
+    if seed + g - 1 > MAX_SEED:
         raise ConfigError(
-            f"--interactions must be an integer >= 2 (a game's first interaction is not "
-            f"counted), got {interactions!r}"
+            f"--seed {seed} gives {g} games the seeds {seed} to {seed + g - 1}, past the largest "
+            f"seed {MAX_SEED}: give --seed {MAX_SEED - g + 1} or lower, or fewer --games"
+        )
+    return n, g
+
+
+def _counts(interactions: Any, games: Any, strategies: int) -> tuple[int, int]:
+    n = _integer(interactions)
+    if n is None or not 2 <= n <= LARGEST_INT:
+        raise ConfigError(
+            f"--interactions must be an integer in [2, {LARGEST_INT}] (a game's first "
+            f"interaction is not counted), got {interactions!r}"
         )
     if games is None:
         balanced = strategies * -(-DEFAULT_GAMES // strategies)
@@ -92,12 +105,14 @@ def _integer(value: Any) -> int | None:
         return None
 
 
-def counts_for(env: Any, task: str, interactions: Any, games: Any) -> tuple[int, int]:
+def counts_for(
+    env: Any, task: str, interactions: Any, games: Any, seed: int = DEFAULT_SEED
+) -> tuple[int, int]:
     """(interactions, games) of ``task``'s bounds on its instance ``env``: its defaults where
     None (the games cycle through its first strategies, ``check_counts``)."""
     choices = env.unwrapped.strategy_choices()
     asked = default_interactions(task) if interactions is None else interactions
-    return check_counts(asked, games, len(choices) if choices else 1)
+    return check_counts(asked, games, len(choices) if choices else 1, seed)
 
 
 def default_games(task: str, interactions: Any = None) -> int:
@@ -124,7 +139,7 @@ def compute_bounds(
     env = make_task(spec.gym_id, **env_kwargs)
     try:
         choices = env.unwrapped.strategy_choices()
-        n, g = counts_for(env, task, interactions, games)
+        n, g = counts_for(env, task, interactions, games, seed)
         lengths = [n // g + (1 if i < n % g else 0) for i in range(g)]
         kinds = [k for k in BOUND_KINDS if k in available_kinds(env)]
         bounds = {}

@@ -68,9 +68,18 @@ def test_bounds_work_for_driving_in_its_own_process():
     "args, message",
     [
         (["nope"], "unknown task 'nope'; allowed: circle-3"),
-        (["circle-3", "--interactions", "0"], "--interactions must be an integer >= 2"),
+        (["circle-3", "--interactions", "0"], "--interactions must be an integer in [2, 2147"),
         (["circle-3", "--interactions", "-3"], "got '-3'"),
-        (["circle-3", "--games", "0"], "--games must be an integer >= 1, got '0'"),
+        (["circle-3", "--interactions", "1e20"], "got '1e20'"),
+        (["circle-3", "--interactions", "10" * 10], "got '1010101010"),  # it ran until killed
+        (["circle-3", "--games", "0"], "--games must be an integer in [1, 2147483647], got '0'"),
+        (["circle-3", "--games", "3" + "0" * 9], "got '3000000000'"),
+        (  # the second game's seed would be 2**32, not a seed
+            ["circle-3", "--interactions", "4", "--games", "2", "--seed", "4294967295"],
+            "--seed 4294967295 gives 2 games the seeds 4294967295 to 4294967296, past the largest "
+            "seed 4294967295: give --seed 4294967294 or lower, or fewer --games",
+        ),
+        (["circle-3", "--seed", "4294967290"], "gives 12 games the seeds 4294967290 to"),
         (["circle-3", "--games", "-1"], "got '-1'\n"),  # the user's count, not the default's
         (["circle-3", "--interactions", "4", "--games", "3"], "must be >= 6 for 3 games"),
         ([], "give either a TASK (e.g. circle-3) or --all"),
