@@ -44,8 +44,8 @@ def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFr
         df = df[df["finished"].astype(bool)]
     if df.empty:
         raise ConfigError(
-            f"{sweep_dir} has no finished runs yet (sili plot --include-unfinished plots "
-            "partial runs)"
+            f"{sweep_dir} has no finished runs yet (`sili runs` shows how far they are; sili "
+            "plot --include-unfinished plots partial runs)"
         )
     return _with_settings(df, sweep_dir)
 

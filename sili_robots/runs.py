@@ -496,6 +496,11 @@ def load_checkpoint(run_dir: Path) -> dict[str, Any] | None:
     """The last checkpoint (in today's layout), or None before the first."""
     path = Path(run_dir) / CHECKPOINT
     if not path.is_file():
+        if path.exists():  # (not "no checkpoint yet, train it first")
+            raise ConfigError(
+                f"{path} is not a checkpoint file (a folder?); the run can be neither resumed "
+                "nor played from it: train it again (sili train ... --overwrite)"
+            )
         return None
     try:
         state = torch.load(path, weights_only=False)

@@ -235,7 +235,7 @@ def test_a_curve_of_one_interaction_is_drawn_as_a_point(tmp_path):
     assert line.get_marker() == "o"  # a line of one point draws nothing
 
 
-def test_unfinished_runs_are_left_out_unless_asked(sweep_dir, tmp_path):
+def test_unfinished_runs_are_left_out_unless_asked(sweep_dir, tmp_path, capsys):
     copy = tmp_path / "sweep"
     shutil.copytree(sweep_dir, copy)
     (copy / "runs" / "circle-3__sac__s1" / "summary.json").unlink()
@@ -255,6 +255,9 @@ def test_unfinished_runs_are_left_out_unless_asked(sweep_dir, tmp_path):
     for summary in (copy / "runs").glob("*/summary.json"):  # none finished: the command says so
         summary.unlink()
     assert main(["plot", str(copy), "--tasks", "circle-3", "--formats", "png"]) == 2
+    assert "has no finished runs yet (`sili runs` shows how far they are" in capsys.readouterr().err
+    assert main(["claims", str(copy)]) == 2  # its hint is not plot's alone
+    assert "has no finished runs yet (`sili runs` shows how far they are" in capsys.readouterr().err
     figures = copy / "figures"
     assert not figures.exists()
     args = ["plot", str(copy), "--tasks", "circle-3", "--formats", "png", "--include-unfinished"]
@@ -284,6 +287,11 @@ def test_plot_of_a_non_sweep_exits_2(tmp_path, capsys):
         )
         assert main([*command[:1], str(tmp_path / "run"), *command[1:]]) == 2
         assert f"{tmp_path / 'run'} is a run, not a sweep or a collection" in (
+            capsys.readouterr().err
+        )
+        config = tmp_path / "run" / "config.json"  # was "holds no runs (no runs/*/config.json)"
+        assert main([*command[:1], str(config), *command[1:]]) == 2
+        assert f"{config} is a file, not a folder; give a directory written by" in (
             capsys.readouterr().err
         )
     assert main(["plot", str(tmp_path), "--formats", "gif"]) == 2

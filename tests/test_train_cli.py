@@ -469,6 +469,11 @@ def test_a_damaged_checkpoint_or_config_exits_2_naming_the_file(tmp_path):
         ckpt.write_bytes(whole[:cut])
         res = _sili("eval", run, "--interactions", 1)
         assert res.returncode == 2 and f"{ckpt} is damaged" in res.stderr, res.stderr
+    ckpt.unlink()
+    ckpt.mkdir()  # was "has no checkpoint yet (no checkpoint.pt); train it first"
+    res = _sili("eval", run, "--interactions", 1)
+    assert res.returncode == 2 and f"{ckpt} is not a checkpoint file (a folder?)" in res.stderr
+    ckpt.rmdir()
     ckpt.write_bytes(whole[:1000])  # cut short, as by a full disk
     res = _sili("train", "--resume", run, "--interactions", 3)
     assert res.returncode == 2 and f"{ckpt} is damaged" in res.stderr, res.stderr

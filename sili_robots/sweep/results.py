@@ -75,6 +75,8 @@ def check_exists(directory: Path) -> None:
     """A results directory that can be read: it exists and is not a single run's."""
     if not Path(directory).exists():
         raise ConfigError(f"{directory} does not exist; {RESULTS_DIR_KIND}")
+    if not Path(directory).is_dir():
+        raise ConfigError(f"{directory} is a file, not a folder; {RESULTS_DIR_KIND}")
     if (Path(directory) / CONFIG).is_file():
         raise ConfigError(
             f"{directory} is a run, not a sweep or a collection; give the folder that holds its "
