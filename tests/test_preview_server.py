@@ -55,16 +55,18 @@ def test_live_server_serves_the_same_scene_and_stops(tmp_path):
     with LiveServer() as server:
         pid = server.pid
         assert _alive(pid) and server.web_url.startswith("http://127.0.0.1:")
-        name, env, pol, label = make_env_and_policy("circle-3")
-        prev = Preview.record(env, pol, 2, 0, name, label, live=server.visualizer)
+        name, env, pol, label = make_env_and_policy("speaker-listener")
+        prev = Preview.record(env, pol, 3, 0, name, label, live=server.visualizer)
         env.close()
         # meshcat's own static_html() from the server holds exactly the file's commands
         served = set(re.findall(r'base64,([A-Za-z0-9+/=]+)"', server.visualizer.static_html()))
         assert served == {base64.b64encode(c).decode() for c in prev.recorder.commands()}
-        # and a browser pointed at the server sees the scene where it belongs
+        # and a browser pointed at the server sees the scene where it belongs, in every frame
+        # (meshcat's replay sent the animation before the objects: only the last frame was right)
         with Browser() as b:
-            shot = prev.render_live(server.web_url, browser=b)
-        assert shot.problems() == []
+            for frame in (0, 25, None):
+                shot = prev.render_live(server.web_url, frame, browser=b)
+                assert shot.problems() == [], frame
         assert any(u.startswith(server.web_url) for u in shot.page.requests)
     assert _wait_dead(pid)
 

@@ -60,7 +60,8 @@ class SceneRecorder:
             raise ValueError(f"meshcat command {kind!r} cannot be recorded")
 
     def commands(self) -> list[bytes]:
-        """Packed commands in the order meshcat's server replays a scene (animation last)."""
+        """Packed commands in the order the live server replays a scene (``meshcat_child``):
+        meshcat's tree walk, the animation after every object."""
         out: list[bytes] = []
         for node in walk(self.tree):
             if node.object is not None:

@@ -16,6 +16,7 @@ import sys
 import threading
 import time
 
+from meshcat.servers.tree import walk
 from meshcat.servers.zmqserver import ZMQWebSocketBridge
 
 LOOPBACK = "127.0.0.1"
@@ -23,12 +24,27 @@ POLL = 0.2
 
 
 class LoopbackBridge(ZMQWebSocketBridge):
-    """meshcat's bridge with its web server listening on the loopback only."""
+    """meshcat's bridge with its web server listening on the loopback only, replaying a scene
+    to a page that connects as the file does (``SceneRecorder.commands``)."""
 
     def make_app(self):
         app = super().make_app()
         app.listen = functools.partial(app.listen, address=LOOPBACK)
         return app
+
+    def send_scene(self, websocket):
+        """Every object, property and transform, then the animations. meshcat's own replay sends
+        a node's animation before its children's objects, so the page's tracks bound to objects
+        not made yet: the live view animated a scene the file shows right, wrongly."""
+        animations = []
+        for node in walk(self.tree):
+            for data in (node.object, *node.properties, node.transform):
+                if data is not None:
+                    websocket.write_message(data, binary=True)
+            if node.animation is not None:
+                animations.append(node.animation)
+        for data in animations:
+            websocket.write_message(data, binary=True)
 
 
 def exit_with(parent: int) -> None:
