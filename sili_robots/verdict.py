@@ -11,7 +11,7 @@ import pandas as pd
 from sili_robots.bounds import stored_bounds
 from sili_robots.errors import ConfigError, check_count
 from sili_robots.labels import METHOD_NAMES
-from sili_robots.metrics import HOLDING, METRICS, kept_fraction, run_metrics
+from sili_robots.metrics import HOLDING, METRICS, kept, kept_fraction, run_metrics
 from sili_robots.runs import MACHINE_SETTINGS, RunConfig, read_config, run_differences
 from sili_robots.tasks.registry import other_task_arguments
 
@@ -28,6 +28,14 @@ def _rows(run_dir: Path) -> pd.DataFrame:
 
 def _last(run_dir: Path, window: int) -> pd.DataFrame:
     return _rows(run_dir).tail(check_count("window", window))
+
+
+def _share(stability: float) -> str:
+    """``stability`` as a percentage that a miss never rounds up to ``HOLDING`` (89.8%, not
+    90% next to "did not hold")."""
+    rounded = f"{stability:.0%}"
+    missed = stability < HOLDING and float(rounded[:-1]) >= 100 * HOLDING
+    return f"{stability:.1%}" if missed else rounded
 
 
 def random_only(cfg: RunConfig, interactions: int) -> str:
@@ -95,13 +103,14 @@ def verdict(run_dir: Path, window: int = 50) -> str:
             if still:
                 line += f" (standing still: {still['stability']:.0%})"
     else:
-        kept = f"kept its strategy in {stability:.0%} of its last {len(tail)} interactions"
+        judged = int(kept(tail).notna().sum())  # a game's first interaction keeps nothing
+        kept_text = f"kept its strategy in {_share(stability)} of its last {judged} interactions"
         if stability < HOLDING:
-            kept += f", {HOLDING:.0%} needed"
+            kept_text += f", {HOLDING:.0%} needed"
         if still:
-            kept += f"; standing still: {still['stability']:.0%}"
+            kept_text += f"; standing still: {still['stability']:.0%}"
         outcome = "held" if stability >= HOLDING else "did not hold"
-        line = f"{name} {outcome} the opponent ({kept})"
+        line = f"{name} {outcome} the opponent ({kept_text})"
     line += f" and earned {reward:.1f} per interaction"
     refs = []
     if still:
@@ -143,7 +152,7 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
         tail = _last(run_dir, window)
         reward = float(tail["task_reward"].mean())
         stability = kept_fraction(tail)
-        said = f"seed {seed} ({'-' if stability is None else f'{stability:.0%}'}, "
+        said = f"seed {seed} ({'-' if stability is None else _share(stability)}, "
         said += f"{reward:.1f} per interaction"
         said += f"; {len(tail)} interactions, too few to tell)" if len(tail) < window else ")"
         judged.append((_worked(tail, still, window), reward, said, run_dir))

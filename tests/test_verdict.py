@@ -106,6 +106,25 @@ def test_true_stability_leaves_out_the_games_first_interaction_everywhere(tmp_pa
     assert table["true_stability"].iloc[1:].tolist() == [0.0, 1.0]
 
 
+def test_the_verdict_counts_the_interactions_it_judged_and_never_rounds_a_miss_up(tmp_path):
+    """A run of exactly the window's length is judged on one fewer (its game's first keeps
+    nothing): it said "of its last 50"; 44 of 49 kept (89.8%) printed "90%, 90% needed"."""
+    run = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--interactions", "3", "--out", str(run)]
+    assert main([*args, *FAST_ARGS, "--no-progress"]) == 0
+    rows = pd.read_csv(run / "metrics.csv")
+    fifty = pd.concat([rows] * 17, ignore_index=True).head(50)
+    fifty["interaction"], fifty["strategy_changed"] = range(50), 0
+    fifty.loc[[10, 20, 30, 40, 45], "strategy_changed"] = 1  # 44 of the 49 after the first
+    fifty.to_csv(run / "metrics.csv", index=False)
+    line = verdict(run)
+    assert line.startswith(
+        "SILI did not hold the opponent (kept its strategy in 89.8% of its last 49 interactions, "
+        "90% needed"
+    )
+    assert ": not seed 0 (89.8%, -" in across_seeds([run])[0]
+
+
 def test_a_run_with_other_task_arguments_is_not_read_against_the_defaults_references(
     tmp_path, capsys
 ):
