@@ -311,8 +311,10 @@ def make_run_config(
         for path, value in addon_settings.items():
             cfg.set(path, value)
     except UnknownSetting as err:  # name every setting, the agent's and the add-ons'
-        allowed = [  # the method is chosen itself, never set
-            p for p in paths(AgentConfig) + paths(AddonsConfig, "addons.") if p != "method"
+        allowed = [  # the method and the profile are chosen themselves, never set
+            p
+            for p in paths(AgentConfig) + paths(AddonsConfig, "addons.")
+            if p not in ("method", "profile")
         ]
         raise ConfigError(
             f"unknown setting {err.name!r}; allowed: {', '.join(allowed)} "

@@ -455,6 +455,10 @@ def test_mistyped_settings_fail_by_name():
     for name in ("sac.lrr", "lrr"):  # whichever layer refuses it, the whole list with flat names
         with pytest.raises(ConfigError, match=r"addons.filter.eps, .* flat names .*latent_filter"):
             make_run_config("circle-3", "sili", 0, 5, settings={name: 0.1})
+    with pytest.raises(ConfigError) as listed:  # neither is a setting: each is chosen itself
+        make_run_config("circle-3", "sili", 0, 5, settings={"foo": 1})
+    allowed = str(listed.value).split("allowed: ")[1].split(" (or")[0].split(", ")
+    assert "sac.lr" in allowed and "method" not in allowed and "profile" not in allowed
     assert (cfg.sac.lr, cfg.hidden, cfg.sili.scale, cfg.sac.target_entropy) == (1.0, 64, None, -3)
     assert isinstance(cfg.hidden, int) and isinstance(cfg.sac.lr, float)
 
