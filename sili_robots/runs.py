@@ -233,6 +233,11 @@ def check_new_run_dir(
     if run_dir.is_file():
         raise ConfigError(f"{run_dir} is a file; give {out} a directory (new, or empty)")
     if (run_dir / CONFIG).exists() and not overwrite:
+        if not (run_dir / CHECKPOINT).exists():  # stopped or failed before its first one
+            raise ConfigError(
+                f"{run_dir} already holds a run with no checkpoint yet; {resume} trains it again "
+                f"from the start as its {CONFIG} records it, {replace} replaces it"
+            )
         raise ConfigError(
             f"{run_dir} already holds a run; {resume} continues it, {replace} replaces it"
         )

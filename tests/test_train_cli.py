@@ -988,6 +988,10 @@ def test_a_run_directory_is_replaced_only_with_overwrite(tmp_path, capsys):
     assert json.loads((out / "config.json").read_text())["run"]["seed"] == 2
     assert len(pd.read_csv(out / "metrics.csv")) == 2
     assert (out / "notes.txt").read_text() == "mine"  # only the run's own files are replaced
+    (out / "checkpoint.pt").unlink()  # as a run stopped or diverged before its first one
+    assert main([*args, "--interactions", "2"]) == 2  # not "--resume continues it"
+    said = f"{out} already holds a run with no checkpoint yet; --resume {out} trains it again "
+    assert said + "from the start as its config.json records it" in capsys.readouterr().err
 
 
 def test_a_new_run_never_goes_into_a_folder_of_other_files(tmp_path, capsys):
