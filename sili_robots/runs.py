@@ -233,11 +233,14 @@ def check_new_run_dir(
     if run_dir.is_file():
         raise ConfigError(f"{run_dir} is a file; give {out} a directory (new, or empty)")
     if (run_dir / CONFIG).exists() and not overwrite:
-        if not (run_dir / CHECKPOINT).exists():  # stopped or failed before its first one
-            raise ConfigError(
-                f"{run_dir} already holds a run with no checkpoint yet; {resume} trains it again "
-                f"from the start as its {CONFIG} records it, {replace} replaces it"
+        if not (run_dir / CHECKPOINT).exists():
+            kept = [name for name in (SUMMARY, COMPRESSED_METRICS) if (run_dir / name).is_file()]
+            what = (  # (check_resumable: nothing to continue from either way)
+                f"a finished run kept without its {CHECKPOINT} (it has {', '.join(kept)})"
+                if kept
+                else "a run stopped or failed before its first checkpoint"
             )
+            raise ConfigError(f"{run_dir} already holds {what}; {replace} replaces it")
         raise ConfigError(
             f"{run_dir} already holds a run; {resume} continues it, {replace} replaces it"
         )
@@ -472,25 +475,20 @@ def recorded_run(run_dir: Path) -> dict[str, Any]:
 
 
 #: what a run's config may say otherwise than its checkpoint: its budget (extended) and its
-#: machine's settings; the task, method and seed are checked on their own, the task arguments
-#: when the task is built (an agent may play on its task built with others)
+#: machine's settings; the task, method and seed are checked on their own
 NOT_CHECKPOINTED = ("interactions", "task", "task_id", "method", "seed", *MACHINE_SETTINGS)
 
 
 def _other_settings(recorded: Any, cfg: RunConfig) -> list[tuple[str, Any, Any]]:
-    """The settings in which the run a checkpoint recorded differs from ``cfg`` (older
-    checkpoints record none: nothing to compare)."""
+    """The settings in which the run a checkpoint recorded differs from ``cfg``, its task
+    arguments as built (older checkpoints record none: nothing to compare)."""
     if not isinstance(recorded, dict):
         return []
     try:
         recorded = RunConfig.from_dict(recorded).to_dict()  # in today's layout, as cfg is
     except (ConfigError, TypeError, KeyError, AttributeError, ValueError):
         return []  # another version's layout: the task, method and seed were compared
-    return [
-        d
-        for d in differences(recorded, cfg.to_dict())
-        if d[0] not in NOT_CHECKPOINTED and not d[0].startswith("env_kwargs")
-    ]
+    return [d for d in run_differences(recorded, cfg.to_dict()) if d[0] not in NOT_CHECKPOINTED]
 
 
 #: what ``torch.load`` raises on a damaged checkpoint (and OSError EINVAL, at some cut lengths)

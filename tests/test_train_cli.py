@@ -559,6 +559,12 @@ def test_a_checkpoint_of_a_run_of_other_settings_is_refused_by_them(tmp_path, ca
         )
         assert "was it copied from another run, or the config edited?" in err
     assert (run / "metrics.csv").read_text() == rows and run_state(run) == "done"
+    margin = tmp_path / "margin"  # other task arguments: another run too
+    assert main([*args, "--env-kwarg", "outside_margin=0.2", "--out", str(margin)]) == 0
+    shutil.copy(margin / "checkpoint.pt", run / "checkpoint.pt")
+    capsys.readouterr()
+    assert main(["train", "--resume", str(run), "--interactions", "3"]) == 2
+    assert "(env_kwargs.outside_margin 0.2 there, None here)" in capsys.readouterr().err
     record = json.loads((other / "config.json").read_text())
     record["run"]["threads"] = 2  # another machine's setting: the same run, extended
     (other / "config.json").write_text(json.dumps(record))
@@ -597,8 +603,15 @@ def test_a_recorded_task_argument_the_task_refuses_names_the_run_s_config(tmp_pa
     args = ["train", "--task", "circle-3", "--interactions", "2", *FAST, "--out", str(run)]
     assert main(args) == 0
     record = json.loads((run / "config.json").read_text())
-    record["run"]["env_kwargs"] = {"horizon": 0}  # edited by hand
+    record["run"]["env_kwargs"] = {"horizon": 0}  # edited by hand: not the checkpoint's run
     (run / "config.json").write_text(json.dumps(record))
+    assert main(["eval", str(run)]) == 2
+    assert "checkpoint of a run with other settings (env_kwargs.horizon None there, 0 here)" in (
+        capsys.readouterr().err
+    )
+    state = torch.load(run / "checkpoint.pt", weights_only=False)
+    del state["run"]  # as checkpoints of earlier versions: the task refuses the arguments
+    torch.save(state, run / "checkpoint.pt")
     said = (
         f"the run in {run} records task sili/Circle3-v1 with arguments {{'horizon': 0}} "
         f"({run / 'config.json'}), which does not build here: horizon must be an integer in"
@@ -988,10 +1001,14 @@ def test_a_run_directory_is_replaced_only_with_overwrite(tmp_path, capsys):
     assert json.loads((out / "config.json").read_text())["run"]["seed"] == 2
     assert len(pd.read_csv(out / "metrics.csv")) == 2
     assert (out / "notes.txt").read_text() == "mine"  # only the run's own files are replaced
-    (out / "checkpoint.pt").unlink()  # as a run stopped or diverged before its first one
-    assert main([*args, "--interactions", "2"]) == 2  # not "--resume continues it"
-    said = f"{out} already holds a run with no checkpoint yet; --resume {out} trains it again "
-    assert said + "from the start as its config.json records it" in capsys.readouterr().err
+    (out / "checkpoint.pt").unlink()  # not "--resume continues it": there is nothing to
+    assert main([*args, "--interactions", "2"]) == 2
+    said = f"{out} already holds a finished run kept without its checkpoint.pt (it has summary.json"
+    assert said + "); --overwrite replaces it" in capsys.readouterr().err
+    (out / "summary.json").unlink()  # as a run stopped or diverged before its first checkpoint
+    assert main([*args, "--interactions", "2"]) == 2
+    said = f"{out} already holds a run stopped or failed before its first checkpoint; --overwrite"
+    assert said in capsys.readouterr().err
 
 
 def test_a_new_run_never_goes_into_a_folder_of_other_files(tmp_path, capsys):
@@ -1296,8 +1313,11 @@ def test_a_record_or_history_damaged_in_its_content_exits_2_naming_the_file(tmp_
     train_doors = ["--task", "sili_robots.examples.two_doors:TwoDoorsEnv", "--method", "sac"]
     assert _sili("train", *train_doors, "--interactions", 1, *FAST, "--out", doors).returncode == 0
     kept = json.loads((doors / "config.json").read_text())
-    kept["run"]["env_kwargs"] = {"bogus": 1}  # (or an argument the class dropped since)
+    kept["run"]["env_kwargs"] = {"bogus": 1}  # an argument the class dropped since
     (doors / "config.json").write_text(json.dumps(kept))
+    state = torch.load(doors / "checkpoint.pt", weights_only=False)
+    state["run"]["env_kwargs"] = {"bogus": 1}  # recorded with the run as it was trained
+    torch.save(state, doors / "checkpoint.pt")
     res = _sili("eval", doors)
     assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr
     assert "takes no argument bogus (the run's env_kwargs); its arguments: horizon" in res.stderr
