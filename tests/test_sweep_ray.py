@@ -183,6 +183,16 @@ def test_an_address_where_no_cluster_listens_is_refused_before_anything_is_writt
     assert not (tmp_path / "s").exists()
 
 
+def test_a_cluster_is_reached_whatever_proxy_the_environment_names(ray_cluster, monkeypatch):
+    """Ray's clients connect straight to the cluster; the handshake went through http_proxy
+    (here a port where nothing listens) and refused a running head."""
+    from sili_robots.sweep.ray_backend import check_reachable
+
+    for variable in ("http_proxy", "https_proxy", "grpc_proxy"):
+        monkeypatch.setenv(variable, "http://127.0.0.1:1")
+    check_reachable(ray_cluster)
+
+
 def test_an_address_where_another_service_listens_is_refused_not_retried(tmp_path):
     """Before, the TCP port answering was enough: ``ray.init`` then retried a web server (or any
     other service) for minutes, printing Ray's log lines, instead of exiting 2."""

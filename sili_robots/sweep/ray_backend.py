@@ -178,7 +178,8 @@ def _speaks_grpc(hostport: str, timeout: float) -> bool:
         import grpc
     except ImportError:
         return True
-    channel = grpc.insecure_channel(hostport)
+    # as Ray's own clients: straight to the cluster, whatever http_proxy or grpc_proxy say
+    channel = grpc.insecure_channel(hostport, options=[("grpc.enable_http_proxy", 0)])
     try:
         grpc.channel_ready_future(channel).result(timeout=timeout)
     except grpc.FutureTimeoutError:
