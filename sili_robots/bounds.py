@@ -69,12 +69,18 @@ def check_counts(
     strategies the games cycle through) that is at least ``DEFAULT_GAMES``, fewer if the
     interactions are few. The games' seeds (``seed``, ``seed + 1``, ...) must be seeds."""
     n, g = _counts(interactions, games, strategies)
-    if seed + g - 1 > MAX_SEED:
-        raise ConfigError(
-            f"--seed {seed} gives {g} games the seeds {seed} to {seed + g - 1}, past the largest "
-            f"seed {MAX_SEED}: give --seed {MAX_SEED - g + 1} or lower, or fewer --games"
-        )
+    check_game_seeds(seed, g, games is not None)
     return n, g
+
+
+def check_game_seeds(seed: int, games: int, games_given: bool = True) -> None:
+    """ConfigError unless the ``games`` games' seeds (``seed``, ``seed + 1``, ...) are seeds."""
+    if seed + games - 1 > MAX_SEED:
+        fewer = "fewer --games" if games_given else f"--games {MAX_SEED - seed + 1} or fewer"
+        raise ConfigError(
+            f"--seed {seed} gives {games} games the seeds {seed} to {seed + games - 1}, past the "
+            f"largest seed {MAX_SEED}: give --seed {MAX_SEED - games + 1} or lower, or {fewer}"
+        )
 
 
 def _counts(interactions: Any, games: Any, strategies: int) -> tuple[int, int]:

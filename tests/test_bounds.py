@@ -79,7 +79,15 @@ def test_bounds_work_for_driving_in_its_own_process():
             "--seed 4294967295 gives 2 games the seeds 4294967295 to 4294967296, past the largest "
             "seed 4294967295: give --seed 4294967294 or lower, or fewer --games",
         ),
-        (["circle-3", "--seed", "4294967290"], "gives 12 games the seeds 4294967290 to"),
+        (
+            ["circle-3", "--seed", "4294967290"],
+            "gives 12 games the seeds 4294967290 to 4294967301"
+            ", past the largest seed 4294967295: give --seed 4294967284 or lower, or --games 6 or",
+        ),
+        (  # before any task's games (circle-3's were played and printed first)
+            ["--all", "--interactions", "40", "--games", "13", "--seed", "4294967284", "--json"],
+            "gives 13 games the seeds 4294967284 to 4294967296",
+        ),
         (["circle-3", "--games", "-1"], "got '-1'\n"),  # the user's count, not the default's
         (["circle-3", "--interactions", "4", "--games", "3"], "must be >= 6 for 3 games"),
         ([], "give either a TASK (e.g. circle-3) or --all"),
@@ -89,7 +97,7 @@ def test_bad_input_exits_2_with_one_line(args, message):
     done = sili_in_process("bounds", *args)  # argparse's errors too
     err = done.stderr
     assert done.returncode == 2 and err.startswith("sili bounds: error: ") and message in err
-    assert len(err.strip().splitlines()) == 1
+    assert len(err.strip().splitlines()) == 1 and done.stdout == ""
 
 
 def test_packaged_bounds_cover_every_version_and_agree_with_a_fresh_run():

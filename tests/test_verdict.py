@@ -123,6 +123,10 @@ def test_the_verdict_counts_the_interactions_it_judged_and_never_rounds_a_miss_u
         "90% needed"
     )
     assert ": not seed 0 (89.8%, -" in across_seeds([run])[0]
+    longer = pd.concat([fifty] * 10, ignore_index=True).assign(interaction=range(500))
+    longer["strategy_changed"] = [0] * 450 + [1] * 50  # 449 of the 499 after the first: 89.98%
+    longer.to_csv(run / "metrics.csv", index=False)
+    assert "kept its strategy in 89.98% of its last 499 interactions" in verdict(run, window=500)
 
 
 def test_a_run_with_other_task_arguments_is_not_read_against_the_defaults_references(
