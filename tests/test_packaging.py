@@ -22,7 +22,7 @@ import sili_robots
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = Path(sili_robots.__file__).parent
 #: imported only where an optional group is installed (``pyproject.toml``'s extras)
-OPTIONAL = {"ray", "tensorboard", "stable_baselines3"}
+OPTIONAL = {"ray", "grpc", "tensorboard", "stable_baselines3"}
 
 
 def _requirement_name(spec: str) -> str:
