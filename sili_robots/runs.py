@@ -233,12 +233,12 @@ def check_new_run_dir(
     if run_dir.is_file():
         raise ConfigError(f"{run_dir} is a file; give {out} a directory (new, or empty)")
     if (run_dir / CONFIG).exists() and not overwrite:
-        if not (run_dir / CHECKPOINT).exists():
+        if not (run_dir / CHECKPOINT).exists():  # nothing to continue from
             kept = [name for name in (SUMMARY, COMPRESSED_METRICS) if (run_dir / name).is_file()]
-            what = (  # (check_resumable: nothing to continue from either way)
+            what = (
                 f"a finished run kept without its {CHECKPOINT} (it has {', '.join(kept)})"
                 if kept
-                else "a run stopped or failed before its first checkpoint"
+                else "a run with no checkpoint yet"
             )
             raise ConfigError(f"{run_dir} already holds {what}; {replace} replaces it")
         raise ConfigError(
@@ -474,9 +474,18 @@ def recorded_run(run_dir: Path) -> dict[str, Any]:
     return json.loads(json.dumps(run))
 
 
-#: what a run's config may say otherwise than its checkpoint: its budget (extended) and its
-#: machine's settings; the task, method and seed are checked on their own
-NOT_CHECKPOINTED = ("interactions", "task", "task_id", "method", "seed", *MACHINE_SETTINGS)
+#: what a run's config may say otherwise than its checkpoint: its budget (extended), its
+#: machine's settings and where its add-ons' code lives (a user's module may be renamed, as a
+#: task class may); the task, method and seed are checked on their own
+NOT_CHECKPOINTED = (
+    "interactions",
+    "task",
+    "task_id",
+    "method",
+    "seed",
+    "addons.plugins",
+    *MACHINE_SETTINGS,
+)
 
 
 def _other_settings(recorded: Any, cfg: RunConfig) -> list[tuple[str, Any, Any]]:

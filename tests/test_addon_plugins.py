@@ -8,7 +8,6 @@ import re
 import textwrap
 
 import pytest
-import torch
 from fast_settings import FAST_ARGS
 
 from sili_robots.build import make_run_config
@@ -153,16 +152,9 @@ def test_a_users_addon_runs_writes_its_columns_and_stays_through_a_resume(
     assert all(float(r["task_reward"]) < 0 for r in rows)  # the task's: not an add-on's
     again = ["train", "--resume", str(run), "--interactions", "8", "--no-progress"]
     config = run / "config.json"
+    # an add-on's path may change (a module renamed, as a task class's may): not another run
     config.write_text(config.read_text().replace("my_addons:Constant", "my_addons:Renamed"))
-    capsys.readouterr()
-    assert main(again) == 2  # an edited config: not the checkpoint's run
-    assert "(addons.plugins 'my_addons:Constant' there, 'my_addons:Renamed' here)" in (
-        capsys.readouterr().err
-    )
-    state = torch.load(run / "checkpoint.pt", weights_only=False)
-    state["run"]["addons"]["plugins"] = "my_addons:Renamed"  # and its checkpoint's record
-    torch.save(state, run / "checkpoint.pt")
-    assert main(again) == 2  # its add-on now declares another column
+    assert main(again) == 2  # but this add-on declares another column
     assert "has columns stored that no add-on of the run (my_addons:Renamed) declares" in (
         capsys.readouterr().err
     )

@@ -84,9 +84,9 @@ def test_bounds_work_for_driving_in_its_own_process():
             "gives 12 games the seeds 4294967290 to 4294967301"
             ", past the largest seed 4294967295: give --seed 4294967284 or lower, or --games 6 or",
         ),
-        (  # before any task's games (circle-3's were played and printed first)
-            ["--all", "--interactions", "40", "--games", "13", "--seed", "4294967284", "--json"],
-            "gives 13 games the seeds 4294967284 to 4294967296",
+        (  # before any task's games: circle-3's 12 fit and were played and printed first
+            ["--all", "--interactions", "40", "--seed", "4294967284", "--json"],
+            "gives 16 games the seeds 4294967284 to 4294967299",  # circle-8's
         ),
         (["circle-3", "--games", "-1"], "got '-1'\n"),  # the user's count, not the default's
         (["circle-3", "--interactions", "4", "--games", "3"], "must be >= 6 for 3 games"),

@@ -1007,8 +1007,8 @@ def test_a_run_directory_is_replaced_only_with_overwrite(tmp_path, capsys):
     assert said + "); --overwrite replaces it" in capsys.readouterr().err
     (out / "summary.json").unlink()  # as a run stopped or diverged before its first checkpoint
     assert main([*args, "--interactions", "2"]) == 2
-    said = f"{out} already holds a run stopped or failed before its first checkpoint; --overwrite"
-    assert said in capsys.readouterr().err
+    said = f"{out} already holds a run with no checkpoint yet; --overwrite replaces it"
+    assert said in capsys.readouterr().err  # (--resume would train it from the start again)
 
 
 def test_a_new_run_never_goes_into_a_folder_of_other_files(tmp_path, capsys):

@@ -93,13 +93,16 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.bounds import (
         BOUNDS_FILE,
         check_counts,
+        check_game_seeds,
         check_games,
         compute_bounds,
+        default_games,
         default_interactions,
         format_table,
         read_bounds_file,
         write_bounds_file,
     )
+    from sili_robots.errors import MAX_SEED
     from sili_robots.tasks import task_spec
     from sili_robots.tasks.registry import all_versions
 
@@ -114,13 +117,17 @@ def run(args: argparse.Namespace) -> int:
     env_kwargs = _task_arguments(args, specs)
     if args.games is not None:
         check_games(args.games)  # the user's own count, whatever the interactions
-    for spec in specs:  # the counts checked before anything runs
+    for spec in specs:  # the counts and the games' seeds checked before anything runs
+        n = args.interactions or default_interactions(spec.name)
         try:
-            check_counts(args.interactions or default_interactions(spec.name), args.games)
+            games = check_counts(n, args.games)[1]
         except ConfigError as err:
             if args.interactions is not None:
                 raise
             raise ConfigError(f"{err} ({spec.name}'s default); give --interactions") from None
+        if args.games is None and args.seed + int(n) // 2 - 1 > MAX_SEED:  # (games <= n / 2)
+            games = default_games(spec.name, n)  # its own: a multiple of its strategies
+        check_game_seeds(args.seed, games, args.games is not None)
     if args.write:
         _check_packaged_counts(args, specs)
     for spec in specs:
