@@ -61,18 +61,6 @@ def check_games(games: Any) -> int:
     return g
 
 
-def check_counts(
-    interactions: Any, games: Any = None, strategies: int = 1, seed: int = DEFAULT_SEED
-) -> tuple[int, int]:
-    """(interactions, games) as integers: at least two interactions per game (a game's first is
-    not counted). ``games=None`` takes the smallest multiple of ``strategies`` (how many first
-    strategies the games cycle through) that is at least ``DEFAULT_GAMES``, fewer if the
-    interactions are few. The games' seeds (``seed``, ``seed + 1``, ...) must be seeds."""
-    n, g = _counts(interactions, games, strategies)
-    check_game_seeds(seed, g, games is not None)
-    return n, g
-
-
 def check_game_seeds(seed: int, games: int, games_given: bool = True) -> None:
     """ConfigError unless the ``games`` games' seeds (``seed``, ``seed + 1``, ...) are seeds."""
     if seed + games - 1 > MAX_SEED:
@@ -83,7 +71,11 @@ def check_game_seeds(seed: int, games: int, games_given: bool = True) -> None:
         )
 
 
-def _counts(interactions: Any, games: Any, strategies: int) -> tuple[int, int]:
+def check_counts(interactions: Any, games: Any = None, strategies: int = 1) -> tuple[int, int]:
+    """(interactions, games) as integers: at least two interactions per game (a game's first is
+    not counted). ``games=None`` takes the smallest multiple of ``strategies`` (how many first
+    strategies the games cycle through) that is at least ``DEFAULT_GAMES``, fewer if the
+    interactions are few."""
     n = _integer(interactions)
     if n is None or not 2 <= n <= LARGEST_INT:
         raise ConfigError(
@@ -111,14 +103,12 @@ def _integer(value: Any) -> int | None:
         return None
 
 
-def counts_for(
-    env: Any, task: str, interactions: Any, games: Any, seed: int = DEFAULT_SEED
-) -> tuple[int, int]:
+def counts_for(env: Any, task: str, interactions: Any, games: Any) -> tuple[int, int]:
     """(interactions, games) of ``task``'s bounds on its instance ``env``: its defaults where
     None (the games cycle through its first strategies, ``check_counts``)."""
     choices = env.unwrapped.strategy_choices()
     asked = default_interactions(task) if interactions is None else interactions
-    return check_counts(asked, games, len(choices) if choices else 1, seed)
+    return check_counts(asked, games, len(choices) if choices else 1)
 
 
 def default_games(task: str, interactions: Any = None) -> int:
@@ -145,7 +135,8 @@ def compute_bounds(
     env = make_task(spec.gym_id, **env_kwargs)
     try:
         choices = env.unwrapped.strategy_choices()
-        n, g = counts_for(env, task, interactions, games, seed)
+        n, g = counts_for(env, task, interactions, games)
+        check_game_seeds(seed, g, games is not None)
         lengths = [n // g + (1 if i < n % g else 0) for i in range(g)]
         kinds = [k for k in BOUND_KINDS if k in available_kinds(env)]
         bounds = {}
