@@ -54,11 +54,12 @@ def _with_settings(df: pd.DataFrame, sweep_dir: Path) -> pd.DataFrame:
     """``df`` with ``settings``: what sets a run apart from the other runs of its variant
     (``sili runs``' column, e.g. ``agent.hidden=16``), so that they are not averaged as seeds;
     and ``b_settings``: the same among the runs of its variant at any b, for the b sweep."""
-    from sili_robots.sweep.inventory import settings_apart
+    from sili_robots.sweep.inventory import recorded_settings, settings_apart
 
     runs = df.groupby("run", sort=False)[["task", *VARIANT_KEYS]].first().reset_index()
-    apart = dict(zip(runs["run"], settings_apart(runs, sweep_dir), strict=True))
-    across_b = settings_apart(runs, sweep_dir, B_SWEEP_VARIANT, ignore=(B_SETTING,))
+    flat = recorded_settings(sweep_dir)  # each config.json read once for both
+    apart = dict(zip(runs["run"], settings_apart(runs, flat), strict=True))
+    across_b = settings_apart(runs, flat, B_SWEEP_VARIANT, ignore=(B_SETTING,))
     return df.assign(
         settings=df["run"].map(apart),
         b_settings=df["run"].map(dict(zip(runs["run"], across_b, strict=True))),

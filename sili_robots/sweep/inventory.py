@@ -29,7 +29,7 @@ def inventory(directory: Path) -> pd.DataFrame:
     runs = runs_table(directory)
     runs["controller"] = runs["controller"].fillna("")
     runs["task_id"] = runs["task_id"].fillna("") if "task_id" in runs else ""
-    runs["settings"] = settings_apart(runs, directory)
+    runs["settings"] = settings_apart(runs, recorded_settings(directory))
     rows = []
     for key, group in runs.groupby(list(INVENTORY_KEYS), sort=False):
         done = group[group["status"] == "done"]
@@ -58,15 +58,19 @@ def inventory(directory: Path) -> pd.DataFrame:
     return table.sort_values(order, kind="stable").reset_index(drop=True)
 
 
+def recorded_settings(directory: Path) -> dict[str, dict[str, Any]]:
+    """Each run's recorded settings (dotted keys, without ``NOT_SETTINGS``), by run name."""
+    return {d.name: _flat(recorded_run(d)) for d in run_dirs(directory)}
+
+
 def settings_apart(
     runs: pd.DataFrame,
-    directory: Path,
+    flat: dict[str, dict[str, Any]],
     variant: Sequence[str] = VARIANT_KEYS,
     ignore: Collection[str] = (),
 ) -> pd.Series:
-    """Per run, the settings (``key=value``) in which it differs from other runs of its task
-    and ``variant``, leaving out the settings in ``ignore``; "" when they all agree."""
-    flat = {d.name: _flat(recorded_run(d)) for d in run_dirs(directory)}
+    """Per run, the settings (``key=value``, of ``recorded_settings``) in which it differs from
+    other runs of its task and ``variant``, leaving out those in ``ignore``; "" when all agree."""
     out = pd.Series("", index=runs.index)
     for _, group in runs.groupby(["task", *variant], sort=False, dropna=False):
         configs = [flat[name] for name in group["run"]]
