@@ -234,7 +234,7 @@ def check_new_run_dir(
         raise ConfigError(f"{run_dir} is a file; give {out} a directory (new, or empty)")
     if (run_dir / CONFIG).exists() and not overwrite:
         if not (run_dir / CHECKPOINT).exists():  # nothing to continue from
-            kept = [name for name in (SUMMARY, COMPRESSED_METRICS) if (run_dir / name).is_file()]
+            kept = _finished_files(run_dir)
             what = (
                 f"a finished run kept without its {CHECKPOINT} (it has {', '.join(kept)})"
                 if kept
@@ -438,6 +438,12 @@ def save_checkpoint(run_dir: Path, state: dict[str, Any]) -> None:
     write_bytes(Path(run_dir) / CHECKPOINT, data.getbuffer())
 
 
+def _finished_files(run_dir: Path) -> list[str]:
+    """The files of a finished run that ``run_dir`` holds (a kept one has them, not always its
+    checkpoint)."""
+    return [name for name in (SUMMARY, COMPRESSED_METRICS) if (run_dir / name).is_file()]
+
+
 def check_resumable(run_dir: Path) -> None:
     """Refuse a finished run kept without its checkpoint (``sili collect``, or the checkpoint
     deleted): resuming it would train it again from the start over its results. A run killed
@@ -445,7 +451,7 @@ def check_resumable(run_dir: Path) -> None:
     run_dir = Path(run_dir)
     if (run_dir / CHECKPOINT).is_file():
         return
-    kept = [name for name in (SUMMARY, COMPRESSED_METRICS) if (run_dir / name).is_file()]
+    kept = _finished_files(run_dir)
     if kept:
         raise ConfigError(
             f"{run_dir} holds a finished run without its {CHECKPOINT} (it has "
