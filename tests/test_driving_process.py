@@ -93,6 +93,39 @@ def test_async_vector_env_of_two_steps_across_interactions():
     assert not libsumo.isLoaded()  # the spaces came from a copy that never started SUMO
 
 
+def test_a_forked_child_leaves_its_parents_simulation_alone():
+    """A child of ``os.fork`` that exits normally, or closes its inherited copy, runs the
+    session's clean-up: the parent's SUMO and its saved start state must outlive it."""
+    out = _python(
+        """
+        import os, sys
+        import numpy as np
+        import gymnasium as gym
+        import sili_robots
+
+        for backend in ("traci", "libsumo"):
+            for child_closes in (False, True):
+                env = gym.make("sili/Driving-v0", backend=backend)
+                env.reset(seed=0)
+                env.step(np.zeros(1, np.float32))
+                pid = os.fork()
+                if pid == 0:
+                    if child_closes:
+                        env.close()
+                    sys.exit(0)  # the interpreter's exit runs the session's finalizer
+                os.waitpid(pid, 0)
+                env.step(np.zeros(1, np.float32))  # the SUMO server still answers
+                env.reset()  # from the saved start state, still on disk
+                env.close()
+                print("OK", backend, child_closes)
+        """
+    )
+    assert out.returncode == 0, out.stderr
+    for backend in ("traci", "libsumo"):
+        for closes in (False, True):
+            assert f"OK {backend} {closes}" in out.stdout
+
+
 def test_sumo_failures_become_python_errors(tmp_path: Path):
     out = _python(
         """
@@ -246,7 +279,7 @@ def test_a_hidden_folder_of_a_process_killed_before_its_lock_is_removed(tmp_path
         assert not old.exists() and fresh.is_dir()
         assert workdir.parent == tmp_path and not workdir.name.startswith(".")
     finally:
-        sumo_session._shutdown("traci", None, 0, workdir, lock, keep_workdir=False)
+        sumo_session._shutdown("traci", None, 0, workdir, lock, os.getpid())
     assert sorted(p.name for p in tmp_path.iterdir()) == [fresh.name]
 
 

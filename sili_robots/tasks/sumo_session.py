@@ -112,7 +112,9 @@ class SumoSession:
                 connection = traci.getConnection(label)
                 self.api = connection
         except BaseException as exc:  # give the slot back whatever went wrong
-            _shutdown(backend, connection, token, self.workdir, None, keep_workdir=True)
+            _shutdown(
+                backend, connection, token, self.workdir, None, os.getpid(), keep_workdir=True
+            )
             message = self._sumo_message(exc) if isinstance(exc, self._errors) else None
             shutil.rmtree(self.workdir, ignore_errors=True)
             _release(self._lock)  # (held until its logs are read)
@@ -120,7 +122,7 @@ class SumoSession:
                 raise
             raise SumoError(f"SUMO could not start ({backend}): {message}") from None
         self._finalizer = weakref.finalize(
-            self, _shutdown, backend, connection, token, self.workdir, self._lock, False
+            self, _shutdown, backend, connection, token, self.workdir, self._lock, os.getpid()
         )
 
     @contextlib.contextmanager
@@ -234,9 +236,21 @@ def _claim_libsumo(token: int) -> None:
 
 
 def _shutdown(
-    backend: str, connection: Any, token: int, workdir: Path, lock: int | None, keep_workdir: bool
+    backend: str,
+    connection: Any,
+    token: int,
+    workdir: Path,
+    lock: int | None,
+    owner: int,
+    keep_workdir: bool = False,
 ) -> None:
-    """Close the simulation; also run by the garbage collector for a never-closed session."""
+    """Close the simulation; also run by the garbage collector for a never-closed session. In a
+    forked child (not the ``owner`` process), which inherits this at its exit, only the child's
+    copies go: the parent's SUMO and its saved start state (``workdir``) are the parent's."""
+    if os.getpid() != owner:
+        _OWN_WORKDIRS.discard(workdir)
+        _release(lock)
+        return
     if backend == "libsumo":
         if _LIBSUMO_OWNER["token"] == token and _LIBSUMO_OWNER["pid"] == os.getpid():
             import libsumo
