@@ -38,6 +38,11 @@ class _AppendFromInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
         gym.utils.RecordConstructorArgs.__init__(self)
         gym.Wrapper.__init__(self, env)
         base = env.observation_space
+        if not isinstance(base, spaces.Box) or len(base.shape) != 1:
+            raise ConfigError(
+                f"{type(self).__name__} appends to a flat observation (a 1-D Box, as a sili "
+                f"task's), got {base}: wrap the task before wrappers that reshape it"
+            )
         self.observation_space = spaces.Box(
             np.concatenate([base.low, low]).astype(np.float32),
             np.concatenate([base.high, high]).astype(np.float32),

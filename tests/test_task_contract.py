@@ -170,6 +170,9 @@ def test_bad_arguments_are_named():
     for wrapper in (OracleObservation, StrategyFlag):  # they read what only a task's info has
         with pytest.raises(ConfigError, match=f"{wrapper.__name__} wraps a sili task .* got <"):
             wrapper(gym.make("CartPole-v1"))
+        stacked = gym.wrappers.FrameStackObservation(make_task("circle-3"), 2)  # [2, obs]
+        with pytest.raises(ConfigError, match=f"{wrapper.__name__} appends to a flat .*Box"):
+            wrapper(stacked)
 
 
 @pytest.mark.parametrize("make", [make_task, lambda n: gym.make(TASKS[n].gym_id)])
@@ -179,6 +182,13 @@ def test_a_refused_first_reset_leaves_the_task_to_play(make):
     env = make("circle-3")
     with pytest.raises(ConfigError, match="unknown strategy 9; allowed: 0, 1, 2"):
         env.reset(options={"strategy": 9})
+    with pytest.raises(ConfigError, match=r"unknown strategy 1000+; allowed: 0, 1, 2"):
+        env.reset(options={"strategy": 10**400})  # beyond a float, which numpy raised on
+    continuous = make("circle-continuous")
+    for given in (10**400, float("nan")):
+        with pytest.raises(ConfigError, match=r"unknown strategy .*; allowed: any finite number"):
+            continuous.reset(options={"strategy": given})
+    continuous.reset(options={"strategy": 2**70})  # an int within a float's range is one
     env.reset(seed=0)
     for _ in range(3):
         assert env.step(np.zeros(2))[1] == pytest.approx(-1.0)

@@ -18,6 +18,7 @@ changed since the last step".
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import inspect
 import math
@@ -158,12 +159,13 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         if type(self)._set_strategy is RepeatedInteractionEnv._set_strategy:
             raise ConfigError(f"{type(self).__name__} cannot start from a chosen strategy")
         choices = self.strategy_choices()
-        if isinstance(strategy, bool) or not isinstance(strategy, (int, float, np.number)):
-            matched = None
-        elif choices is None:
-            matched = float(strategy) if np.isfinite(strategy) else None
-        else:  # 0.9999999999 starts from 1, not from int(0.9999999999)
-            matched = next((c for c in choices if _same(strategy, c)), None)
+        matched = None
+        number = isinstance(strategy, (int, float, np.number)) and not isinstance(strategy, bool)
+        with contextlib.suppress(OverflowError):  # an int beyond a float's range matches none
+            if number and choices is None:
+                matched = float(strategy) if math.isfinite(strategy) else None
+            elif number:  # 0.9999999999 starts from 1, not from int(0.9999999999)
+                matched = next((c for c in choices if _same(strategy, c)), None)
         if matched is None:
             allowed = "any finite number" if choices is None else ", ".join(map(str, choices))
             raise ConfigError(f"unknown strategy {strategy!r}; allowed: {allowed}")
