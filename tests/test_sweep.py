@@ -380,9 +380,12 @@ def test_resume_of_a_non_sweep_and_changed_settings_exit_2(tiny_sweep, tmp_path,
     assert "is not a sweep directory" in capsys.readouterr().err  # the first thing to mend
     out, _ = tiny_sweep
     args = ["--tasks", "circle-3", "--methods", "sac", "--seeds", "0", "--interactions", "9"]
-    assert main(["sweep", *args, "--out", str(out), *FAST_ARGS]) == 2
+    assert main(["sweep", *args, "--out", str(out), *FAST_ARGS]) == 2  # (saved as often or not)
+    assert "has 8 interactions, fewer than the 9 asked for now" in capsys.readouterr().err
+    assert main(["sweep", *args, "--out", str(out), *FAST_ARGS, "--set", "sac.tau=0.5"]) == 2
     err = capsys.readouterr().err
-    assert "interactions: 8 on disk, 9 now" in err and f"or move that run out of {out}" in err
+    assert "agent.sac.tau: 0.005 on disk, 0.5 now; interactions: 8 on disk, 9 now" in err
+    assert f"or move that run out of {out}" in err
     resume = ["sweep", "--resume", str(out), "--checkpoint-every", "9", "--workers", "1"]
     assert main(resume) == 2
     err = capsys.readouterr().err
@@ -435,6 +438,44 @@ def test_a_sweep_run_again_where_kernels_time_otherwise_keeps_each_runs_own(
         "onednn",
     ]
     assert run_sweep(recorded_specs(tmp_path), tmp_path, progress=False, recorded=True).ok
+
+
+def test_a_sweep_run_again_with_another_checkpoint_interval_goes_on_with_its_runs(tmp_path, capsys):
+    """How often a run is saved changes no number it logs (as ``collect`` holds): the same
+    sweep invoked again for more seeds without its ``--checkpoint-every`` was refused as 'made
+    with other settings (checkpoint_every: 4 on disk, 50 now)'."""
+    first = _spec(methods=["sac"], seeds=[0], interactions=5)  # saved every 4
+    assert run_sweep(first, tmp_path, LocalBackend(workers=1), progress=False).ok
+    run = tmp_path / "runs" / "circle-3__sac__s0"
+    (run / "summary.json").unlink()  # as if stopped after its checkpoint at 4
+    args = ["sweep", "--tasks", "circle-3", "--methods", "sac", "--seeds", "0-1"]
+    args += ["--interactions", "5", "--out", str(tmp_path), *FAST_ARGS, "--no-progress"]
+    assert main([*args, "--dry-run"]) == 0
+    assert "circle-3__sac__s0\tresumable" in capsys.readouterr().out
+    assert main(args) == 0
+    assert len(pd.read_csv(run / "metrics.csv")) == 5  # finished
+    assert (tmp_path / "runs" / "circle-3__sac__s1" / "summary.json").is_file()
+    assert main([*args, "--set", "sac.lr=1e-3", "--dry-run"]) == 2  # a setting still counts
+    assert "made with other settings (agent.sac.lr" in capsys.readouterr().err
+
+
+def test_a_failed_sweep_run_finished_by_hand_is_no_longer_called_failed(tmp_path, capsys):
+    """``sili train --resume`` on a sweep's run claims it as a worker does, and with the claim
+    goes the failure an earlier attempt recorded: the dry run said 'done (failed before, see
+    its error.txt)' of a run finished since."""
+    assert run_sweep(_spec(methods=["sac"], seeds=[0], interactions=5), tmp_path, progress=False).ok
+    run = tmp_path / "runs" / "circle-3__sac__s0"
+    (run / "summary.json").unlink()  # stopped after its checkpoint at 4 ...
+    (run / "error.txt").write_text("Traceback ...: the attempt's failure")  # ... by a failure
+    assert main(["sweep", "--resume", str(tmp_path), "--dry-run"]) == 0
+    assert (
+        "circle-3__sac__s0\tresumable (failed before, see its error.txt)" in capsys.readouterr().out
+    )
+    assert main(["train", "--resume", str(run), "--no-progress"]) == 0
+    assert not (run / "error.txt").exists()
+    capsys.readouterr()
+    assert main(["sweep", "--resume", str(tmp_path), "--dry-run"]) == 0
+    assert capsys.readouterr().out == "circle-3__sac__s0\tdone\n1 run\n"
 
 
 def test_a_record_that_cannot_run_is_named_and_a_dry_run_refuses_it_too(tmp_path, capsys):
@@ -510,7 +551,10 @@ def test_overwrite_starts_the_sweep_anew_and_keeps_a_users_files(tmp_path, capsy
     assert f"circle-3__sac__s1 in {out} is being trained by process" in capsys.readouterr().err
     for dry in ([], ["--dry-run"]):  # nor resumed beside it; a dry run says so as well
         assert main(["sweep", "--resume", str(out), "--no-progress", *dry]) == 2
-        assert f"circle-3__sac__s1 in {out} is being trained by process" in capsys.readouterr().err
+        printed = capsys.readouterr()
+        assert f"circle-3__sac__s1 in {out} is being trained by process" in printed.err
+        listed = f"circle-3__sac__s0\tdone\ncircle-3__sac__s1\ttraining (process {os.getpid()})"
+        assert printed.out == (f"{listed}\n2 runs\n" if dry else "")  # where each run stands
     (s1 / "worker.json").unlink()
     (out / "figures").mkdir()
     plotted = ["circle-3.png", "circle-3.pdf", "circle-3_beta.svg", "overview.png"]

@@ -225,10 +225,13 @@ def test_an_existing_run_with_other_settings_is_refused(tmp_path):
     with pytest.raises(ConfigError, match=re.escape(said)):
         check_existing(tmp_path, run)
     other["interactions"] = 99
-    other["checkpoint_every"] += 1  # and more: another run
+    other["agent"]["sac"]["tau"] = 0.5  # and more: another run
     (path / "config.json").write_text(json.dumps({"run": other}))
-    with pytest.raises(ConfigError, match=r"checkpoint_every: .*; interactions: 99 on disk, 5 now"):
+    with pytest.raises(ConfigError, match=r"sac\.tau: 0\.5 on disk, .*; interactions: 99 on disk"):
         check_existing(tmp_path, run)
+    saved = {**run.config.to_dict(), "checkpoint_every": run.config.checkpoint_every + 1}
+    (path / "config.json").write_text(json.dumps({"run": saved}))
+    check_existing(tmp_path, run)  # saved more often: the same run (it logs the same numbers)
     (path / "config.json").write_text(json.dumps({"run": run.config.to_dict()}))
     check_existing(tmp_path, run)  # the same run: fine
     older = run.config.to_dict()

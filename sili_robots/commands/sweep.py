@@ -259,8 +259,8 @@ def _specs_and_dir(args: argparse.Namespace) -> tuple[list[SweepSpec], Path]:
 def _dry_run(args: argparse.Namespace, specs: list[SweepSpec], sweep_dir: Path) -> int:
     """Print each planned run and what the sweep would do with it; refuse what it would."""
     from sili_robots.runs import CHECKPOINT, ERROR_FILE
-    from sili_robots.sweep.runner import as_made, check_planned, plan, replaced_runs
-    from sili_robots.sweep.state import run_path, run_state
+    from sili_robots.sweep.runner import as_found, as_made, check_planned, plan, replaced_runs
+    from sili_robots.sweep.state import RunBeingTrained, run_path, run_state, training_worker
 
     planned = plan(specs)
     if args.overwrite:  # what is on disk goes: every planned run is new
@@ -273,7 +273,18 @@ def _dry_run(args: argparse.Namespace, specs: list[SweepSpec], sweep_dir: Path) 
         print(_run_count(planned))
         return 0
     planned = as_made(sweep_dir, planned)
-    found, shorter = check_planned(sweep_dir, planned, args.resume is not None)
+    try:
+        found, shorter = check_planned(sweep_dir, planned, args.resume is not None)
+    except RunBeingTrained:  # refused as the sweep would be, after where each run stands
+        for run_ in planned:
+            folder = run_path(sweep_dir, as_found(sweep_dir, run_).name)
+            pid = training_worker(folder)
+            print(
+                f"{run_.name}\t"
+                + (run_state(folder) if pid is None else f"training (process {pid})")
+            )
+        print(_run_count(planned))
+        raise
     for run_ in planned:
         on_disk = found[run_.name]
         path = run_path(sweep_dir, on_disk.name)

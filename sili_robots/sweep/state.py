@@ -31,6 +31,7 @@ from sili_robots.metrics import COMPRESSED_METRICS
 from sili_robots.runs import (
     CHECKPOINT,
     CONFIG,
+    ERROR_FILE,
     RUNNING_FILE,
     SUMMARY,
     check_resumable,
@@ -195,7 +196,8 @@ def training_claim(run_dir: Path, before: Callable[[], None] | None = None) -> I
     ``RunBeingTrained`` when another live process has claimed it. The check and the claim are
     one step (under a lock on the folder): of two trainers started together, one trains.
     ``before`` runs in that step too (a new run's folder checked, or cleared, for what another
-    process may have started and finished there since it was first checked)."""
+    process may have started and finished there since it was first checked). A failure an
+    earlier attempt recorded (``ERROR_FILE``) goes with the claim: this attempt decides."""
     import fcntl
 
     path = Path(run_dir) / RUNNING_FILE
@@ -209,6 +211,7 @@ def training_claim(run_dir: Path, before: Callable[[], None] | None = None) -> I
         if before is not None:
             before()
         write_text(path, json.dumps(claim))
+        (Path(run_dir) / ERROR_FILE).unlink(missing_ok=True)
     finally:
         os.close(folder)
     try:
@@ -262,13 +265,18 @@ def _summed_short(run_dir: Path) -> bool:
 
 
 def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
-    """An existing run directory must hold the same run (else resuming it would mix two)."""
+    """An existing run directory must hold the same run (else resuming it would mix two); how
+    often it is saved may differ (it changes no number the run logs, as ``collect`` holds)."""
     path = run_path(sweep_dir, planned.name)
     if not (path / CONFIG).is_file():
         return
     on_disk = recorded_run(path)
     planned_dict = json.loads(json.dumps(planned.config.to_dict()))
-    diffs = [f"{k}: {a!r} on disk, {b!r} now" for k, a, b in run_differences(on_disk, planned_dict)]
+    diffs = [
+        f"{k}: {a!r} on disk, {b!r} now"
+        for k, a, b in run_differences(on_disk, planned_dict)
+        if k != "checkpoint_every"
+    ]
     held, asked = on_disk.get("interactions"), planned.config.interactions
     only_length = len(diffs) == 1 and isinstance(held, int)
     a_sweep = (Path(sweep_dir) / SWEEP_FILE).is_file()  # a collection has no record to resume

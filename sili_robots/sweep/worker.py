@@ -63,7 +63,6 @@ def run_job(job: Job) -> Outcome:
     state = run_state(run_dir)
     if state == "done":
         return Outcome(job.name, "done", pid=os.getpid(), verdict=_verdict(run_dir))
-    (run_dir / ERROR_FILE).unlink(missing_ok=True)  # an earlier attempt's: this one decides
     try:
         with training_claim(run_dir):
             import torch
