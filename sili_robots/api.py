@@ -158,7 +158,10 @@ class SILI:
         if state is not None:
             self.agent.load_state_dict(state["agent"])
             game = state["game"]
-        self.env: gym.Env = AgentFeedback(base, self.agent, game)
+        if isinstance(getattr(self, "env", None), AgentFeedback):  # the one a user may hold
+            self.env.rebind(base, self.agent, game)
+        else:
+            self.env: gym.Env = AgentFeedback(base, self.agent, game)
         #: the checkpoint's interaction this model holds, and what its run's files were then
         self._done = 0 if state is None else int(state["interaction"])
         self._loaded = None if state is None else _stamp(self.run_dir)
@@ -341,15 +344,17 @@ class SILI:
         """Greedy play continuing the saved game: mean task reward, and stability after the first
         interaction (``sili eval``'s numbers, ``evaluation.evaluate``). ``model.env``
         starts again from the saved game afterwards (the evaluation plays on the same task:
-        libsumo holds one simulation per process)."""
+        libsumo holds one simulation per process); torch's global random state is the caller's
+        again (the evaluation and the reload set the checkpoint's)."""
         interactions = check_count("interactions", interactions)
         self._refresh()
         self._check_trained("evaluate")
         self.close()
-        try:
-            return evaluate(self.run_dir, interactions, self._task_env)
-        finally:
-            self._setup(load_checkpoint(self.run_dir))
+        with torch.random.fork_rng(devices=[]):
+            try:
+                return evaluate(self.run_dir, interactions, self._task_env)
+            finally:
+                self._setup(load_checkpoint(self.run_dir))
 
     def close(self) -> None:
         """Close ``model.env`` (a task instance given to ``SILI`` stays open: it is yours)."""

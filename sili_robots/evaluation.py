@@ -40,6 +40,11 @@ class AgentFeedback(gym.Wrapper):
     """
 
     def __init__(self, env: gym.Env, agent: SILIAgent, game_state: dict[str, Any] | None) -> None:
+        self.rebind(env, agent, game_state)
+
+    def rebind(self, env: gym.Env, agent: SILIAgent, game_state: dict[str, Any] | None) -> None:
+        """Play ``env`` with ``agent`` from ``game_state`` from now on, as a new wrapper would:
+        a model's ``env`` stays the object a user holds when training replaces its agent."""
         super().__init__(env)
         self.agent = agent
         self._game_state = game_state

@@ -309,8 +309,8 @@ def test_target_entropy_schedule_is_applied_at_each_update():
     assert saved.sac.target_entropy.value(5) == pytest.approx(-4.0)
     with pytest.raises(ConfigError, match=r"schedule of sac.target_entropy: value must be a "):
         method_config("sili", target_entropy_schedule=Schedule([(0, float("nan"))]))
-    with pytest.raises(ConfigError, match=r"sac.target_entropy must be .*, got '1500:-2'"):
-        method_config("sili", target_entropy_schedule="1500:-2")
+    text = method_config("sili", target_entropy_schedule="1500:-2,1600:-4")  # --set's form
+    assert text.sac.target_entropy == Schedule(((1500, -2.0), (1600, -4.0)))
 
 
 def test_discount_schedule_sets_the_critic_targets_gamma_at_each_update():
@@ -445,8 +445,8 @@ def test_mistyped_settings_fail_by_name():
         method_config("sili", hidden=1.5)
     with pytest.raises(ConfigError, match=r"unknown sac.precision 16; allowed: float32, bf"):
         method_config("sili", precision=16)
-    with pytest.raises(ConfigError, match=r"sili.beta must be .*, got '0:0,300:0.5'"):
-        method_config("sili", beta_schedule="0:0,300:0.5")
+    with pytest.raises(ConfigError, match=r"setting sili.beta: '300:0.5x' is not INTERACTION:V"):
+        method_config("sili", beta_schedule="0:0,300:0.5x")
     with pytest.raises(ConfigError, match=r"unknown setting 'sac.lrr'; allowed: .*sac.lr"):
         method_config("sili", sac__lrr=1.0)
     cfg = method_config("sili", lr=1, hidden=64.0, stability_scale=None, target_entropy=-3)

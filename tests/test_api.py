@@ -733,3 +733,35 @@ def test_numpy_numbers_are_settings_as_pythons_are():
     cfg = SILI("circle-3", settings={**settings, "model.sample": np.bool_(True)}).cfg.agent
     assert (cfg.sac.lr, cfg.hidden, cfg.model.sample) == (0.5, 16, True)
     assert type(cfg.hidden) is int and type(cfg.model.sample) is bool  # as config.json keeps
+
+
+def test_a_held_model_env_plays_the_trained_agent_and_evaluate_keeps_the_random_state():
+    """``env = model.env`` before ``learn`` (stable-baselines3's ``get_env`` habit) fed its
+    interactions to the untrained agent while ``predict`` acted with the trained one; and
+    ``evaluate`` set torch's global random state to the checkpoint's, so a loop of stochastic
+    trials and evaluations repeated one trial."""
+    import torch
+
+    model = SILI("circle-3", seed=0, settings=FAST_AGENT)
+    env = model.env
+    model.learn(4)
+    assert env is model.env and env.agent is model.agent
+    assert env.reset()[1]["interaction"] == 4  # the trained run's game goes on
+    model.evaluate(2)
+    assert env is model.env and env.agent is model.agent
+    torch.manual_seed(123)
+    expected = torch.rand(3)
+    torch.manual_seed(123)
+    model.evaluate(1)
+    assert torch.equal(torch.rand(3), expected)
+
+
+def test_a_schedule_is_a_setting_in_the_command_lines_text_too():
+    from sili_robots.agent.schedule import Schedule
+
+    model = SILI("circle-3", settings={**FAST_AGENT, "sili.beta": "0:0, 300:0.5"})
+    assert model.cfg.agent.sili.beta == Schedule(((0, 0.0), (300, 0.5)))
+    with pytest.raises(ConfigError, match=r"setting sili.beta: 'x:1' is not INTERACTION:VALUE"):
+        SILI("circle-3", settings={"sili.beta": "0:0,x:1"})
+    with pytest.raises(ConfigError, match=r"setting sac.lr must be a number, got 'fast'"):
+        SILI("circle-3", settings={"sac.lr": "fast"})  # no schedule in it: a number's error

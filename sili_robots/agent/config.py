@@ -181,6 +181,11 @@ def convert(name: str, tp: Any, value: Any) -> Any:
                     f'setting {name}: a schedule is {{"points": [[INTERACTION, VALUE], ...]}} '
                     f"(or INTERACTION:VALUE,... on the command line), got {value!r}"
                 ) from None
+        if isinstance(value, str) and ":" in value and Schedule in args:
+            try:
+                return Schedule.parse(value)
+            except ConfigError as err:
+                raise ConfigError(f"setting {name}: {err}") from None
         for kind in (float, int, bool, str):
             if kind in args:
                 return convert(name, kind, value)

@@ -45,6 +45,22 @@ class Schedule:
             return cls(tuple(data["points"]))
         return cls.ramp(data["start"], data["end"], data["length"], data.get("delay", 0))
 
+    @classmethod
+    def parse(cls, text: str) -> Schedule:
+        """``"250:0,300:0.5"``, the form ``__str__`` writes and ``--set`` takes."""
+        points = []
+        for item in text.split(","):
+            interaction, sep, value = item.strip().partition(":")
+            try:
+                points.append((int(interaction), float(value)))
+            except ValueError:
+                sep = ""
+            if not sep:
+                raise ConfigError(
+                    f"{item.strip()!r} is not INTERACTION:VALUE (a schedule: 250:0,300:0.5)"
+                )
+        return cls(tuple(points))
+
     def to_dict(self) -> dict[str, Any]:
         return {"points": [list(p) for p in self.points]}
 
