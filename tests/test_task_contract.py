@@ -447,10 +447,19 @@ def test_an_action_space_other_than_minus_one_to_one_is_refused():
     ):
         Wide()
     with pytest.raises(
-        ConfigError, match=r"must be a gymnasium Box in \[-1, 1\], got Discrete\(3\)"
+        ConfigError, match=r"must be a flat gymnasium Box in \[-1, 1\], got Discrete\(3\)"
     ):
         Choices()
     assert TwoDoorsEnv().action_space == spaces.Box(-1.0, 1.0, (1,), np.float32)
+    odd = [  # refused where the task is built, not by numpy or the networks later
+        ("_make_action_space", spaces.Box(-1.0, 1.0, ()), "action space must be a flat"),
+        ("_base_observation_space", spaces.Box(-1.0, 1.0, (2, 2)), "observation space .* flat"),
+        ("_base_observation_space", spaces.Discrete(3), "observation space must be a flat"),
+    ]
+    for method, space, said in odd:
+        task = type("Odd", (TwoDoorsEnv,), {method: lambda self, s=space: s})
+        with pytest.raises(ConfigError, match=said):
+            task()
 
 
 def test_vector_env_steps():

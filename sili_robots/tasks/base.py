@@ -93,7 +93,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         self._changed_since_last_step = False
         self._warned_outside = False  # an observation outside the space: told once
         self.action_space = _checked_action_space(self._make_action_space())
-        base = self._base_observation_space()
+        base = _checked_observation_space(self._base_observation_space())
         low, high = base.low.astype(np.float32), base.high.astype(np.float32)
         self.observation_space = spaces.Box(low, high)
 
@@ -464,12 +464,23 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         return self.t / self.horizon
 
 
-def _checked_action_space(space: Any) -> spaces.Box:
-    """``space`` if it is a Box in [-1, 1]: every agent acts through a tanh policy (and uniform
-    random actions) in [-1, 1], so other bounds would be silently mis-scaled or clipped."""
-    if not isinstance(space, spaces.Box):
+def _checked_observation_space(space: Any) -> spaces.Box:
+    """``space`` if it is a flat Box: the agent's networks take a vector of numbers."""
+    if not isinstance(space, spaces.Box) or len(space.shape) != 1:
         raise ConfigError(
-            f"the action space must be a gymnasium Box in [-1, 1], got {space!r}: return "
+            f"the observation space must be a flat gymnasium Box (shape (n,)), got {space!r}: "
+            "return spaces.Box(low, high, (n,)) from _base_observation_space (flatten images, "
+            "one-hot discrete values)"
+        )
+    return space
+
+
+def _checked_action_space(space: Any) -> spaces.Box:
+    """``space`` if it is a flat Box in [-1, 1]: every agent acts through a tanh policy (and
+    uniform random actions) in [-1, 1], so other bounds would be silently mis-scaled or clipped."""
+    if not isinstance(space, spaces.Box) or len(space.shape) != 1:
+        raise ConfigError(
+            f"the action space must be a flat gymnasium Box in [-1, 1], got {space!r}: return "
             f"spaces.Box(-1.0, 1.0, (n,), np.float32) from _make_action_space"
         )
     if not (np.all(space.low == -1.0) and np.all(space.high == 1.0)):
