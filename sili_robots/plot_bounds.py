@@ -49,8 +49,8 @@ def bound_ids(rows: pd.DataFrame, task: str) -> list[str]:
 def draw_bounds(ax: Axes, metric: str, task_ids: Sequence[str], note: str = "") -> None:
     """The stored bounds of ``task_ids`` as labelled horizontal lines across ``ax`` (a panel of
     ``BOUND_METRICS``), all kept in view; bounds close together share one label at the right
-    edge, each kind with its value and ``note`` (e.g. that they hold for the default task
-    arguments only, on a panel that also has runs given others)."""
+    edge, each kind with its value, and the label ends with ``note`` (e.g. that they hold for the
+    default task arguments only, on a panel that also has runs given others)."""
     from matplotlib.collections import LineCollection
     from matplotlib.transforms import blended_transform_factory
 
@@ -77,8 +77,8 @@ def draw_bounds(ax: Axes, metric: str, task_ids: Sequence[str], note: str = "") 
             )
             lines.set_gid("bound")
             ax.add_collection(lines, autolim=False)
-            ax.update_datalim([(ax.dataLim.x0 if ax.dataLim.width else 0.0, y)], updatex=False)
-            drawn.append((y, f"{kind}{suffix}{note}"))
+            ax.update_datalim([(0.0, y)], updatex=False)  # (x: any finite one; an empty
+            drawn.append((y, f"{kind}{suffix}"))  # panel's dataLim.x0 is inf, which is dropped)
     if not drawn:
         return
     ax.autoscale_view()
@@ -89,7 +89,7 @@ def draw_bounds(ax: Axes, metric: str, task_ids: Sequence[str], note: str = "") 
         by_value: dict[str, list[str]] = {}
         for y, kind in cluster:
             by_value.setdefault(f"{y:.2f}", []).append(kind)
-        text = "; ".join(f"{', '.join(kinds)} {v}" for v, kinds in by_value.items())
+        text = "; ".join(f"{', '.join(kinds)} {v}" for v, kinds in by_value.items()) + note
         upper = (at - lo) > 0.5 * (hi - lo)
         ax.annotate(
             text,

@@ -189,9 +189,9 @@ def _draw_curves(
     for ax, (metric, ylabel) in zip(axes, metrics, strict=True):
         draw_bounds(ax, metric, task_ids, " [default task args]" if mixed else "")
         ax.set_ylabel(ylabel)
+        ax.set_xlabel("interaction")
         ax.set_gid(metric)
         ax.grid(alpha=0.3)
-    axes[-1].set_xlabel("interaction")
 
 
 def _seed_note(rows: pd.DataFrame) -> str:
@@ -218,8 +218,6 @@ def learning_curves(df: pd.DataFrame, task: str, smooth: int | None = None) -> F
     fig = Figure(figsize=(14, 4.0), layout="constrained")
     axes = fig.subplots(1, len(CURVE_METRICS), sharex=True)
     _draw_curves(axes, rows, CURVE_METRICS, window)
-    for ax in axes:
-        ax.set_xlabel("interaction")
     ids = ", ".join(bound_ids(rows, task))
     if ids and (rows["task_args"] != "").any():
         ids += " (its default task arguments)"
@@ -303,7 +301,7 @@ def overview(df: pd.DataFrame, smooth: int | None = None) -> Figure:
     )
     metrics = CURVE_METRICS[:2]
     fig = Figure(figsize=(11, 2.7 * len(tasks) + 0.6), layout="constrained")
-    grid = np.atleast_2d(fig.subplots(len(tasks), len(metrics), squeeze=False))
+    grid = np.atleast_2d(fig.subplots(len(tasks), len(metrics), squeeze=False, sharex="row"))
     handles: dict[str, object] = {}
     shown = {task: curve_rows(df, task) for task in tasks}
     # a method that ran in two profiles anywhere names its profile in every row, one colour each

@@ -454,3 +454,29 @@ def test_bound_labels_within_the_gap_of_the_one_before_share_a_cluster():
     points = [(0.0, "a"), (0.06, "b"), (0.12, "c")]
     assert _clusters(points, 0.07) == [points]
     assert _clusters(points, 0.05) == [[p] for p in points]
+
+
+def test_bounds_stay_in_view_on_an_empty_panel_and_a_labels_note_is_said_once():
+    """A panel with no finite data (runs of one interaction have no stability) kept its empty
+    data limits, so its bounds were drawn out of view; the note followed every bound's name."""
+    from matplotlib.figure import Figure
+
+    from sili_robots.bounds import stored_bounds
+    from sili_robots.plot_bounds import draw_bounds
+
+    ax = Figure().subplots()
+    draw_bounds(ax, "true_stability", ["sili/Circle3-v1"], " [default task args]")
+    lo, hi = ax.get_ylim()
+    values = [v["stability"] for v in stored_bounds("sili/Circle3-v1").values()]
+    assert lo <= min(values) and max(values) <= hi
+    labels = [t.get_text() for t in ax.texts if t.get_gid() == "bound_label"]
+    assert labels and all(t.count("[default task args]") == 1 for t in labels)
+    assert all(t.endswith(" [default task args]") for t in labels)
+
+
+def test_every_overview_panel_names_its_axis_and_a_rows_panels_share_it(sweep_dir):
+    fig = overview(load_results(sweep_dir), smooth=2)
+    grid = [ax for ax in fig.axes if ax.get_gid()]
+    assert all(ax.get_xlabel() == "interaction" for ax in grid)
+    for reward, stability in zip(grid[::2], grid[1::2], strict=True):
+        assert reward.get_xlim() == stability.get_xlim()  # stability has no interaction 0
