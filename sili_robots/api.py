@@ -347,10 +347,10 @@ class SILI:
         libsumo holds one simulation per process); torch's global random state is the caller's
         again (the evaluation and the reload set the checkpoint's)."""
         interactions = check_count("interactions", interactions)
-        self._refresh()
-        self._check_trained("evaluate")
-        self.close()
         with torch.random.fork_rng(devices=[]):
+            self._refresh()
+            self._check_trained("evaluate")
+            self.close()
             try:
                 return evaluate(self.run_dir, interactions, self._task_env)
             finally:

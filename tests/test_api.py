@@ -735,14 +735,14 @@ def test_numpy_numbers_are_settings_as_pythons_are():
     assert type(cfg.hidden) is int and type(cfg.model.sample) is bool  # as config.json keeps
 
 
-def test_a_held_model_env_plays_the_trained_agent_and_evaluate_keeps_the_random_state():
+def test_a_held_model_env_plays_the_trained_agent_and_evaluate_keeps_the_random_state(tmp_path):
     """``env = model.env`` before ``learn`` (stable-baselines3's ``get_env`` habit) fed its
     interactions to the untrained agent while ``predict`` acted with the trained one; and
     ``evaluate`` set torch's global random state to the checkpoint's, so a loop of stochastic
     trials and evaluations repeated one trial."""
     import torch
 
-    model = SILI("circle-3", seed=0, settings=FAST_AGENT)
+    model = SILI("circle-3", seed=0, settings=FAST_AGENT, run_dir=tmp_path / "run")
     env = model.env
     model.learn(4)
     assert env is model.env and env.agent is model.agent
@@ -751,6 +751,10 @@ def test_a_held_model_env_plays_the_trained_agent_and_evaluate_keeps_the_random_
     assert env is model.env and env.agent is model.agent
     torch.manual_seed(123)
     expected = torch.rand(3)
+    torch.manual_seed(123)
+    model.evaluate(1)
+    assert torch.equal(torch.rand(3), expected)
+    SILI.load(model.run_dir).learn(1)  # trained further: evaluate first catches up with it
     torch.manual_seed(123)
     model.evaluate(1)
     assert torch.equal(torch.rand(3), expected)

@@ -457,6 +457,9 @@ def test_a_sweep_run_again_with_another_checkpoint_interval_goes_on_with_its_run
     assert (tmp_path / "runs" / "circle-3__sac__s1" / "summary.json").is_file()
     assert main([*args, "--set", "sac.lr=1e-3", "--dry-run"]) == 2  # a setting still counts
     assert "made with other settings (agent.sac.lr" in capsys.readouterr().err
+    # both invocations are recorded: the first's interval wins, as for a timed kernel
+    assert main(["sweep", "--resume", str(tmp_path), "--interactions", "6", "--dry-run"]) == 0
+    assert capsys.readouterr().out.count("resumable (extended to 6)") == 2
 
 
 def test_a_failed_sweep_run_finished_by_hand_is_no_longer_called_failed(tmp_path, capsys):
@@ -476,6 +479,27 @@ def test_a_failed_sweep_run_finished_by_hand_is_no_longer_called_failed(tmp_path
     capsys.readouterr()
     assert main(["sweep", "--resume", str(tmp_path), "--dry-run"]) == 0
     assert capsys.readouterr().out == "circle-3__sac__s0\tdone\n1 run\n"
+
+
+def test_a_dry_run_refused_by_a_live_trainer_lists_each_run_as_it_would(tmp_path, capsys):
+    """The listing before the refusal said only each run's state: 'done' of a run the
+    extension would go on with, and nothing of an earlier failure."""
+    assert run_sweep(_spec(methods=["sac"], seeds=[0, 1], interactions=3), tmp_path).ok
+    s0, s1 = (tmp_path / "runs" / f"circle-3__sac__s{seed}" for seed in (0, 1))
+    (s0 / "error.txt").write_text("Traceback ...")
+    trainer = {"pid": os.getpid(), "host": socket.gethostname()}  # a live process on this host
+    (s1 / "worker.json").write_text(json.dumps(trainer))
+    capsys.readouterr()
+    for extend, s0_line in ((["--interactions", "5"], "resumable (extended to 5)"), ([], "done")):
+        if not extend:
+            s0_line += " (failed before, see its error.txt)"
+        assert main(["sweep", "--resume", str(tmp_path), *extend, "--dry-run"]) == 2
+        printed = capsys.readouterr()
+        assert (
+            "circle-3__sac__s1 in" in printed.err and "is being trained by process" in printed.err
+        )
+        s1_line = f"circle-3__sac__s1\ttraining (process {os.getpid()})"
+        assert printed.out == f"circle-3__sac__s0\t{s0_line}\n{s1_line}\n2 runs\n"
 
 
 def test_a_record_that_cannot_run_is_named_and_a_dry_run_refuses_it_too(tmp_path, capsys):

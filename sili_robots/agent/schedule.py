@@ -47,7 +47,8 @@ class Schedule:
 
     @classmethod
     def parse(cls, text: str) -> Schedule:
-        """``"250:0,300:0.5"``, the form ``__str__`` writes and ``--set`` takes."""
+        """``"250:0,300:0.5"``, the form ``__str__`` writes and the command line's, for a
+        setting given as text (the CLI's own reader names the option and its range)."""
         points = []
         for item in text.split(","):
             interaction, sep, value = item.strip().partition(":")

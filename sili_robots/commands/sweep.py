@@ -257,10 +257,10 @@ def _specs_and_dir(args: argparse.Namespace) -> tuple[list[SweepSpec], Path]:
 
 
 def _dry_run(args: argparse.Namespace, specs: list[SweepSpec], sweep_dir: Path) -> int:
-    """Print each planned run and what the sweep would do with it; refuse what it would."""
-    from sili_robots.runs import CHECKPOINT, ERROR_FILE
+    """Print each planned run and what the sweep would do with it; refuse what it would (a run
+    another process trains: after the listing, which shows it)."""
     from sili_robots.sweep.runner import as_found, as_made, check_planned, plan, replaced_runs
-    from sili_robots.sweep.state import RunBeingTrained, run_path, run_state, training_worker
+    from sili_robots.sweep.state import RunBeingTrained, run_path, shorter_run
 
     planned = plan(specs)
     if args.overwrite:  # what is on disk goes: every planned run is new
@@ -273,23 +273,35 @@ def _dry_run(args: argparse.Namespace, specs: list[SweepSpec], sweep_dir: Path) 
         print(_run_count(planned))
         return 0
     planned = as_made(sweep_dir, planned)
+    recorded = args.resume is not None
     try:
-        found, shorter = check_planned(sweep_dir, planned, args.resume is not None)
-    except RunBeingTrained:  # refused as the sweep would be, after where each run stands
+        found, shorter = check_planned(sweep_dir, planned, recorded)
+    except RunBeingTrained:
+        found = {run_.name: as_found(sweep_dir, run_) for run_ in planned}
+        shorter = []
         for run_ in planned:
-            folder = run_path(sweep_dir, as_found(sweep_dir, run_).name)
-            pid = training_worker(folder)
-            print(
-                f"{run_.name}\t"
-                + (run_state(folder) if pid is None else f"training (process {pid})")
-            )
-        print(_run_count(planned))
+            with contextlib.suppress(ConfigError):  # (the trained one raises: listed as such)
+                if recorded and shorter_run(sweep_dir, found[run_.name]):
+                    shorter.append(run_)
+        _list_planned(sweep_dir, planned, found, shorter)
         raise
+    _list_planned(sweep_dir, planned, found, shorter)
+    return 0
+
+
+def _list_planned(sweep_dir: Path, planned: list, found: dict, shorter: list) -> None:
+    """One line per planned run: its state and what the sweep does first with it."""
+    from sili_robots.runs import CHECKPOINT, ERROR_FILE
+    from sili_robots.sweep.state import run_path, run_state, training_worker
+
     for run_ in planned:
         on_disk = found[run_.name]
         path = run_path(sweep_dir, on_disk.name)
         notes = [] if on_disk is run_ else [f"its folder {on_disk.name} is renamed to it first"]
-        if run_ in shorter:
+        pid = training_worker(path)
+        if pid is not None:  # (the sweep refuses to run now)
+            state = f"training (process {pid})"
+        elif run_ in shorter:
             state = "resumable" if (path / CHECKPOINT).is_file() else "new"
             notes.insert(0, f"extended to {run_.config.interactions}")
         else:
@@ -298,7 +310,6 @@ def _dry_run(args: argparse.Namespace, specs: list[SweepSpec], sweep_dir: Path) 
                 notes.insert(0, f"failed before, see its {ERROR_FILE}")
         print(f"{run_.name}\t{state}" + (f" ({', '.join(notes)})" if notes else ""))
     print(_run_count(planned))
-    return 0
 
 
 def _run_count(planned: list) -> str:

@@ -59,13 +59,14 @@ class SweepReport:
 
 def plan(specs: Sequence[SweepSpec]) -> list[PlannedRun]:
     """The union of the specs' runs (a run named twice must be the same run, but for what the
-    later one's machine timed: invocations on two machines may time other kernels for it; the
-    first wins)."""
+    later one's machine timed, as invocations on two machines may time other kernels for it,
+    and how often it is saved, which changes no number it logs; the first wins)."""
     runs: dict[str, PlannedRun] = {}
     for spec in specs:
         for run in expand(spec):
             prev = runs.get(run.name)
-            if prev is not None and not same_run(prev.config, run.config, run.timed):
+            either = {*run.timed, "checkpoint_every"}
+            if prev is not None and not same_run(prev.config, run.config, either):
                 raise ConfigError(f"run {run.name} is planned twice with different settings")
             runs.setdefault(run.name, run)
     return list(runs.values())

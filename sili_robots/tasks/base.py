@@ -100,11 +100,11 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     # ----------------------------------------------------------------- subclass hooks
     @abstractmethod
     def _make_action_space(self) -> spaces.Box:
-        """The ego's action space: a Box in [-1, 1] (scale it in ``_apply_action``)."""
+        """The ego's action space: a flat Box in [-1, 1] (scale it in ``_apply_action``)."""
 
     @abstractmethod
     def _base_observation_space(self) -> spaces.Box:
-        """What the ego sees, without oracle encoding or strategy flag."""
+        """What the ego sees, without oracle encoding or strategy flag: a flat Box."""
 
     @abstractmethod
     def _initial_strategy(self) -> None:
