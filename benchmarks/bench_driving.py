@@ -59,6 +59,8 @@ def main() -> None:
     parser.add_argument("--interactions", type=positive_int, default=100)
     parser.add_argument("--seed", type=seed_number, default=0)
     args = parser.parse_args()
+    if args.interactions < 2:  # the first reset starts SUMO; the later ones are timed
+        parser.error(f"--interactions {args.interactions}: give at least 2 (resets are timed)")
     print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
     results = {b: run(b, args.interactions, args.seed) for b in ("libsumo", "traci")}
     if results["libsumo"]["returns"] != results["traci"]["returns"]:

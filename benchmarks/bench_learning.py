@@ -48,8 +48,10 @@ from sili_robots.runs import (
     DAMAGED_SUMMARY,
     MACHINE_SETTINGS,
     SUMMARY,
+    RunConfig,
     read_config,
     read_json,
+    run_differences,
 )
 from sili_robots.sweep import parse_seeds
 from sili_robots.sweep.results import finished_summary
@@ -232,11 +234,17 @@ def main() -> None:
             if (config.parent / SUMMARY).exists():  # damaged: named now, not after the others
                 read_json(config.parent / SUMMARY, DAMAGED_SUMMARY, "interactions")
             if config.exists():
-                recorded = read_config(config.parent).interactions
-                if recorded > args.interactions:
+                recorded = read_config(config.parent)
+                if recorded.interactions > args.interactions:
                     p.error(
                         f"--interactions {args.interactions}: {config.parent} is set to "
-                        f"{recorded}; give at least that, or another --out"
+                        f"{recorded.interactions}; give at least that, or another --out"
+                    )
+                other = _other_settings(recorded, task, method, seed, args)
+                if other:  # reused or resumed as recorded, it would not be the run asked for
+                    p.error(
+                        f"{config.parent} holds a run of other settings ({'; '.join(other[:3])}"
+                        "): give the settings it was made with, or another --out"
                     )
         print(f"machine: {machine_key()} each", flush=True)  # what the runs trained now ran on
         with ThreadPoolExecutor(args.workers) as pool:
@@ -283,6 +291,23 @@ def checked_jobs(p: argparse.ArgumentParser, args: argparse.Namespace) -> tuple[
             ),
         )
     return methods, seeds
+
+
+def _other_settings(
+    recorded: RunConfig, task: str, method: str, seed: int, args: argparse.Namespace
+) -> list[str]:
+    """How the run on disk differs from the one ``--set`` and ``--latent`` ask for, but its
+    budget and the machine's settings (``run_one`` reuses it, or resumes it as recorded)."""
+    latent = args.latent if method in LATENT_METHODS else None
+    settings = parse_settings(args.set)
+    wanted = make_run_config(
+        task, method, seed, args.interactions, latent=latent, settings=settings
+    )
+    return [
+        f"{key}: {there!r} there, {asked!r} asked"
+        for key, there, asked in run_differences(recorded.to_dict(), wanted.to_dict())
+        if key != "interactions" and key not in MACHINE_SETTINGS
+    ]
 
 
 def _population_std(values: pd.Series) -> float:

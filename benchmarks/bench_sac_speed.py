@@ -305,6 +305,7 @@ def main() -> None:
             p.error(f"--arm {arm!r}: {err}")
     torch.set_num_threads(args.threads)
     if args.matmul_only:
+        print(f"machine: {machine()}")  # every timing names its CPU
         matmul_only()
         return
     in_dim, act_dim, batch = 3 + 2 * 10, 2, 256

@@ -38,6 +38,8 @@ from sili_robots.tasks import make_task, task_spec
 from sili_robots.tasks.sawyer_scene import N_SUBSTEPS, SawyerScene
 
 Block = Callable[[int], None]
+#: robosuite Lift's episode length (its default), which the timed steps of all rounds stay under
+LIFT_HORIZON = 1000
 
 
 def lift_blocks(seed: int) -> tuple[Block, Block, float]:
@@ -52,6 +54,7 @@ def lift_blocks(seed: int) -> tuple[Block, Block, float]:
         has_offscreen_renderer=False,
         use_camera_obs=False,
         control_freq=20,
+        horizon=LIFT_HORIZON,
     )
     arm = env.robots[0].part_controllers["right"]
     assert arm.name == "OSC_POSE", arm.name
@@ -112,6 +115,14 @@ def main() -> None:
     parser.add_argument("--block", type=positive_int, default=300, help="steps per timed block")
     parser.add_argument("--seed", type=seed_number, default=0)
     args = parser.parse_args()
+    lift_steps = args.block // 3  # the reference and OSC, slower, time a third of a block
+    if lift_steps < 1:
+        parser.error(f"--block {args.block}: give at least 3 (Lift and OSC time a third of it)")
+    if lift_steps * args.rounds >= LIFT_HORIZON:  # (it is never reset between rounds)
+        parser.error(
+            f"--block {args.block} --rounds {args.rounds}: Lift would play {lift_steps} x "
+            f"{args.rounds} steps, which must stay under its horizon of {LIFT_HORIZON}; give fewer"
+        )
     print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
 
     lift, lift_raw, lift_reset = lift_blocks(args.seed)
@@ -120,10 +131,10 @@ def main() -> None:
     scene.reset()
     # (label, block, steps per block): slow environments get shorter blocks
     entries: list[tuple[str, Block, int]] = [
-        ("robosuite Lift, Sawyer, OSC_POSE (reference)", lift, args.block // 3)
+        ("robosuite Lift, Sawyer, OSC_POSE (reference)", lift, lift_steps)
     ]
     for name in CONTROLLER_NAMES:
-        steps = args.block // 3 if name == "osc" else args.block
+        steps = lift_steps if name == "osc" else args.block
         block, resets[f"SawyerReach {name}"] = ours_block(name, args.seed)
         entries.append((f"{TASK_ID}, controller={name}", block, steps))
     entries.append(

@@ -87,6 +87,11 @@ def test_run_one_resumes_and_extends_a_recorded_run(tmp_path: Path) -> None:
     result = run_script(*shorter, "--interactions", "2")
     assert result.returncode == 2 and "is set to 3" in result.stderr
     assert "Traceback" not in result.stderr
+    # other settings on the same folder: refused, not the recorded run reused as if it had them
+    sets = [x for item in FAST_SET for x in ("--set", item)]
+    result = run_script(*shorter, "--interactions", "3", *sets, "--set", "sac.lr=0.01")
+    assert result.returncode == 2 and "holds a run of other settings (agent.sac.lr" in result.stderr
+    assert run_script(*shorter, "--interactions", "3", *sets).returncode == 0  # its own: reused
 
 
 def test_seeds_trained_on_other_kernels_are_one_configuration() -> None:

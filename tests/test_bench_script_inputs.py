@@ -55,3 +55,24 @@ def test_grouping_settings_are_checked_before_the_first_fit(tmp_path: Path) -> N
     (run / "checkpoint.pt").unlink()
     result = run_script("bench_latent_grouping.py", str(run), "--steps", "1")
     assert result.returncode == 2 and "has no checkpoint" in result.stderr
+
+
+def test_timing_budgets_that_cannot_be_measured_are_refused_before_any_timing() -> None:
+    """A Lift block of 0 steps divided by zero, and Lift's timed steps past its horizon failed
+    an assert after the rounds before it; one Driving interaction times no reset (0.00 ms)."""
+    for args, said in (
+        (["--block", "2"], "--block 2: give at least 3"),
+        (["--block", "3000", "--rounds", "1"], "must stay under its horizon of 1000"),
+        (["--rounds", "10"], "Lift would play 100 x 10 steps"),
+    ):
+        result = run_script("bench_sawyer_speed.py", *args)
+        assert result.returncode == 2 and said in result.stderr
+        assert "machine:" not in result.stdout  # before anything was timed
+    result = run_script("bench_driving.py", "--interactions", "1")
+    assert result.returncode == 2 and "give at least 2 (resets are timed)" in result.stderr
+
+
+def test_the_matmul_timing_names_the_machine_it_ran_on() -> None:
+    result = run_script("bench_sac_speed.py", "--matmul-only")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.startswith("machine: ") and "GFLOP/s" in result.stdout
