@@ -77,8 +77,9 @@ def draw_bounds(ax: Axes, metric: str, task_ids: Sequence[str], note: str = "") 
             )
             lines.set_gid("bound")
             ax.add_collection(lines, autolim=False)
-            ax.update_datalim([(0.0, y)], updatex=False)  # (x: any finite one; an empty
-            drawn.append((y, f"{kind}{suffix}"))  # panel's dataLim.x0 is inf, which is dropped)
+            # y alone counts: any finite x (an empty panel's dataLim.x0 is inf, a dropped point)
+            ax.update_datalim([(0.0, y)], updatex=False)
+            drawn.append((y, f"{kind}{suffix}"))
     if not drawn:
         return
     ax.autoscale_view()
