@@ -14,7 +14,7 @@ last ``--window`` interactions in at least 2 of 3 seeds (two thirds of them), an
 task reward is within 15% of Oracle's cost (judged only where Oracle's reward is negative) and
 above LILI's and SAC's. A folder with several configurations of one method on a task (profiles,
 b values, budgets) is tabulated but not judged. A run stopped midway resumes as recorded; a
-finished shorter one is extended.
+finished shorter one is extended; one of other settings than those asked for is refused.
 """
 
 from __future__ import annotations
@@ -242,9 +242,15 @@ def main() -> None:
                     )
                 other = _other_settings(recorded, task, method, seed, args)
                 if other:  # reused or resumed as recorded, it would not be the run asked for
+                    said = [
+                        f"{key}: {there!r} there, {asked!r} asked" for key, there, asked in other
+                    ]
+                    more = f" and {len(said) - 3} more" if len(said) > 3 else ""
+                    settable = all(key.startswith(("agent.", "addons.")) for key, _, _ in other)
+                    fix = "the settings it was made with, or " if settable else ""
                     p.error(
-                        f"{config.parent} holds a run of other settings ({'; '.join(other[:3])}"
-                        "): give the settings it was made with, or another --out"
+                        f"{config.parent} holds a run of other settings ({'; '.join(said[:3])}"
+                        f"{more}): give {fix}another --out"
                     )
         print(f"machine: {machine_key()} each", flush=True)  # what the runs trained now ran on
         with ThreadPoolExecutor(args.workers) as pool:
@@ -295,19 +301,19 @@ def checked_jobs(p: argparse.ArgumentParser, args: argparse.Namespace) -> tuple[
 
 def _other_settings(
     recorded: RunConfig, task: str, method: str, seed: int, args: argparse.Namespace
-) -> list[str]:
+) -> list[tuple[str, Any, Any]]:
     """How the run on disk differs from the one ``--set`` and ``--latent`` ask for, but its
-    budget and the machine's settings (``run_one`` reuses it, or resumes it as recorded)."""
+    budget and the machine's settings not given (``run_one`` reuses it, or resumes it as
+    recorded; as a sweep, it keeps the kernels a machine chose for it, not those asked for)."""
     latent = args.latent if method in LATENT_METHODS else None
     settings = parse_settings(args.set)
     wanted = make_run_config(
         task, method, seed, args.interactions, latent=latent, settings=settings
     )
-    return [
-        f"{key}: {there!r} there, {asked!r} asked"
-        for key, there, asked in run_differences(recorded.to_dict(), wanted.to_dict())
-        if key != "interactions" and key not in MACHINE_SETTINGS
-    ]
+    given = {f"agent.{setting_path(name)}" for name in settings}
+    ignored = {"interactions", *MACHINE_SETTINGS} - given
+    differences = run_differences(recorded.to_dict(), wanted.to_dict())
+    return [d for d in differences if d[0] not in ignored]
 
 
 def _population_std(values: pd.Series) -> float:

@@ -175,9 +175,11 @@ class SILI:
 
     def _refresh(self) -> None:
         """Catch up with a run trained further since this model loaded it (by another model
-        of the same run, or ``sili train --resume``), so counts and saves start from it."""
+        of the same run, or ``sili train --resume``), so counts and saves start from it; torch's
+        global random state stays the caller's (reloading sets the checkpoint's)."""
         if self._done and _stamp(self.run_dir) != self._loaded:
-            self._reload()
+            with torch.random.fork_rng(devices=[]):
+                self._reload()
 
     @classmethod
     def load(cls, path: str | Path, env: gym.Env | None = None) -> SILI:

@@ -758,6 +758,10 @@ def test_a_held_model_env_plays_the_trained_agent_and_evaluate_keeps_the_random_
     torch.manual_seed(123)
     model.evaluate(1)
     assert torch.equal(torch.rand(3), expected)
+    SILI.load(model.run_dir).learn(1)  # and so does save
+    torch.manual_seed(123)
+    model.save(tmp_path / "saved")
+    assert torch.equal(torch.rand(3), expected)
 
 
 def test_a_schedule_is_a_setting_in_the_command_lines_text_too():

@@ -92,6 +92,9 @@ def test_run_one_resumes_and_extends_a_recorded_run(tmp_path: Path) -> None:
     result = run_script(*shorter, "--interactions", "3", *sets, "--set", "sac.lr=0.01")
     assert result.returncode == 2 and "holds a run of other settings (agent.sac.lr" in result.stderr
     assert run_script(*shorter, "--interactions", "3", *sets).returncode == 0  # its own: reused
+    result = run_script(*shorter, "--interactions", "3", *sets, "--set", "sac.precision=bfloat16")
+    assert result.returncode == 2  # a machine's setting, given, is checked as any other
+    assert "(agent.sac.precision: 'float32' there, 'bfloat16' asked)" in result.stderr
 
 
 def test_seeds_trained_on_other_kernels_are_one_configuration() -> None:
