@@ -312,8 +312,7 @@ def _other_settings(
     )
     given = {f"agent.{setting_path(name)}" for name in settings}
     ignored = {"interactions", *MACHINE_SETTINGS} - given
-    differences = run_differences(recorded.to_dict(), wanted.to_dict())
-    return [d for d in differences if d[0] not in ignored]
+    return run_differences(recorded.to_dict(), wanted.to_dict(), ignored)
 
 
 def _population_std(values: pd.Series) -> float:

@@ -401,14 +401,16 @@ def with_settings_of(cfg: RunConfig, recorded: dict[str, Any], keys: Collection[
 def same_run(a: RunConfig, b: RunConfig, ignoring: Collection[str]) -> bool:
     """Whether two configs make the same run, whatever each has in the settings ``ignoring``
     (dotted; e.g. those a machine's timing chose)."""
-    return all(key in ignoring for key, _, _ in run_differences(a.to_dict(), b.to_dict()))
+    return not run_differences(a.to_dict(), b.to_dict(), ignoring)
 
 
-def run_differences(a: dict[str, Any], b: dict[str, Any]) -> list[tuple[str, Any, Any]]:
+def run_differences(
+    a: dict[str, Any], b: dict[str, Any], ignoring: Collection[str] = ()
+) -> list[tuple[str, Any, Any]]:
     """``differences`` of two runs' configs (``to_dict``, ``recorded_run``), where a task
     argument given at the task's default is the same run as one not given (a sweep's
-    ``--controller mink`` on Sawyer-Reach, or none)."""
-    return differences(_as_built(a), _as_built(b))
+    ``--controller mink`` on Sawyer-Reach, or none), but in the settings ``ignoring`` (dotted)."""
+    return [d for d in differences(_as_built(a), _as_built(b)) if d[0] not in ignoring]
 
 
 def _as_built(run: dict[str, Any]) -> dict[str, Any]:
@@ -503,7 +505,7 @@ def _other_settings(recorded: Any, cfg: RunConfig) -> list[tuple[str, Any, Any]]
         recorded = RunConfig.from_dict(recorded).to_dict()  # in today's layout, as cfg is
     except (ConfigError, TypeError, KeyError, AttributeError, ValueError):
         return []  # another version's layout: the task, method and seed were compared
-    return [d for d in run_differences(recorded, cfg.to_dict()) if d[0] not in NOT_CHECKPOINTED]
+    return run_differences(recorded, cfg.to_dict(), NOT_CHECKPOINTED)
 
 
 #: what ``torch.load`` raises on a damaged checkpoint (and OSError EINVAL, at some cut lengths)

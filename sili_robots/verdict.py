@@ -183,8 +183,7 @@ NONE_WORKED = 3
 def _settings_that_differ(a: RunConfig, b: RunConfig) -> list[tuple[str, Any, Any]]:
     """(dotted name, value in ``a``, in ``b``) of the settings two runs differ in, other than
     the seed and the per-machine settings; the top-level ones (task, method) first."""
-    ignored = {"seed", *MACHINE_SETTINGS}
-    found = [d for d in run_differences(a.to_dict(), b.to_dict()) if d[0] not in ignored]
+    found = run_differences(a.to_dict(), b.to_dict(), {"seed", *MACHINE_SETTINGS})
     return sorted(found, key=lambda d: d[0].count("."))
 
 

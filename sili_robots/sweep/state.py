@@ -272,11 +272,8 @@ def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
         return
     on_disk = recorded_run(path)
     planned_dict = json.loads(json.dumps(planned.config.to_dict()))
-    diffs = [
-        f"{k}: {a!r} on disk, {b!r} now"
-        for k, a, b in run_differences(on_disk, planned_dict)
-        if k != "checkpoint_every"
-    ]
+    found = run_differences(on_disk, planned_dict, ("checkpoint_every",))
+    diffs = [f"{k}: {a!r} on disk, {b!r} now" for k, a, b in found]
     held, asked = on_disk.get("interactions"), planned.config.interactions
     only_length = len(diffs) == 1 and isinstance(held, int)
     a_sweep = (Path(sweep_dir) / SWEEP_FILE).is_file()  # a collection has no record to resume
