@@ -21,9 +21,10 @@ from typing import Any
 
 import meshcat
 import umsgpack
-from meshcat.servers.tree import SceneTree, find_node, walk
+from meshcat.servers.tree import SceneTree, find_node
 
 from sili_robots.atomic import write_text
+from sili_robots.preview.meshcat_child import scene_messages
 
 VIEWER_JS = Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js"
 
@@ -60,17 +61,9 @@ class SceneRecorder:
             raise ValueError(f"meshcat command {kind!r} cannot be recorded")
 
     def commands(self) -> list[bytes]:
-        """Packed commands in the order the live server replays a scene (``meshcat_child``):
-        meshcat's tree walk, the animation after every object."""
-        out: list[bytes] = []
-        for node in walk(self.tree):
-            if node.object is not None:
-                out.append(node.object)
-            out.extend(node.properties)
-            if node.transform is not None:
-                out.append(node.transform)
-            if node.animation is not None:
-                out.append(node.animation)
+        """Packed commands in the order the live server replays a scene (``scene_messages``),
+        the animation last."""
+        out = scene_messages(self.tree)
         if self.animation is not None:
             out.append(self.animation)
         return out

@@ -33,18 +33,22 @@ class LoopbackBridge(ZMQWebSocketBridge):
         return app
 
     def send_scene(self, websocket):
-        """Every object, property and transform, then the animations. meshcat's own replay sends
-        a node's animation before its children's objects, so the page's tracks bound to objects
-        not made yet: the live view animated a scene the file shows right, wrongly."""
-        animations = []
-        for node in walk(self.tree):
-            for data in (node.object, *node.properties, node.transform):
-                if data is not None:
-                    websocket.write_message(data, binary=True)
-            if node.animation is not None:
-                animations.append(node.animation)
-        for data in animations:
+        """``scene_messages``: meshcat's own replay sends a node's animation before its
+        children's objects, so the page's tracks bound to objects not made yet: the live view
+        animated a scene the file shows right, wrongly."""
+        for data in scene_messages(self.tree):
             websocket.write_message(data, binary=True)
+
+
+def scene_messages(tree) -> list[bytes]:
+    """A scene tree's packed commands in the order a page must get them: every object,
+    property and transform (meshcat's tree walk), then the animations, which bind to them."""
+    out, animations = [], []
+    for node in walk(tree):
+        out.extend(d for d in (node.object, *node.properties, node.transform) if d is not None)
+        if node.animation is not None:
+            animations.append(node.animation)
+    return out + animations
 
 
 def exit_with(parent: int) -> None:
