@@ -89,8 +89,9 @@ def read_metrics(path: Path) -> Any:
         if missing:
             raise ValueError(f"no column {', '.join(missing)}")
         filled = [c for c in FILLED_COLUMNS if c in df.columns]
-        if len(df) and df[filled].iloc[-1].isna().any():  # a last row cut short (a run stopped
-            # mid-write): resume drops it; read again, so the columns' types are the rows' own
+        if len(df) and (df[filled].iloc[-1].isna().any() or _cut_at_end(path)):
+            # a last row cut short (a run stopped mid-write, also past its filled columns):
+            # resume drops it; read again, so the columns' types are the rows' own
             df = pd.read_csv(path, float_precision="round_trip", nrows=len(df) - 1)
         for column in READ_COLUMNS:
             pd.to_numeric(df[column])
@@ -168,6 +169,11 @@ def check_history(
             f"{state}; resuming would leave a hole in its record: restore {METRICS}, or train "
             "it again (sili train --overwrite; in a sweep, delete the run's folder and resume)"
         )
+
+
+def _cut_at_end(path: Path) -> bool:
+    """A plain ``metrics.csv`` whose last row lost its end (a gzipped copy is written whole)."""
+    return path.suffix != ".gz" and not _ends_a_line(path)
 
 
 def _ends_a_line(path: Path) -> bool:

@@ -1094,6 +1094,9 @@ def test_a_history_row_cut_short_is_refused_not_trained_on(tmp_path):
         assert (run / "metrics.csv").read_bytes() == damaged
     (run / "metrics.csv").write_bytes(whole + lines[3][:8])  # a row past the checkpoint
     assert len(read_metrics(run / "metrics.csv")) == 3  # readers leave it out as resume does
+    filled = b",".join(lines[3].split(b",")[:9])  # interaction to beta, and latent_loss
+    (run / "metrics.csv").write_bytes(whole + filled + b",0.1")  # cut in critic_loss
+    assert len(read_metrics(run / "metrics.csv")) == 3  # not a trained row (`sili runs`)
     (run / "metrics.csv").write_bytes(whole + b"3,-")  # cut inside a number
     rows = read_metrics(run / "metrics.csv")
     assert rows.dtypes.equals(pd.read_csv(io.BytesIO(whole)).dtypes)  # numbers, as written
