@@ -254,3 +254,17 @@ def test_blind_and_tracking_policies_act_on_the_goal_revealed(kind):
     else:
         wanted = action_toward(task, GOALS[[0, 1]].mean(axis=0))
     np.testing.assert_allclose(policy(env, obs), wanted)
+
+
+def test_goals_differ_in_worth_as_docs_say():
+    """The per-axis clip (docs/tasks.md, README's departures): holding goal 0, straight along x,
+    costs more than holding a diagonal goal; the stabilizing reference's per-goal costs."""
+    env = gym.make("sili/SawyerReach-v1")
+    costs = []
+    for goal in range(3):
+        policy = scripted_policy(env, "stabilizing")
+        played = run_interactions(env, policy, 2, seed=goal, options={"strategy": goal})
+        assert [p.end_strategy_id for p in played] == [goal, goal]
+        costs.append(-played[1].task_reward)
+    env.close()
+    assert costs == pytest.approx([2.73, 2.50, 2.57], abs=0.01)
