@@ -12,30 +12,35 @@
 # SILI_MAIN_OUT: where the sweep goes (default runs/main-job; a rerun replaces it).
 # Further arguments go to `sili sweep`; the output folder is SILI_MAIN_OUT's alone, as the verdict
 # reads the runs there.
+# SILI_VENV: the environment setup.sh makes and the job runs in (default .venv).
 set -euo pipefail
+dry_run=0
 for arg in "$@"; do
     case $arg in
     --ou*)  # --out, or an abbreviation argparse would take for it
         echo "scripts/main.sh: error: give the output folder as SILI_MAIN_OUT=DIR, not $arg" >&2
         exit 2
         ;;
+    --dr*) dry_run=1 ;;  # --dry-run (or its abbreviation): the listing alone, nothing trained
     esac
 done
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
+VENV=${SILI_VENV:-.venv}
 OUT=${SILI_MAIN_OUT:-runs/main-job}
-.venv/bin/sili sweep --tasks circle-3 --methods sili --seeds 0-1 --workers 2 \
+"$VENV/bin/sili" sweep --tasks circle-3 --methods sili --seeds 0-1 --workers 2 \
     --interactions "${SILI_MAIN_INTERACTIONS:-900}" --set hidden=64 --set sac.precision=float32 \
     --beta-schedule 250:0,300:0.5 --out "$OUT" --overwrite --no-tensorboard "$@"
+[ "$dry_run" = 1 ] && exit 0
 status=0
-RUN=$(.venv/bin/python -m sili_robots.verdict "$OUT"/runs/*/) || status=$?  # the runs --overwrite left
+RUN=$("$VENV/bin/python" -m sili_robots.verdict "$OUT"/runs/*/) || status=$?  # the runs --overwrite left
 if [ "$status" = 3 ]; then  # no seed worked (sili_robots.verdict.NONE_WORKED)
     echo "Whether this small agent holds well at 900 interactions depends on the seed (how the processor" \
         "rounds is part of it: 8 of 12 seeds held above standing still's reward). The default agent (2 x 256) in float32" \
         "held on this task in 3 of 3 seeds of the paper grid at 2,000 interactions (-8.3 to -16.9; 23-27 min per run):" \
-        ".venv/bin/sili train --task circle-3 --method sili --interactions 2000 --set sac.precision=float32 --out runs/recipe" \
+        "$VENV/bin/sili train --task circle-3 --method sili --interactions 2000 --set sac.precision=float32 --out runs/recipe" \
         "(benchmarks/RESULTS.md, \"The main job\" and \"The paper grid\")." >&2
 elif [ "$status" != 0 ]; then
     exit "$status"
 fi
-.venv/bin/sili eval "$RUN" --interactions 20
+"$VENV/bin/sili" eval "$RUN" --interactions 20

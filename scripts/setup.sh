@@ -1,22 +1,44 @@
 #!/usr/bin/env bash
 # Create (or refresh) .venv with the CPU torch wheel first, then this package, with the optional
 # dependency groups named as arguments (`bash scripts/setup.sh dev` adds the test tools).
-# Idempotent: nothing to do when pyproject.toml is unchanged and the groups are installed.
+# Idempotent: nothing to do when pyproject.toml and the torch pin are unchanged and the groups
+# are installed. SILI_VENV: another environment folder; PYTHON: the interpreter to make it with
+# (an environment on another Python version is made anew with it).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=${SILI_VENV:-.venv}
 PY=${PYTHON:-python3}
-if ! "$VENV/bin/python" -m pip --version >/dev/null 2>&1 &&
-    ! "$VENV/bin/python" -m ensurepip -q >/dev/null 2>&1; then
-    # missing, or broken (its interpreter gone with an upgrade): anew, if it is an environment
+TORCH=2.13.0
+TORCH_CPU_INDEX=https://download.pytorch.org/whl/cpu
+SUPPORTED='import sys; sys.exit(sys.version_info < (3, 10))'  # pyproject's requires-python
+
+version() { "$1" -c 'import sys; print(*sys.version_info[:2], sep=".")' 2>/dev/null; }
+
+usable() {  # an environment with pip, on a supported Python (PYTHON's version, when given)
+    "$VENV/bin/python" -c "$SUPPORTED" 2>/dev/null || return 1
+    if [ -n "${PYTHON:-}" ]; then
+        [ "$(version "$VENV/bin/python")" = "$(version "$PY")" ] || return 1
+    fi
+    "$VENV/bin/python" -m pip --version >/dev/null 2>&1 ||
+        "$VENV/bin/python" -m ensurepip -q >/dev/null 2>&1
+}
+
+if ! usable; then
+    # missing, broken (its interpreter gone with an upgrade) or on another Python: anew, if it
+    # is an environment
     if [ -n "$(ls -A "$VENV" 2>/dev/null)" ] && [ ! -f "$VENV/pyvenv.cfg" ]; then
         echo "setup: $VENV is a folder, not a virtual environment; give SILI_VENV another" >&2
         exit 2
     fi
+    if ! "$PY" -c "$SUPPORTED" 2>/dev/null; then
+        echo "setup: sili-robots needs Python >= 3.10; $PY is $(version "$PY" || echo "not a" \
+            "Python"); give PYTHON=python3.11 (or another >= 3.10)" >&2
+        exit 2
+    fi
     "$PY" -m venv --clear "$VENV"
 fi
-hash=$(sha256sum pyproject.toml | cut -d' ' -f1)
-stamp="$VENV/.sili-installed"  # the pyproject hash, then the groups installed with it
+hash=$({ cat pyproject.toml; echo "torch==$TORCH"; } | sha256sum | cut -d' ' -f1)
+stamp="$VENV/.sili-installed"  # the hash, then the groups installed with it
 have=$(cat "$stamp" 2>/dev/null || true)
 groups="" missing=1
 if [ "${have%% *}" = "$hash" ]; then
@@ -27,11 +49,18 @@ for g in "$@"; do
 done
 if [ "$missing" = 1 ]; then
     groups=$(echo $groups)  # trimmed, one space apart
-    "$VENV/bin/python" -m pip install -q --upgrade pip
-    # CPU build first so no dependency range pulls a CUDA build of torch.
-    "$VENV/bin/python" -m pip install -q torch==2.13.0
+    pip=("$VENV/bin/python" -m pip install -q)
+    "${pip[@]}" --upgrade pip
+    # The CPU build first, so no dependency range pulls a CUDA build of torch (several GB): one
+    # pip finds already (a wheel on disk, a configured index), else PyTorch's CPU index; PyPI's
+    # own (on Linux x86-64 the CUDA build) only where neither has it.
+    if ! "${pip[@]}" "torch==$TORCH+cpu" 2>/dev/null &&
+        ! "${pip[@]}" "torch==$TORCH+cpu" --extra-index-url "$TORCH_CPU_INDEX" 2>/dev/null; then
+        echo "setup: no CPU build of torch $TORCH found; installing PyPI's" >&2
+        "${pip[@]}" "torch==$TORCH"
+    fi
     spec="."
     [ -n "$groups" ] && spec=".[${groups// /,}]"
-    "$VENV/bin/python" -m pip install -q -e "$spec"
+    "${pip[@]}" -e "$spec"
     echo "$hash${groups:+ $groups}" > "$stamp"
 fi

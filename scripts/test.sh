@@ -8,8 +8,9 @@ if ! command -v chromium >/dev/null 2>&1 && [ "$(id -u)" = 0 ] && command -v apt
     (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium \
         fonts-dejavu-core >/dev/null) || echo "warning: could not install chromium" >&2
 fi
-.venv/bin/ruff check .
-.venv/bin/ruff format --check .
+VENV=${SILI_VENV:-.venv}  # the environment setup.sh made
+"$VENV/bin/ruff" check .
+"$VENV/bin/ruff" format --check .
 # Two pytest workers (pytest-xdist): on a 2-core Zen 3 the suite took 9 min against 15 in one process.
 # Give -n 0 after the command for one process (e.g. to debug a test).
-exec .venv/bin/python -m pytest -m "slow or not slow" -n 2 "$@"
+exec "$VENV/bin/python" -m pytest -m "slow or not slow" -n 2 "$@"

@@ -65,3 +65,19 @@ def test_the_main_jobs_output_folder_is_given_by_its_variable_only(tmp_path):
         assert done.returncode == 2
         assert f"give the output folder as SILI_MAIN_OUT=DIR, not {option[0]}" in done.stderr
     assert not (tmp_path / "elsewhere").exists()
+
+
+def test_the_main_jobs_dry_run_lists_its_runs_and_trains_nothing(tmp_path):
+    out = tmp_path / "main"
+    done = subprocess.run(
+        ["bash", "scripts/main.sh", "--dry-run"],
+        cwd=ROOT,
+        env={**os.environ, "SILI_MAIN_OUT": str(out)},
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.count("circle-3__sili-bschedule") == 2  # its two seeds, one line each
+    assert not list(out.glob("runs/*/metrics.csv"))
+    assert "does not exist" not in done.stderr  # no verdict on runs that were never trained

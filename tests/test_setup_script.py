@@ -4,6 +4,7 @@ real installation is what the test command itself runs on a fresh clone)."""
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 from pathlib import Path
@@ -98,3 +99,124 @@ def test_a_folder_that_is_not_an_environment_is_never_cleared(tmp_path):
     )
     assert done.returncode == 2 and "mine is a folder, not a virtual environment" in done.stderr
     assert (mine / "project" / "data.csv").read_text() == "1,2\n"
+
+
+def _stand_in(path: Path, log: Path, body: str = "") -> None:
+    """An interpreter that logs its arguments, then runs ``body`` (bash; ``$*`` the arguments)."""
+    path.write_text(f'#!/usr/bin/env bash\necho "$*" >> {log}\n{body}\n')
+    path.chmod(0o755)
+
+
+def _torch_installs(log: Path) -> list[str]:
+    return [
+        line.split(" install -q ")[1] for line in log.read_text().splitlines() if "torch==" in line
+    ]
+
+
+def test_torch_is_the_cpu_build_from_disk_then_pytorchs_cpu_index_then_pypi(tmp_path):
+    """PyPI's torch is the CUDA build on Linux x86-64 (several GB): the CPU build is asked for
+    first, where pip finds it already, then from PyPI's CPU index; the plain pin last, said."""
+    repo, log = _checkout(tmp_path)
+    _setup(repo)
+    assert _torch_installs(log) == ["torch==2.13.0+cpu"]
+    for missing, asked in (
+        ("*torch==*+cpu*", 3),  # no CPU build anywhere: PyPI's, said
+        ("*+cpu", 2),  # none on disk or in the configured indexes: PyTorch's CPU index
+    ):
+        log.unlink()
+        (repo / "venv" / ".sili-installed").unlink()
+        _stand_in(repo / "venv" / "bin" / "python", log, f'case "$*" in {missing}) exit 1;; esac')
+        done = subprocess.run(
+            ["bash", "scripts/setup.sh"],
+            cwd=repo,
+            env={"PATH": "/usr/bin:/bin", "SILI_VENV": "venv"},
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        torch = _torch_installs(log)
+        assert (
+            torch[:2]
+            == [
+                "torch==2.13.0+cpu",
+                "torch==2.13.0+cpu --extra-index-url https://download.pytorch.org/whl/cpu",
+            ][: len(torch[:2])]
+        )
+        assert len(torch) == asked and _installs(log) == ["."]
+        assert (torch[-1] == "torch==2.13.0") is (asked == 3)
+        assert ("no CPU build of torch 2.13.0 found" in done.stderr) is (asked == 3)
+
+
+def test_a_changed_torch_pin_installs_again(tmp_path):
+    repo, log = _checkout(tmp_path)
+    _setup(repo)
+    script = repo / "scripts" / "setup.sh"
+    script.write_text(script.read_text().replace("TORCH=2.13.0", "TORCH=2.13.1"))
+    _setup(repo)
+    assert _torch_installs(log) == ["torch==2.13.0+cpu", "torch==2.13.1+cpu"]
+    assert _installs(log) == [".", "."]
+
+
+def test_an_environment_on_another_python_is_made_anew_with_the_one_given(tmp_path):
+    """A leftover .venv below requires-python, or on another version than PYTHON names, would
+    keep its Python (pip then fails on torch, or PYTHON is silently ignored)."""
+    repo, log = _checkout(tmp_path)
+    venv_python = repo / "venv" / "bin" / "python"
+    _stand_in(venv_python, log, 'case "$*" in *version_info[:2]*) echo 3.11;; esac')
+    made = venv_python.read_text()  # what `python3 -m venv --clear venv` makes: a 3.11
+    system = tmp_path / "python3"
+    _stand_in(
+        system,
+        log,
+        'case "$*" in *version_info[:2]*) echo 3.11;; *-m\\ venv*) rm -rf venv && mkdir -p '
+        f"venv/bin && printf '%s' '{made}' > venv/bin/python && chmod +x venv/bin/python && "
+        "touch venv/pyvenv.cfg;; esac",
+    )
+    env = {"PATH": "/usr/bin:/bin", "SILI_VENV": "venv", "PYTHON": str(system)}
+    for old in ("exit 1", "echo 3.12"):  # 3.9: below 3.10; 3.12: not PYTHON's
+        _stand_in(venv_python, log, f'case "$*" in *sys.exit*|*version_info*) {old};; esac')
+        (repo / "venv" / "pyvenv.cfg").write_text("home = /old\n")
+        log.write_text("")
+        subprocess.run(["bash", "scripts/setup.sh"], cwd=repo, env=env, check=True)
+        assert "-m venv --clear venv" in log.read_text()
+        assert _installs(log) == ["."]
+    subprocess.run(["bash", "scripts/setup.sh"], cwd=repo, env=env, check=True)
+    assert _installs(log) == ["."]  # the same version now: nothing to do
+
+
+def test_a_python_below_requires_python_is_named_not_used(tmp_path):
+    repo, log = _checkout(tmp_path)
+    shutil.rmtree(repo / "venv")  # none yet
+    old = tmp_path / "python3"
+    _stand_in(old, log, 'case "$*" in *sys.exit*) exit 1;; *version_info*) echo 3.9;; esac')
+    done = subprocess.run(
+        ["bash", "scripts/setup.sh"],
+        cwd=repo,
+        env={"PATH": "/usr/bin:/bin", "SILI_VENV": "venv", "PYTHON": str(old)},
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 2
+    assert f"sili-robots needs Python >= 3.10; {old} is 3.9" in done.stderr
+    assert "-m venv" not in log.read_text()
+
+
+def test_both_commands_run_in_the_environment_sili_venv_names(tmp_path):
+    """setup.sh makes SILI_VENV's environment, so the two commands must run in it too: a
+    checkout without .venv, this repository's environment named by its path (setup.sh a
+    stand-in here, so no install can touch that environment)."""
+    (tmp_path / "scripts").mkdir()
+    for script in ("main.sh", "test.sh"):
+        shutil.copy(ROOT / "scripts" / script, tmp_path / "scripts" / script)
+    log = tmp_path / "setup.log"
+    (tmp_path / "scripts" / "setup.sh").write_text(f'echo "$SILI_VENV $*" >> {log}\n')
+    env = {**os.environ, "SILI_VENV": str(ROOT / ".venv"), "SILI_MAIN_OUT": str(tmp_path / "m")}
+    run = dict(cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
+    main = subprocess.run(["bash", "scripts/main.sh", "--dry-run"], **run)
+    assert main.returncode == 0, main.stderr[-2000:]
+    assert "2 runs" in main.stdout
+    tests = subprocess.run(["bash", "scripts/test.sh", "--version"], **run)
+    assert tests.returncode == 0, tests.stderr[-2000:]
+    assert "pytest" in tests.stdout + tests.stderr
+    assert log.read_text().splitlines() == [f"{ROOT / '.venv'} ", f"{ROOT / '.venv'} dev"]
+    assert not (tmp_path / ".venv").exists()
