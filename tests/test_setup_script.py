@@ -24,12 +24,19 @@ def _checkout(tmp_path: Path) -> tuple[Path, Path]:
     return tmp_path, log
 
 
-def _setup(repo: Path, *groups: str) -> None:
-    subprocess.run(
+def _setup(
+    repo: Path, *groups: str, venv: str = "venv", python: Path | None = None, check: bool = True
+) -> subprocess.CompletedProcess:
+    env = {"PATH": "/usr/bin:/bin", "SILI_VENV": venv}
+    if python is not None:
+        env["PYTHON"] = str(python)
+    return subprocess.run(
         ["bash", "scripts/setup.sh", *groups],
         cwd=repo,
-        env={"PATH": "/usr/bin:/bin", "SILI_VENV": "venv"},
-        check=True,
+        env=env,
+        capture_output=True,
+        text=True,
+        check=check,
     )
 
 
@@ -75,12 +82,7 @@ def test_a_broken_environment_is_made_anew(tmp_path):
         f"printf '%s' '{working}' > venv/bin/python && chmod +x venv/bin/python\n"
     )
     system.chmod(0o755)
-    subprocess.run(
-        ["bash", "scripts/setup.sh", "dev"],
-        cwd=repo,
-        env={"PATH": "/usr/bin:/bin", "SILI_VENV": "venv", "PYTHON": str(system)},
-        check=True,
-    )
+    _setup(repo, "dev", python=system)
     assert "-m venv --clear venv" in log.read_text()
     assert _installs(log) == [".[dev]", ".[dev]"]
 
@@ -90,13 +92,7 @@ def test_a_folder_that_is_not_an_environment_is_never_cleared(tmp_path):
     mine = repo / "mine"
     (mine / "project").mkdir(parents=True)
     (mine / "project" / "data.csv").write_text("1,2\n")
-    done = subprocess.run(
-        ["bash", "scripts/setup.sh"],
-        cwd=repo,
-        env={"PATH": "/usr/bin:/bin", "SILI_VENV": "mine"},
-        capture_output=True,
-        text=True,
-    )
+    done = _setup(repo, venv="mine", check=False)
     assert done.returncode == 2 and "mine is a folder, not a virtual environment" in done.stderr
     assert (mine / "project" / "data.csv").read_text() == "1,2\n"
 
@@ -115,7 +111,7 @@ def _torch_installs(log: Path) -> list[str]:
 
 def test_torch_is_the_cpu_build_from_disk_then_pytorchs_cpu_index_then_pypi(tmp_path):
     """PyPI's torch is the CUDA build on Linux x86-64 (several GB): the CPU build is asked for
-    first, where pip finds it already, then from PyPI's CPU index; the plain pin last, said."""
+    first, where pip finds it already, then from PyTorch's CPU index; the plain pin last, said."""
     repo, log = _checkout(tmp_path)
     _setup(repo)
     assert _torch_installs(log) == ["torch==2.13.0+cpu"]
@@ -126,14 +122,7 @@ def test_torch_is_the_cpu_build_from_disk_then_pytorchs_cpu_index_then_pypi(tmp_
         log.unlink()
         (repo / "venv" / ".sili-installed").unlink()
         _stand_in(repo / "venv" / "bin" / "python", log, f'case "$*" in {missing}) exit 1;; esac')
-        done = subprocess.run(
-            ["bash", "scripts/setup.sh"],
-            cwd=repo,
-            env={"PATH": "/usr/bin:/bin", "SILI_VENV": "venv"},
-            capture_output=True,
-            text=True,
-            check=True,
-        )
+        done = _setup(repo)
         torch = _torch_installs(log)
         assert (
             torch[:2]
@@ -172,15 +161,14 @@ def test_an_environment_on_another_python_is_made_anew_with_the_one_given(tmp_pa
         f"venv/bin && printf '%s' '{made}' > venv/bin/python && chmod +x venv/bin/python && "
         "touch venv/pyvenv.cfg;; esac",
     )
-    env = {"PATH": "/usr/bin:/bin", "SILI_VENV": "venv", "PYTHON": str(system)}
     for old in ("exit 1", "echo 3.12"):  # 3.9: below 3.10; 3.12: not PYTHON's
         _stand_in(venv_python, log, f'case "$*" in *sys.exit*|*version_info*) {old};; esac')
         (repo / "venv" / "pyvenv.cfg").write_text("home = /old\n")
         log.write_text("")
-        subprocess.run(["bash", "scripts/setup.sh"], cwd=repo, env=env, check=True)
+        _setup(repo, python=system)
         assert "-m venv --clear venv" in log.read_text()
         assert _installs(log) == ["."]
-    subprocess.run(["bash", "scripts/setup.sh"], cwd=repo, env=env, check=True)
+    _setup(repo, python=system)
     assert _installs(log) == ["."]  # the same version now: nothing to do
 
 
@@ -189,13 +177,7 @@ def test_a_python_below_requires_python_is_named_not_used(tmp_path):
     shutil.rmtree(repo / "venv")  # none yet
     old = tmp_path / "python3"
     _stand_in(old, log, 'case "$*" in *sys.exit*) exit 1;; *version_info*) echo 3.9;; esac')
-    done = subprocess.run(
-        ["bash", "scripts/setup.sh"],
-        cwd=repo,
-        env={"PATH": "/usr/bin:/bin", "SILI_VENV": "venv", "PYTHON": str(old)},
-        capture_output=True,
-        text=True,
-    )
+    done = _setup(repo, python=old, check=False)
     assert done.returncode == 2
     assert f"sili-robots needs Python >= 3.10; {old} is 3.9" in done.stderr
     assert "-m venv" not in log.read_text()
