@@ -416,6 +416,8 @@ def test_a_task_argument_that_names_another_task_exits_2(tmp_path):
     for value in ('"8"', "8"):
         code, _, err = _main(*train, "--env-kwarg", f"variant={value}")
         assert code == 2 and "circle-3 fixes variant='3'" in err and "circle-8" in err
+    code, _, err = _main(*train, "--env-kwarg", "variant=3")  # its own name, as a number
+    assert code == 2 and "so variant=3 (int 3, not str '3') is not allowed" in err
     assert not (tmp_path / "r").exists()
     make_task("circle-3", variant="3").close()  # its own value is no other task
 

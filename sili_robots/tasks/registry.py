@@ -216,9 +216,13 @@ def check_identity(name: str, kwargs: dict[str, Any]) -> None:
             for s in all_versions()
             if s.entry_point == spec.entry_point and s.version == spec.version and s != spec
         ]
+        fixed, given = spec.kwargs.get(key), kwargs[key]
+        kind = ""  # `--env-kwarg variant=3` reads a number: the same text, another type
+        if str(given) == str(fixed) and type(given) is not type(fixed):
+            kind = f" ({type(given).__name__} {given!r}, not {type(fixed).__name__} {fixed!r})"
         raise ConfigError(
-            f"{spec.name} fixes {key}={spec.kwargs.get(key)!r} (it is what the task is), so "
-            f"{key}={kwargs[key]!r} is not allowed; drop it, or build another {key} by its "
+            f"{spec.name} fixes {key}={fixed!r} (it is what the task is), so "
+            f"{key}={given!r}{kind} is not allowed; drop it, or build another {key} by its "
             f"name: {', '.join(others)}"
         )
 
