@@ -120,10 +120,16 @@ def fitting(run_dir: Path, cfg: RunConfig, env: gym.Env | None) -> Iterator[None
                 f"{err}; was it copied from another run? Train this run again (sili train ... "
                 "--overwrite)"
             ) from None
-        given = f"{task_name_of(env)} with {task_kwargs_of(env)}"
+        task = env.unwrapped
+        sizes = (
+            f"horizon {task.horizon}, observations {task.observation_space.shape}, actions "
+            f"{task.action_space.shape}"
+        )
+        given = f"{task_name_of(env)} with {task_kwargs_of(env)} ({sizes})"
         raise ConfigError(
             f"env does not fit the run in {run_dir}, trained on {cfg.task} with "
-            f"{cfg.env_kwargs}; env is {given} ({str(err).splitlines()[0]})"
+            f"{cfg.env_kwargs}; env is {given}: give the task the run's horizon and sizes "
+            f"({str(err).splitlines()[0]})"
         ) from None
 
 

@@ -128,8 +128,13 @@ def test_loading_a_run_with_a_task_instance_of_other_sizes_names_both(tmp_path):
     run = tmp_path / "doors"
     SILI(TwoDoorsEnv(horizon=8), method="sili", settings=FAST_AGENT, run_dir=run).learn(2)
     assert SILI.load(run, env=TwoDoorsEnv(horizon=8)).predict([0.5, 0.0]).shape == (1,)
-    with pytest.raises(ConfigError, match=r"env does not fit the run in .*'horizon': 8\}; env is"):
+    with pytest.raises(
+        ConfigError, match=r"env does not fit the run in .*'horizon': 8\}; env is"
+    ) as e:
         SILI.load(run, env=TwoDoorsEnv(horizon=5))  # 5 steps where 8 are stored
+    assert "{'horizon': 5} (horizon 5, observations (2,), actions (1,)): give the task" in str(
+        e.value
+    )
 
 
 def test_a_task_given_by_any_name_is_recorded_by_its_name(tmp_path):

@@ -13,7 +13,7 @@ from gymnasium.utils.env_checker import check_env
 
 from sili_robots.errors import ConfigError
 from sili_robots.examples.two_doors import TwoDoorsEnv
-from sili_robots.tasks import TASKS, make_task
+from sili_robots.tasks import TASKS, RepeatedInteractionEnv, make_task
 from sili_robots.tasks.circle import CircleEnv
 from sili_robots.wrappers import OracleObservation, StrategyFlag
 
@@ -410,6 +410,68 @@ def test_a_task_s_own_mistakes_are_named_where_they_are_made():
             TwoDoorsEnv.__init__(self)
 
     assert Both().note == "helpers only"
+
+
+def test_a_tasks_strategy_and_reward_mistakes_are_named_where_they_are_made():
+    """Each was let through and met later: a NaN id written to metrics.csv (then read as a
+    damaged file), an id beyond strategy_choices() (a saved game at it refused on resume), an
+    encoding beyond its bounds (Oracle's clipped observation alike for two strategies), a reward
+    that is no number (a TypeError traceback), strategy_dim unset (an AttributeError)."""
+
+    class Doors(TwoDoorsEnv):  # starts from a chosen door
+        def strategy_choices(self):
+            return [-1.0, 1.0]
+
+        def _set_strategy(self, strategy):
+            self.door = strategy
+
+    class NaNId(Doors):
+        def strategy_id(self):
+            return float("nan") if self.door > 0 else self.door
+
+    class BeyondChoices(Doors):
+        def strategy_id(self):
+            return 2 * self.door
+
+    class WideEncoding(Doors):
+        def strategy_encoding(self):
+            return np.array([3 * self.door], np.float32)
+
+    class StartsElsewhere(Doors):
+        def _set_strategy(self, strategy):
+            self.door = -strategy
+
+    def init(self, horizon: int = 20) -> None:
+        RepeatedInteractionEnv.__init__(self, horizon)
+        self.door, self.x = 1.0, 0.0
+
+    own = {k: v for k, v in vars(TwoDoorsEnv).items() if not k.startswith("__")}
+    del own["strategy_dim"]  # never set
+    NoDim = type("NoDim", (RepeatedInteractionEnv,), {**own, "__init__": init})
+
+    assert Doors().reset(options={"strategy": 1.0})[1]["strategy_id"] == 1.0
+    for cls, said in (
+        (NaNId, r"NaNId.strategy_id\(\) returned nan; it must be finite"),
+        (BeyondChoices, r"returned 2.0, not one of its strategy_choices\(\): -1.0, 1.0"),
+        (WideEncoding, r"returned \[3.0\], outside its strategy_low -1.0 to strategy_high 1.0"),
+        (StartsElsewhere, r"_set_strategy\(1.0\) left strategy_id\(\) at -1.0"),
+    ):
+        with pytest.raises(ConfigError, match=said):
+            cls().reset(options={"strategy": 1.0})
+    with pytest.raises(ConfigError, match=r"NoDim.strategy_dim is None; a task sets it"):
+        NoDim()
+    for returned, said in ((None, "None"), (np.zeros(2), r"array\(\[0., 0.\]\)")):
+
+        class Odd(Doors):
+            def _apply_action(self, action, returned=returned):
+                return returned
+
+        env = Odd()
+        env.reset(seed=0)
+        with pytest.raises(ConfigError, match=rf"returned reward {said} \(interaction 0, step 1"):
+            env.step(np.zeros(1))
+    with pytest.raises(ConfigError, match=r"cannot start from a chosen strategy .*_set_strategy"):
+        TwoDoorsEnv().reset(options={"strategy": 1.0})
 
 
 def test_an_observation_outside_the_space_is_clipped_with_a_warning():

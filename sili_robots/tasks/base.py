@@ -53,7 +53,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     metadata: ClassVar[dict[str, Any]] = {"render_modes": []}
     #: size of ``strategy_encoding()``; subclasses set it.
     strategy_dim: ClassVar[int]
-    #: bounds of ``strategy_encoding()``.
+    #: bounds of ``strategy_encoding()`` (checked): the box of Oracle's observation.
     strategy_low: ClassVar[float] = 0.0
     strategy_high: ClassVar[float] = 1.0
     #: attributes that hold the opponent's strategy between interactions; with the RNG state
@@ -84,6 +84,12 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
             cls.__init__ = _calling_base_init(init)  # type: ignore[method-assign]
 
     def __init__(self, horizon: int) -> None:
+        dim = getattr(self, "strategy_dim", None)
+        if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)) or dim < 1:
+            raise ConfigError(
+                f"{type(self).__name__}.strategy_dim is {dim!r}; a task sets it to the length of "
+                "its strategy_encoding() (a count >= 1)"
+            )
         self.horizon = check_count("horizon", horizon, 1, LONGEST_HORIZON)
         self.interaction = -1  # index of the current interaction; -1 before the first reset
         self.t = 0
@@ -144,7 +150,8 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         """Hook for strategies that may change between timesteps (e.g. Speaker-Listener)."""
 
     def strategy_choices(self) -> list[StrategyId] | None:
-        """Every strategy a game can start from, when there are finitely many (else ``None``)."""
+        """Every strategy a game can start from, when there are finitely many (else ``None``);
+        ``strategy_id()`` is checked to be one of them."""
         return None
 
     def _set_strategy(self, strategy: StrategyId) -> None:
@@ -157,7 +164,10 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         rounding), refusing one this task cannot start from before ``reset`` changes anything,
         so a refused reset leaves the game as it was."""
         if type(self)._set_strategy is RepeatedInteractionEnv._set_strategy:
-            raise ConfigError(f"{type(self).__name__} cannot start from a chosen strategy")
+            raise ConfigError(
+                f"{type(self).__name__} cannot start from a chosen strategy (a task that can "
+                "overrides _set_strategy, and strategy_choices when its strategies are few)"
+            )
         choices = self.strategy_choices()
         matched = None
         number = isinstance(strategy, (int, float, np.number)) and not isinstance(strategy, bool)
@@ -267,6 +277,11 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         self._boundary_state = self._capture_game_state()
         self._begin_interaction()
         sid = self._checked_strategy()
+        if start is not None and self.strategy_choices() is not None and not _same(sid, start):
+            raise ConfigError(
+                f"{type(self).__name__}._set_strategy({start!r}) left strategy_id() at {sid!r}; "
+                f"it must make {start!r} the current strategy"
+            )
         self._boundary_state["strategy_id"] = sid
         self._changed_since_last_step = self._last_strategy_id is not None and not _same(
             sid, self._last_strategy_id
@@ -283,11 +298,16 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
                 "call reset() to begin the next interaction"
             )
         action = self._validate_action(action)
-        reward = float(self._apply_action(action))
+        returned = self._apply_action(action)
+        try:
+            reward = float(returned)
+        except (TypeError, ValueError):
+            reward = math.nan  # refused below, naming what came back
         if not math.isfinite(reward):  # else met as a diverged training, blamed on its settings
             raise ConfigError(
-                f"{type(self).__name__}._apply_action() returned reward {reward} (interaction "
-                f"{self.interaction}, step {self.t + 1}): a task's rewards must be finite"
+                f"{type(self).__name__}._apply_action() returned reward {returned!r} "
+                f"(interaction {self.interaction}, step {self.t + 1}): a task's reward is one "
+                "finite number"
             )
         self.t += 1
         record = {"t": self.t, "reward": reward, **self._step_record()}
@@ -295,6 +315,8 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         self._within_interaction_update()
         sid = self.strategy_id()
         self._changed_since_last_step = not _same(sid, self._last_strategy_id)
+        if self._changed_since_last_step:  # within the interaction (Speaker-Listener v0)
+            sid = self._checked_strategy()
         self._last_strategy_id = sid
         truncated = self.t >= self.horizon
         return self._observation(), reward, False, truncated, self._info()
@@ -409,11 +431,25 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         name, sid = type(self).__name__, self.strategy_id()
         if isinstance(sid, bool) or not isinstance(sid, (int, float, np.integer, np.floating)):
             raise ConfigError(f"{name}.strategy_id() returned {sid!r}; it must be a number")
-        shape = np.shape(self.strategy_encoding())
-        if shape != (self.strategy_dim,):
+        if not math.isfinite(sid):  # else written to metrics.csv, which then reads as damaged
+            raise ConfigError(f"{name}.strategy_id() returned {sid!r}; it must be finite")
+        choices = self.strategy_choices()
+        if choices is not None and not any(_same(sid, c) for c in choices):
+            raise ConfigError(  # else a saved game at it could not be resumed
+                f"{name}.strategy_id() returned {sid!r}, not one of its strategy_choices(): "
+                f"{', '.join(map(str, choices))}"
+            )
+        encoding = np.asarray(self.strategy_encoding(), float)
+        if encoding.shape != (self.strategy_dim,):
             raise ConfigError(
-                f"{name}.strategy_encoding() returned shape {shape}; its strategy_dim is "
-                f"{self.strategy_dim}"
+                f"{name}.strategy_encoding() returned shape {encoding.shape}; its strategy_dim "
+                f"is {self.strategy_dim}"
+            )
+        if not np.all((encoding >= self.strategy_low) & (encoding <= self.strategy_high)):
+            raise ConfigError(  # Oracle's observation clips it: two strategies could look alike
+                f"{name}.strategy_encoding() returned {encoding.tolist()}, outside its "
+                f"strategy_low {self.strategy_low} to strategy_high {self.strategy_high}; set "
+                "them to bound every strategy's encoding"
             )
         return sid
 
