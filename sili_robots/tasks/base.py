@@ -545,9 +545,11 @@ def _copy(value: Any) -> Any:
 
 
 def _same(a: StrategyId | None, b: StrategyId | None) -> bool:
+    """Ids within 1e-9 (np.isclose with atol 1e-9, rtol 0, in plain floats: once a step)."""
     if a is None or b is None:
         return a is b
-    return bool(np.isclose(float(a), float(b), rtol=0.0, atol=1e-9))
+    x, y = float(a), float(b)
+    return x == y or abs(x - y) <= 1e-9
 
 
 def resume_game(env: gym.Env, state: dict[str, Any]) -> tuple[np.ndarray, dict[str, Any]]:
