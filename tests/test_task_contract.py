@@ -460,6 +460,24 @@ def test_a_tasks_strategy_and_reward_mistakes_are_named_where_they_are_made():
             cls().reset(options={"strategy": 1.0})
     with pytest.raises(ConfigError, match=r"NoDim.strategy_dim is None; a task sets it"):
         NoDim()
+
+    class Huge(Doors):
+        def strategy_id(self):
+            return 10**400
+
+    with pytest.raises(ConfigError, match=r"returned 1000+; it must be finite"):
+        Huge().reset(seed=0)
+
+    class Sized(Doors):  # its size set from an argument, after the base's __init__
+        strategy_dim = None
+
+        def __init__(self, size: int = 1):
+            super().__init__()
+            self.strategy_dim = size
+
+    assert Sized().strategy_dim == 1
+    with pytest.raises(ConfigError, match=r"Sized.strategy_dim is 0; a task sets it"):
+        Sized(0)
     for returned, said in ((None, "None"), (np.zeros(2), r"array\(\[0., 0.\]\)")):
 
         class Odd(Doors):

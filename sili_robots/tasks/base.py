@@ -84,12 +84,8 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
             cls.__init__ = _calling_base_init(init)  # type: ignore[method-assign]
 
     def __init__(self, horizon: int) -> None:
-        dim = getattr(self, "strategy_dim", None)
-        if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)) or dim < 1:
-            raise ConfigError(
-                f"{type(self).__name__}.strategy_dim is {dim!r}; a task sets it to the length of "
-                "its strategy_encoding() (a count >= 1)"
-            )
+        if type(self).__init__ is RepeatedInteractionEnv.__init__:  # else once its own is done
+            _check_strategy_dim(self)
         self.horizon = check_count("horizon", horizon, 1, LONGEST_HORIZON)
         self.interaction = -1  # index of the current interaction; -1 before the first reset
         self.t = 0
@@ -431,7 +427,11 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         name, sid = type(self).__name__, self.strategy_id()
         if isinstance(sid, bool) or not isinstance(sid, (int, float, np.integer, np.floating)):
             raise ConfigError(f"{name}.strategy_id() returned {sid!r}; it must be a number")
-        if not math.isfinite(sid):  # else written to metrics.csv, which then reads as damaged
+        try:
+            finite = math.isfinite(sid)
+        except OverflowError:  # an int beyond a float's range
+            finite = False
+        if not finite:  # else written to metrics.csv, which then reads as damaged
             raise ConfigError(f"{name}.strategy_id() returned {sid!r}; it must be finite")
         choices = self.strategy_choices()
         if choices is not None and not any(_same(sid, c) for c in choices):
@@ -589,8 +589,19 @@ def _calling_base_init(init: Any) -> Any:
                 f"{type(self).__name__}.__init__ did not call super().__init__(horizon), "
                 "where a RepeatedInteractionEnv sets up its spaces and its game"
             )
+        if outermost:  # a task may set it in its __init__, e.g. from its arguments
+            _check_strategy_dim(self)
 
     return __init__
+
+
+def _check_strategy_dim(env: RepeatedInteractionEnv) -> None:
+    dim = getattr(env, "strategy_dim", None)
+    if isinstance(dim, bool) or not isinstance(dim, (int, np.integer)) or dim < 1:
+        raise ConfigError(
+            f"{type(env).__name__}.strategy_dim is {dim!r}; a task sets it to the length of its "
+            "strategy_encoding() (a count >= 1)"
+        )
 
 
 RepeatedInteractionEnv.__init__ = _taking_render_mode(RepeatedInteractionEnv.__init__)  # type: ignore[method-assign]
