@@ -118,7 +118,9 @@ class SILIAgent:
                 readouts=[r for a in self.hooks["encoder_readouts"] for r in a.encoder_readouts()],
                 matmul=cfg.matmul,
             )
-            self.model_opt = torch.optim.Adam(self.model.parameters(), lr=value_at(m.lr, 0))
+            self.model_opt = torch.optim.Adam(  # foreach: the same steps, a third faster on CPU
+                self.model.parameters(), lr=value_at(m.lr, 0), foreach=True
+            )
         self.buffer = InteractionBuffer(obs_dim, act_dim, horizon)
         self.latents = LatentCache(
             self.model,

@@ -87,16 +87,24 @@ class Actor(nn.Module):
         log_std = LOG_STD_MIN + 0.5 * (LOG_STD_MAX - LOG_STD_MIN) * (torch.tanh(log_std) + 1)
         return mean, log_std
 
-    def sample(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """A reparameterised action and its log-probability."""
+    def _draw(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """A reparameterised pre-tanh action, with the noise and log-std that drew it."""
         mean, log_std = self(x)
         std = log_std.exp()
         eps = torch.randn_like(mean)
-        pre = mean + std * eps
+        return mean + std * eps, eps, log_std
+
+    def sample(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """A reparameterised action and its log-probability."""
+        pre, eps, log_std = self._draw(x)
         action = torch.tanh(pre)
         logp = (-0.5 * eps.pow(2) - log_std - 0.5 * math.log(2 * math.pi)).sum(-1)
         logp = logp - (2 * (math.log(2) - pre - nn.functional.softplus(-2 * pre))).sum(-1)
         return action, logp
+
+    def sample_action(self, x: torch.Tensor) -> torch.Tensor:
+        """``sample(x)[0]`` (the same draw) without the log-probability acting does not use."""
+        return torch.tanh(self._draw(x)[0])
 
     def deterministic(self, x: torch.Tensor) -> torch.Tensor:
         return torch.tanh(self(x)[0])

@@ -416,7 +416,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
                 f"action must have shape {shape} (bounds {self.action_space.low.tolist()} to "
                 f"{self.action_space.high.tolist()}), got shape {arr.shape}"
             )
-        if not np.all(np.isfinite(arr)):
+        if not math.isfinite(sum(arr.tolist())) and not np.all(np.isfinite(arr)):  # 0.2 us first
             raise ConfigError(f"action must be finite, got {arr.tolist()}")
         # outside the box: clipped to it, as gymnasium's ClipAction (a policy's noise may cross it)
         return np.clip(arr, self.action_space.low, self.action_space.high)
