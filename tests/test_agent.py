@@ -241,6 +241,32 @@ def test_one_sac_update_lowers_critic_loss_on_a_fixed_batch(precision, matmul):
     assert sac.actor.sample(x)[1].dtype == torch.float32
 
 
+def test_acting_draws_the_sampled_action_and_an_update_leaves_the_critics_trainable():
+    """``act`` skips the log-probability, not the draw: the action ``sample`` gives from the same
+    random state. The update freezes the critics for the actor's step on their parameter list:
+    afterwards they train again, and the next critic step starts from fresh gradients."""
+    torch.manual_seed(0)
+    sac = SAC(5, 2, hidden=32)
+    x = torch.randn(7, 5)
+    state = torch.random.get_rng_state()
+    with torch.no_grad():
+        sampled = sac.actor.sample(x)[0]
+        torch.random.set_rng_state(state)
+        assert torch.equal(sac.act(x), sampled)
+    batch = torch.randn(64, 5), torch.rand(64, 2) * 2 - 1, torch.randn(64), torch.randn(64, 5)
+    sac.update(*batch)
+    assert all(p.requires_grad for p in sac.critic.parameters())
+    twin = copy.deepcopy(sac)
+    state = torch.random.get_rng_state()
+    sac.update(*batch)
+    torch.random.set_rng_state(state)
+    for p in twin.critic.parameters():  # gradients of a step set to none, as zero_grad would
+        p.grad = None
+    twin.update(*batch)
+    for mine, other in zip(sac.critic.parameters(), twin.critic.parameters(), strict=True):
+        assert torch.equal(mine, other)
+
+
 def test_temperature_steps_as_adam_on_the_temperature_loss_alone():
     """Each update moves log alpha by exactly one Adam step on -log_alpha * (log_pi + target),
     with log_pi of the policy's own draw in that update (the one the actor loss used)."""
