@@ -21,7 +21,7 @@ for arg in "$@"; do
         echo "scripts/main.sh: error: give the output folder as SILI_MAIN_OUT=DIR, not $arg" >&2
         exit 2
         ;;
-    --dr*) dry_run=1 ;;  # --dry-run (or its abbreviation): the listing alone, nothing trained
+    --dr* | -h | --he*) dry_run=1 ;;  # --dry-run or --help (or abbreviations): nothing trained
     esac
 done
 cd "$(dirname "$0")/.."

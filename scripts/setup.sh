@@ -51,13 +51,16 @@ if [ "$missing" = 1 ]; then
     groups=$(echo $groups)  # trimmed, one space apart
     pip=("$VENV/bin/python" -m pip install -q)
     "${pip[@]}" --upgrade pip
-    # The CPU build first, so no dependency range pulls a CUDA build of torch (several GB): one
-    # pip finds already (a wheel on disk, a configured index), else PyTorch's CPU index; PyPI's
-    # own (on Linux x86-64 the CUDA build) only where neither has it.
-    if ! "${pip[@]}" "torch==$TORCH+cpu" 2>/dev/null &&
-        ! "${pip[@]}" "torch==$TORCH+cpu" --extra-index-url "$TORCH_CPU_INDEX" 2>/dev/null; then
-        echo "setup: no CPU build of torch $TORCH found; installing PyPI's" >&2
+    # torch first, so no dependency range pulls another build. On Linux x86-64 PyPI's is the CUDA
+    # build (several GB): the CPU build where pip finds it already (a wheel on disk, a configured
+    # index), else from PyTorch's CPU index; elsewhere PyPI's is the CPU build.
+    if [ "$(uname -s)-$(uname -m)" != Linux-x86_64 ]; then
         "${pip[@]}" "torch==$TORCH"
+    elif ! "${pip[@]}" "torch==$TORCH+cpu" 2>/dev/null &&
+        ! "${pip[@]}" "torch==$TORCH+cpu" --extra-index-url "$TORCH_CPU_INDEX"; then
+        echo "setup: could not install torch $TORCH's CPU build (pip's error above); install it" \
+            "into $VENV first (e.g. from a wheel file), then run this again" >&2
+        exit 1
     fi
     spec="."
     [ -n "$groups" ] && spec=".[${groups// /,}]"

@@ -530,6 +530,17 @@ def test_latent_model_learns_two_strategies():
     assert purity > 0.85, purity
 
 
+def test_a_checkpoint_saved_before_foreach_resumes_on_it():
+    """The latent model's Adam runs on foreach (the same steps, faster); a checkpoint saved
+    without it would restore the slower loop."""
+    saved = _agent().state_dict()
+    for group in saved["model_opt"]["param_groups"]:
+        group["foreach"] = None  # as saved before
+    agent = _agent()
+    agent.load_state_dict(saved)
+    assert [g["foreach"] for g in agent.model_opt.param_groups] == [True]
+
+
 def test_checkpoint_round_trip_restores_everything():
     a1 = _agent()
     _fill(a1, 8)

@@ -81,3 +81,11 @@ def test_the_main_jobs_dry_run_lists_its_runs_and_trains_nothing(tmp_path):
     assert done.stdout.count("circle-3__sili-bschedule") == 2  # its two seeds, one line each
     assert not list(out.glob("runs/*/metrics.csv"))
     assert "does not exist" not in done.stderr  # no verdict on runs that were never trained
+    done = subprocess.run(
+        ["bash", "scripts/main.sh", "--help"],
+        cwd=ROOT,
+        env={**os.environ, "SILI_MAIN_OUT": str(tmp_path / "help")},  # no runs there
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 0 and "usage: sili sweep" in done.stdout, done.stderr[-2000:]

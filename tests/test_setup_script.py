@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -25,9 +26,22 @@ def _checkout(tmp_path: Path) -> tuple[Path, Path]:
 
 
 def _setup(
-    repo: Path, *groups: str, venv: str = "venv", python: Path | None = None, check: bool = True
+    repo: Path,
+    *groups: str,
+    venv: str = "venv",
+    python: Path | None = None,
+    check: bool = True,
+    platform: tuple[str, str] = ("Linux", "x86_64"),
 ) -> subprocess.CompletedProcess:
-    env = {"PATH": "/usr/bin:/bin", "SILI_VENV": venv}
+    """setup.sh with a stand-in `uname` naming ``platform`` (system, machine)."""
+    bin_dir = repo / "platform-bin"
+    bin_dir.mkdir(exist_ok=True)
+    (bin_dir / "uname").write_text(
+        f'#!/usr/bin/env bash\ncase "$1" in -s) echo {platform[0]};; -m) echo {platform[1]};;'
+        " esac\n"
+    )
+    (bin_dir / "uname").chmod(0o755)
+    env = {"PATH": f"{bin_dir}:/usr/bin:/bin", "SILI_VENV": venv}
     if python is not None:
         env["PYTHON"] = str(python)
     return subprocess.run(
@@ -109,31 +123,34 @@ def _torch_installs(log: Path) -> list[str]:
     ]
 
 
-def test_torch_is_the_cpu_build_from_disk_then_pytorchs_cpu_index_then_pypi(tmp_path):
+def test_torch_is_the_cpu_build_from_disk_then_pytorchs_cpu_index_never_the_cuda_one(tmp_path):
     """PyPI's torch is the CUDA build on Linux x86-64 (several GB): the CPU build is asked for
-    first, where pip finds it already, then from PyTorch's CPU index; the plain pin last, said."""
+    first where pip finds it already, then from PyTorch's CPU index; when neither installs, setup
+    stops and says so, and the next run tries again. Elsewhere PyPI's is the CPU build."""
     repo, log = _checkout(tmp_path)
+    cpu_index = "torch==2.13.0+cpu --extra-index-url https://download.pytorch.org/whl/cpu"
     _setup(repo)
     assert _torch_installs(log) == ["torch==2.13.0+cpu"]
-    for missing, asked in (
-        ("*torch==*+cpu*", 3),  # no CPU build anywhere: PyPI's, said
-        ("*+cpu", 2),  # none on disk or in the configured indexes: PyTorch's CPU index
-    ):
+    stamp = repo / "venv" / ".sili-installed"
+    for failing, asked in (("*+cpu", ["torch==2.13.0+cpu", cpu_index]), ("*torch==*", None)):
         log.unlink()
-        (repo / "venv" / ".sili-installed").unlink()
-        _stand_in(repo / "venv" / "bin" / "python", log, f'case "$*" in {missing}) exit 1;; esac')
-        done = _setup(repo)
-        torch = _torch_installs(log)
-        assert (
-            torch[:2]
-            == [
-                "torch==2.13.0+cpu",
-                "torch==2.13.0+cpu --extra-index-url https://download.pytorch.org/whl/cpu",
-            ][: len(torch[:2])]
-        )
-        assert len(torch) == asked and _installs(log) == ["."]
-        assert (torch[-1] == "torch==2.13.0") is (asked == 3)
-        assert ("no CPU build of torch 2.13.0 found" in done.stderr) is (asked == 3)
+        stamp.unlink(missing_ok=True)
+        _stand_in(repo / "venv" / "bin" / "python", log, f'case "$*" in {failing}) exit 1;; esac')
+        done = _setup(repo, check=False)
+        if asked is not None:  # none on disk or in the configured indexes: PyTorch's CPU index
+            assert done.returncode == 0 and _torch_installs(log) == asked
+            assert _installs(log) == ["."] and stamp.is_file()
+        else:  # no CPU build anywhere: no CUDA build instead, and no stamp
+            assert done.returncode == 1
+            assert "could not install torch 2.13.0's CPU build" in done.stderr
+            assert _torch_installs(log) == ["torch==2.13.0+cpu", cpu_index]
+            assert _installs(log) == [] and not stamp.exists()
+    _stand_in(repo / "venv" / "bin" / "python", log)
+    for platform in (("Darwin", "arm64"), ("Linux", "aarch64")):
+        log.unlink()
+        stamp.unlink(missing_ok=True)
+        _setup(repo, platform=platform)
+        assert _torch_installs(log) == ["torch==2.13.0"]
 
 
 def test_a_changed_torch_pin_installs_again(tmp_path):
@@ -192,7 +209,13 @@ def test_both_commands_run_in_the_environment_sili_venv_names(tmp_path):
         shutil.copy(ROOT / "scripts" / script, tmp_path / "scripts" / script)
     log = tmp_path / "setup.log"
     (tmp_path / "scripts" / "setup.sh").write_text(f'echo "$SILI_VENV $*" >> {log}\n')
-    env = {**os.environ, "SILI_VENV": str(ROOT / ".venv"), "SILI_MAIN_OUT": str(tmp_path / "m")}
+    venv = Path(sys.prefix)  # the environment running these tests
+    bin_dir = tmp_path / "bin"  # chromium found: test.sh installs nothing
+    bin_dir.mkdir()
+    (bin_dir / "chromium").write_text("#!/bin/sh\n")
+    (bin_dir / "chromium").chmod(0o755)
+    path = f"{bin_dir}:{os.environ['PATH']}"
+    env = {**os.environ, "PATH": path, "SILI_VENV": str(venv), "SILI_MAIN_OUT": str(tmp_path / "m")}
     run = dict(cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
     main = subprocess.run(["bash", "scripts/main.sh", "--dry-run"], **run)
     assert main.returncode == 0, main.stderr[-2000:]
@@ -200,5 +223,5 @@ def test_both_commands_run_in_the_environment_sili_venv_names(tmp_path):
     tests = subprocess.run(["bash", "scripts/test.sh", "--version"], **run)
     assert tests.returncode == 0, tests.stderr[-2000:]
     assert "pytest" in tests.stdout + tests.stderr
-    assert log.read_text().splitlines() == [f"{ROOT / '.venv'} ", f"{ROOT / '.venv'} dev"]
+    assert log.read_text().splitlines() == [f"{venv} ", f"{venv} dev"]
     assert not (tmp_path / ".venv").exists()

@@ -468,6 +468,23 @@ def test_a_tasks_strategy_and_reward_mistakes_are_named_where_they_are_made():
     with pytest.raises(ConfigError, match=r"returned 1000+; it must be finite"):
         Huge().reset(seed=0)
 
+    class NamedLater(Doors):  # a task whose strategy changes within an interaction
+        label = None
+
+        def _within_interaction_update(self):
+            self.label = {2: 10**400, 3: "left"}.get(self.t)
+
+        def strategy_id(self):
+            return self.door if self.label is None else self.label
+
+    env = NamedLater()
+    env.reset(seed=0)
+    env.step(np.zeros(1))
+    with pytest.raises(ConfigError, match=r"returned 1000+; it must be finite"):
+        env.step(np.zeros(1))
+    with pytest.raises(ConfigError, match=r"returned 'left'; it must be a number"):
+        env.step(np.zeros(1))
+
     class Sized(Doors):  # its size set from an argument, after the base's __init__
         strategy_dim = None
 

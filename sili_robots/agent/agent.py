@@ -438,3 +438,5 @@ class SILIAgent:
         if self.model is not None:
             self.model.load_state_dict(state["model"])
             self.model_opt.load_state_dict(state["model_opt"])
+            for group in self.model_opt.param_groups:  # saved before it was set: the same steps
+                group["foreach"] = True

@@ -310,7 +310,10 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         self._trajectory.append(record)
         self._within_interaction_update()
         sid = self.strategy_id()
-        self._changed_since_last_step = not _same(sid, self._last_strategy_id)
+        try:
+            self._changed_since_last_step = not _same(sid, self._last_strategy_id)
+        except (TypeError, ValueError, OverflowError):  # no number: named just below
+            self._changed_since_last_step = True
         if self._changed_since_last_step:  # within the interaction (Speaker-Listener v0)
             sid = self._checked_strategy()
         self._last_strategy_id = sid
