@@ -202,7 +202,7 @@ def test_a_python_below_requires_python_is_named_not_used(tmp_path):
 
 def test_both_commands_run_in_the_environment_sili_venv_names(tmp_path):
     """setup.sh makes SILI_VENV's environment, so the two commands must run in it too: a
-    checkout without .venv, this repository's environment named by its path (setup.sh a
+    checkout without .venv, the environment running these tests named by its path (setup.sh a
     stand-in here, so no install can touch that environment)."""
     (tmp_path / "scripts").mkdir()
     for script in ("main.sh", "test.sh"):
