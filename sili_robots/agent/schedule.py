@@ -45,21 +45,33 @@ class Schedule:
             return cls(tuple(data["points"]))
         return cls.ramp(data["start"], data["end"], data["length"], data.get("delay", 0))
 
+    @staticmethod
+    def items(text: str) -> list[tuple[str, str, str]]:
+        """The points of ``"250:0,300:0.5"`` as text, each (item, interaction, value); ConfigError
+        naming an item without its colon. ``parse`` and the CLI's reader read them."""
+        found = []
+        for item in (part.strip() for part in text.split(",")):
+            interaction, sep, value = item.partition(":")
+            if not sep:
+                raise ConfigError(f"{item!r} is not INTERACTION:VALUE")
+            found.append((item, interaction, value))
+        return found
+
     @classmethod
     def parse(cls, text: str) -> Schedule:
         """``"250:0,300:0.5"``, the form ``__str__`` writes and the command line's, for a
         setting given as text (the CLI's own reader names the option and its range)."""
+        example = " (a schedule: 250:0,300:0.5)"
+        try:
+            items = cls.items(text)
+        except ConfigError as err:
+            raise ConfigError(f"{err}{example}") from None
         points = []
-        for item in text.split(","):
-            interaction, sep, value = item.strip().partition(":")
+        for item, interaction, value in items:
             try:
                 points.append((int(interaction), float(value)))
             except ValueError:
-                sep = ""
-            if not sep:
-                raise ConfigError(
-                    f"{item.strip()!r} is not INTERACTION:VALUE (a schedule: 250:0,300:0.5)"
-                )
+                raise ConfigError(f"{item!r} is not INTERACTION:VALUE{example}") from None
         return cls(tuple(points))
 
     def to_dict(self) -> dict[str, Any]:

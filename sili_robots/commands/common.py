@@ -139,15 +139,10 @@ def unit_float(text: str) -> float:
 
 def parse_schedule(text: str, option: str, low: float = -math.inf, high: float = math.inf):
     """``"250:0,300:0.5"`` -> Schedule(((250, 0.0), (300, 0.5))), unparsable points named."""
-    points = []
-    for item in text.split(","):
-        interaction, sep, value = item.strip().partition(":")
-        try:
-            if not sep:
-                raise argparse.ArgumentTypeError(f"{item.strip()!r} is not INTERACTION:VALUE")
-            points.append((non_negative_int(interaction), float_in(value, low, high)))
-        except argparse.ArgumentTypeError as err:
-            raise ConfigError(f"{option} {text!r}: {err}") from None
+    try:
+        points = [(non_negative_int(i), float_in(v, low, high)) for _, i, v in Schedule.items(text)]
+    except (ConfigError, argparse.ArgumentTypeError) as err:
+        raise ConfigError(f"{option} {text!r}: {err}") from None
     return Schedule(tuple(points))  # the config's check names a bad order
 
 
