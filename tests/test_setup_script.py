@@ -20,9 +20,19 @@ def _checkout(tmp_path: Path) -> tuple[Path, Path]:
     log = tmp_path / "pip.log"
     python = tmp_path / "venv" / "bin" / "python"
     python.parent.mkdir(parents=True)
-    python.write_text(f'#!/usr/bin/env bash\necho "$*" >> {log}\n')
-    python.chmod(0o755)
+    _stand_in(python, log)
     return tmp_path, log
+
+
+def _script(path: Path, body: str) -> None:
+    """An executable bash script running ``body``."""
+    path.write_text(f"#!/usr/bin/env bash\n{body}\n")
+    path.chmod(0o755)
+
+
+def _stand_in(path: Path, log: Path, body: str = "") -> None:
+    """An interpreter that logs its arguments, then runs ``body`` (bash; ``$*`` the arguments)."""
+    _script(path, f'echo "$*" >> {log}\n{body}')
 
 
 def _setup(
@@ -36,11 +46,9 @@ def _setup(
     """setup.sh with a stand-in `uname` naming ``platform`` (system, machine)."""
     bin_dir = repo / "platform-bin"
     bin_dir.mkdir(exist_ok=True)
-    (bin_dir / "uname").write_text(
-        f'#!/usr/bin/env bash\ncase "$1" in -s) echo {platform[0]};; -m) echo {platform[1]};;'
-        " esac\n"
+    _script(
+        bin_dir / "uname", f'case "$1" in -s) echo {platform[0]};; -m) echo {platform[1]};; esac'
     )
-    (bin_dir / "uname").chmod(0o755)
     env = {"PATH": f"{bin_dir}:/usr/bin:/bin", "SILI_VENV": venv}
     if python is not None:
         env["PYTHON"] = str(python)
@@ -88,14 +96,15 @@ def test_a_broken_environment_is_made_anew(tmp_path):
     repo, log = _checkout(tmp_path)
     working = (repo / "venv" / "bin" / "python").read_text()
     _setup(repo, "dev")
-    (repo / "venv" / "bin" / "python").write_text("#!/usr/bin/env bash\nexit 1\n")
+    _script(repo / "venv" / "bin" / "python", "exit 1")
     (repo / "venv" / "pyvenv.cfg").write_text("home = /gone\n")
     system = tmp_path / "python3"  # as `python3 -m venv --clear venv` would, a working one
-    system.write_text(
-        f'#!/usr/bin/env bash\necho "$*" >> {log}\nrm -rf venv && mkdir -p venv/bin\n'
-        f"printf '%s' '{working}' > venv/bin/python && chmod +x venv/bin/python\n"
+    _stand_in(
+        system,
+        log,
+        "rm -rf venv && mkdir -p venv/bin\n"
+        f"printf '%s' '{working}' > venv/bin/python && chmod +x venv/bin/python",
     )
-    system.chmod(0o755)
     _setup(repo, "dev", python=system)
     assert "-m venv --clear venv" in log.read_text()
     assert _installs(log) == [".[dev]", ".[dev]"]
@@ -109,12 +118,6 @@ def test_a_folder_that_is_not_an_environment_is_never_cleared(tmp_path):
     done = _setup(repo, venv="mine", check=False)
     assert done.returncode == 2 and "mine is a folder, not a virtual environment" in done.stderr
     assert (mine / "project" / "data.csv").read_text() == "1,2\n"
-
-
-def _stand_in(path: Path, log: Path, body: str = "") -> None:
-    """An interpreter that logs its arguments, then runs ``body`` (bash; ``$*`` the arguments)."""
-    path.write_text(f'#!/usr/bin/env bash\necho "$*" >> {log}\n{body}\n')
-    path.chmod(0o755)
 
 
 def _torch_installs(log: Path) -> list[str]:
@@ -212,8 +215,7 @@ def test_both_commands_run_in_the_environment_sili_venv_names(tmp_path):
     venv = Path(sys.prefix)  # the environment running these tests
     bin_dir = tmp_path / "bin"  # chromium found: test.sh installs nothing
     bin_dir.mkdir()
-    (bin_dir / "chromium").write_text("#!/bin/sh\n")
-    (bin_dir / "chromium").chmod(0o755)
+    _script(bin_dir / "chromium", "")
     path = f"{bin_dir}:{os.environ['PATH']}"
     env = {**os.environ, "PATH": path, "SILI_VENV": str(venv), "SILI_MAIN_OUT": str(tmp_path / "m")}
     run = dict(cwd=tmp_path, env=env, capture_output=True, text=True, timeout=300)
