@@ -1035,6 +1035,30 @@ def test_a_new_run_never_goes_into_a_folder_of_other_files(tmp_path, capsys):
     assert json.loads((empty / "config.json").read_text())["run"]["seed"] == 3
 
 
+def test_a_run_that_fails_before_writing_leaves_no_folder_it_made(tmp_path, capsys, monkeypatch):
+    """Too little memory for the agent (torch's own failure) or a stop while the run is set up:
+    the folders the command made for it go again; a folder given, or one written to, stays."""
+    args = ["train", "--task", "circle-3", "--method", "sac", *FAST, "--interactions", "2"]
+    monkeypatch.setattr(
+        training, "_start_or_resume", lambda *_a: torch.empty(2**62, dtype=torch.uint8)
+    )
+    assert main([*args, "--out", str(tmp_path / "new" / "run")]) == 1
+    assert "out of memory" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+    given = tmp_path / "given"
+    given.mkdir()
+    assert main([*args, "--out", str(given / "run")]) == 1
+    assert list(tmp_path.iterdir()) == [given] and list(given.iterdir()) == []
+
+    def written_then_stopped(_cfg, run_dir, *_a):
+        (run_dir / "config.json").write_text("{}")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(training, "_start_or_resume", written_then_stopped)
+    assert main([*args, "--out", str(tmp_path / "new" / "run")]) == 130
+    assert (tmp_path / "new" / "run" / "config.json").read_text() == "{}"
+
+
 def test_a_checkpoint_write_cut_short_leaves_the_previous_one_and_names_the_file(tmp_path):
     """The write goes to a side file that replaces the checkpoint only once it is complete; a
     disk that refuses it part-way gives the file's name and the cause (torch's own writer said

@@ -274,6 +274,7 @@ def run(args: argparse.Namespace) -> int:
         if args.out.is_dir():  # an existing folder (one to be made: make_run_dir says why not)
             writable_dir(args.out, "--out")
         _check_builds(cfg, agent=args.overwrite and (args.out / CONFIG).is_file())
+        made = [d for d in (args.out, *args.out.parents) if not d.exists()]
         make_run_dir(args.out)
         _note_threads_beyond_cores(cfg.threads)
         _note_slow_kernels(cfg)
@@ -281,7 +282,11 @@ def run(args: argparse.Namespace) -> int:
         ready = functools.partial(
             ready_new_run_dir, args.out, args.overwrite, resume=f"--resume {quoted}"
         )
-        with _resume_hint(args.out), training_claim(args.out, before=ready):
+        with (
+            _removed_if_left_empty(made),
+            _resume_hint(args.out),
+            training_claim(args.out, before=ready),
+        ):
             run_dir = train(cfg, args.out, progress=not args.no_progress)
     summary = write_summary(run_dir)
     print(json.dumps({"run_dir": str(run_dir), **summary}, indent=2))
@@ -351,6 +356,20 @@ def _resume_hint(run_dir: Path) -> Iterator[None]:
                     f"{when}continue the run with: sili train --resume {shell_path(run_dir)}",
                     file=sys.stderr,
                 )
+        raise
+
+
+@contextlib.contextmanager
+def _removed_if_left_empty(made: list[Path]) -> Iterator[None]:
+    """The folders this command made for a new run (innermost first) go again when the run
+    fails before it wrote anything there (too little memory for its agent, a stop while it was
+    set up)."""
+    try:
+        yield
+    except BaseException:
+        with contextlib.suppress(OSError):  # one not empty, or gone: it and those above stay
+            for folder in made:
+                folder.rmdir()
         raise
 
 
