@@ -107,6 +107,23 @@ def test_any_policy_callable_is_recorded():
     assert prev.recording.policy == ""
 
 
+def test_the_live_page_s_key_colours_each_item_in_a_terminal():
+    """``--serve`` prints the title and legend meshcat's live page lacks; in a terminal each
+    item's swatch is drawn in its colour, elsewhere its colour is named."""
+    from sili_robots.commands.preview import _key
+
+    env = make_task("speaker-listener")
+    prev = Preview.record(env, lambda e, obs: np.array([1.0, 0.0]), 1, 0, "speaker-listener")
+    env.close()
+    title = prev.scene.title(prev.recording)
+    (colour, label), *_ = prev.scene.legend(prev.recording)
+    r, g, b = colour >> 16, (colour >> 8) & 0xFF, colour & 0xFF
+    assert _key(prev, colour=True).startswith(
+        f"scene: {title}\nlegend: \033[38;2;{r};{g};{b}m\u25a0\033[0m {label}, "
+    )
+    assert _key(prev, colour=False).startswith(f"scene: {title}\nlegend: {label} (#{colour:06x}), ")
+
+
 def test_every_registered_task_has_a_preview_scene():
     for name in TASKS:
         env = make_task(name)  # cheap: Driving starts SUMO only on reset

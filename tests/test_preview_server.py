@@ -163,6 +163,9 @@ def test_cli_reports_the_files_and_the_check_before_serving_on_the_loopback(tmp_
         printed = "".join(proc.before)
         assert "wrote " + str(tmp_path / "p.html") in printed
         assert "picture check: ok" in printed and (tmp_path / "p.png").is_file()
+        # meshcat's live page has no title or legend: the HTML page's are printed beside it
+        assert "\nscene: circle-3 · scripted stabilizing · 1 interaction" in printed
+        assert "\nlegend: ego (#1f6fd1), ego's path (#" in printed and "circle (#" in printed
         # the web page and the zmq socket: 127.0.0.1 only, never every interface
         assert _listening_addresses(server) == {"0100007F"}
     finally:

@@ -3,7 +3,8 @@
 Writes one self-contained HTML file (opens offline, animated with meshcat's timeline), optionally
 renders its picture frame (the last; Driving's last pass) to PNG in headless Chromium (and checks
 the picture shows the scene), and optionally serves the scene live on 127.0.0.1 until Ctrl-C
-(what was written and checked is printed before serving).
+(what was written and checked is printed before serving, with the scene's title and legend,
+which meshcat's live page does not show).
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from sili_robots.commands.common import (
 from sili_robots.errors import ConfigError
 
 if TYPE_CHECKING:
-    from sili_robots.preview import PreviewResult
+    from sili_robots.preview import Preview, PreviewResult
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -87,6 +88,7 @@ def run(args: argparse.Namespace) -> int:
 
     def serving(result: PreviewResult) -> None:  # what was written and checked, then the URL
         reported.append(_report(result))
+        print(_key(result.preview, colour=sys.stdout.isatty()))
         print(f"meshcat server: {result.url}  (Ctrl-C to stop)", flush=True)
 
     if args.checkpoint is not None and args.seed is not None:
@@ -136,3 +138,16 @@ def _report(result: PreviewResult) -> int:
         print(f"picture check: ok ({result.rendered.seen_summary()})")
     print("time: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.seconds.items()), flush=True)
     return 0
+
+
+def _key(prev: Preview, colour: bool) -> str:
+    """The title and legend the HTML page shows over the scene, for the live page, which is
+    meshcat's own and shows neither; ``colour``: a swatch in each item's colour (a terminal)."""
+    scene, rec = prev.scene, prev.recording
+    items = []
+    for rgb, label in scene.legend(rec):
+        r, g, b = rgb >> 16, (rgb >> 8) & 0xFF, rgb & 0xFF
+        items.append(
+            f"\033[38;2;{r};{g};{b}m\u25a0\033[0m {label}" if colour else f"{label} (#{rgb:06x})"
+        )
+    return f"scene: {scene.title(rec)}\nlegend: " + ", ".join(items)
