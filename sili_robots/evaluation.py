@@ -85,7 +85,7 @@ class AgentFeedback(gym.Wrapper):
         self._last_obs = obs
         return obs, info
 
-    def step(self, action: np.ndarray):
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         obs, r, term, trunc, info = self.env.step(action)
         space = self.env.action_space  # the agent learns from the action the task applied
         applied = np.clip(np.asarray(action, np.float32), space.low, space.high)

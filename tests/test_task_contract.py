@@ -17,9 +17,7 @@ from sili_robots.tasks import TASKS, RepeatedInteractionEnv, make_task
 from sili_robots.tasks.circle import CircleEnv
 from sili_robots.wrappers import OracleObservation, StrategyFlag
 
-LIGHT_TASKS = [
-    n for n, s in TASKS.items() if not s.one_per_process and n.startswith(("circle", "speaker"))
-]
+LIGHT_TASKS = [n for n in TASKS if n.startswith(("circle", "speaker"))]
 
 
 def _rollout(env, seed, interactions=6):

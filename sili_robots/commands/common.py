@@ -137,7 +137,9 @@ def unit_float(text: str) -> float:
     return float_in(text, 0.0, 1.0)
 
 
-def parse_schedule(text: str, option: str, low: float = -math.inf, high: float = math.inf):
+def parse_schedule(
+    text: str, option: str, low: float = -math.inf, high: float = math.inf
+) -> Schedule:
     """``"250:0,300:0.5"`` -> Schedule(((250, 0.0), (300, 0.5))), unparsable points named."""
     try:
         points = [(non_negative_int(i), float_in(v, low, high)) for _, i, v in Schedule.items(text)]
@@ -346,7 +348,13 @@ def track_typed_options(p: argparse.ArgumentParser) -> None:
 @functools.cache
 def _typed(cls: type[argparse.Action]) -> type[argparse.Action]:
     class Typed(cls):  # type: ignore[valid-type, misc]
-        def __call__(self, parser, namespace, values, option_string=None) -> None:
+        def __call__(
+            self,
+            parser: argparse.ArgumentParser,
+            namespace: argparse.Namespace,
+            values: Any,
+            option_string: str | None = None,
+        ) -> None:
             namespace.typed_options = (*namespace.typed_options, self.dest)
             super().__call__(parser, namespace, values, option_string)
 

@@ -7,8 +7,12 @@ import json
 import os
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from sili_robots.commands.common import float_in, path_arg, positive_int
+
+if TYPE_CHECKING:
+    from sili_robots.sweep import SweepSpec
 
 #: where the grid at its budgets trains and collects
 SWEEP_DIR, COLLECTION = Path("sweeps/paper-grid"), Path("results/paper-grid")
@@ -213,7 +217,7 @@ def _finished(run_dir: Path, interactions: int) -> bool:
     return read_json(summary, DAMAGED_SUMMARY, "interactions")["interactions"] == interactions
 
 
-def recorded(sweep_dir: Path, spec, collection: Path | None = None):
+def recorded(sweep_dir: Path, spec: SweepSpec, collection: Path | None = None) -> SweepSpec:
     """The invocation as ``sweep_dir`` recorded it when this block already ran on this task, so
     a resumed grid keeps the defaults, kernels and task versions its runs started with; when
     ``sweep_dir`` has no record (a fresh clone), as its runs in ``collection`` were planned."""
@@ -225,7 +229,7 @@ def recorded(sweep_dir: Path, spec, collection: Path | None = None):
     except ConfigError:  # nothing recorded yet
         specs = []
 
-    def key(s):
+    def key(s: SweepSpec) -> tuple:
         return (s.tasks, s.methods, s.seeds, s.interactions, s.betas, s.profile)
 
     found = next((r for r in specs if key(r) == key(spec)), None)
@@ -234,7 +238,7 @@ def recorded(sweep_dir: Path, spec, collection: Path | None = None):
     return spec if collection is None else as_collected(collection, spec)
 
 
-def as_collected(collection: Path, spec):
+def as_collected(collection: Path, spec: SweepSpec) -> SweepSpec:
     """``spec`` with the settings recorded when it was first planned (kernel library, changed
     defaults, task version) read from one of its runs in ``collection``: another machine would
     plan its own kernel library, and the collected runs would no longer be the same runs."""

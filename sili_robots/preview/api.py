@@ -109,7 +109,8 @@ class Preview:
         return write_html(self.recorder, overlay(self.scene, self.recording), path)
 
     def markers(self, frame: int | None = None) -> list[tuple[Marker, tuple[float, ...]]]:
-        """What must be visible in ``frame`` (default: the last), with viewer-world points."""
+        """What must be visible in ``frame`` (default: the scene's picture frame), with
+        viewer-world points."""
         f = self.frame(frame)
         return [
             (m, world_point(self.scene, self.recording, m.position, f))

@@ -41,7 +41,9 @@ def shaded(color: int, opacity: float = 1.0) -> g.MeshPhongMaterial:
 class UVGeometry(g.Geometry):
     """Triangles with texture coordinates (meshcat's TriangularMeshGeometry has none)."""
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray, uvs: np.ndarray | None = None):
+    def __init__(
+        self, vertices: np.ndarray, faces: np.ndarray, uvs: np.ndarray | None = None
+    ) -> None:
         super().__init__()
         self.vertices = np.asarray(vertices, np.float32)
         self.faces = np.asarray(faces, np.uint32)

@@ -18,7 +18,7 @@ import signal
 import threading
 import time
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
 from pathlib import Path
@@ -196,7 +196,7 @@ class LocalBackend:
         return None
 
     @staticmethod
-    def _stop(workers) -> None:
+    def _stop(workers: Iterable[_Worker]) -> None:
         """Stop the workers still running (an interrupted sweep) as a Ray sweep does: each
         run's stop file asks its training to stop once the interaction it is in is logged and
         checkpointed. No signal is sent first: a worker may already hold one (``timeout`` and

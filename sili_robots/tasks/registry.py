@@ -43,8 +43,6 @@ class TaskSpec:
     #: the settings ``--method sili`` starts from here when no profile is given: the package's,
     #: unless the paper grid found the paper's better on this task (``sili_robots/claims.py``)
     sili_profile: str = "package"
-    #: True when the task may need a dedicated process (e.g. libsumo: one simulation each)
-    one_per_process: bool = False
     #: the CLI name of the task family (the same for every version); set by ``register_task``
     family: str = ""
 
@@ -329,7 +327,6 @@ _register(
     "sili_robots.tasks.driving:DrivingEnv",
     {0: {}},
     "Driving",
-    one_per_process=True,
     # the paper grid, 5 seeds of each: score 0.68 in the paper profile against 0.49 (RESULTS.md)
     sili_profile="paper",
 )

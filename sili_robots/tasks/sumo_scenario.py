@@ -173,13 +173,10 @@ def scenario_key() -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def scenario_files(root: Path | None = None) -> ScenarioFiles:
-    """Return the scenario's files, building them with the wheel's netconvert if not cached."""
-    roots = (
-        [root]
-        if root is not None
-        else [cache_dir() / "sumo", Path(tempfile.gettempdir()) / "sili-sumo"]
-    )
+def scenario_files() -> ScenarioFiles:
+    """Return the scenario's files, building them with the wheel's netconvert if not cached
+    (in the package's cache, else the temporary folder)."""
+    roots = [cache_dir() / "sumo", Path(tempfile.gettempdir()) / "sili-sumo"]
     errors = []
     for base in roots:
         target = base / scenario_key()
