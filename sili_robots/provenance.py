@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import hashlib
+import inspect
 import os
 import platform
 import subprocess
@@ -80,6 +81,24 @@ def _digest(root: Path, names: list[bytes]) -> str:
         except OSError:
             digest.update(b"unreadable")
     return digest.hexdigest()[:12]
+
+
+#: prefix of the ``versions`` keys of a user's classes' code (``source_digests``)
+OWN_CODE = "code of "
+
+
+def source_digests(classes: list[type]) -> dict[str, str]:
+    """12 hex digits of the file each of a user's classes (a task or an add-on named by
+    ``module:Class``) is defined in, keyed ``code of module:Class``: the package's revision does
+    not cover them, and an add-on's settings are its class attributes. (Modules they import are
+    not covered.) A class whose file cannot be read is left out."""
+    found = {}
+    for cls in classes:
+        with contextlib.suppress(OSError, TypeError):  # a built-in, or a file gone since
+            source = Path(inspect.getsourcefile(cls) or "").read_bytes()
+            key = f"{OWN_CODE}{cls.__module__}:{cls.__qualname__}"
+            found[key] = hashlib.sha256(source).hexdigest()[:12]
+    return found
 
 
 def versions(threads: int = 1) -> dict[str, str]:

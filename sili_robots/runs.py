@@ -32,10 +32,11 @@ from sili_robots.atomic import write_bytes, write_text
 from sili_robots.errors import ConfigError, check_count, check_seed, first_line, is_number
 from sili_robots.metrics import COMPRESSED_METRICS, METRIC_COLUMNS, METRICS
 from sili_robots.migrations import migrate_agent_state, migrate_run, setting_path
-from sili_robots.provenance import REVISION, versions
+from sili_robots.provenance import OWN_CODE, REVISION, source_digests, versions
 from sili_robots.tasks.registry import (
     check_argument_names,
     is_class_path,
+    task_class,
     task_spec,
     without_defaults,
 )
@@ -125,24 +126,40 @@ class RunConfig:
 
     def metric_columns(self) -> tuple[str, ...]:
         """``metrics.csv``'s columns: ``METRIC_COLUMNS``, then those its own add-ons declare."""
-        own: dict[str, None] = {}
+        own: dict[str, str] = {}  # column -> the add-on that declares it
         for cls in self.addons.plugin_classes():
-            declared = cls.metric_columns
+            path, declared = f"{cls.__module__}:{cls.__qualname__}", cls.metric_columns
             if not isinstance(declared, tuple | list) or not all(
                 isinstance(c, str) and c.strip() for c in declared
             ):
                 raise ConfigError(
-                    f"add-on {cls.__module__}:{cls.__qualname__} declares metric_columns "
-                    f"{declared!r}; give a tuple of column names, e.g. ('score',)"
+                    f"add-on {path} declares metric_columns {declared!r}; give a tuple of column "
+                    "names, e.g. ('score',)"
                 )
-            taken = [c for c in cls.metric_columns if c in METRIC_COLUMNS]
+            taken = [c for c in declared if c in METRIC_COLUMNS]
             if taken:
                 raise ConfigError(
-                    f"add-on {cls.__module__}:{cls.__qualname__} declares metric_columns "
-                    f"{', '.join(taken)}, which metrics.csv has already; name its own otherwise"
+                    f"add-on {path} declares metric_columns {', '.join(taken)}, which metrics.csv "
+                    "has already; name its own otherwise"
                 )
-            own.update(dict.fromkeys(cls.metric_columns))
+            shared = [f"{c} ({own[c]})" for c in declared if c in own]
+            if shared:
+                raise ConfigError(
+                    f"add-on {path} declares metric_columns {', '.join(shared)}, which another "
+                    "add-on of the run declares already; give each add-on its own column names"
+                )
+            own.update(dict.fromkeys(declared, path))
         return (*METRIC_COLUMNS, *own)
+
+    def versions(self) -> dict[str, str]:
+        """The software and processor the run uses now (``provenance.versions``), with the code
+        of the classes it names by ``module:Class``: its task (unless it cannot be imported
+        by its name: a class of a script, trained as an instance), its add-ons."""
+        own = []
+        if is_class_path(self.task):
+            with contextlib.suppress(ConfigError):
+                own.append(task_class(self.task))
+        return {**versions(self.threads), **source_digests([*own, *self.addons.plugin_classes()])}
 
     def set(self, name: str, value: Any) -> None:
         """Set an agent or add-on setting by dotted path (or an earlier flat name)."""
@@ -284,20 +301,23 @@ def make_run_dir(run_dir: Path, out: str = "--out") -> None:
 
 def write_config(run_dir: Path, cfg: RunConfig) -> None:
     make_run_dir(run_dir)
-    payload = {"run": cfg.to_dict(), "versions": versions(cfg.threads)}
+    payload = {"run": cfg.to_dict(), "versions": cfg.versions()}
     write_text(run_dir / CONFIG, json.dumps(payload, indent=2, sort_keys=True))
 
 
-def record_continuation(run_dir: Path, threads: int, interaction: int) -> None:
-    """Note in ``config.json`` that a run went on at ``interaction`` with other software or on
-    another kind of processor than it last ran on: seeded runs repeat only on the same, so its
-    results are then a mix (``continued``: where, and with what)."""
+def record_continuation(run_dir: Path, cfg: RunConfig, interaction: int) -> None:
+    """Note in ``config.json`` that run ``cfg`` went on at ``interaction`` with other software
+    (its own classes' code too) or on another kind of processor than it last ran on: seeded runs
+    repeat only on the same, so its results are then a mix (``continued``: where, and with
+    what)."""
     path = Path(run_dir) / CONFIG
     record = read_json(path, DAMAGED_CONFIG, "run")
-    now = versions(threads)
-    last = (record.get("continued") or [record])[-1].get("versions") or {}
-    if REVISION not in now or REVISION not in last:  # unknown on one side: not a difference
-        now, last = ({k: v for k, v in d.items() if k != REVISION} for d in (now, last))
+    now = cfg.versions()
+    last = dict((record.get("continued") or [record])[-1].get("versions") or {})
+    for key in {*now, *last}:  # unknown on one side (an earlier version wrote it): no difference
+        if (key == REVISION or key.startswith(OWN_CODE)) and (key not in now or key not in last):
+            now.pop(key, None)
+            last.pop(key, None)
     if now != last:
         record.setdefault("continued", []).append(
             {"from_interaction": interaction, "versions": now}

@@ -177,7 +177,7 @@ def _start_or_resume(
     extend(run_dir, cfg.interactions)
     (run_dir / SUMMARY).unlink(missing_ok=True)  # unfinished until it writes a new one
     start = int(state["interaction"])
-    record_continuation(run_dir, cfg.threads, start)
+    record_continuation(run_dir, cfg, start)
     return agent, obs, info, start, MetricsWriter(run_dir, cfg.metric_columns(), keep_rows=start)
 
 

@@ -4,7 +4,10 @@ agent, its metric columns written, kept through a resume and named when it canno
 from __future__ import annotations
 
 import csv
+import hashlib
+import json
 import re
+import sys
 import textwrap
 
 import pytest
@@ -18,6 +21,8 @@ PLUGIN = '''
 import types
 
 import numpy as np
+import torch
+from sili_robots.agent import stability
 from sili_robots.agent.addon import AgentAddon
 
 
@@ -68,8 +73,18 @@ class Unnamed(Constant):
     metric_columns = ("",)
 
 
-class Twin(Constant):
+class Twin(AgentAddon):
     pass  # named "addon" as Constant is
+
+
+class SameColumn(AgentAddon):
+    name = "same"
+    metric_columns = ("stored",)  # Constant's column: one would overwrite the other's values
+
+
+class ScaledChange(AgentAddon):
+    def stability_distance(self, j):
+        return 2.0 * stability.change_after(self.agent.Z, j, self.agent.cfg.latent)
 
 
 class NaN(AgentAddon):
@@ -80,6 +95,11 @@ class NaN(AgentAddon):
 class NoValues(AgentAddon):
     def interaction_stored(self, j):
         self.last = j  # returns None, not its columns' values
+
+
+class Tensor(Constant):
+    def interaction_stored(self, j):
+        return {"stored": torch.tensor(0.5)}  # written as "tensor(0.5)"
 
 
 class ShortLatent(AgentAddon):
@@ -160,6 +180,47 @@ def test_a_users_addon_runs_writes_its_columns_and_stays_through_a_resume(
     )
 
 
+def test_an_addon_scales_the_default_distance_through_the_public_function(tmp_path, monkeypatch):
+    """The hook's docstring points at ``stability.change_after`` for the latents' own d (the
+    agent's ``change_after`` would call the hook again)."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "my_addons.py").write_text(textwrap.dedent(PLUGIN))
+    args = ["train", "--task", "circle-3", "--no-progress", "--interactions", "8", *FAST_ARGS]
+    assert main([*args, "--out", str(tmp_path / "plain")]) == 0
+    scaled = ["--set", "addons.plugins=my_addons:ScaledChange"]
+    assert main([*args, *scaled, "--out", str(tmp_path / "scaled")]) == 0
+    plain, doubled = (
+        [float(r["stability_reward"]) for r in _rows(tmp_path / run)] for run in ("plain", "scaled")
+    )
+    assert doubled == [2 * d for d in plain] and min(plain) == -1.0
+
+
+def test_a_run_records_its_addon_s_code_and_notes_a_resume_on_other_code(tmp_path, monkeypatch):
+    """An add-on's settings are its class attributes, which the package's revision does not
+    cover: the run records a digest of its module's file, and a resume on another says so."""
+    monkeypatch.chdir(tmp_path)
+    module = tmp_path / "my_addons.py"
+    module.write_text(textwrap.dedent(PLUGIN))
+    monkeypatch.syspath_prepend(tmp_path)  # not another test's my_addons, imported before
+    monkeypatch.delitem(sys.modules, "my_addons", raising=False)
+    run = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--out", str(run), "--no-progress", *FAST_ARGS]
+    assert main([*args, "--set", "addons.plugins=my_addons:Constant", "--interactions", "2"]) == 0
+    key = "code of my_addons:Constant"
+    record = json.loads((run / "config.json").read_text())
+    assert record["versions"][key] == hashlib.sha256(module.read_bytes()).hexdigest()[:12]
+    resume = ["train", "--resume", str(run), "--no-progress", "--interactions"]
+    assert main([*resume, "3"]) == 0  # the same code: nothing to note
+    assert "continued" not in json.loads((run / "config.json").read_text())
+    module.write_text(module.read_text().replace("0.37", "0.5"))
+    del sys.modules["my_addons"]  # as a new process would import it
+    assert main([*resume, "4"]) == 0
+    (continued,) = json.loads((run / "config.json").read_text())["continued"]
+    assert continued["from_interaction"] == 3
+    assert continued["versions"][key] == hashlib.sha256(module.read_bytes()).hexdigest()[:12]
+    assert [float(r["stability_reward"]) for r in _rows(run)] == [-0.37] * 3 + [-0.5]
+
+
 def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "my_addons.py").write_text(textwrap.dedent(PLUGIN))
@@ -189,14 +250,35 @@ def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, caps
     plugins = "addons.plugins=my_addons:Constant,my_addons:Twin"  # one checkpoint entry by name
     assert main([*fresh, *FAST_ARGS, "--interactions", "1", "--set", plugins]) == 2
     assert "my_addons:Constant and my_addons:Twin are both named 'addon'" in capsys.readouterr().err
+    plugins = "addons.plugins=my_addons:Constant,my_addons:SameColumn"
+    assert main([*fresh, *FAST_ARGS, "--interactions", "1", "--set", plugins]) == 2
+    assert (
+        "add-on my_addons:SameColumn declares metric_columns stored (my_addons:Constant), which "
+        "another add-on of the run declares already" in capsys.readouterr().err
+    )
+    # a distance nothing would read: SMiRL's term is its own, partial latents count flags
+    for task, method in (("circle-3", "smirl"), ("speaker-listener", "sili")):
+        given = ["train", "--task", task, "--method", method, *fresh[3:]]
+        assert main([*given, "--set", "addons.plugins=my_addons:Constant"]) == 2
+        assert "add-on my_addons:Constant replaces stability_distance, which method " in (
+            capsys.readouterr().err
+        )
+    # the packaged posteriors add-on replaces d too: one of them would be ignored
+    for plugins in (
+        "Constant,my_addons:Scalar",
+        "Constant --set addons.stability_distance=hindsight",
+    ):
+        given = ["--set", f"addons.plugins=my_addons:{plugins.split()[0]}", *plugins.split()[1:]]
+        assert main([*fresh, *given]) == 2
+        err = capsys.readouterr().err
+        assert "my_addons:Constant" in err and "each replace stability_distance: keep one" in err
+    assert "add-ons posteriors (addons.stability_distance 'hindsight'), my_addons:Constant" in err
+    assert not (tmp_path / "u").exists()  # each refused before a run was written
     wrong = {
         "my_addons:Scalar": "add-on Scalar: stability_distance must return finite values of j's "
         "shape (1,), got shape ()",
         "my_addons:NaN": "add-on NaN: stability_distance must return finite values of j's shape "
         "(1,), got shape (1,) (not finite)",
-        # the packaged posteriors add-on replaces d too: one of them would be ignored
-        "my_addons:Constant --set addons.stability_distance=posterior": "add-ons "
-        "HindsightPosteriors, Constant each replace stability_distance: keep one",
     }
     for plugins, message in wrong.items():
         given = ["--set", f"addons.plugins={plugins.split()[0]}", *plugins.split()[1:]]
@@ -214,6 +296,8 @@ def test_a_hook_that_returns_the_wrong_thing_is_named_with_what_it_must_return(
     (tmp_path / "my_addons.py").write_text(textwrap.dedent(PLUGIN))
     wrong = {
         "NoValues": "interaction_stored must return a dict of its metric_columns' values, got None",
+        "Tensor": "interaction_stored must return a number for its column stored, got "
+        "tensor(0.5000)",
         "ShortLatent": "acting_latent must return None or an array of shape (10,), got an array "
         "of shape (3,) and dtype float32",
         "PastTheEnd": "latent_pairs must return an integer array of shape (32,) in [1, 2), got "

@@ -1,5 +1,6 @@
 """``sili train`` / ``sili eval`` end to end: run directories, bad input, kill and resume."""
 
+import hashlib
 import io
 import json
 import os
@@ -27,7 +28,13 @@ from sili_robots.errors import ConfigError
 from sili_robots.evaluation import AgentFeedback, evaluate, load_trained
 from sili_robots.metrics import read_metrics
 from sili_robots.provenance import code_revision
-from sili_robots.runs import load_checkpoint, record_continuation, save_checkpoint, set_target
+from sili_robots.runs import (
+    load_checkpoint,
+    read_config,
+    record_continuation,
+    save_checkpoint,
+    set_target,
+)
 from sili_robots.sweep.state import run_state
 from sili_robots.training import extend, resume, write_summary
 
@@ -156,6 +163,17 @@ def test_the_recorded_revision_is_the_commit_and_a_digest_of_code_edits_alone(tm
     code_revision.cache_clear()
 
 
+def test_a_run_of_your_own_task_records_its_code_and_one_of_a_script_s_class_goes_without():
+    from sili_robots.build import make_run_config
+    from sili_robots.examples import two_doors
+
+    cfg = make_run_config("sili_robots.examples.two_doors:TwoDoorsEnv", "sili")
+    digest = hashlib.sha256(Path(two_doors.__file__).read_bytes()).hexdigest()[:12]
+    assert cfg.versions()["code of sili_robots.examples.two_doors:TwoDoorsEnv"] == digest
+    cfg.task = "__main__:TwoDoorsEnv"  # trained as an instance: nothing to import it by
+    assert not [k for k in cfg.versions() if k.startswith("code of ")]
+
+
 def test_a_revision_unknown_on_one_side_is_no_continuation(tmp_path):
     args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "1", *FAST]
     run = tmp_path / "run"
@@ -164,13 +182,13 @@ def test_a_revision_unknown_on_one_side_is_no_continuation(tmp_path):
     now = record["versions"].get("sili_robots_revision")
     record["versions"].pop("sili_robots_revision", None)  # an installed package wrote it
     (run / "config.json").write_text(json.dumps(record))
-    record_continuation(run, 1, 1)
+    record_continuation(run, read_config(run), 1)
     assert "continued" not in json.loads((run / "config.json").read_text())
     if now is None:
         return  # not run from a checkout: nothing to tell apart
     record["versions"]["sili_robots_revision"] = "0123456789ab"  # other code, alone
     (run / "config.json").write_text(json.dumps(record))
-    record_continuation(run, 1, 1)
+    record_continuation(run, read_config(run), 1)
     (continued,) = json.loads((run / "config.json").read_text())["continued"]
     assert continued["from_interaction"] == 1
     assert continued["versions"]["sili_robots_revision"] == now

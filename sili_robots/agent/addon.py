@@ -7,7 +7,10 @@ Add-ons live outside ``sili_robots/agent/`` (in ``sili_robots/addons/``, or a us
 named by the setting ``addons.plugins``) and are wired in by configuration
 (``sili_robots.addons.build_addons``); they may read the agent's public state (``buffer``;
 ``Z``, the cached latents: ``Z[j]`` is z^j of stored interaction j, ``Z[0]`` the zeros of no
-history, the true strategy for ``latent="true"``; ``latents``, ``model``, ``cfg``, ``rng``).
+history, the true strategy for ``latent="true"``; ``zdim``, their size; ``latents``, ``model``,
+``cfg``, ``rng``). A run records each of a user's add-ons by ``module:Class`` and a digest of
+its module's file (``config.json``'s ``versions``; a resume on another is noted in
+``continued``): its settings are its class attributes.
 
 Hooks, in the order the agent calls them:
 
@@ -18,7 +21,9 @@ Hooks, in the order the agent calls them:
 - ``interaction_stored(j)``: interaction j is stored and z^{j+1} cached; returns values for
   the ``metrics.csv`` columns the class declares in ``metric_columns``.
 - ``stability_distance``: d(z^j, z^{j+1}) replaced (one add-on), for the metrics here and for
-  each batch's stability reward below.
+  each batch's stability reward below (``stability.change_after(agent.Z, j, agent.cfg.latent)``
+  is the latents' own; refused where the stability term does not read it: SMiRL, partial
+  latents).
 - ``latents_refreshed``: the cached latents were recomputed with the current encoder.
 - ``before_update(interaction)``: settings for the updates after ``interaction``.
 - ``latent_pairs`` / ``rl_interactions``: which stored interactions a batch draws.
@@ -165,9 +170,14 @@ def redrawn(addons: list[AgentAddon], hook: str, j: np.ndarray, low: int, high: 
 
 
 def stored_values(addon: AgentAddon, given: object) -> Mapping[str, float]:
-    """An ``interaction_stored`` return checked: a mapping of metric values."""
+    """An ``interaction_stored`` return checked: a mapping of metric values, each a number (a
+    tensor or a string would be written as its text)."""
     if not isinstance(given, Mapping):
         raise refused(addon, "interaction_stored", given, "a dict of its metric_columns' values")
+    for column in type(addon).metric_columns:
+        value = given.get(column, 0.0)
+        if not isinstance(value, int | float | np.integer | np.floating | np.bool_):
+            raise refused(addon, "interaction_stored", value, f"a number for its column {column}")
     return given
 
 
