@@ -14,6 +14,7 @@ from sili_robots.addons.last_step import last_transition
 from sili_robots.addons.latent_filter import LatentFilter, largest_power_of_two
 from sili_robots.addons.posteriors import HindsightPosteriors
 from sili_robots.agent import AgentConfig, Schedule, SILIAgent
+from sili_robots.agent.buffer import KEYS
 from sili_robots.agent.latent import (
     LatentModel,
     category_groups,
@@ -136,6 +137,10 @@ def test_true_latent_mode_uses_the_true_strategy():
     _fill(agent, 4)
     assert agent.zdim == 2
     np.testing.assert_array_equal(agent.Z[1:, 0], [1, 0, 1, 0])
+    # R_stable's d is whether the true strategy changed, also after interaction 0 (z^0 is the
+    # strategy the game began with, not "no history"), however small the change
+    agent.Z[:, 0] = [0.0, 1.0, 1.0, 1.001, 1.001]
+    np.testing.assert_array_equal(agent.change_after(np.arange(4)), [1, 0, 1, 0])
 
 
 def test_bootstrap_across_boundary_uses_next_interactions_latents_and_first_obs():
@@ -392,6 +397,27 @@ def test_the_critic_target_is_the_soft_backup_of_the_smaller_target_twin():
         assert float(sac.critic_loss(x, a, r, x2, a2, logp2)) == pytest.approx(float(expected))
 
 
+def test_the_actor_loss_is_alpha_logp_less_the_smaller_critic_twin():
+    """alpha log pi(a|x) - min_k Q_k(x, a) at a ~ pi(.|x), alpha held fixed (CleanRL's SAC):
+    the policy climbs the pessimistic twin, and its sign makes it climb, not descend."""
+    torch.manual_seed(0)
+    sac = SAC(in_dim=3, act_dim=2, hidden=16)
+    with torch.no_grad():
+        sac.log_alpha.fill_(np.log(0.3))
+        for p in sac.critic.parameters():
+            p.add_(torch.randn_like(p))
+    x = torch.randn(64, 3)
+    torch.manual_seed(1)
+    actor_loss, _ = sac.actor_objective(x)
+    torch.manual_seed(1)  # the same draw of a ~ pi(.|x)
+    with torch.no_grad():
+        a_pi, logp = sac.actor.sample(x)
+        twins = sac.critic(x, a_pi)
+        assert (twins[0] < twins[1]).any() and (twins[1] < twins[0]).any()
+        expected = (0.3 * logp - torch.minimum(twins[0], twins[1])).mean()
+    assert float(actor_loss) == pytest.approx(float(expected), rel=1e-5)
+
+
 def test_the_target_critics_follow_the_critics_by_polyak_averaging():
     torch.manual_seed(0)
     sac = SAC(in_dim=3, act_dim=2, hidden=16, tau=0.1)
@@ -556,7 +582,9 @@ def test_checkpoint_round_trip_restores_everything():
     torch.manual_seed(3)
     np.testing.assert_allclose(act1, a2.act(obs))
     np.testing.assert_array_equal(a1.Z, a2.Z)
-    np.testing.assert_array_equal(a1.buffer.obs[: a1.buffer.n], a2.buffer.obs[: a2.buffer.n])
+    assert a1.buffer.n == a2.buffer.n == 8
+    for key in KEYS:  # the strategy ids too: only the metrics' breakdowns read them
+        np.testing.assert_array_equal(getattr(a1.buffer, key)[:8], getattr(a2.buffer, key)[:8])
     # identical next updates: the RNGs were restored too
     torch.manual_seed(4)
     l1 = a1.update(9)
@@ -909,6 +937,8 @@ def test_beta_schedule_rises_then_falls_through_its_points():
     assert values == pytest.approx([0.0, 0.25, 0.5, 0.5, 0.3, 0.1, 0.1])
     with pytest.raises(ConfigError, match="must increase, got 250 after 300"):
         method_config("sili", beta_schedule=Schedule([(300, 0.5), (250, 0.0)]))
+    with pytest.raises(ConfigError, match="must increase, got 250 after 250"):  # two values at once
+        method_config("sili", beta_schedule=Schedule([(250, 0.0), (250, 0.5)]))
     with pytest.raises(ConfigError, match=r"sili.beta: value must be in \[0, 1\], got 1.5 at"):
         method_config("sili", beta_schedule=Schedule([(9, 1.5)]))
 

@@ -30,6 +30,19 @@ def test_the_reward_is_minus_the_distance_to_the_opponent_after_the_move():
     assert reward == pytest.approx(-math.hypot(0.4 - other[0], -0.15 - other[1]))
 
 
+def test_the_point_mass_stays_in_the_arena_and_is_paid_where_it_stopped():
+    """Positions are clipped to [-2, 2]^2 (the observation's bounds): pushing past the corner
+    leaves the ego at it, observed and rewarded there."""
+    env = make_task("circle-3").unwrapped
+    env.reset(seed=0, options={"strategy": 0})
+    env.position = np.array([1.95, -1.97])
+    obs, reward, *_ = env.step(np.array([1.0, -1.0]))
+    np.testing.assert_array_equal(env.position, [2.0, -2.0])
+    np.testing.assert_array_equal(obs[:2], [2.0, -2.0])
+    other = env.opponent_position
+    assert reward == pytest.approx(-math.hypot(2.0 - other[0], -2.0 - other[1]))
+
+
 @pytest.mark.parametrize("variant,n", [("3", 3), ("8", 8)])
 def test_inside_moves_counter_clockwise_outside_holds(variant, n):
     env = make_task(f"circle-{variant}").unwrapped

@@ -145,6 +145,25 @@ def test_strategy_flag_is_last_element(name):
     assert 1.0 in flags and 0.0 in flags  # the flag is raised, and only when z changed
 
 
+@pytest.mark.parametrize("name", LIGHT_TASKS)
+def test_a_new_game_begins_unchanged_whatever_strategy_it_starts_at(name):
+    """A new game (a seed, a chosen start, a restart) has no earlier interaction to change
+    from: its first interaction is never flagged, also after a game at another strategy."""
+    env = make_task(name).unwrapped
+    starts = []
+    for seed in range(4):
+        _, info = env.reset(seed=seed)
+        starts.append(info["strategy_id"])
+        assert not info["strategy_changed"]
+        env.step(env.action_space.sample())
+        for options in ({"strategy": 0}, {"restart": True}):
+            _, info = env.reset(options=options)
+            starts.append(info["strategy_id"])
+            assert not info["strategy_changed"], options
+            env.step(env.action_space.sample())
+    assert len(set(starts)) > 1  # games at other strategies followed one another
+
+
 def test_bad_arguments_are_named():
     with pytest.raises(ConfigError, match=r"'7'.*allowed: 3, 8, continuous, unequal"):
         CircleEnv(variant="7")

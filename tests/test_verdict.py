@@ -176,15 +176,16 @@ def _trained(tmp_path, seed: int, task_reward: float, changed: int):
 def test_the_line_across_seeds_counts_the_runs_that_worked_and_picks_the_best(tmp_path, capsys):
     held_low = _trained(tmp_path, 2, -30.0, changed=0)
     lost = _trained(tmp_path, 0, -10.0, changed=1)
-    held_high = _trained(tmp_path, 1, -20.0, changed=0)
+    held_high = _trained(tmp_path, 3, -20.0, changed=0)
     line, best = across_seeds([held_low, lost, held_high])
     assert line == (
         "SILI worked in 2 of 3 seeds (held the opponent in 90% or more of its last 50 "
-        "interactions and earned more than standing still's -50.0): seed 1 (100%, -20.0 per "
-        "interaction), seed 2 (100%, -30.0 per interaction); not seed 0 (0%, -10.0 per "
+        "interactions and earned more than standing still's -50.0): seed 2 (100%, -30.0 per "
+        "interaction), seed 3 (100%, -20.0 per interaction); not seed 0 (0%, -10.0 per "
         "interaction)"
     )
-    assert best == held_high  # the best-earning run that worked, not the best-earning one
+    # the best-earning run that worked: not the best-earning one, nor the first that worked
+    assert best == held_high
     capsys.readouterr()
     assert verdict_main([str(lost), str(held_low), str(held_high)]) == 0
     printed = capsys.readouterr()
