@@ -124,6 +124,29 @@ def test_the_live_page_s_key_colours_each_item_in_a_terminal():
     assert _key(prev, colour=False).startswith(f"scene: {title}\nlegend: {label} (#{colour:06x}), ")
 
 
+def test_serve_colours_the_key_in_a_terminal_unless_no_color_is_set(monkeypatch, capsys, tmp_path):
+    import sili_robots.preview as preview_package
+
+    monkeypatch.chdir(tmp_path)  # the page's default path: not written here, but checked
+
+    recorded = preview("speaker-listener", interactions=1, out=None)
+
+    def served(*_args, on_ready, **_kwargs):  # as preview(serve=True) does, without a server
+        on_ready(recorded)
+        return recorded
+
+    monkeypatch.setattr(preview_package, "preview", served)
+    args = ["preview", "speaker-listener", "--interactions", "1", "--serve"]
+    monkeypatch.delenv("NO_COLOR", raising=False)
+    for terminal, no_color, swatch in ((True, "", True), (True, "1", False), (False, "", False)):
+        capsys.readouterr()
+        monkeypatch.setattr(sys.stdout, "isatty", lambda t=terminal: t)
+        monkeypatch.setenv("NO_COLOR", no_color)
+        assert main(args) == 0
+        out = capsys.readouterr().out
+        assert "\nlegend: " in out and ("\033[38;2;" in out) == swatch, (terminal, no_color)
+
+
 def test_every_registered_task_has_a_preview_scene():
     for name in TASKS:
         env = make_task(name)  # cheap: Driving starts SUMO only on reset

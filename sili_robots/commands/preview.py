@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -88,7 +89,8 @@ def run(args: argparse.Namespace) -> int:
 
     def serving(result: PreviewResult) -> None:  # what was written and checked, then the URL
         reported.append(_report(result))
-        print(_key(result.preview, colour=sys.stdout.isatty()))
+        colour = sys.stdout.isatty() and not os.environ.get("NO_COLOR")  # no-color.org
+        print(_key(result.preview, colour))
         print(f"meshcat server: {result.url}  (Ctrl-C to stop)", flush=True)
 
     if args.checkpoint is not None and args.seed is not None:
