@@ -50,7 +50,8 @@ def test_a_latent_that_predicts_the_next_strategy_is_pure_and_agrees():
 def test_a_window_without_latents_reports_no_latent_statistics():
     # a run whose early rows had categories but whose last window has none (-1)
     categories = [0, 1, 2] + [-1] * 10
-    out = latent_diagnostics(_metrics(categories, [0, 1, 2] + [0] * 10), window=5)
+    paid = np.r_[np.full(8, -1.0), np.zeros(5)]  # paid early, not in the window
+    out = latent_diagnostics(_metrics(categories, [0, 1, 2] + [0] * 10, paid), window=5)
     assert "latent_purity" not in out and "latent_entropy" not in out
     assert out["stability_reward_paid"] == 0.0
 

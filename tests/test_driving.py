@@ -358,6 +358,16 @@ def test_the_passing_offset_is_taken_when_the_fronts_are_level(env):
     assert env.passing_offset == passed_at
 
 
+def test_the_passing_offset_is_not_taken_before_the_fronts_are_level(env):
+    """Drifting left through the pass: the offset is where the ego was when the opponent's
+    front came level, not up to a metre (or a step) before."""
+    env.reset(seed=0)
+    for t in range(env.horizon):
+        env.step(np.array([0.0 if t < 4 else 0.3], np.float32))
+    passed_at = next(ego_y for _, ego_x, ego_y, opp_x, *_ in env.substeps if opp_x <= ego_x)
+    assert env.passing_offset == passed_at
+
+
 def test_the_opponents_lateral_position_is_observed_in_lane_widths(env):
     env.reset(seed=0)
     for _ in range(env.horizon):

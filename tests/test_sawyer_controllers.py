@@ -38,6 +38,25 @@ def test_registry_names_and_errors():
         controller_class("ik")
 
 
+def test_mink_s_reference_is_resynced_to_the_joints_only_when_it_runs_ahead():
+    """A blocked arm (pressed into the table) lags its IK reference: past ``RESYNC`` the
+    reference restarts from the measured joints, so the hand does not slide on; within it, the
+    reference is kept (it is what makes the arm track smoothly)."""
+    from sili_robots.controllers.mink_ik import RESYNC
+
+    env = make_task("sawyer-reach").unwrapped
+    env.reset(seed=0)
+    ctrl, adr = env.controller, env.scene.arm.qpos_adr
+    for ahead, resynced in ((RESYNC / 2, False), (5 * RESYNC, True)):
+        ctrl.q_ref = np.array(env.scene.data.qpos)
+        ctrl.q_ref[adr[0]] += ahead
+        kept = ctrl.q_ref.copy()
+        ctrl.ik_step(ctrl.target)
+        expected = env.scene.data.qpos if resynced else kept
+        np.testing.assert_allclose(ctrl.q_ref[adr], expected[adr], atol=1e-12)
+    env.close()
+
+
 def test_osc_is_robosuites_own_controller():
     from robosuite.controllers.parts.arm.osc import OperationalSpaceController
 

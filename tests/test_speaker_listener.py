@@ -3,6 +3,7 @@
 import warnings
 
 import numpy as np
+import pytest
 
 from sili_robots.policies import scripted_policy
 from sili_robots.policies.scripted import Revealed
@@ -73,6 +74,18 @@ def test_stabilizing_policy_keeps_mapping_and_oracle_is_near_optimal():
     assert (
         oracle_mean > np.mean([s.task_reward for s in stab]) > np.mean([s.task_reward for s in rnd])
     )
+
+
+@pytest.mark.parametrize("mapping", range(len(MAPPINGS)))
+def test_the_scripted_listener_reaches_the_goal_under_every_mapping(mapping):
+    """The references (and the bounds built on them) decode the speaker's message through the
+    mapping the right way round: the two 3-cycles are each other's inverse."""
+    env = make_task("speaker-listener")
+    task, policy = env.unwrapped, scripted_policy(env, "stabilizing")
+    obs, _ = env.reset(seed=0, options={"strategy": mapping})
+    for _ in range(task.horizon):
+        obs, *_ = env.step(policy(env, obs))
+    assert np.linalg.norm(task.position - GOALS[task.goal]) < 0.15
 
 
 def test_the_v0_mapping_changes_within_an_interaction_but_not_after_its_last_step():
