@@ -321,5 +321,5 @@ def make_run_config(
             f"(or the earlier flat names {', '.join(LEGACY_SETTINGS)})"
         ) from None
     cfg.addons.validate(cfg.agent)
-    cfg.metric_columns()  # a plug-in's columns checked before a run is written
+    cfg.metric_columns(new_run=True)  # a plug-in's columns checked before a run is written
     return cfg

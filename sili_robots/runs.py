@@ -124,8 +124,10 @@ class RunConfig:
 
         return {**unused_settings(self.agent, given), **self.addons.unread(given, self.agent)}
 
-    def metric_columns(self) -> tuple[str, ...]:
-        """``metrics.csv``'s columns: ``METRIC_COLUMNS``, then those its own add-ons declare."""
+    def metric_columns(self, new_run: bool = False) -> tuple[str, ...]:
+        """``metrics.csv``'s columns: ``METRIC_COLUMNS``, then those its own add-ons declare.
+        ``new_run``: two add-ons declaring one column are refused (the second's values replaced
+        the first's; a run recorded so goes on as it began)."""
         own: dict[str, str] = {}  # column -> the add-on that declares it
         for cls in self.addons.plugin_classes():
             path, declared = f"{cls.__module__}:{cls.__qualname__}", cls.metric_columns
@@ -143,15 +145,15 @@ class RunConfig:
                     "has already; name its own otherwise"
                 )
             shared = [f"{c} ({own[c]})" for c in declared if c in own]
-            if shared:
+            if shared and new_run:
                 raise ConfigError(
                     f"add-on {path} declares metric_columns {', '.join(shared)}, which another "
                     "add-on of the run declares already; give each add-on its own column names"
                 )
-            own.update(dict.fromkeys(declared, path))
+            own.update({c: path for c in declared if c not in own})
         return (*METRIC_COLUMNS, *own)
 
-    def versions(self) -> dict[str, str]:
+    def provenance(self) -> dict[str, str]:
         """The software and processor the run uses now (``provenance.versions``), with the code
         of the classes it names by ``module:Class``: its task (unless it cannot be imported
         by its name: a class of a script, trained as an instance), its add-ons."""
@@ -301,7 +303,7 @@ def make_run_dir(run_dir: Path, out: str = "--out") -> None:
 
 def write_config(run_dir: Path, cfg: RunConfig) -> None:
     make_run_dir(run_dir)
-    payload = {"run": cfg.to_dict(), "versions": cfg.versions()}
+    payload = {"run": cfg.to_dict(), "versions": cfg.provenance()}
     write_text(run_dir / CONFIG, json.dumps(payload, indent=2, sort_keys=True))
 
 
@@ -312,12 +314,18 @@ def record_continuation(run_dir: Path, cfg: RunConfig, interaction: int) -> None
     what)."""
     path = Path(run_dir) / CONFIG
     record = read_json(path, DAMAGED_CONFIG, "run")
-    now = cfg.versions()
+    now = cfg.provenance()
     last = dict((record.get("continued") or [record])[-1].get("versions") or {})
-    for key in {*now, *last}:  # unknown on one side (an earlier version wrote it): no difference
-        if (key == REVISION or key.startswith(OWN_CODE)) and (key not in now or key not in last):
-            now.pop(key, None)
-            last.pop(key, None)
+    # what one side does not know (an earlier version wrote it, or git could not tell) is no
+    # difference; a class's code known on both sides but under other names is
+    if REVISION not in now or REVISION not in last:
+        now.pop(REVISION, None)
+        last.pop(REVISION, None)
+    code = [{k for k in d if k.startswith(OWN_CODE)} for d in (now, last)]
+    if not all(code):
+        now, last = (
+            {k: v for k, v in d.items() if k not in code[0] | code[1]} for d in (now, last)
+        )
     if now != last:
         record.setdefault("continued", []).append(
             {"from_interaction": interaction, "versions": now}

@@ -102,6 +102,14 @@ class Tensor(Constant):
         return {"stored": torch.tensor(0.5)}  # written as "tensor(0.5)"
 
 
+class Flags(AgentAddon):
+    name = "flags"
+    metric_columns = ("odd", "seen", "half")
+
+    def interaction_stored(self, j):
+        return {"odd": bool(j % 2), "seen": np.bool_(True), "half": np.float32(j / 2)}
+
+
 class ShortLatent(AgentAddon):
     def acting_latent(self):
         return np.zeros(3, np.float32)  # the latent has 10 entries
@@ -219,6 +227,43 @@ def test_a_run_records_its_addon_s_code_and_notes_a_resume_on_other_code(tmp_pat
     assert continued["from_interaction"] == 3
     assert continued["versions"][key] == hashlib.sha256(module.read_bytes()).hexdigest()[:12]
     assert [float(r["stability_reward"]) for r in _rows(run)] == [-0.37] * 3 + [-0.5]
+    # the class renamed, its old name kept for the run: other code all the same
+    renamed = module.read_text().replace("Constant", "Kept")
+    module.write_text(renamed.replace("0.5", "0.6") + "\nConstant = Kept\n")
+    del sys.modules["my_addons"]
+    assert main([*resume, "5"]) == 0
+    *_, again = json.loads((run / "config.json").read_text())["continued"]
+    assert again["from_interaction"] == 4 and "code of my_addons:Kept" in again["versions"]
+
+
+def test_a_run_recorded_by_an_earlier_version_goes_on_as_it_began(tmp_path, monkeypatch):
+    """Without the code digests (not a difference) and with two add-ons sharing a column (a new
+    run is refused that): resumed, as the README promises runs of earlier versions are."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "my_addons.py").write_text(textwrap.dedent(PLUGIN))
+    run = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--out", str(run), "--no-progress", *FAST_ARGS]
+    assert main([*args, "--set", "addons.plugins=my_addons:Constant", "--interactions", "2"]) == 0
+    config = json.loads((run / "config.json").read_text())
+    config["versions"] = {k: v for k, v in config["versions"].items() if not k.startswith("code")}
+    config["run"]["addons"]["plugins"] = "my_addons:Constant,my_addons:SameColumn"
+    (run / "config.json").write_text(json.dumps(config))
+    assert main(["train", "--resume", str(run), "--no-progress", "--interactions", "3"]) == 0
+    assert "continued" not in json.loads((run / "config.json").read_text())
+
+
+def test_an_addon_s_flags_and_numpy_numbers_are_written_as_numbers(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "my_addons.py").write_text(textwrap.dedent(PLUGIN))
+    run = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--out", str(run), "--no-progress", *FAST_ARGS]
+    assert main([*args, "--set", "addons.plugins=my_addons:Flags", "--interactions", "3"]) == 0
+    rows = _rows(run)
+    assert [(r["odd"], r["seen"], r["half"]) for r in rows] == [
+        ("0", "1", "0.0"),
+        ("1", "1", "0.5"),
+        ("0", "1", "1.0"),
+    ]
 
 
 def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, capsys):
@@ -256,29 +301,15 @@ def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, caps
         "add-on my_addons:SameColumn declares metric_columns stored (my_addons:Constant), which "
         "another add-on of the run declares already" in capsys.readouterr().err
     )
-    # a distance nothing would read: SMiRL's term is its own, partial latents count flags
-    for task, method in (("circle-3", "smirl"), ("speaker-listener", "sili")):
-        given = ["train", "--task", task, "--method", method, *fresh[3:]]
-        assert main([*given, "--set", "addons.plugins=my_addons:Constant"]) == 2
-        assert "add-on my_addons:Constant replaces stability_distance, which method " in (
-            capsys.readouterr().err
-        )
-    # the packaged posteriors add-on replaces d too: one of them would be ignored
-    for plugins in (
-        "Constant,my_addons:Scalar",
-        "Constant --set addons.stability_distance=hindsight",
-    ):
-        given = ["--set", f"addons.plugins=my_addons:{plugins.split()[0]}", *plugins.split()[1:]]
-        assert main([*fresh, *given]) == 2
-        err = capsys.readouterr().err
-        assert "my_addons:Constant" in err and "each replace stability_distance: keep one" in err
-    assert "add-ons posteriors (addons.stability_distance 'hindsight'), my_addons:Constant" in err
     assert not (tmp_path / "u").exists()  # each refused before a run was written
     wrong = {
         "my_addons:Scalar": "add-on Scalar: stability_distance must return finite values of j's "
         "shape (1,), got shape ()",
         "my_addons:NaN": "add-on NaN: stability_distance must return finite values of j's shape "
         "(1,), got shape (1,) (not finite)",
+        # the packaged posteriors add-on replaces d too: one of them would be ignored
+        "my_addons:Constant --set addons.stability_distance=posterior": "add-ons "
+        "HindsightPosteriors, Constant each replace stability_distance: keep one",
     }
     for plugins, message in wrong.items():
         given = ["--set", f"addons.plugins={plugins.split()[0]}", *plugins.split()[1:]]

@@ -169,9 +169,9 @@ def test_a_run_of_your_own_task_records_its_code_and_one_of_a_script_s_class_goe
 
     cfg = make_run_config("sili_robots.examples.two_doors:TwoDoorsEnv", "sili")
     digest = hashlib.sha256(Path(two_doors.__file__).read_bytes()).hexdigest()[:12]
-    assert cfg.versions()["code of sili_robots.examples.two_doors:TwoDoorsEnv"] == digest
+    assert cfg.provenance()["code of sili_robots.examples.two_doors:TwoDoorsEnv"] == digest
     cfg.task = "__main__:TwoDoorsEnv"  # trained as an instance: nothing to import it by
-    assert not [k for k in cfg.versions() if k.startswith("code of ")]
+    assert not [k for k in cfg.provenance() if k.startswith("code of ")]
 
 
 def test_a_revision_unknown_on_one_side_is_no_continuation(tmp_path):
@@ -1060,9 +1060,10 @@ def test_a_run_that_fails_before_writing_leaves_no_folder_it_made(tmp_path, caps
     monkeypatch.setattr(
         training, "_start_or_resume", lambda *_a: torch.empty(2**62, dtype=torch.uint8)
     )
-    assert main([*args, "--out", str(tmp_path / "new" / "run")]) == 1
-    assert "out of memory" in capsys.readouterr().err
-    assert list(tmp_path.iterdir()) == []
+    for out in (tmp_path / "new" / "run", tmp_path / "new" / ".." / "other" / "run"):
+        assert main([*args, "--out", str(out)]) == 1
+        assert "out of memory" in capsys.readouterr().err
+        assert list(tmp_path.iterdir()) == [], out
     given = tmp_path / "given"
     given.mkdir()
     assert main([*args, "--out", str(given / "run")]) == 1

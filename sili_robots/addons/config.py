@@ -27,21 +27,6 @@ def check_learned_latents(name: str, agent: AgentConfig, discrete: bool = False)
         raise ConfigError(f"add-on {name} needs discrete latents, got latent {agent.latent!r}")
 
 
-def check_distance_read(name: str, agent: AgentConfig) -> None:
-    """Refuse add-on ``name``, which replaces ``stability_distance``, on an agent whose stability
-    term does not read it: it would change neither training nor the metrics, without a word."""
-    if agent.method == "smirl" or agent.latent == "partial":
-        reads = (
-            "SMiRL's term is its own log-likelihood"
-            if agent.method == "smirl"
-            else "with partial latents the term counts the opponent's change flags"
-        )
-        raise ConfigError(
-            f"add-on {name} replaces stability_distance, which method {agent.method!r} with "
-            f"latent {agent.latent!r} does not read ({reads}); switch it off for this method"
-        )
-
-
 @dataclass
 class FilterConfig:
     """Within-interaction latent filter (addons/latent_filter.py)."""
@@ -128,17 +113,7 @@ class AddonsConfig:
 
     def validate(self, agent: AgentConfig) -> AddonsConfig:
         check(self, "addons.")
-        replacing = [] if self.stability_distance == "latents" else ["posteriors"]
-        for cls in self.plugin_classes():  # each one loads, before a run starts
-            if cls.stability_distance is not AgentAddon.stability_distance:
-                replacing.append(f"{cls.__module__}:{cls.__qualname__}")
-                check_distance_read(replacing[-1], agent)
-        if len(replacing) > 1:
-            if replacing[0] == "posteriors":
-                replacing[0] += f" (addons.stability_distance {self.stability_distance!r})"
-            raise ConfigError(
-                f"add-ons {', '.join(replacing)} each replace stability_distance: keep one"
-            )
+        self.plugin_classes()  # each one loads, before a run starts
         active = self.active()
         for name in active:
             if name != "recent":

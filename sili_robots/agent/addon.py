@@ -22,8 +22,8 @@ Hooks, in the order the agent calls them:
   the ``metrics.csv`` columns the class declares in ``metric_columns``.
 - ``stability_distance``: d(z^j, z^{j+1}) replaced (one add-on), for the metrics here and for
   each batch's stability reward below (``stability.change_after(agent.Z, j, agent.cfg.latent)``
-  is the latents' own; refused where the stability term does not read it: SMiRL, partial
-  latents).
+  is the latents' own). Not read with partial latents, whose R_stable counts the opponent's
+  change flags; SMiRL trains on its own term (its metrics still show d).
 - ``latents_refreshed``: the cached latents were recomputed with the current encoder.
 - ``before_update(interaction)``: settings for the updates after ``interaction``.
 - ``latent_pairs`` / ``rl_interactions``: which stored interactions a batch draws.
@@ -169,16 +169,20 @@ def redrawn(addons: list[AgentAddon], hook: str, j: np.ndarray, low: int, high: 
     return j
 
 
-def stored_values(addon: AgentAddon, given: object) -> Mapping[str, float]:
-    """An ``interaction_stored`` return checked: a mapping of metric values, each a number (a
-    tensor or a string would be written as its text)."""
+def stored_values(addon: AgentAddon, given: object) -> dict[str, float]:
+    """An ``interaction_stored`` return checked: its columns' values, each a number (a tensor
+    or a string would be written as its text), a flag as 0 or 1 (as the package's own)."""
     if not isinstance(given, Mapping):
         raise refused(addon, "interaction_stored", given, "a dict of its metric_columns' values")
+    out = {}
     for column in type(addon).metric_columns:
-        value = given.get(column, 0.0)
+        if column not in given:
+            continue
+        value = given[column]
         if not isinstance(value, int | float | np.integer | np.floating | np.bool_):
             raise refused(addon, "interaction_stored", value, f"a number for its column {column}")
-    return given
+        out[column] = int(value) if isinstance(value, bool | np.bool_) else value
+    return out
 
 
 def acting_latent(addon: AgentAddon, given: object, zdim: int) -> np.ndarray:

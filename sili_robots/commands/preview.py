@@ -145,11 +145,13 @@ def _report(result: PreviewResult) -> int:
 def _key(prev: Preview, colour: bool) -> str:
     """The title and legend the HTML page shows over the scene, for the live page, which is
     meshcat's own and shows neither; ``colour``: a swatch in each item's colour (a terminal)."""
+    from sili_robots.preview.shapes import css, hex_rgb
+
     scene, rec = prev.scene, prev.recording
     items = []
     for rgb, label in scene.legend(rec):
-        r, g, b = rgb >> 16, (rgb >> 8) & 0xFF, rgb & 0xFF
+        r, g, b = hex_rgb(rgb)
         items.append(
-            f"\033[38;2;{r};{g};{b}m\u25a0\033[0m {label}" if colour else f"{label} (#{rgb:06x})"
+            f"\033[38;2;{r};{g};{b}m\u25a0\033[0m {label}" if colour else f"{label} ({css(rgb)})"
         )
     return f"scene: {scene.title(rec)}\nlegend: " + ", ".join(items)
