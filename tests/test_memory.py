@@ -98,3 +98,15 @@ def test_a_containers_memory_limit_bounds_what_is_available(monkeypatch, tmp_pat
     assert memory.available_memory() <= 424 * MIB
     limit.write_text("max\n")  # no limit: the machine's memory
     assert memory.available_memory() > 424 * MIB
+
+
+def test_a_container_over_its_limit_has_nothing_left_not_less_than_nothing(monkeypatch, tmp_path):
+    """Usage above the limit (cgroup v1 counts the page cache): 0 available, never a negative
+    amount, which would cap the process below what it already uses."""
+    limit, usage = tmp_path / "memory.max", tmp_path / "memory.current"
+    limit.write_text(f"{2**30}\n")
+    usage.write_text(f"{2 * 2**30}\n")
+    monkeypatch.setattr(memory, "CGROUP_FILES", ((str(limit), str(usage)),))
+    if memory.available_memory() is None:
+        pytest.skip("needs /proc/meminfo")
+    assert memory.available_memory() == 0

@@ -88,3 +88,24 @@ def test_a_method_without_a_latent_model_reads_as_none_whatever_its_flat_config_
         run = flat_layout(make_run_config("circle-3", method, 0, 10).to_dict())
         run["agent"]["latent"] = "discrete"
         assert RunConfig.from_dict(run).agent.latent == "none", method
+
+
+def test_an_old_config_without_precision_reads_as_float32_where_bfloat16_would_be_chosen(
+    monkeypatch,
+):
+    """The earliest flat configs trained in float32: on a machine whose timing chooses
+    bfloat16 they still read as float32 (else a resume rounds otherwise)."""
+    from sili_robots.agent import matmul
+    from sili_robots.build import make_run_config
+    from sili_robots.runs import RunConfig
+
+    run = flat_layout(make_run_config("circle-3", "sili", 0, 10).to_dict())
+    del run["agent"]["precision"]
+    real = matmul._cached_choice
+    monkeypatch.setattr(
+        matmul,
+        "_cached_choice",
+        lambda kind, measure: "bfloat16" if kind == "precision" else real(kind, measure),
+    )
+    assert matmul.default_precision() == "bfloat16"  # the machine this test stands for
+    assert RunConfig.from_dict(run).agent.sac.precision == "float32"

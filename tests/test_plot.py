@@ -480,3 +480,15 @@ def test_every_overview_panel_names_its_axis_and_a_rows_panels_share_it(sweep_di
     assert all(ax.get_xlabel() == "interaction" for ax in grid)
     for reward, stability in zip(grid[::2], grid[1::2], strict=True):
         assert reward.get_xlim() == stability.get_xlim()  # stability has no interaction 0
+
+
+def test_formats_that_name_none_are_bad_input(tmp_path, monkeypatch, capsys):
+    """--formats "," would draw nothing: refused, not a success without a figure."""
+    from sili_robots import plotting
+
+    drawn = []
+    monkeypatch.setattr(plotting, "plot_sweep", lambda *a, **k: drawn.append(k) or [])
+    for given in (",", " "):
+        assert main(["plot", str(tmp_path), "--formats", given]) == 2
+        assert "unknown figure format" in capsys.readouterr().err
+    assert drawn == []

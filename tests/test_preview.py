@@ -482,3 +482,15 @@ def test_colours_are_red_green_blue():
 
     assert rgb_hex((1.0, 0.5, 0.0)) == 0xFF8000
     assert hex_rgb(rgb_hex((0.0, 0.0, 1.0))) == (0, 0, 255)
+
+
+def test_a_picture_of_background_alone_is_blank():
+    """The blank check without a browser (tests/test_preview_browser.py checks it on pictures
+    Chromium renders)."""
+    from sili_robots.preview.check import blank_problem
+
+    gradient = np.repeat(np.linspace(150, 250, 40, dtype=np.int16)[:, None, None], 40, axis=1)
+    rgb = np.repeat(gradient, 3, axis=2)
+    assert "picture is blank: only 0.0% of pixels" in (blank_problem(rgb) or "")
+    rgb[10:30, 10:30] = [0xD6, 0x27, 0x28]  # a body drawn: not blank
+    assert blank_problem(rgb) is None

@@ -1320,3 +1320,21 @@ def test_a_sweep_given_through_python_names_what_each_field_takes(tmp_path):
         with pytest.raises(ConfigError, match=said):
             call()
     assert (tmp_path / "runs" / "circle-3__sac__s0" / "config.json").stat().st_mtime_ns == kept
+
+
+def test_a_sweep_whose_backend_lost_a_run_is_not_ok(tmp_path):
+    """Every planned run must be done or skipped: a backend that returns no outcome for one (a
+    lost remote worker) fails the sweep."""
+
+    class LosesEverything:
+        def run(self, jobs, monitor):
+            return []
+
+    spec = SweepSpec(
+        tasks=["circle-3"], methods=["sac"], seeds=[0], interactions=2, agent_overrides=FAST
+    )
+    report = run_sweep(
+        spec, tmp_path / "s", LosesEverything(), progress=False, tensorboard_scalars=False
+    )
+    assert report.failed == {} and report.skipped == []
+    assert not report.ok

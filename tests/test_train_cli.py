@@ -1461,3 +1461,64 @@ def test_a_narrow_terminal_shortens_the_label_not_the_numbers(monkeypatch):
     drawn = re.sub(r"\x1b\[[0-9;?]*[A-Za-z]", "", out.getvalue()).replace("\r", "\n")
     last = [line for line in drawn.splitlines() if line.strip()][-1]
     assert "190/2500 reward   -47.87 stable 0.01" in last, last
+
+
+def test_a_resumed_run_s_wall_time_goes_on_from_its_checkpoint(tmp_path, monkeypatch):
+    """A resumed run's wall_time (metrics.csv, summary.json's wall_time_s) counts the time
+    before the stop too: 100 s between clock reads in a first session, the real clock after."""
+    import itertools
+    import types
+
+    from sili_robots.build import make_run_config
+
+    ticks = itertools.count(step=100.0)
+    monkeypatch.setattr(training, "time", types.SimpleNamespace(perf_counter=lambda: next(ticks)))
+    cfg = make_run_config("circle-3", "sac", 0, 2, settings=FAST_AGENT)
+    training.train(cfg, tmp_path / "run", progress=False)
+    before = pd.read_csv(tmp_path / "run" / "metrics.csv")["wall_time"].iloc[-1]
+    assert before >= 100
+    monkeypatch.undo()
+    training.resume(tmp_path / "run", progress=False, interactions=4)
+    wall = pd.read_csv(tmp_path / "run" / "metrics.csv")["wall_time"]
+    assert (wall.diff().dropna() >= 0).all(), wall.tolist()
+    assert json.loads((tmp_path / "run" / "summary.json").read_text())["wall_time_s"] >= before
+
+
+def test_a_stop_file_in_the_last_interaction_leaves_the_run_finished(tmp_path, monkeypatch):
+    """Asked to stop (a sweep's stop file) in its last interaction, the run finishes, summary
+    written, as at a stop signal there: a sweep then counts it done."""
+    from sili_robots.build import make_run_config
+
+    cfg = make_run_config("circle-3", "sac", 0, 2, settings=FAST_AGENT)
+    stop, play, calls = tmp_path / "stop", training.play_interaction, []
+
+    def asked_during_the_last(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            stop.touch()
+        return play(*args, **kwargs)
+
+    monkeypatch.setattr(training, "play_interaction", asked_during_the_last)
+    try:
+        training.train(cfg, tmp_path / "run", progress=False, stop_file=stop)
+    except KeyboardInterrupt as stopped:  # (pytest would end the whole session on it)
+        pytest.fail(f"a stop in the last interaction raised: {stopped}")
+    assert (tmp_path / "run" / "summary.json").is_file()
+    assert run_state(tmp_path / "run") == "done"
+
+
+def test_a_resumed_run_s_log_line_counts_its_time_left_at_this_session_s_rate(monkeypatch, capsys):
+    """Resumed at 90 of 100, one interaction in 10 s: 9 left at 10 s each, 0:01:30 (not 1 s at
+    the rate from interaction 0, nor 1,000 s for all 100)."""
+    from sili_robots import progress
+
+    monkeypatch.setattr(progress, "LOG_EVERY", 1e9)  # only the closing line
+    clock = {"t": 0.0}
+    monkeypatch.setattr(progress.time, "monotonic", lambda: clock["t"])
+    bar = progress.TrainingProgress(100, 90, label="x")
+    assert bar.shown
+    clock["t"] = 10.0
+    bar.advance(1.0, 1.0)
+    bar.close()
+    line = [ln for ln in capsys.readouterr().err.splitlines() if "interactions" in ln][-1]
+    assert "91/100 interactions" in line and line.endswith("0:01:30 left"), line
