@@ -26,10 +26,10 @@ def load_class(path: str, base: type, kind: str, instead: str = "") -> type:
         )
     if os.getcwd() not in sys.path:
         sys.path.append(os.getcwd())
-    where = (
-        f"give {instead}package.module:ClassName of a subclass of {base.__name__} importable from "
-        f"the current directory (a run of one is resumed, evaluated and loaded from a folder "
-        "its module imports from)"
+    where = (  # (also when a run's record names it: nothing was given then)
+        f"it must be {instead}package.module:ClassName of a subclass of {base.__name__} "
+        "importable from the current directory or PYTHONPATH (a run of one is trained, resumed, "
+        "evaluated and loaded from a folder its module imports from)"
     )
     try:
         obj: Any = importlib.import_module(module_name)

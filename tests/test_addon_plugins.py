@@ -278,6 +278,9 @@ def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, caps
     for path, message in cases.items():
         with pytest.raises(ConfigError, match=message):
             make_run_config("circle-3", "sili", settings={"addons.plugins": path})
+    # worded for a run's record too (a resume from another folder), where nothing was given
+    with pytest.raises(ConfigError, match=r"\); it must be package.module:ClassName of a subclass"):
+        make_run_config("circle-3", "sili", settings={"addons.plugins": "no_such_module:X"})
     args = ["train", "--task", "circle-3", "--out", str(tmp_path / "r"), "--no-progress"]
     assert main([*args, "--set", "addons.plugins=my_addons:Configured"]) == 2
     err = capsys.readouterr().err
