@@ -22,6 +22,7 @@ from sili_robots.agent import SILIAgent, method_config
 from sili_robots.agent.config import AgentConfig, UnknownSetting, paths
 from sili_robots.errors import ConfigError
 from sili_robots.migrations import LEGACY_SETTINGS, setting_path
+from sili_robots.plugins import class_path
 from sili_robots.runs import CONFIG, RunConfig
 from sili_robots.tasks import make_task, task_spec
 from sili_robots.tasks.registry import (
@@ -78,8 +79,7 @@ def task_name_of(env: gym.Env) -> str:
             return task_spec(spec.id).name
         except ConfigError:
             pass
-    cls = type(env.unwrapped)
-    return f"{cls.__module__}:{cls.__qualname__}"
+    return class_path(type(env.unwrapped))
 
 
 def task_version_of(env: gym.Env) -> str:

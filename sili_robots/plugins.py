@@ -49,6 +49,12 @@ def load_class(path: str, base: type, kind: str, instead: str = "") -> type:
     return obj
 
 
+def class_path(cls: type) -> str:
+    """``package.module:ClassName`` of ``cls``: how a run records a user's class, which
+    ``load_class`` reads back."""
+    return f"{cls.__module__}:{cls.__qualname__}"
+
+
 def _unloadable(path: str, kind: str, module_name: str, err: Exception, where: str) -> str:
     if module_name == "__main__":
         where = "a class defined in a script loads only in that script: put it in a module" + (

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import torch
 
+from sili_robots.plugins import class_path
+
 #: the libraries behind the tasks' dynamics and the agent's numbers beyond torch and numpy
 #: (recorded where installed): simulators, solvers, SciPy (category matching, k-means)
 RECORDED_PACKAGES = (
@@ -96,8 +98,7 @@ def source_digests(classes: list[type]) -> dict[str, str]:
     for cls in classes:
         with contextlib.suppress(OSError, TypeError):  # a built-in, or a file gone since
             source = Path(inspect.getsourcefile(cls) or "").read_bytes()
-            key = f"{OWN_CODE}{cls.__module__}:{cls.__qualname__}"
-            found[key] = hashlib.sha256(source).hexdigest()[:12]
+            found[OWN_CODE + class_path(cls)] = hashlib.sha256(source).hexdigest()[:12]
     return found
 
 

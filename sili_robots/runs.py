@@ -32,6 +32,7 @@ from sili_robots.atomic import write_bytes, write_text
 from sili_robots.errors import ConfigError, check_count, check_seed, first_line, is_number
 from sili_robots.metrics import COMPRESSED_METRICS, METRIC_COLUMNS, METRICS
 from sili_robots.migrations import migrate_agent_state, migrate_run, setting_path
+from sili_robots.plugins import class_path
 from sili_robots.provenance import OWN_CODE, REVISION, source_digests, versions
 from sili_robots.tasks.registry import (
     check_argument_names,
@@ -130,7 +131,7 @@ class RunConfig:
         the first's; a run recorded so goes on as it began)."""
         own: dict[str, str] = {}  # column -> the add-on that declares it
         for cls in self.addons.plugin_classes():
-            path, declared = f"{cls.__module__}:{cls.__qualname__}", cls.metric_columns
+            path, declared = class_path(cls), cls.metric_columns
             if not isinstance(declared, tuple | list) or not all(
                 isinstance(c, str) and c.strip() for c in declared
             ):
@@ -287,9 +288,10 @@ def ready_new_run_dir(run_dir: Path, overwrite: bool = False, **names: str) -> N
         clear_run(run_dir)
 
 
-def make_run_dir(run_dir: Path, out: str = "--out") -> None:
+def make_run_dir(run_dir: Path, out: str = "--out") -> list[Path]:
     """Create a run directory, or ConfigError naming it (and ``out``, what the caller calls
-    it) when it cannot be."""
+    it) when it cannot be; the folders it made, innermost first."""
+    made = [d for d in (Path(run_dir), *Path(run_dir).parents) if d.name != ".." and not d.exists()]
     if Path(run_dir).is_file():
         raise ConfigError(f"{run_dir} is a file; give {out} a directory (new, or empty)")
     try:
@@ -299,6 +301,7 @@ def make_run_dir(run_dir: Path, out: str = "--out") -> None:
             f"cannot create the run directory {run_dir}: {err.strerror or err}; "
             f"give {out} a directory that can be written"
         ) from None
+    return made
 
 
 def write_config(run_dir: Path, cfg: RunConfig) -> None:
@@ -315,17 +318,15 @@ def record_continuation(run_dir: Path, cfg: RunConfig, interaction: int) -> None
     path = Path(run_dir) / CONFIG
     record = read_json(path, DAMAGED_CONFIG, "run")
     now = cfg.provenance()
-    last = dict((record.get("continued") or [record])[-1].get("versions") or {})
+    last = (record.get("continued") or [record])[-1].get("versions") or {}
     # what one side does not know (an earlier version wrote it, or git could not tell) is no
     # difference; a class's code known on both sides but under other names is
-    if REVISION not in now or REVISION not in last:
-        now.pop(REVISION, None)
-        last.pop(REVISION, None)
-    code = [{k for k in d if k.startswith(OWN_CODE)} for d in (now, last)]
-    if not all(code):
-        now, last = (
-            {k: v for k, v in d.items() if k not in code[0] | code[1]} for d in (now, last)
-        )
+    for known in (lambda k: k == REVISION, lambda k: k.startswith(OWN_CODE)):
+        keys = [{k for k in d if known(k)} for d in (now, last)]
+        if not all(keys):
+            now, last = (
+                {k: v for k, v in d.items() if k not in keys[0] | keys[1]} for d in (now, last)
+            )
     if now != last:
         record.setdefault("continued", []).append(
             {"from_interaction": interaction, "versions": now}

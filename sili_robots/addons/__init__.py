@@ -26,6 +26,7 @@ from sili_robots.addons.schedules import Schedules
 from sili_robots.agent.addon import AgentAddon
 from sili_robots.agent.config import AgentConfig, scheduled_paths
 from sili_robots.errors import ConfigError
+from sili_robots.plugins import class_path
 
 
 def build_addons(addons: AddonsConfig, agent: AgentConfig) -> list[AgentAddon]:
@@ -48,7 +49,7 @@ def build_addons(addons: AddonsConfig, agent: AgentConfig) -> list[AgentAddon]:
             inspect.signature(cls).bind()
         except TypeError as err:  # e.g. a constructor that takes settings
             raise ConfigError(
-                f"add-on {cls.__module__}:{cls.__qualname__} is built with no arguments ({err}): "
+                f"add-on {class_path(cls)} is built with no arguments ({err}): "
                 "give its settings as class attributes, a subclass per variant"
             ) from None
         out.append(cls())
@@ -57,14 +58,10 @@ def build_addons(addons: AddonsConfig, agent: AgentConfig) -> list[AgentAddon]:
         first = named.setdefault(addon.name, addon)
         if first is not addon:
             raise ConfigError(
-                f"add-ons {_class_path(first)} and {_class_path(addon)} are both named "
+                f"add-ons {class_path(type(first))} and {class_path(type(addon))} are both named "
                 f"{addon.name!r}; give each its own `name` (their saved states are kept by name)"
             )
     return out
-
-
-def _class_path(addon: AgentAddon) -> str:
-    return f"{type(addon).__module__}:{type(addon).__qualname__}"
 
 
 __all__ = [

@@ -274,8 +274,7 @@ def run(args: argparse.Namespace) -> int:
         if args.out.is_dir():  # an existing folder (one to be made: make_run_dir says why not)
             writable_dir(args.out, "--out")
         _check_builds(cfg, agent=args.overwrite and (args.out / CONFIG).is_file())
-        made = [d for d in (args.out, *args.out.parents) if d.name != ".." and not d.exists()]
-        make_run_dir(args.out)
+        made = make_run_dir(args.out)
         _note_threads_beyond_cores(cfg.threads)
         _note_slow_kernels(cfg)
         # again with the claim: a run may have started and ended there since

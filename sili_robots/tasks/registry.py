@@ -26,7 +26,7 @@ import numpy as np
 from gymnasium.envs.registration import load_env_creator
 
 from sili_robots.errors import ConfigError
-from sili_robots.plugins import load_class
+from sili_robots.plugins import class_path, load_class
 from sili_robots.tasks.base import RepeatedInteractionEnv
 
 
@@ -106,7 +106,7 @@ def _own_class_hint(name: str) -> str:
         return ""
     entry = gym.registry[name].entry_point
     try:
-        path = entry if isinstance(entry, str) else f"{entry.__module__}:{entry.__qualname__}"
+        path = entry if isinstance(entry, str) else class_path(entry)
         load_class(path, RepeatedInteractionEnv, "task")
     except (ConfigError, AttributeError):
         return ""  # not one (Pendulum-v1), not importable as named, or no class (a partial)
