@@ -415,7 +415,7 @@ def test_the_actor_loss_is_alpha_logp_less_the_smaller_critic_twin():
         twins = sac.critic(x, a_pi)
         assert (twins[0] < twins[1]).any() and (twins[1] < twins[0]).any()
         expected = (0.3 * logp - torch.minimum(twins[0], twins[1])).mean()
-    assert float(actor_loss) == pytest.approx(float(expected), rel=1e-5)
+    assert actor_loss.item() == pytest.approx(float(expected), rel=1e-5)
 
 
 def test_the_target_critics_follow_the_critics_by_polyak_averaging():

@@ -681,6 +681,7 @@ def test_a_game_state_without_the_strategy_s_attributes_is_refused_on_restore():
     assert info["strategy_id"] == env.door
 
 
+@pytest.mark.filterwarnings("ignore:.*render_mode=.rgb_array. that is not in the possible")
 def test_render_mode_none_is_taken_and_any_mode_refused_by_every_task():
     """Training scripts pass render_mode=None (or their flag's value) to gym.make as a matter
     of course: it was a TypeError on every task."""
