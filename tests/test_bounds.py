@@ -140,11 +140,16 @@ def test_write_adds_to_a_bounds_file(tmp_path, capsys):
     assert json.loads(capsys.readouterr().out)["task"] == "circle-3"  # one JSON document
     assert BOUNDS_FILE.is_file()
     packaged = BOUNDS_FILE.read_bytes()
-    for counts in (["--interactions", "4"], ["--games", "3"], ["--seed", "1"]):
-        assert main(["bounds", "circle-3", *counts, "--write"]) == 2
-        err = capsys.readouterr().err
-        assert "are measured at the default counts" in err and f"with {' '.join(counts)}" in err
-    assert BOUNDS_FILE.read_bytes() == packaged
+    try:
+        for counts in (["--interactions", "4"], ["--games", "3"], ["--seed", "1"]):
+            assert main(["bounds", "circle-3", *counts, "--write"]) == 2
+            err = capsys.readouterr().err
+            assert "are measured at the default counts" in err and f"with {' '.join(counts)}" in err
+    finally:  # a broken refusal must not leave the package's own file rewritten
+        written = BOUNDS_FILE.read_bytes()
+        if written != packaged:
+            BOUNDS_FILE.write_bytes(packaged)
+    assert written == packaged
     from argparse import Namespace
 
     from sili_robots.commands.bounds import _check_packaged_counts
@@ -395,3 +400,16 @@ def test_a_bound_with_a_value_that_is_not_finite_is_not_drawn(tmp_path):
     }
     write_bounds_file([{"task_id": "sili/Circle3-v1", "bounds": bounds}], path)
     assert set(stored_bounds("sili/Circle3-v1", path)) == {"still"}
+
+
+def test_the_recorded_command_keeps_a_seed_other_than_the_default(tmp_path):
+    """A bounds file records the command that wrote it, with every count and seed it was given."""
+    path = tmp_path / "bounds.json"
+    args = ["bounds", "circle-3", "--interactions", 4, "--games", 2, "--seed", 7]
+    out = sili_in_process(*args, "--write", path)
+    assert out.returncode == 0, out.stderr
+    data = json.loads(path.read_text())
+    assert data["command"] == (
+        f"sili bounds circle-3 --interactions 4 --games 2 --seed 7 --write {path}"
+    )
+    assert data["tasks"]["sili/Circle3-v1"]["seed"] == 7

@@ -1,5 +1,6 @@
 """The ``sili`` command line: bad input exits 2 with a message; good input prints a result."""
 
+import argparse
 import os
 import subprocess
 import sys
@@ -10,8 +11,11 @@ import pytest
 from cli_helpers import sili as sili_in_process
 from fast_settings import FAST_ARGS
 
+from sili_robots.agent.config import LARGEST_INT
+from sili_robots.commands.common import NAME_MAX, path_arg, positive_int, threads_arg
 from sili_robots.policies import scripted_policy
 from sili_robots.rollout import run_interactions
+from sili_robots.runs import MAX_THREADS
 from sili_robots.tasks import make_task
 
 GRID = Path(__file__).resolve().parents[1] / "results" / "paper-grid"
@@ -573,3 +577,21 @@ def test_beta_anneal_refuses_a_fifth_word():
     beta_anneal([["0", "0.5", "100", "10"]])
     with pytest.raises(ConfigError, match="START END LENGTH"):
         beta_anneal([["0", "0.5", "100", "10", "99"]])
+
+
+def test_the_largest_allowed_integer_is_accepted():
+    """An integer option takes its largest allowed value itself (the bound is inclusive)."""
+    assert threads_arg(str(MAX_THREADS)) == MAX_THREADS
+    assert positive_int(str(LARGEST_INT)) == LARGEST_INT
+    # on the command line: the option is taken, the next check (no --task) is what refuses
+    out = sili_in_process("train", "--threads", MAX_THREADS, "--interactions", LARGEST_INT)
+    assert out.returncode == 2
+    assert "is not allowed" not in out.stderr and "--task is required" in out.stderr
+
+
+def test_a_name_of_exactly_name_max_bytes_is_a_path_one_more_is_refused():
+    """A path option takes a name as long as file systems allow (NAME_MAX bytes), not one more."""
+    longest = "r" * NAME_MAX
+    assert path_arg(f"runs/{longest}") == Path("runs", longest)
+    with pytest.raises(argparse.ArgumentTypeError, match=f"{NAME_MAX + 1} bytes"):
+        path_arg(f"runs/{longest}r")

@@ -11,9 +11,11 @@ from fast_settings import FAST_ARGS
 
 from sili_robots.agent import method_config
 from sili_robots.agent.schedule import Schedule
+from sili_robots.build import make_run_config, make_run_env
 from sili_robots.cli import main
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import load_trained
+from sili_robots.wrappers import StrategyFlag
 
 
 @pytest.mark.parametrize(
@@ -302,5 +304,19 @@ def test_stable_on_a_partial_latent_task_observes_the_strategy_flag():
     try:
         assert isinstance(env, StrategyFlag)
         assert env.observation_space.shape[0] == env.unwrapped.observation_space.shape[0] + 1
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("method", ["sili", "stable"])
+def test_a_partial_latent_run_sees_the_strategy_changed_flag(method):
+    """``latent="partial"`` (SILI and Stable) observes the task with its 'strategy changed'
+    flag."""
+    cfg = make_run_config("circle-3", method, latent="partial")
+    env = make_run_env(cfg)
+    try:
+        assert isinstance(env, StrategyFlag)
+        base = env.unwrapped.observation_space.shape[0]
+        assert env.observation_space.shape[0] == base + 1
     finally:
         env.close()

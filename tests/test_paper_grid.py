@@ -10,8 +10,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from cli_helpers import sili
 from fast_settings import FAST_AGENT as FAST
 
+from sili_robots import paper_grid
 from sili_robots.bounds import stored_bounds
 from sili_robots.build import default_profile
 from sili_robots.claims import (
@@ -26,12 +28,14 @@ from sili_robots.claims import (
     score,
 )
 from sili_robots.cli import main
-from sili_robots.commands.claims import END, START
+from sili_robots.commands.claims import END, START, write_block
 from sili_robots.paper_grid import BLOCKS, TASK_BUDGETS, block
 from sili_robots.plot_data import load_results
+from sili_robots.runs import SUMMARY
 from sili_robots.sweep import LocalBackend, SweepSpec, expand, run_name, run_sweep
 from sili_robots.sweep.results import results_table
 from sili_robots.sweep.runner import plan
+from sili_robots.sweep.state import run_path
 
 
 @pytest.fixture(scope="module")
@@ -1012,3 +1016,87 @@ def test_a_block_recorded_at_another_budget_is_not_the_block_resumed(tmp_path):
     (rehearsal,) = block("sili-oracle").scaled(0.01).specs(("circle-8",))
     record_invocation(tmp_path, rehearsal)
     assert recorded(tmp_path, full).interactions == full.interactions
+
+
+def test_a_wrong_write_file_is_named_before_the_results_are_read(tmp_path):
+    """``sili claims DIR --write FILE`` names a wrong FILE before it reads DIR's results."""
+    empty = tmp_path / "results"  # holds no runs: reading it would fail too
+    empty.mkdir()
+    missing = tmp_path / "README.md"
+    out = sili("claims", empty, "--write", missing)
+    assert out.returncode == 2 and out.stdout == ""
+    assert f"--write {missing}: no such file" in out.stderr and "holds no runs" not in out.stderr
+    missing.write_text("# no claims block here\n", encoding="utf-8")
+    out = sili("claims", empty, "--write", missing)
+    assert out.returncode == 2
+    assert f"no {START} ... {END} block" in out.stderr and "holds no runs" not in out.stderr
+
+
+def test_write_replaces_the_first_block_and_leaves_a_later_mention_of_the_markers(tmp_path):
+    """``sili claims --write`` replaces the file's claims block, and only that one."""
+    readme = tmp_path / "README.md"
+    note = f"`sili claims --write` fills the table between {START} and {END} above.\n"
+    readme.write_text(f"# Results\n{START}\nold table\n{END}\n\n{note}", encoding="utf-8")
+    write_block(readme, "| new | table |\n")
+    assert readme.read_text(encoding="utf-8") == (
+        f"# Results\n{START}\n| new | table |\n{END}\n\n{note}"
+    )
+
+
+def test_a_collected_run_longer_than_the_budget_is_not_done(tmp_path, monkeypatch):
+    """A grid run counts as done only at its block's budget: a collected run of the same name
+    that trained longer (extended by hand) is not the block's run."""
+    tiny = paper_grid.Block("tiny", ("sili",), ("circle-3",), seeds=(0,), interactions=3)
+    monkeypatch.setattr(paper_grid, "BLOCKS", (tiny,))
+    (run,) = plan(tiny.specs(("circle-3",)))
+    collection = tmp_path / "collection"
+    args = ["grid", "--dry-run", "--blocks", "tiny", "--tasks", "circle-3"]
+    args += ["--sweep-dir", tmp_path / "sweep", "--into", collection]
+    for trained, done in ((3, 1), (4, 0), (2, 0)):
+        folder = run_path(collection, run.name)
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / SUMMARY).write_text(json.dumps({"interactions": trained}))
+        out = sili(*args)
+        assert out.returncode == 0, out.stderr
+        assert f"tiny on circle-3 (3 interactions): 1 runs, {done} done" in out.stdout
+
+
+@pytest.mark.parametrize("present", ["results/paper-grid", "sweeps/paper-grid"])
+def test_grid_goes_on_where_one_of_its_default_folders_exists(tmp_path, monkeypatch, present):
+    """``sili grid`` with its default folders runs where either of them exists (a fresh clone
+    has the collection but no sweep directory), and is refused only where neither does."""
+    (tmp_path / present).mkdir(parents=True)
+    monkeypatch.chdir(tmp_path)
+    # a selection that runs nothing: refused for that, after the folders were accepted
+    out = sili("grid", "--blocks", "b-sweep", "--tasks", "circle-8", "--workers", 1)
+    assert out.returncode == 2
+    assert "neither sweeps/paper-grid nor results/paper-grid exists" not in out.stderr
+    assert "b-sweep run nothing on circle-8" in out.stderr
+    out = sili("grid", "--dry-run", "--blocks", "b-sweep", "--tasks", "circle-3")
+    assert out.returncode == 0 and "neither exists here" not in out.stdout
+
+
+@pytest.mark.parametrize("option", ["--sweep-dir", "--into"])
+def test_an_unwritable_folder_stops_a_grid_but_not_its_listing(tmp_path, monkeypatch, option):
+    """``sili grid`` checks that it can write its folders before it trains, and a ``--dry-run``
+    listing, which writes nothing, does not ask for that."""
+    import sili_robots.sweep as sweep
+
+    tiny = paper_grid.Block("tiny", ("sac",), ("circle-3",), seeds=(0,), interactions=2)
+    monkeypatch.setattr(paper_grid, "BLOCKS", (tiny,))
+
+    def trains(*args, **kwargs):
+        raise AssertionError("the grid trained before it checked its folders")
+
+    monkeypatch.setattr(sweep, "run_sweep", trains)
+    a_file = tmp_path / "file"
+    a_file.write_text("x")
+    folders = {"--sweep-dir": tmp_path / "sweep", "--into": tmp_path / "collection"}
+    folders[option] = a_file / "sub"  # under a file: nothing can be written there
+    args = ["grid", "--blocks", "tiny", "--tasks", "circle-3", "--workers", 1]
+    args += [x for pair in folders.items() for x in pair]
+    out = sili(*args)
+    assert out.returncode == 2 and f"{option} {a_file / 'sub'}: cannot write there" in out.stderr
+    listing = sili(*args, "--dry-run")
+    assert listing.returncode == 0, listing.stderr
+    assert "tiny on circle-3 (2 interactions): 1 runs, 0 done" in listing.stdout

@@ -7,6 +7,8 @@ import subprocess
 import sys
 from collections.abc import Iterator
 
+import meshcat
+import meshcat.geometry as g
 import numpy as np
 import pytest
 import umsgpack
@@ -15,7 +17,7 @@ from sili_robots.cli import main
 from sili_robots.errors import ConfigError
 from sili_robots.policies import scripted_policy
 from sili_robots.preview import Preview, find_chromium, make_env_and_policy, preview
-from sili_robots.preview.html import PREVIEW_MARK
+from sili_robots.preview.html import PREVIEW_MARK, SceneRecorder
 from sili_robots.preview.scenes import scene_for
 from sili_robots.rollout import run_interactions
 from sili_robots.tasks import make_task
@@ -494,3 +496,36 @@ def test_a_picture_of_background_alone_is_blank():
     assert "picture is blank: only 0.0% of pixels" in (blank_problem(rgb) or "")
     rgb[10:30, 10:30] = [0xD6, 0x27, 0x28]  # a body drawn: not blank
     assert blank_problem(rgb) is None
+
+
+def _sent(recorder: SceneRecorder) -> list[tuple[str, str]]:
+    return [(c["type"], c["path"]) for c in map(umsgpack.unpackb, recorder.commands())]
+
+
+def test_an_object_set_again_drops_the_properties_of_the_one_it_replaces():
+    """meshcat's server forgets a node's properties when its object is set again; the file
+    replays the same scene, not the old object's properties onto the new one."""
+    recorder = SceneRecorder()
+    vis = meshcat.Visualizer(window=recorder)
+    vis["ball"].set_object(g.Sphere(0.1))
+    vis["ball"].set_property("visible", False)
+    vis["ball"].set_object(g.Sphere(0.2))
+    assert [s for s in _sent(recorder) if s[1] == "/meshcat/ball"] == [
+        ("set_object", "/meshcat/ball")
+    ]
+    vis["ball"].set_property("visible", True)
+    assert [s for s in _sent(recorder) if s[1] == "/meshcat/ball"] == [
+        ("set_object", "/meshcat/ball"),
+        ("set_property", "/meshcat/ball"),
+    ]
+
+
+def test_deleting_the_root_clears_the_whole_scene_as_the_server_does():
+    recorder = SceneRecorder()
+    vis = meshcat.Visualizer(window=recorder)
+    vis["ball"].set_object(g.Sphere(0.1))
+    vis["box"].set_object(g.Box([0.1, 0.1, 0.1]))
+    vis["/"].delete()  # the path "/": the scene tree's root
+    assert recorder.commands() == []
+    vis["ball"].set_object(g.Sphere(0.2))
+    assert _sent(recorder) == [("set_object", "/meshcat/ball")]

@@ -1338,3 +1338,47 @@ def test_a_sweep_whose_backend_lost_a_run_is_not_ok(tmp_path):
     )
     assert report.failed == {} and report.skipped == []
     assert not report.ok
+
+
+class _Counting:
+    """A backend wrapper counting the runs under way, as its monitor hears of them."""
+
+    def __init__(self, backend):
+        self.backend, self.running, self.most = backend, 0, 0
+
+    def run(self, jobs, monitor):
+        counter = self
+
+        class Counted:
+            def started(self, job):
+                counter.running += 1
+                counter.most = max(counter.most, counter.running)
+                monitor.started(job)
+
+            def finished(self, outcome):
+                counter.running -= 1
+                monitor.finished(outcome)
+
+            def retrying(self, job, reason):
+                counter.running -= 1
+                monitor.retrying(job, reason)
+
+            def tick(self):
+                monitor.tick()
+
+        return self.backend.run(jobs, Counted())
+
+
+def test_one_worker_trains_one_run_at_a_time(tmp_path):
+    """The local backend never runs more workers at once than it is given."""
+    spec = SweepSpec(
+        tasks=["circle-3"],
+        methods=["sac"],
+        seeds=[0, 1],
+        interactions=2,
+        agent_overrides=FAST,
+    )
+    backend = _Counting(LocalBackend(workers=1))
+    report = run_sweep(spec, tmp_path / "s", backend, progress=False, tensorboard_scalars=False)
+    assert report.ok and len(report.outcomes) == 2
+    assert backend.most == 1

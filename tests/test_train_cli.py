@@ -1522,3 +1522,16 @@ def test_a_resumed_run_s_log_line_counts_its_time_left_at_this_session_s_rate(mo
     bar.close()
     line = [ln for ln in capsys.readouterr().err.splitlines() if "interactions" in ln][-1]
     assert "91/100 interactions" in line and line.endswith("0:01:30 left"), line
+
+
+def test_a_run_in_a_runs_folder_outside_a_sweep_writes_no_tables_above_it(tmp_path):
+    """``sili train --resume`` rebuilds a sweep's tables only for a run of a sweep: a run that
+    merely sits in a folder named ``runs`` leaves the folder above it alone."""
+    project = tmp_path / "project"
+    run = project / "runs" / "r1"
+    new = ("train", "--task", "circle-3", "--interactions", 2, *FAST_ARGS, "--no-progress")
+    assert _sili(*new, "--out", run).returncode == 0
+    resumed = _sili("train", "--resume", run, "--interactions", 3, "--no-progress")
+    assert resumed.returncode == 0, resumed.stderr
+    assert "tables were not rebuilt" not in resumed.stderr
+    assert sorted(p.name for p in project.iterdir()) == ["runs"]  # no results.csv, runs.csv
