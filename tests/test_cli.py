@@ -13,6 +13,7 @@ from fast_settings import FAST_ARGS
 
 from sili_robots.agent.config import LARGEST_INT
 from sili_robots.commands.common import NAME_MAX, path_arg, positive_int, threads_arg
+from sili_robots.commands.sweep import ray_address
 from sili_robots.policies import scripted_policy
 from sili_robots.rollout import run_interactions
 from sili_robots.runs import MAX_THREADS
@@ -595,3 +596,11 @@ def test_a_name_of_exactly_name_max_bytes_is_a_path_one_more_is_refused():
     assert path_arg(f"runs/{longest}") == Path("runs", longest)
     with pytest.raises(argparse.ArgumentTypeError, match=f"{NAME_MAX + 1} bytes"):
         path_arg(f"runs/{longest}r")
+
+
+def test_the_largest_port_is_an_address_one_more_is_refused():
+    """``--ray-address`` takes every TCP port, 65535 the largest."""
+    assert ray_address("localhost:65535") == "localhost:65535"
+    assert ray_address("ray://10.0.0.2:65535") == "ray://10.0.0.2:65535"
+    with pytest.raises(argparse.ArgumentTypeError, match="PORT up to 65535"):
+        ray_address("localhost:65536")

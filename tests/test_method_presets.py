@@ -292,31 +292,15 @@ def test_an_addon_setting_that_does_nothing_is_noted_and_its_addon_not_built(cap
     )
 
 
-def test_stable_on_a_partial_latent_task_observes_the_strategy_flag():
-    """Stable with the partial latent (Speaker-Listener's default) reads its stability from the
-    flag the observation ends with: without it, it would read the time fraction."""
-    from sili_robots.build import make_run_config, make_run_env
-    from sili_robots.wrappers import StrategyFlag
-
-    cfg = make_run_config("speaker-listener", "stable", interactions=2)
+@pytest.mark.parametrize("method", ["sili", "stable"])
+def test_a_partial_latent_run_observes_the_strategy_flag(method):
+    """SILI and Stable with the partial latent (Speaker-Listener's default) read their stability
+    from the flag the observation ends with: without it, they would read the time fraction."""
+    cfg = make_run_config("speaker-listener", method, interactions=2)
     assert cfg.agent.latent == "partial"
     env = make_run_env(cfg)
     try:
         assert isinstance(env, StrategyFlag)
         assert env.observation_space.shape[0] == env.unwrapped.observation_space.shape[0] + 1
-    finally:
-        env.close()
-
-
-@pytest.mark.parametrize("method", ["sili", "stable"])
-def test_a_partial_latent_run_sees_the_strategy_changed_flag(method):
-    """``latent="partial"`` (SILI and Stable) observes the task with its 'strategy changed'
-    flag."""
-    cfg = make_run_config("circle-3", method, latent="partial")
-    env = make_run_env(cfg)
-    try:
-        assert isinstance(env, StrategyFlag)
-        base = env.unwrapped.observation_space.shape[0]
-        assert env.observation_space.shape[0] == base + 1
     finally:
         env.close()

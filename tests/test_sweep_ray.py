@@ -1,7 +1,6 @@
 """``sili sweep --backend ray`` against a local Ray instance started by the test: the same runs
 as the local backend, a failing run isolated, a killed worker retried from its checkpoint."""
 
-import argparse
 import json
 import os
 import signal
@@ -15,7 +14,6 @@ import torch
 from fast_settings import FAST_AGENT as FAST
 from process_helpers import killing_its_worker_once, metrics_rows, signal_when
 
-from sili_robots.commands.sweep import ray_address
 from sili_robots.runs import RunConfig
 from sili_robots.sweep import RayBackend, SweepSpec, expand, run_sweep
 from sili_robots.training import train
@@ -228,11 +226,3 @@ def test_a_sweep_without_an_address_starts_its_own_ray_whatever_ray_address_says
     assert out.returncode == 0, out.stderr
     assert json.loads(out.stdout)["failed"] == {}
     assert "sweep: 1 done, 0 failed" in out.stderr
-
-
-def test_the_largest_port_is_an_address_one_more_is_refused():
-    """``--ray-address`` takes every TCP port, 65535 the largest."""
-    assert ray_address("localhost:65535") == "localhost:65535"
-    assert ray_address("ray://10.0.0.2:65535") == "ray://10.0.0.2:65535"
-    with pytest.raises(argparse.ArgumentTypeError, match="PORT up to 65535"):
-        ray_address("localhost:65536")
