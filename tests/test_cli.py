@@ -1,12 +1,16 @@
 """The ``sili`` command line: bad input exits 2 with a message; good input prints a result."""
 
 import argparse
+import io
+import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 from cli_helpers import sili as sili_in_process
 from fast_settings import FAST_ARGS
@@ -20,6 +24,7 @@ from sili_robots.runs import MAX_THREADS
 from sili_robots.tasks import make_task
 
 GRID = Path(__file__).resolve().parents[1] / "results" / "paper-grid"
+MAIN_JOB = GRID.parent / "main-job-zen4"  # a collection of two finished runs
 
 
 def _sili(*args):
@@ -530,7 +535,7 @@ def test_read_outs_name_a_damaged_summary_and_read_a_sweep_they_cannot_write(tmp
     from sili_robots.sweep import results
 
     collection = tmp_path / "collection"
-    shutil.copytree(Path(__file__).resolve().parents[1] / "results" / "main-job-zen4", collection)
+    shutil.copytree(MAIN_JOB, collection)
     assert "2 runs done" in sili_in_process("runs", collection).stdout
     summary = collection / "runs" / "s1" / "summary.json"
     summary.write_text(json.dumps({**json.loads(summary.read_text()), "final_task_reward": "x"}))
@@ -604,3 +609,78 @@ def test_the_largest_port_is_an_address_one_more_is_refused():
     assert ray_address("ray://10.0.0.2:65535") == "ray://10.0.0.2:65535"
     with pytest.raises(argparse.ArgumentTypeError, match="PORT up to 65535"):
         ray_address("localhost:65536")
+
+
+def test_collect_refuses_a_summary_of_zero_interactions(tmp_path):
+    """A damaged summary.json saying 0 interactions was collected as a finished run."""
+    source = tmp_path / "source"
+    shutil.copytree(MAIN_JOB, source)
+    summary = source / "runs" / "s1" / "summary.json"
+    summary.write_text(json.dumps({**json.loads(summary.read_text()), "interactions": 0}))
+    into = tmp_path / "into"
+    done = sili_in_process("collect", source, "--into", into)
+    assert done.returncode == 2
+    assert f"{summary} is damaged (interactions 0 is not a count)" in done.stderr
+    assert not (into / "runs").exists()
+
+
+def test_collect_refuses_into_its_own_source_given_by_another_path(tmp_path, monkeypatch):
+    """A collection into itself, named once relative and once absolute, was not refused."""
+    shutil.copytree(MAIN_JOB, tmp_path / "c")
+    monkeypatch.chdir(tmp_path)
+    done = sili_in_process("collect", "c", "--into", tmp_path / "c")
+    assert done.returncode == 2
+    assert "is also a source (c); collect elsewhere" in done.stderr
+
+
+def test_runs_lists_only_the_seeds_of_done_runs(tmp_path):
+    """An unfinished run's seed was listed among the done runs' seeds."""
+    collection = tmp_path / "collection"
+    shutil.copytree(MAIN_JOB, collection)
+    seed = json.loads((collection / "runs" / "s2" / "config.json").read_text())["run"]["seed"]
+    done_seed = json.loads((collection / "runs" / "s1" / "config.json").read_text())["run"]["seed"]
+    assert seed != done_seed
+    (collection / "runs" / "s2" / "summary.json").unlink()  # still training
+    out = sili_in_process("runs", collection, "--csv")
+    assert out.returncode == 0, out.stderr
+    table = pd.read_csv(io.StringIO(out.stdout))
+    assert table.done.tolist() == [1] and table.unfinished.tolist() == [1]
+    assert table.seeds.astype(str).tolist() == [str(done_seed)]
+
+
+def test_runs_of_a_folder_without_runs_exits_2_saying_why(tmp_path):
+    """A missing or empty folder printed an empty table, exit 0, instead of the reason."""
+    missing = sili_in_process("runs", tmp_path / "missing")
+    assert missing.returncode == 2 and "does not exist" in missing.stderr
+    empty = sili_in_process("runs", tmp_path)
+    assert empty.returncode == 2 and "holds no runs (no runs/*/config.json)" in empty.stderr
+
+
+def _mean_after_first(seed):
+    env = make_task("circle-3")
+    try:
+        played = run_interactions(env, scripted_policy(env, "random"), 3, seed=seed)
+    finally:
+        env.close()
+    return np.mean([s.task_reward for s in played[1:]])
+
+
+def test_rollout_plays_the_game_of_the_seed_given():
+    """--seed was ignored: every seed printed seed 0's numbers."""
+    assert f"{_mean_after_first(5):.3f}" != f"{_mean_after_first(0):.3f}"
+    done = sili_in_process(
+        "rollout", "circle-3", "--policy", "random", "--interactions", "3", "--seed", "5"
+    )
+    assert done.returncode == 0, done.stderr
+    line = f"mean task reward per interaction (after the first): {_mean_after_first(5):.3f}"
+    assert line in done.stdout
+
+
+def test_eval_plays_100_interactions_by_default(tmp_path):
+    """The documented default of 100 evaluation interactions was not what ran."""
+    run = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--interactions", "3", *FAST_ARGS, "--no-progress"]
+    assert sili_in_process(*args, "--out", run).returncode == 0
+    done = sili_in_process("eval", run)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout)["interactions"] == 100

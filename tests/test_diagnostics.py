@@ -143,3 +143,17 @@ def test_latent_entropy_is_in_nats():
     assert two["latent_entropy"] == pytest.approx(np.log(2))
     one = latent_diagnostics(_metrics([3, 3, 3, 3, 3], [0, 0, 0, 0, 0]), window=100)
     assert one["latent_entropy"] == pytest.approx(0.0)
+
+
+def test_a_correction_at_step_0_is_a_correction():
+    """A filter that corrected at step 0 was counted as never correcting."""
+    df = pd.DataFrame(
+        {
+            "strategy_id": [0, 0, 1, 1],
+            "filter_step": [-1, -1, 0, 0],
+            "task_reward": [1.0, 2.0, 3.0, 4.0],
+        }
+    )
+    out = filter_corrections(df)
+    assert out["moved"] == 1 and out["moved_corrected"] == 1 and out["median_step_moved"] == 0.0
+    assert out["false_alarms"] == 1 and out["reward_false_alarms"] == 4.0

@@ -1535,3 +1535,26 @@ def test_a_run_in_a_runs_folder_outside_a_sweep_writes_no_tables_above_it(tmp_pa
     assert resumed.returncode == 0, resumed.stderr
     assert "tables were not rebuilt" not in resumed.stderr
     assert sorted(p.name for p in project.iterdir()) == ["runs"]  # no results.csv, runs.csv
+
+
+def test_a_checkpoint_with_a_negative_wall_time_is_refused(tmp_path):
+    """A checkpoint saying -5 seconds was evaluated and resumed, its time gone negative."""
+    run = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--interactions", "2", *FAST, "--out", run]
+    assert _sili(*args).returncode == 0
+    state = torch.load(run / "checkpoint.pt", weights_only=False)
+    torch.save({**state, "wall_time": -5.0}, run / "checkpoint.pt")
+    done = _sili("eval", run, "--interactions", "1")
+    assert done.returncode == 2
+    assert "checkpoint.pt is damaged (its wall_time is -5.0, not a duration" in done.stderr
+
+
+def test_a_run_s_files_with_its_tb_folder_but_no_config_are_not_trained_over(tmp_path):
+    """A run's metrics.csv and tb/ left without config.json were trained over without asking."""
+    run = tmp_path / "run"
+    (run / "tb").mkdir(parents=True)
+    (run / "metrics.csv").write_text("interaction\n0\n")
+    done = _sili("train", "--task", "circle-3", "--interactions", "1", *FAST, "--out", run)
+    assert done.returncode == 2
+    assert "holds a run's files (metrics.csv, tb) but no config.json" in done.stderr
+    assert (run / "metrics.csv").read_text() == "interaction\n0\n"
