@@ -778,3 +778,27 @@ def test_a_schedule_is_a_setting_in_the_command_lines_text_too():
         SILI("circle-3", settings={"sili.beta": "0:0,x:1"})
     with pytest.raises(ConfigError, match=r"setting sac.lr must be a number, got 'fast'"):
         SILI("circle-3", settings={"sac.lr": "fast"})  # no schedule in it: a number's error
+
+
+def test_evaluate_on_a_users_task_instance_does_not_close_it(tmp_path, monkeypatch):
+    """Without it, the user's task (e.g. a SUMO simulation) was closed under them."""
+    run = tmp_path / "run"
+    SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run).learn(2)
+    task = make_task("circle-3")
+    closed = []
+    monkeypatch.setattr(task, "close", lambda: closed.append(True))
+    assert evaluate(run, 2, task)["interactions"] == 2
+    assert closed == []
+    model = SILI.load(run, env=task)
+    model.evaluate(2)
+    assert closed == []
+
+
+def test_predict_samples_when_not_deterministic(tmp_path):
+    """Without it, deterministic=False was silently the greedy action (no exploration)."""
+    model = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=tmp_path / "r")
+    obs, _ = model.env.reset()
+    greedy = [model.predict(obs) for _ in range(4)]
+    sampled = [model.predict(obs, deterministic=False) for _ in range(4)]
+    assert all(np.array_equal(a, greedy[0]) for a in greedy)
+    assert len({tuple(np.asarray(a).ravel()) for a in sampled}) > 1

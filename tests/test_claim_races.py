@@ -4,6 +4,7 @@ trainer refuses it, and that process's files stay (``sweep.state.training_claim`
 from __future__ import annotations
 
 import json
+import os
 import socket
 import subprocess
 
@@ -16,6 +17,7 @@ import sili_robots.sweep.runner as runner
 from sili_robots import SILI
 from sili_robots.cli import main
 from sili_robots.errors import ConfigError
+from sili_robots.sweep.state import check_not_trained, training_worker
 
 
 @pytest.fixture
@@ -106,3 +108,11 @@ def test_the_api_neither_trains_over_nor_clears_a_run_that_appeared_before_its_c
     monkeypatch.setattr(api, "make_run_dir", make)
     (run_dir / "config.json").unlink()
     assert len(model.learn(2).agent.Z) == 2 + 1  # as it was made: 2 interactions, z^1..z^3
+
+
+def test_a_claim_written_on_another_host_names_no_local_trainer(tmp_path):
+    """Without the host check, a local process that happens to hold that pid blocked the run."""
+    claim = {"pid": os.getpid(), "host": "another-machine.invalid", "started": None}
+    (tmp_path / "worker.json").write_text(json.dumps(claim))
+    assert training_worker(tmp_path) is None
+    check_not_trained(tmp_path)  # nothing raised: nobody here trains it

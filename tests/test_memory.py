@@ -110,3 +110,33 @@ def test_a_container_over_its_limit_has_nothing_left_not_less_than_nothing(monke
     if memory.available_memory() is None:
         pytest.skip("needs /proc/meminfo")
     assert memory.available_memory() == 0
+
+
+def test_free_swap_counts_as_memory_the_machine_can_give(monkeypatch, tmp_path):
+    """Without it, a training that fits in swap was refused as "out of memory"."""
+    real = memory._kib
+
+    def kib(path, *fields):
+        if path == "/proc/meminfo":
+            return {"MemAvailable": 300 * MIB, "SwapFree": 700 * MIB}
+        return real(path, *fields)
+
+    monkeypatch.setattr(memory, "_kib", kib)
+    monkeypatch.setattr(memory, "CGROUP_FILES", ((str(tmp_path / "no"), str(tmp_path / "no")),))
+    assert memory.available_memory() == 1000 * MIB
+    limit, usage = tmp_path / "memory.max", tmp_path / "memory.current"
+    limit.write_text(f"{2**30}\n")  # a container's 1 GiB, 100 MiB of it used
+    usage.write_text(f"{100 * MIB}\n")
+    monkeypatch.setattr(memory, "CGROUP_FILES", ((str(limit), str(usage)),))
+    assert memory.available_memory() == pytest.approx(924 * MIB)
+
+
+def test_memory_reserved_but_never_touched_fits_under_the_cap_when_nothing_is_free(monkeypatch):
+    """Without the headroom, a replay buffer's doubled (untouched) half failed as out of memory."""
+    before = resource.getrlimit(resource.RLIMIT_DATA)
+    monkeypatch.setattr(memory, "available_memory", lambda: 0)
+    with memory.capped_at_available():
+        reserved = np.empty(memory.HEADROOM // 2, np.uint8)  # counted, never touched
+        assert reserved.nbytes == memory.HEADROOM // 2
+        del reserved
+    assert resource.getrlimit(resource.RLIMIT_DATA) == before

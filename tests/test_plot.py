@@ -13,7 +13,7 @@ from matplotlib.collections import PolyCollection
 from matplotlib.colors import to_rgb
 
 from sili_robots.cli import main
-from sili_robots.plot_data import default_smoothing, load_results
+from sili_robots.plot_data import b_sweep_rows, default_smoothing, load_results
 from sili_robots.plotting import METHOD_COLORS, beta_sweep, learning_curves, overview
 from sili_robots.sweep import LocalBackend, SweepSpec, run_sweep
 
@@ -492,3 +492,26 @@ def test_formats_that_name_none_are_bad_input(tmp_path, monkeypatch, capsys):
         assert main(["plot", str(tmp_path), "--formats", given]) == 2
         assert "unknown figure format" in capsys.readouterr().err
     assert drawn == []
+
+
+def test_a_scheduled_run_of_the_sweeps_length_is_not_in_the_b_sweep():
+    """Without it, a run on a b schedule was drawn in the b sweep at the b it ends at."""
+
+    def run(name, beta, scheduled=False, n=20):
+        return pd.DataFrame(
+            {
+                "run": name,
+                "task": "circle-3",
+                "method": "sili",
+                "profile": "package",
+                "config_beta": beta,
+                "beta_scheduled": scheduled,
+                "interaction": range(n),
+            }
+        )
+
+    df = pd.concat(
+        [run("b0", 0.0), run("b0.5", 0.5), run("b1", 1.0), run("sched", 0.5, scheduled=True)],
+        ignore_index=True,
+    )
+    assert sorted(b_sweep_rows(df, "circle-3")["run"].unique()) == ["b0", "b0.5", "b1"]

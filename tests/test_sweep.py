@@ -1,6 +1,7 @@
 """``sili sweep`` on the local process pool: real runs, the results table, TensorBoard scalars,
 resume after a SIGKILLed worker, a failing run isolated, bad input."""
 
+import io
 import json
 import os
 import shutil
@@ -18,6 +19,7 @@ from cli_helpers import sili as sili_in_process
 from fast_settings import FAST_AGENT as FAST
 from fast_settings import FAST_ARGS
 from process_helpers import killing_its_worker_once, metrics_rows, signal_when, wait_for
+from rich.console import Console
 
 from sili_robots import SILI
 from sili_robots.cli import main
@@ -26,8 +28,10 @@ from sili_robots.evaluation import load_trained
 from sili_robots.runs import RunConfig
 from sili_robots.sweep import LocalBackend, SweepSpec, expand, run_sweep
 from sili_robots.sweep import tensorboard as tb
+from sili_robots.sweep.progress import SweepProgress, logged_interactions
 from sili_robots.sweep.results import results_table
 from sili_robots.sweep.state import recorded_specs, sweep_lock, write_invocations
+from sili_robots.sweep.worker import Job
 from sili_robots.training import train
 from sili_robots.verdict import verdict
 
@@ -1382,3 +1386,24 @@ def test_one_worker_trains_one_run_at_a_time(tmp_path):
     report = run_sweep(spec, tmp_path / "s", backend, progress=False, tensorboard_scalars=False)
     assert report.ok and len(report.outcomes) == 2
     assert backend.most == 1
+
+
+def test_a_run_whose_metrics_file_is_still_empty_has_logged_nothing(tmp_path):
+    """A run just created (its metrics.csv not yet written) showed -1 interactions."""
+    run = tmp_path / "r0"
+    run.mkdir()
+    (run / "metrics.csv").write_bytes(b"")
+    assert logged_interactions(run) == 0
+    jobs = [Job("r0", {}, str(run))]
+    display = SweepProgress(jobs, {"r0": 10}, already_done=0, console=Console(file=io.StringIO()))
+    assert display._completed() == 0
+
+
+def test_resume_with_the_sweeps_own_budget_is_accepted(tmp_path, capsys):
+    """A script that always passes --interactions to a resume was refused as shortening it."""
+    out = tmp_path / "sweep"
+    args = ["sweep", "--tasks", "circle-3", "--methods", "sac", "--out", str(out), *FAST_ARGS]
+    assert main([*args, "--interactions", "1", "--no-progress"]) == 0
+    capsys.readouterr()
+    assert main(["sweep", "--resume", str(out), "--interactions", "1", "--dry-run"]) == 0
+    assert "would shorten" not in capsys.readouterr().err
