@@ -115,11 +115,13 @@ def test_a_container_over_its_limit_has_nothing_left_not_less_than_nothing(monke
 def test_free_swap_counts_as_memory_the_machine_can_give(monkeypatch, tmp_path):
     """Without it, a training that fits in swap was refused as "out of memory"."""
     real = memory._kib
+    meminfo = tmp_path / "meminfo"  # read by the real parser: the fields it asks for count
+    meminfo.write_text(
+        f"MemTotal: {4096 * 1024} kB\nMemAvailable: {300 * 1024} kB\nSwapFree: {700 * 1024} kB\n"
+    )
 
     def kib(path, *fields):
-        if path == "/proc/meminfo":
-            return {"MemAvailable": 300 * MIB, "SwapFree": 700 * MIB}
-        return real(path, *fields)
+        return real(str(meminfo) if path == "/proc/meminfo" else path, *fields)
 
     monkeypatch.setattr(memory, "_kib", kib)
     monkeypatch.setattr(memory, "CGROUP_FILES", ((str(tmp_path / "no"), str(tmp_path / "no")),))
@@ -136,7 +138,7 @@ def test_memory_reserved_but_never_touched_fits_under_the_cap_when_nothing_is_fr
     before = resource.getrlimit(resource.RLIMIT_DATA)
     monkeypatch.setattr(memory, "available_memory", lambda: 0)
     with memory.capped_at_available():
-        reserved = np.empty(memory.HEADROOM // 2, np.uint8)  # counted, never touched
-        assert reserved.nbytes == memory.HEADROOM // 2
+        reserved = np.empty(256 * MIB, np.uint8)  # counted, never touched
+        assert reserved.nbytes == 256 * MIB
         del reserved
     assert resource.getrlimit(resource.RLIMIT_DATA) == before

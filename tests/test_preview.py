@@ -342,7 +342,7 @@ def test_a_marker_out_of_the_cameras_view_is_asked_for_only_if_it_must_be_seen()
     rgb = _picture((20, 20))
     png = _png(rgb)
     here = Marker("here", (0, 0, 0), RED, 0.1, 0.5)
-    passed = Marker("passed", (9, 9, 9), 0xD62728, 0.1, may_leave_view=True)
+    passed = Marker("passed", (9, 9, 9), RED, 0.1, may_leave_view=True)
     results = marker_results(rgb, [here, passed], [(20, 20), (-1, -1)], [(24, 20), (-1, -1)])
     assert [r.in_view for r in results] == [True, False] and all(r.ok for r in results)
     assert problems(png, results) == []
@@ -536,7 +536,7 @@ def test_deleting_the_root_clears_the_whole_scene_as_the_server_does():
 def test_a_marker_one_pixel_past_the_edge_is_out_of_view():
     """A marker at x == width (past the last column) was looked for in the picture."""
     rgb = np.full((40, 40, 3), 200, np.int16)
-    passed = Marker("passed", (9, 9, 9), 0xD62728, 0.1, may_leave_view=True)
+    passed = Marker("passed", (9, 9, 9), RED, 0.1, may_leave_view=True)
     right, below = marker_results(rgb, [passed, passed], [(40, 20), (20, 40)], [(44, 20), (24, 40)])
     assert not right.in_view and not below.in_view
     assert right.ok and below.ok  # it may leave the view: not reported missing
@@ -545,6 +545,6 @@ def test_a_marker_one_pixel_past_the_edge_is_out_of_view():
 def test_a_view_covered_by_text_boxes_is_blank():
     """A picture whose 3D view the caption and legend cover whole passed as not blank."""
     rgb = np.zeros((40, 40, 3), np.int16)
-    rgb[::2] = 255  # stripes: anything but the background, under the boxes
+    rgb[:, ::2] = 255  # column stripes: drawn, not background, under the boxes
     problem = blank_problem(rgb, [(0, 0, 40, 20), (0, 20, 40, 40)])
     assert problem == "picture is blank: the 3D view is covered by text boxes"
