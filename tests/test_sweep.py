@@ -1345,32 +1345,31 @@ def test_a_sweep_whose_backend_lost_a_run_is_not_ok(tmp_path):
 
 
 class _Counting:
-    """A backend wrapper counting the runs under way, as its monitor hears of them."""
+    """A backend wrapper that is also its monitor: it counts the runs under way as it hears of
+    them, and passes every event on to the sweep's own monitor."""
 
     def __init__(self, backend):
         self.backend, self.running, self.most = backend, 0, 0
 
     def run(self, jobs, monitor):
-        counter = self
+        self.monitor = monitor
+        return self.backend.run(jobs, self)
 
-        class Counted:
-            def started(self, job):
-                counter.running += 1
-                counter.most = max(counter.most, counter.running)
-                monitor.started(job)
+    def started(self, job):
+        self.running += 1
+        self.most = max(self.most, self.running)
+        self.monitor.started(job)
 
-            def finished(self, outcome):
-                counter.running -= 1
-                monitor.finished(outcome)
+    def finished(self, outcome):
+        self.running -= 1
+        self.monitor.finished(outcome)
 
-            def retrying(self, job, reason):
-                counter.running -= 1
-                monitor.retrying(job, reason)
+    def retrying(self, job, reason):
+        self.running -= 1
+        self.monitor.retrying(job, reason)
 
-            def tick(self):
-                monitor.tick()
-
-        return self.backend.run(jobs, Counted())
+    def tick(self):
+        self.monitor.tick()
 
 
 def test_one_worker_trains_one_run_at_a_time(tmp_path):
