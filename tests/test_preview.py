@@ -102,6 +102,18 @@ def test_html_is_self_contained_and_animates_the_recorded_rollout():
     assert clip["fps"] == prev.scene.fps
 
 
+def test_speaker_listener_caption_says_whether_the_code_is_locked():
+    """The caption follows the lock: a visit locks the code, before it the code may change."""
+    prev = _record("speaker-listener", interactions=1)
+    rec = prev.recording
+    locked = rec.series("locked")
+    assert not locked[0] and locked.any()
+    first_locked = int(locked.argmax())
+    assert prev.scene.caption(rec, 0).endswith(", unlocked); return so far 0.00")
+    assert ", locked by a visit); return so far" in prev.scene.caption(rec, first_locked)
+    assert "unlocked" not in prev.scene.caption(rec, first_locked)
+
+
 def test_any_policy_callable_is_recorded():
     env = make_task("speaker-listener")
     prev = Preview.record(env, lambda e, obs: np.array([1.0, 0.0]), 1, 0, "speaker-listener")

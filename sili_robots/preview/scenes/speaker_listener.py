@@ -129,7 +129,7 @@ class SpeakerListenerScene(TaskScene):
         fr = rec.frames[frame]
         mapping = rec.static["mappings"][fr["mapping"]]
         code = " ".join(f"{GOAL_NAMES[g_]}→{m}" for g_, m in enumerate(mapping))
-        state = "locked (visited)" if fr["locked"] else "unlocked"
+        state = "locked by a visit" if fr["locked"] else "unlocked"
         return (
             f"interaction {fr['interaction'] + 1}/{rec.interactions}, step {fr['t']}/"
             f"{rec.horizon}: true goal {GOAL_NAMES[fr['goal']]}, speaker says {fr['message']} "
