@@ -137,13 +137,20 @@ def _out_of_memory(err: BaseException) -> bool:
 
 
 def _allocation(err: BaseException) -> str:
-    """torch's "you tried to allocate 92000000000 bytes" as "92.0 GB were asked for", numpy's
-    "Unable to allocate 5.68 PiB for an array" as "5.68 PiB were asked for"."""
+    """torch's "you tried to allocate 92000000000 bytes" as "85.68 GiB were asked for", in the
+    units of numpy's "Unable to allocate 5.68 PiB for an array" ("5.68 PiB were asked for")."""
     match = re.search(r"allocate (\d+) bytes", str(err))
     if match:
-        return f"{int(match.group(1)) / 1e9:.1f} GB were asked for"
+        return f"{_binary_size(int(match.group(1)))} were asked for"
     match = re.search(r"allocate ([\d.]+ [KMGTPE]iB)", str(err))
     return f"{match.group(1)} were asked for" if match else type(err).__name__
+
+
+def _binary_size(size: int) -> str:
+    """Bytes as numpy writes them: 2 decimals in the largest binary unit not above the size."""
+    units = ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB")
+    power = min(max(size.bit_length() - 1, 0) // 10, len(units) - 1)
+    return f"{size} bytes" if power == 0 else f"{size / 1024**power:.2f} {units[power]}"
 
 
 def main(argv: Sequence[str] | None = None) -> int:

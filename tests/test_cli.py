@@ -386,6 +386,18 @@ def test_a_broken_pipe_that_is_not_stdout_is_a_failure(monkeypatch):
         sili_in_process("rollout", "circle-3")
 
 
+def test_an_allocation_is_sized_in_the_binary_units_numpy_uses():
+    """torch's byte count reads as numpy's sizes do: the largest unit not above it."""
+    from sili_robots.cli import _binary_size
+
+    assert [_binary_size(n) for n in (1023, 1024, 92_000_000_000, 2**62)] == [
+        "1023 bytes",
+        "1.00 KiB",
+        "85.68 GiB",
+        "4.00 EiB",
+    ]
+
+
 def test_an_agent_too_large_for_memory_is_one_line_and_other_errors_keep_their_trace(monkeypatch):
     """torch's own allocation failure (2**62 bytes is past any address space) becomes a line
     naming the size and the settings that size the agent; any other RuntimeError still raises."""
@@ -397,7 +409,7 @@ def test_an_agent_too_large_for_memory_is_one_line_and_other_errors_keep_their_t
     done = sili_in_process("train", "--task", "circle-3")
     assert done.returncode == 1
     assert done.stderr == (
-        "sili train: error: out of memory (4611686018.4 GB were asked for); the settings that size "
+        "sili train: error: out of memory (4.00 EiB were asked for); the settings that size "
         "the agent (hidden, model.dim, sac.batch_interactions, sac.batch_steps, model.batch) or "
         "its batches per interaction (sac.updates_per_step) may be too large for this machine\n"
     )
