@@ -271,6 +271,22 @@ def test_missing_chromium_is_reported_with_the_install_hint(monkeypatch, tmp_pat
         find_chromium()
 
 
+def test_a_png_without_chromium_is_refused_before_anything_is_recorded_or_written(
+    monkeypatch, tmp_path, capsys
+):
+    """Asked for a PNG on a machine without a browser, the preview says so at once: no
+    recording is made and no page is left half of what was asked for."""
+    from sili_robots.preview import api
+
+    monkeypatch.setenv("PATH", str(tmp_path))
+    monkeypatch.delenv("SILI_CHROMIUM", raising=False)
+    monkeypatch.setattr(api, "make_env_and_policy", lambda *_a: pytest.fail("recorded"))
+    argv = ["preview", "circle-3", "--out", str(tmp_path / "p.html"), "--png"]
+    assert main([*argv, str(tmp_path / "p.png")]) == 2
+    assert "apt-get install chromium" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_failed_render_leaves_no_temporary_page(monkeypatch, tmp_path):
     import tempfile
 
@@ -291,6 +307,7 @@ def test_a_failed_write_leaves_no_temporary_page(monkeypatch, tmp_path):
     def full_disk(*_args):
         raise OSError(28, "No space left on device")
 
+    monkeypatch.setenv("SILI_CHROMIUM", "false")  # found; the write fails before it runs
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     monkeypatch.setattr(preview_api, "write_html", full_disk)
     with pytest.raises(OSError, match="No space left"):

@@ -33,7 +33,7 @@ from sili_robots.errors import (
     check_seed,
     is_number,
 )
-from sili_robots.preview.browser import Browser
+from sili_robots.preview.browser import Browser, find_chromium
 from sili_robots.preview.build import overlay, populate, world_point
 from sili_robots.preview.html import PREVIEW_MARK, SceneRecorder, scene_html, write_html
 from sili_robots.preview.recording import Recording, record_rollout
@@ -264,11 +264,12 @@ def preview(
     """Record ``interactions`` interactions of ``task`` and write/render/serve the preview.
 
     ``png`` renders the scene's picture frame (the last; on Driving the last interaction's
-    moment the ego draws level with the opponent) in headless Chromium (``out`` is written
-    first; a temporary file is used when ``out`` is None, and removed). ``serve`` starts a live
-    meshcat server on 127.0.0.1, calls ``on_ready`` with the result so far (files written,
-    picture checked, ``url`` set) and blocks for ``serve_seconds`` (None: until Ctrl-C); the
-    server is stopped on every exit path.
+    moment the ego draws level with the opponent) in headless Chromium (found before the
+    recording, a ConfigError without it; ``out`` is written first; a temporary file is used
+    when ``out`` is None, and removed). ``serve`` starts a live meshcat server on 127.0.0.1,
+    calls ``on_ready`` with the result so far (files written, picture checked, ``url`` set)
+    and blocks for ``serve_seconds`` (None: until Ctrl-C); the server is stopped on every exit
+    path.
     """
     from sili_robots.preview.server import LiveServer
 
@@ -278,6 +279,8 @@ def preview(
     for path, option in ((out, "out"), (png, "png")):
         if path is not None:
             check_output(path, option)
+    if png is not None:
+        find_chromium()  # before the recording: a missing browser is told before any work
     seconds: dict[str, float] = {}
     t0 = time.perf_counter()
     name, env, pol, label = make_env_and_policy(task, policy, checkpoint, env_kwargs)
