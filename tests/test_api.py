@@ -150,6 +150,25 @@ def test_a_task_given_by_any_name_is_recorded_by_its_name(tmp_path):
     assert type(seeded.cfg.seed) is int and seeded.cfg.seed == 3  # recorded as JSON can
 
 
+def test_a_packaged_task_built_from_its_class_is_warned_about_and_a_version_is_not():
+    """CircleEnv() has the class's defaults and no version on record: the user is told which
+    names build a version; a version built by name, and a user's own class, train quietly."""
+    import warnings
+
+    import gymnasium as gym
+
+    from sili_robots.tasks.circle import CircleEnv
+
+    names = "circle-3, circle-8, circle-continuous, circle-unequal"
+    with pytest.warns(UserWarning, match=f"CircleEnv built from its class .* one of {names}$"):
+        SILI(CircleEnv(variant="3"), method="sac", settings=FAST_AGENT)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        SILI(make_task("circle-3"), method="sac", settings=FAST_AGENT)
+        SILI(gym.make("sili/Circle3-v0"), method="sac", settings=FAST_AGENT)
+        SILI(TwoDoorsEnv(horizon=6), method="sac", settings=FAST_AGENT)
+
+
 def test_a_task_instance_is_recorded_with_its_arguments_and_rebuilt_with_them(tmp_path):
     import gymnasium as gym
 

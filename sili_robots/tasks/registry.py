@@ -113,6 +113,12 @@ def _own_class_hint(name: str) -> str:
     return f"; the gymnasium id {name} is your own task: give its class, {path}"
 
 
+def current_names_of_class(cls: type) -> list[str]:
+    """The CLI names whose current version builds ``cls`` (none for a user's own class)."""
+    path = class_path(cls)
+    return [spec.name for spec in TASKS.values() if spec.entry_point == path]
+
+
 def first_version(name: str) -> TaskSpec:
     """The oldest registered version of the task ``name`` belongs to.
 
