@@ -180,3 +180,28 @@ def test_a_onednn_layer_under_bfloat16_autocast_computes_in_bfloat16():
     layer = matmul.Linear(32, 32, "onednn")
     with torch.autocast("cpu", dtype=torch.bfloat16):
         assert layer(torch.randn(8, 32)).dtype == torch.bfloat16
+
+
+def test_xdg_cache_home_gets_a_sili_robots_folder_of_its_own(monkeypatch, tmp_path):
+    """With $XDG_CACHE_HOME set, the cache is its sili-robots folder, not the shared root;
+    $SILI_ROBOTS_CACHE wins over it."""
+    from sili_robots.cache import cache_dir
+
+    monkeypatch.delenv("SILI_ROBOTS_CACHE", raising=False)
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert cache_dir() == tmp_path / "xdg" / "sili-robots"
+    monkeypatch.setenv("XDG_CACHE_HOME", "~/xdg")  # a quoted ~ is expanded here too
+    assert cache_dir() == tmp_path / "home" / "xdg" / "sili-robots"
+    monkeypatch.setenv("SILI_ROBOTS_CACHE", str(tmp_path / "own"))
+    assert cache_dir() == tmp_path / "own"
+
+
+def test_an_empty_cache_variable_is_as_if_unset_not_the_current_directory(monkeypatch, tmp_path):
+    """SILI_ROBOTS_CACHE= (set but empty) falls back to the default cache, never '.'."""
+    from sili_robots.cache import cache_dir
+
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.delenv("XDG_CACHE_HOME", raising=False)
+    monkeypatch.setenv("SILI_ROBOTS_CACHE", "")
+    assert cache_dir() == tmp_path / "home" / ".cache" / "sili-robots"

@@ -449,10 +449,17 @@ def _planned_rows(block_name, task, task_id, curves):
     return parts
 
 
-@pytest.mark.parametrize(("b0_reward", "verdict"), [(-20.0, HOLDS), (-6.5, PART)])
-def test_the_sweet_spot_holds_only_where_the_best_b_stands_clear_of_both_ends(b0_reward, verdict):
-    """Best at b=0.6 in both; b=0 within 0.05 of its score in the second: in range, not apart."""
-    reward = {0.0: b0_reward, 0.2: -15.0, 0.4: -10.0, 0.6: -6.0, 0.8: -10.0, 1.0: -20.0}
+@pytest.mark.parametrize(
+    ("best_b", "b0_reward", "verdict"),
+    [(0.6, -20.0, HOLDS), (0.6, -6.5, PART), (0.4, -20.0, HOLDS), (0.8, -20.0, HOLDS)],
+)
+def test_the_sweet_spot_holds_only_where_the_best_b_stands_clear_of_both_ends(
+    best_b, b0_reward, verdict
+):
+    """Best at b=0.6, or at either end of the range (0.4, 0.8, both in it); b=0 within 0.05 of
+    its score in the second: in range, not apart."""
+    reward = {0.0: b0_reward, 0.2: -15.0, 0.4: -10.0, 0.6: -10.0, 0.8: -10.0, 1.0: -20.0}
+    reward[best_b] = -6.0
     parts = []
     for b in reward:
         for seed in range(5):
@@ -464,9 +471,12 @@ def test_the_sweet_spot_holds_only_where_the_best_b_stands_clear_of_both_ends(b0
     assert claim.verdict == verdict, claim
 
 
-@pytest.mark.parametrize(("stable_from", "verdict"), [(200, HOLDS), (500, PART)])
+@pytest.mark.parametrize(
+    ("stable_from", "verdict"), [(200, HOLDS), (500, PART), (355, HOLDS), (356, PART)]
+)
 def test_speaker_listener_needs_sili_stable_by_about_250(stable_from, verdict):
-    """SILI above LILI, SAC and SMiRL in both; held from interaction 200, or only from 500."""
+    """SILI above LILI, SAC and SMiRL in all; held from interaction 200, or only from 500; the
+    first stable window at 350 (the bound, included) holds, at 351 does not."""
 
     def sili(n):
         return _const(n, -3.0), np.r_[_const(stable_from, 0), _const(n - stable_from, 1)]
@@ -614,22 +624,25 @@ def _reward_at(task_id: str, target: float) -> float:
     return still + target * (best - still)
 
 
-def test_stable_s_poor_reward_needs_a_score_clear_of_silis():
+@pytest.mark.parametrize(
+    ("below", "held", "verdict"), [(0.05, 1, PART), (0.5, 1, HOLDS), (0, 0, NO)]
+)
+def test_stable_s_poor_reward_needs_a_score_clear_of_silis(below, held, verdict):
     """Stable holds as SILI does but scores 0.05 below it: within the 0.1 margin, so the paper's
-    "Stable earns little" is not shown."""
+    "Stable earns little" is shown in part; 0.5 below: in full; neither holding nor below: not."""
     task_id = "sili/Circle3-v1"
-    stable = _reward_at(task_id, score(-6.0, task_id) - 0.05)
+    stable = _reward_at(task_id, score(-6.0, task_id) - below)
     parts = [
         _rows("circle-3", task_id, "sili", s, _const(2000, -6.0), _const(2000, 1)) for s in range(3)
     ]
     curves = {
-        "stable": lambda n: (_const(n, stable), _const(n, 1.0)),
+        "stable": lambda n: (_const(n, stable), _const(n, held)),
         "smirl": lambda n: (_const(n, -50.0), _const(n, 0.0)),
     }
     parts += _planned_rows("stable-smirl", "circle-3", task_id, curves)
     claims = claims_table(pd.concat(parts, ignore_index=True))
     (claim,) = [c for c in claims if c.task == "circle-3" and c.claim.startswith("Stable")]
-    assert claim.verdict == PART, claim
+    assert claim.verdict == verdict, claim
 
 
 @pytest.mark.parametrize(("paper_reward", "verdict"), [(-30.0, HOLDS), (-6.0, PART), (-2.0, NO)])
@@ -701,16 +714,17 @@ def test_the_default_on_driving_is_decided_on_five_seeds_of_each_profile():
 
 
 def test_first_finished_run_finals():
+    """A run's final numbers are means over its last 100 interactions, as the table says."""
     df = _rows(
         "circle-3",
         "sili/Circle3-v1",
         "sili",
         0,
-        np.r_[_const(100, -50), _const(100, -4)],
+        np.r_[_const(100, -50), _const(50, -10), _const(50, -4)],
         np.r_[_const(60, 0), _const(140, 1)],
     )
     (row,) = run_finals(df).itertuples()
-    assert row.task_reward == pytest.approx(-4.0) and row.stability == 1.0
+    assert row.task_reward == pytest.approx(-7.0) and row.stability == 1.0
     assert row.first_stable == 55  # the first 50-window with >= 0.9 (45 of 50 stable) starts at 55
 
 
@@ -1058,7 +1072,7 @@ def test_a_collected_run_longer_than_the_budget_is_not_done(tmp_path, monkeypatc
         (folder / SUMMARY).write_text(json.dumps({"interactions": trained}))
         out = sili(*args)
         assert out.returncode == 0, out.stderr
-        assert f"tiny on circle-3 (3 interactions): 1 runs, {done} done" in out.stdout
+        assert f"tiny on circle-3 (3 interactions): 1 run, {done} done" in out.stdout
 
 
 @pytest.mark.parametrize("present", ["results/paper-grid", "sweeps/paper-grid"])
@@ -1099,4 +1113,13 @@ def test_an_unwritable_folder_stops_a_grid_but_not_its_listing(tmp_path, monkeyp
     assert out.returncode == 2 and f"{option} {a_file / 'sub'}: cannot write there" in out.stderr
     listing = sili(*args, "--dry-run")
     assert listing.returncode == 0, listing.stderr
-    assert "tiny on circle-3 (2 interactions): 1 runs, 0 done" in listing.stdout
+    assert "tiny on circle-3 (2 interactions): 1 run, 0 done" in listing.stdout
+
+
+def test_a_tiny_rehearsal_of_the_b_sweep_still_runs_one_interaction(tmp_path, capsys):
+    """A block with its own interaction count (the b sweep) scaled by a tiny --fraction never
+    plans 0 interactions."""
+    assert block("b-sweep").scaled(1e-6).budget("circle-3") == 1
+    own = ["--sweep-dir", str(tmp_path / "s"), "--into", str(tmp_path / "r")]
+    assert main(["grid", "--fraction", "0.0001", "--dry-run", "--blocks", "b-sweep", *own]) == 0
+    assert "b-sweep on circle-3 (1 interaction): 30 runs, 0 done" in capsys.readouterr().out

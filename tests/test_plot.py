@@ -173,6 +173,30 @@ def test_plot_tasks_draws_only_their_figures(sweep_dir, tmp_path, capsys):
     assert "--tasks ',' names none" in capsys.readouterr().err
 
 
+def test_a_format_named_twice_is_written_and_listed_once(sweep_dir, tmp_path, capsys):
+    """`--formats png,png` writes each figure once and lists each path once."""
+    out = tmp_path / "figs"
+    args = ["plot", str(sweep_dir), "--out", str(out), "--formats", "png, png"]
+    assert main([*args, "--tasks", "speaker-listener"]) == 0
+    assert capsys.readouterr().out.split() == [str(out / "speaker-listener.png")]
+
+
+def test_plot_window_sets_the_b_sweeps_final_window(sweep_dir, tmp_path, capsys):
+    """`sili plot --window N` draws the b-sweep figure's final values over the last N
+    interactions: the runs' whole 8 at 100 or 8, their last 2 at 2."""
+
+    def figure(*extra: str) -> bytes:
+        out = tmp_path / ("f" + "_".join(extra))
+        args = ["plot", str(sweep_dir), "--out", str(out), "--formats", "png", "--tasks"]
+        assert main([*args, "circle-3", *extra]) == 0
+        capsys.readouterr()
+        return (out / "circle-3_beta.png").read_bytes()
+
+    default = figure()
+    assert figure("--window", "8") == default
+    assert figure("--window", "2") != default
+
+
 def test_runs_of_other_settings_are_curves_of_their_own_not_seeds(sweep_dir, tmp_path):
     """`sili runs` told SAC at hidden 16 and 32 apart; the plot averaged them as two seeds."""
     copy = tmp_path / "sweep"
@@ -515,3 +539,26 @@ def test_a_scheduled_run_of_the_sweeps_length_is_not_in_the_b_sweep():
         ignore_index=True,
     )
     assert sorted(b_sweep_rows(df, "circle-3")["run"].unique()) == ["b0", "b0.5", "b1"]
+
+
+def test_bound_labels_stay_inside_their_panel():
+    """A bound near the top of a panel has its label below its line, inside the panel, not over
+    the title."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from sili_robots.plot_bounds import draw_bounds
+
+    fig = Figure(figsize=(4, 3))
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    ax.plot([0, 10], [0.0, 0.2])
+    draw_bounds(ax, "true_stability", ["sili/Circle3-v1"])
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    box = ax.get_window_extent(renderer)
+    labels = [t for t in ax.texts if t.get_gid() == "bound_label"]
+    assert len(labels) >= 2
+    for t in labels:
+        ext = t.get_window_extent(renderer)
+        assert box.y0 - 0.5 <= ext.y0 and ext.y1 <= box.y1 + 0.5, (t.get_text(), ext, box)

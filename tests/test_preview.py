@@ -445,6 +445,44 @@ def test_a_scripted_preview_plays_the_controller_asked_for():
         env.close()
 
 
+def test_preview_seed_picks_the_game_recorded(tmp_path, capsys):
+    """`sili preview --seed N` records the game of seed N (Circle (8 Goals)' opponent differs
+    by seed), seed 0 by default."""
+
+    def ego(*extra: str) -> list:
+        out = tmp_path / "page.html"
+        assert main(["preview", "circle-8", "--interactions", "2", "--out", str(out), *extra]) == 0
+        capsys.readouterr()
+        (anim,) = [c for c in _commands(out.read_text()) if c["type"] == "set_animation"]
+        clip = {a["path"]: a["clip"] for a in anim["animations"]}["/meshcat/ego"]
+        (track,) = [t for t in clip["tracks"] if t["name"] == ".position"]
+        return [(k["time"], list(k["value"])) for k in track["keys"]]
+
+    default = ego()
+    assert ego("--seed", "0") == default
+    assert ego("--seed", "5") != default
+
+
+def test_the_picture_checks_summary_counts_an_element_out_of_view_apart():
+    """'picture check: ok (N scene elements seen, M out of view)': an element allowed out of
+    view is not counted as seen."""
+    from sili_robots.preview.browser import PageResult
+    from sili_robots.preview.check import MarkerResult
+    from sili_robots.preview.render import Rendered
+
+    def marker(name, may_leave):
+        return Marker(name, (0.0, 0.0, 0.0), 0x1F6FD1, 0.1, may_leave_view=may_leave)
+
+    results = [
+        MarkerResult(marker("ego", False), (10.0, 10.0), 5.0, 0.9),
+        MarkerResult(marker("opponent", False), (20.0, 20.0), 5.0, 0.8),
+        MarkerResult(marker("trail", True), (-1.0, -1.0), 5.0, 0.0, in_view=False),
+    ]
+    page = PageResult(png=b"", width=640, height=480)
+    assert Rendered(page, 0, results).seen_summary() == "2 scene elements seen, 1 out of view"
+    assert Rendered(page, 0, results[:2]).seen_summary() == "2 scene elements seen"
+
+
 def test_cli_writes_html(tmp_path):
     out = subprocess.run(
         [

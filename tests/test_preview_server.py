@@ -140,6 +140,20 @@ def _serve_cli(tmp_path, *extra):
     return proc, server
 
 
+@contextlib.contextmanager
+def _served_cli(tmp_path, *extra):
+    """``_serve_cli`` whose processes are killed however the test ends: a failed assertion
+    must not leave a preview server running."""
+    proc, server = _serve_cli(tmp_path, *extra)
+    try:
+        yield proc, server
+    finally:
+        for pid in (proc.pid, server):
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+
+
 def _listening_addresses(pid: int) -> set[str]:
     """Local addresses (hex, as in /proc/net/tcp) of the sockets ``pid`` listens on."""
     inodes = set()
@@ -189,20 +203,34 @@ def test_a_server_started_in_a_thread_lives_until_it_is_stopped():
 
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 128 + 15)])
 def test_ctrl_c_and_sigterm_stop_the_server(sig, code, tmp_path):
-    proc, server = _serve_cli(tmp_path)
-    proc.send_signal(sig)
-    assert proc.wait(timeout=30) == code
-    assert "Traceback" not in proc.stderr.read()
-    assert _wait_dead(server)
+    with _served_cli(tmp_path) as (proc, server):
+        proc.send_signal(sig)
+        assert proc.wait(timeout=30) == code
+        assert "Traceback" not in proc.stderr.read()
+        assert _wait_dead(server)
 
 
 def test_server_dies_with_a_killed_parent(tmp_path):
-    proc, server = _serve_cli(tmp_path)
-    log = os.readlink(f"/proc/{server}/fd/1")
-    assert log.endswith(" (deleted)")  # the server's log is gone once its URLs were read
-    proc.kill()  # no cleanup code runs in the parent
-    proc.wait(timeout=30)
-    assert _wait_dead(server)
+    with _served_cli(tmp_path) as (proc, server):
+        log = os.readlink(f"/proc/{server}/fd/1")
+        assert log.endswith(" (deleted)")  # the server's log is gone once its URLs were read
+        proc.kill()  # no cleanup code runs in the parent
+        proc.wait(timeout=30)
+        assert _wait_dead(server)
+
+
+def test_serving_ends_with_an_error_when_the_meshcat_server_dies():
+    """`--serve` does not keep waiting on a dead server: serve() raises ServerError soon after
+    it stops (the OOM killer, a crash)."""
+    from sili_robots.preview.server import ServerError
+
+    with LiveServer() as server:
+        os.killpg(server.pid, signal.SIGKILL)
+        server.proc.wait(timeout=10)
+        t0 = time.monotonic()
+        with pytest.raises(ServerError, match="the meshcat server stopped unexpectedly"):
+            server.serve(seconds=5.0)
+        assert time.monotonic() - t0 < 2.0
 
 
 def test_serve_puts_the_callers_sigterm_handler_back():

@@ -997,6 +997,45 @@ def test_without_tensorboard_no_scalars_are_written(tmp_path, monkeypatch):
     assert (run_dir / "summary.json").exists() and not (run_dir / "tb").exists()
 
 
+def test_a_tensorboard_writer_that_cannot_start_only_turns_the_scalars_off(tmp_path, monkeypatch):
+    """When TensorBoard's writer cannot be loaded, the run's block still completes: a warning,
+    no error, no tb/."""
+    monkeypatch.setitem(sys.modules, "torch.utils.tensorboard", None)  # as if it were absent
+    ran = []
+    with (
+        pytest.warns(UserWarning, match=f"TensorBoard scalars off for {tmp_path.name}"),
+        tb.mirrored(tmp_path, enabled=True),
+    ):
+        ran.append(True)
+    assert ran == [True] and not (tmp_path / "tb").exists()
+
+
+@pytest.mark.skipif(not tb.available(), reason="tensorboard is not installed")
+def test_a_loss_that_is_not_finite_is_left_out_of_the_scalars(tmp_path):
+    """A diverged (nan/inf) loss in metrics.csv is not mirrored as a TensorBoard point; the
+    finite ones are."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    from sili_robots.metrics import METRIC_COLUMNS
+
+    def row(j, loss):
+        values = {"interaction": j, "task_reward": -1.0, "strategy_changed": 0, "critic_loss": loss}
+        return ",".join(str(values.get(c, "")) for c in METRIC_COLUMNS) + "\r\n"
+
+    tail = tb.MetricsTail(tmp_path, interval=60)  # no metrics.csv yet: any new one is the run's
+    tail.start()
+    new = tmp_path / "new.csv"
+    rows = row(0, 0.5) + row(1, "nan") + row(2, "inf") + row(3, 0.25)
+    new.write_text(",".join(METRIC_COLUMNS) + "\r\n" + rows)
+    os.replace(new, tmp_path / "metrics.csv")
+    tail.stop()
+    assert tail.rows_written == 4 and not tail.failed
+    acc = EventAccumulator(str(tmp_path / "tb"))
+    acc.Reload()
+    assert [(e.step, e.value) for e in acc.Scalars("loss/critic")] == [(0, 0.5), (3, 0.25)]
+    assert [e.step for e in acc.Scalars("reward/task")] == [0, 1, 2, 3]
+
+
 @pytest.mark.skipif(not tb.available(), reason="tensorboard is not installed")
 def test_tensorboard_tail_skips_rows_a_resume_drops_and_waits_for_whole_lines(tmp_path):
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator

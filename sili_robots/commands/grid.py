@@ -119,13 +119,13 @@ def run(args: argparse.Namespace) -> int:
             [r for r in runs if not _finished(run_path(args.into, r.name), r.config.interactions)],
         )
     for b, spec in steps:
-        label = f"{b.name} on {spec.tasks[0]} ({spec.interactions} interactions)"
+        label = f"{b.name} on {spec.tasks[0]} ({_counted(spec.interactions, 'interaction')})"
         runs = plan([spec])
         if args.dry_run:
             n_done = sum(
                 any(_finished(run_path(d, r.name), spec.interactions) for d in dirs) for r in runs
             )
-            print(f"{label}: {len(runs)} runs, {n_done} done")
+            print(f"{label}: {_counted(len(runs), 'run')}, {n_done} done")
             planned, done = planned + len(runs), done + n_done
             planned_interactions += len(runs) * spec.interactions
             done_interactions += n_done * spec.interactions
@@ -134,7 +134,11 @@ def run(args: argparse.Namespace) -> int:
             r.name for r in runs if _finished(run_path(args.into, r.name), spec.interactions)
         ]
         if len(collected) == len(runs):  # nothing to train (its settings may have moved on)
-            print(f"grid: {label}: all {len(runs)} runs collected", file=sys.stderr, flush=True)
+            print(
+                f"grid: {label}: all {_counted(len(runs), 'run')} collected",
+                file=sys.stderr,
+                flush=True,
+            )
             continue
         print(f"grid: {label}", file=sys.stderr, flush=True)  # stdout: JSON lines alone
         if collected:  # back into the sweep, so it does not train them again
@@ -257,3 +261,8 @@ def as_collected(collection: Path, spec: SweepSpec) -> SweepSpec:
             task_ids = {**spec.task_ids, config.task: config.task_id}
             return replace(spec, agent_overrides=overrides, task_ids=task_ids)
     return spec
+
+
+def _counted(n: int, noun: str) -> str:
+    """``1 run``, ``3 runs``."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
