@@ -41,6 +41,7 @@ from sili_robots.build import (
     same_task_arguments,
     task_kwargs_of,
     task_name_of,
+    unversioned_note,
 )
 from sili_robots.errors import (
     ConfigError,
@@ -69,7 +70,7 @@ from sili_robots.runs import read_config as read_run_config
 from sili_robots.stopping import HeldStops
 from sili_robots.sweep.state import check_not_in_a_sweep, check_not_trained, training_claim
 from sili_robots.tasks import RepeatedInteractionEnv
-from sili_robots.tasks.registry import check_argument_names, current_names_of_class, is_class_path
+from sili_robots.tasks.registry import check_argument_names, is_class_path
 from sili_robots.training import resume, train
 
 
@@ -114,10 +115,13 @@ class SILI:
                 )
             self._task_env, task = env, task_name_of(env)
             env_kwargs = task_kwargs_of(env)
-            _warn_unversioned(env)
+            note = unversioned_note(type(env.unwrapped)) if is_class_path(task) else ""
         else:
             task = canonical_task(env)
             check_argument_names(task, env_kwargs or {}, "env_kwargs")
+            note = unversioned_note(task)
+        if note:
+            warnings.warn(note, UserWarning, stacklevel=2)
         cfg = make_run_config(
             task,
             method,
@@ -379,20 +383,6 @@ _TEMPORARY: dict[Path, weakref.finalize] = {}
 #: temporary runs a refused save kept (the error named them), until their model saves or another
 #: model loads them
 _KEPT: set[Path] = set()
-
-
-def _warn_unversioned(env: gym.Env) -> None:
-    """A packaged task built from its class has the class's defaults, which need not be any
-    registered version's, and no version on record: most likely a version was meant."""
-    names = current_names_of_class(type(env.unwrapped))
-    if names and is_class_path(task_name_of(env)):
-        warnings.warn(
-            f"{type(env.unwrapped).__name__} built from its class trains with the class's own "
-            "defaults and records no task version (nor the version's bounds and scene); build "
-            f"it with make_task(NAME) or gym.make, NAME one of {', '.join(names)}",
-            UserWarning,
-            stacklevel=3,
-        )
 
 
 def _check_arguments(env: object, settings: object, env_kwargs: object) -> None:

@@ -27,6 +27,7 @@ from sili_robots.runs import CONFIG, RunConfig
 from sili_robots.tasks import make_task, task_spec
 from sili_robots.tasks.registry import (
     check_argument_names,
+    current_names_of_class,
     identity_conflict,
     is_class_path,
     same_argument,
@@ -49,6 +50,24 @@ def canonical_task(task: str) -> str:
         raise ConfigError(
             f"{err}; or a task class of your own as package.module:ClassName"
         ) from None
+
+
+def unversioned_note(task: str | type) -> str:
+    """Why a packaged task's class (its path, or an instance's class) was most likely not
+    meant: it trains with the class's defaults, which need not be any version's, and records
+    no version; "" for any other task."""
+    if isinstance(task, str):
+        if not is_class_path(task):
+            return ""
+        task = task_class(task)
+    names = current_names_of_class(task)
+    if not names:
+        return ""
+    return (
+        f"{task.__name__} given as a class trains with its own defaults, which need not be any "
+        "task version's, and records no version (nor a version's bounds and scene); give a "
+        f"task name instead: {', '.join(names)}"
+    )
 
 
 #: the wrappers ``gym.make`` adds, which change nothing a run records

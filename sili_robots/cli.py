@@ -147,10 +147,18 @@ def _allocation(err: BaseException) -> str:
 
 
 def _binary_size(size: int) -> str:
-    """Bytes as numpy writes them: 2 decimals in the largest binary unit not above the size."""
+    """Bytes as numpy's allocation error writes them: 3 significant figures in the largest
+    binary unit they do not round up out of (1048575 bytes is "1.00 MiB")."""
     units = ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB", "EiB")
-    power = min(max(size.bit_length() - 1, 0) // 10, len(units) - 1)
-    return f"{size} bytes" if power == 0 else f"{size / 1024**power:.2f} {units[power]}"
+    power = max(size.bit_length() - 1, 1) // 10
+    value = size / 1024**power
+    if round(value) == 1024:
+        power, value = power + 1, value / 1024
+    if power >= len(units):
+        power, value = len(units) - 1, value * 1024 ** (power - len(units) + 1)
+    if power == 0:
+        return f"{value:.0f} bytes"
+    return f"{value:#.3g} {units[power]}" if round(value) < 1000 else f"{value:#.0f} {units[power]}"
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -150,23 +150,37 @@ def test_a_task_given_by_any_name_is_recorded_by_its_name(tmp_path):
     assert type(seeded.cfg.seed) is int and seeded.cfg.seed == 3  # recorded as JSON can
 
 
-def test_a_packaged_task_built_from_its_class_is_warned_about_and_a_version_is_not():
-    """CircleEnv() has the class's defaults and no version on record: the user is told which
-    names build a version; a version built by name, and a user's own class, train quietly."""
+def test_a_packaged_task_given_as_its_class_is_warned_about_and_a_version_is_not(tmp_path, capsys):
+    """CircleEnv has the class's defaults and no version on record: as an instance, a class
+    path or the CLI's --task/--tasks, the user is told which names build a version; a version
+    by name, and a user's own class, train quietly."""
     import warnings
 
     import gymnasium as gym
 
     from sili_robots.tasks.circle import CircleEnv
 
-    names = "circle-3, circle-8, circle-continuous, circle-unequal"
-    with pytest.warns(UserWarning, match=f"CircleEnv built from its class .* one of {names}$"):
-        SILI(CircleEnv(variant="3"), method="sac", settings=FAST_AGENT)
+    told = "CircleEnv given as a class trains with its own defaults, which need not be any task "
+    names = "give a task name instead: circle-3, circle-8, circle-continuous, circle-unequal"
+    path = "sili_robots.tasks.circle:CircleEnv"
+    for task in (CircleEnv(variant="3"), path):
+        with pytest.warns(UserWarning, match=f"^{told}.*{names}$"):
+            SILI(task, method="sac", settings=FAST_AGENT)
     with warnings.catch_warnings():
         warnings.simplefilter("error", UserWarning)
         SILI(make_task("circle-3"), method="sac", settings=FAST_AGENT)
         SILI(gym.make("sili/Circle3-v0"), method="sac", settings=FAST_AGENT)
         SILI(TwoDoorsEnv(horizon=6), method="sac", settings=FAST_AGENT)
+        SILI(TWO_DOORS, method="sac", settings=FAST_AGENT)
+    sweep = ["sweep", "--methods", "sac", "--seeds", "0", "--dry-run", "--out"]
+    assert main([*sweep, str(tmp_path / "s"), "--tasks", f"{path},circle-3"]) == 0
+    err = capsys.readouterr().err
+    assert err.count("note:") == 1 and f"sili sweep: note: {told}" in err and names in err
+    assert main([*sweep, str(tmp_path / "t"), "--tasks", f"{TWO_DOORS},circle-3"]) == 0
+    assert "note:" not in capsys.readouterr().err
+    train = ["train", "--task", path, "--method", "sac", "--interactions", "1", "--no-progress"]
+    assert main([*train, "--set", "hidden=8", "--out", str(tmp_path / "r")]) == 0
+    assert f"sili train: note: {told}" in capsys.readouterr().err
 
 
 def test_a_task_instance_is_recorded_with_its_arguments_and_rebuilt_with_them(tmp_path):

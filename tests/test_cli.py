@@ -386,15 +386,21 @@ def test_a_broken_pipe_that_is_not_stdout_is_a_failure(monkeypatch):
         sili_in_process("rollout", "circle-3")
 
 
-def test_an_allocation_is_sized_in_the_binary_units_numpy_uses():
-    """torch's byte count reads as numpy's sizes do: the largest unit not above it."""
+def test_an_allocation_is_sized_as_numpy_sizes_it():
+    """torch's byte count reads as numpy's allocation error writes a size (its strings for
+    these sizes): 3 figures, a unit up where rounding reaches 1024 of one."""
     from sili_robots.cli import _binary_size
 
-    assert [_binary_size(n) for n in (1023, 1024, 92_000_000_000, 2**62)] == [
+    sizes = (1, 1023, 1024, 1_048_575, 92_000_000_000, 1000 * 2**30, 2**62, 2**70)
+    assert [_binary_size(n) for n in sizes] == [
+        "1 bytes",
         "1023 bytes",
         "1.00 KiB",
-        "85.68 GiB",
+        "1.00 MiB",
+        "85.7 GiB",
+        "1000. GiB",
         "4.00 EiB",
+        "1024. EiB",
     ]
 
 

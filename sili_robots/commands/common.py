@@ -365,3 +365,8 @@ def given_options(args: argparse.Namespace, allowed: set[str]) -> list[str]:
     """The options typed on the command line, other than those whose dest is ``allowed``."""
     typed = dict.fromkeys(args.typed_options)  # in order, once each
     return [args.option_names[dest] for dest in typed if dest not in allowed]
+
+
+def counted(n: int, noun: str) -> str:
+    """``1 run``, ``3 runs``: a count as the commands print it."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"

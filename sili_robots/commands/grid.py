@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from sili_robots.commands.common import float_in, path_arg, positive_int
+from sili_robots.commands.common import counted, float_in, path_arg, positive_int
 
 if TYPE_CHECKING:
     from sili_robots.sweep import SweepSpec
@@ -119,13 +119,13 @@ def run(args: argparse.Namespace) -> int:
             [r for r in runs if not _finished(run_path(args.into, r.name), r.config.interactions)],
         )
     for b, spec in steps:
-        label = f"{b.name} on {spec.tasks[0]} ({_counted(spec.interactions, 'interaction')})"
+        label = f"{b.name} on {spec.tasks[0]} ({counted(spec.interactions, 'interaction')})"
         runs = plan([spec])
         if args.dry_run:
             n_done = sum(
                 any(_finished(run_path(d, r.name), spec.interactions) for d in dirs) for r in runs
             )
-            print(f"{label}: {_counted(len(runs), 'run')}, {n_done} done")
+            print(f"{label}: {counted(len(runs), 'run')}, {n_done} done")
             planned, done = planned + len(runs), done + n_done
             planned_interactions += len(runs) * spec.interactions
             done_interactions += n_done * spec.interactions
@@ -135,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
         ]
         if len(collected) == len(runs):  # nothing to train (its settings may have moved on)
             print(
-                f"grid: {label}: all {_counted(len(runs), 'run')} collected",
+                f"grid: {label}: all {counted(len(runs), 'run')} collected",
                 file=sys.stderr,
                 flush=True,
             )
@@ -154,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
         if elsewhere:
             where += ": neither exists here; run from the repository root, or give them"
         print(
-            f"{done} of {planned} runs done, "
+            f"{done} of {counted(planned, 'run')} done, "
             f"{done_interactions:,} of {planned_interactions:,} interactions ({where})"
         )
     if failed:
@@ -261,8 +261,3 @@ def as_collected(collection: Path, spec: SweepSpec) -> SweepSpec:
             task_ids = {**spec.task_ids, config.task: config.task_id}
             return replace(spec, agent_overrides=overrides, task_ids=task_ids)
     return spec
-
-
-def _counted(n: int, noun: str) -> str:
-    """``1 run``, ``3 runs``."""
-    return f"{n} {noun}{'' if n == 1 else 's'}"

@@ -17,6 +17,7 @@ from sili_robots.commands.common import (
     LATENT_HELP,
     add_override_args,
     add_schedule_args,
+    counted,
     given_options,
     non_negative_int,
     parse_settings,
@@ -207,6 +208,12 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
     )
     check_task_arguments(spec)  # new sweeps only, as --latent above
     _note_unused_settings(spec, parse_settings(args.agent_set))
+    from sili_robots.build import unversioned_note
+
+    for task in spec.tasks:
+        note = unversioned_note(task)
+        if note:
+            print(f"sili sweep: note: {note}", file=sys.stderr)
     return spec
 
 
@@ -270,7 +277,7 @@ def _dry_run(args: argparse.Namespace, specs: list[SweepSpec], sweep_dir: Path) 
                 print(f"{name}\tnew")
             elif run_path(sweep_dir, name).is_dir():
                 print(f"{name}\tremoved")
-        print(_run_count(planned))
+        print(counted(len(planned), "run"))
         return 0
     planned = as_made(sweep_dir, planned)
     recorded = args.resume is not None
@@ -309,11 +316,7 @@ def _list_planned(sweep_dir: Path, planned: list, found: dict, shorter: list) ->
             if (path / ERROR_FILE).is_file():  # the run's last attempt failed
                 notes.insert(0, f"failed before, see its {ERROR_FILE}")
         print(f"{run_.name}\t{state}" + (f" ({', '.join(notes)})" if notes else ""))
-    print(_run_count(planned))
-
-
-def _run_count(planned: list) -> str:
-    return f"{len(planned)} run{'' if len(planned) == 1 else 's'}"
+    print(counted(len(planned), "run"))
 
 
 def _extends(args: argparse.Namespace) -> bool:

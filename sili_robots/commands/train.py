@@ -12,7 +12,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from sili_robots.agent import BETA_METHODS, LATENT_CHOICES, METHODS, PROFILES, Schedule
-from sili_robots.build import make_run_config
+from sili_robots.build import make_run_config, unversioned_note
 from sili_robots.commands.common import (
     CONTROLLERS_HELP,
     LATENT_HELP,
@@ -170,6 +170,9 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     )
     for path, why in cfg.unread_settings(given).items():
         print(f"sili train: note: --set {given[path]} does nothing here: {why}", file=sys.stderr)
+    note = unversioned_note(args.task)
+    if note:
+        print(f"sili train: note: {note}", file=sys.stderr)
     return cfg
 
 
