@@ -26,7 +26,7 @@ from sili_robots.cli import main
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import load_trained
 from sili_robots.runs import RunConfig
-from sili_robots.sweep import LocalBackend, SweepSpec, expand, run_sweep
+from sili_robots.sweep import LocalBackend, RayBackend, SweepSpec, expand, run_sweep
 from sili_robots.sweep import tensorboard as tb
 from sili_robots.sweep.progress import SweepProgress, logged_interactions
 from sili_robots.sweep.results import results_table
@@ -1359,6 +1359,10 @@ def test_a_sweep_given_through_python_names_what_each_field_takes(tmp_path):
         (lambda: run_sweep(numpy, tmp_path, backend="local"), "backend must be a sweep backend"),
         (lambda: LocalBackend(workers=1.5), r"workers must be an integer >= 1, got 1\.5"),
         (lambda: LocalBackend(retries="1"), "retries must be an integer >= 0, got '1'"),
+        (lambda: RayBackend(workers=0), "workers must be an integer >= 1, got 0"),
+        (lambda: RayBackend(workers=1.5), r"workers must be an integer >= 1, got 1\.5"),
+        (lambda: RayBackend(retries=-1), "retries must be an integer >= 0, got -1"),
+        (lambda: RayBackend(address=6379), "address must be a string or None, got 6379"),
     ):
         with pytest.raises(ConfigError, match=said):
             call()

@@ -22,7 +22,7 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, check_count
 from sili_robots.runs import RUNNING_FILE, STOP_FILE
 from sili_robots.stopping import STOP_SIGNALS, act_as
 from sili_robots.sweep.backend import STOP_GRACE_S, Monitor
@@ -45,11 +45,12 @@ class RayBackend:
     def __init__(
         self, address: str | None = None, workers: int | None = None, retries: int = 0
     ) -> None:
-        if workers is not None and workers < 1:
-            raise ConfigError(f"workers must be >= 1, got {workers}")
+        if address is not None and not isinstance(address, str):
+            raise ConfigError(f"address must be a string or None, got {address!r}")
         self.address = address
-        self.workers = workers
-        self.retries = retries
+        # as LocalBackend's: 1.5 workers would put two runs in flight, -1 retries Ray's forever
+        self.workers = None if workers is None else check_count("workers", workers)
+        self.retries = check_count("retries", retries, 0)
 
     def check_reachable(self) -> None:
         """ConfigError when nothing listens at ``address`` (see ``check_reachable``)."""
