@@ -483,6 +483,81 @@ def test_the_picture_checks_summary_counts_an_element_out_of_view_apart():
     assert Rendered(page, 0, results[:2]).seen_summary() == "2 scene elements seen"
 
 
+def test_cli_records_three_interactions_into_preview_html_by_default(monkeypatch, tmp_path, capsys):
+    """Without --out and --interactions, `sili preview` records 3 interactions into
+    ./preview.html, as its help says."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["preview", "circle-3"]) == 0
+    out = capsys.readouterr().out
+    assert "task=circle-3 policy=scripted stabilizing interactions=3 frames=153" in out
+    assert "wrote preview.html (" in out and [p.name for p in tmp_path.iterdir()] == [
+        "preview.html"
+    ]
+
+
+def test_a_browser_that_will_not_start_is_one_error_line_and_exit_1(monkeypatch, tmp_path, capsys):
+    """`sili preview --png` with a browser that dies at start: one line naming why, exit 1."""
+    monkeypatch.setenv("SILI_CHROMIUM", "false")  # an executable that exits at once
+    argv = ["preview", "circle-3", "--interactions", "1", "--out", str(tmp_path / "p.html")]
+    assert main([*argv, "--png", str(tmp_path / "p.png")]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith("sili preview: error: Chromium closed its DevTools pipe")
+    assert err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_the_circle_legend_names_the_opponents_locations_only_where_there_are_some():
+    """The grey discs of Circle (3 Goals) are in the legend; Circle (Continuous) has none."""
+    three = _record("circle-3", interactions=1)
+    assert [label for _, label in three.scene.legend(three.recording)] == [
+        "ego",
+        "ego's path",
+        "opponent (hidden from ego)",
+        "opponent's locations",
+        "circle",
+    ]
+    cont = _record("circle-continuous", interactions=1)
+    assert "opponent's locations" not in [label for _, label in cont.scene.legend(cont.recording)]
+
+
+def _driving_to(lane: int | None) -> Preview:
+    """One interaction of Driving with the ego steered into ``lane`` (None: straight on)."""
+    from sili_robots.tasks import sumo_scenario as sc
+
+    def to_lane(env, _obs):
+        if lane is None:
+            return np.array([0.0], np.float32)
+        target = (lane - sc.CENTRE_LANE) * sc.LANE_WIDTH
+        return np.array([np.clip((target - env.unwrapped.ego_y) / 2.0, -1, 1)], np.float32)
+
+    name, env, _, label = make_env_and_policy("driving")
+    try:
+        return Preview.record(env, to_lane, 1, 0, name, label)
+    finally:
+        env.close()
+
+
+def test_driving_caption_names_the_egos_lane_and_whether_it_was_left_at_the_red_line():
+    """Merged into the left lane: "ego in the left lane", "was left at the red line"; straight
+    on: the centre lane, "was not"."""
+    from sili_robots.tasks.driving import LEFT
+
+    left, straight = _driving_to(LEFT), _driving_to(None)
+    caption = left.scene.caption(left.recording, left.recording.last)
+    assert "; ego in the left lane" in caption and "was left at the red line" in caption
+    assert "; ego in the centre lane" in left.scene.caption(left.recording, 0)
+    caption = straight.scene.caption(straight.recording, straight.recording.last)
+    assert "was not left at the red line" in caption
+
+
+def test_sawyer_caption_says_whether_the_gripper_is_above_the_height_plane():
+    """The scripted reach starts 0.90 m high (under the 0.95 m plane) and ends above it."""
+    prev = _record("sawyer-reach", interactions=1)
+    rec = prev.recording
+    assert rec.series("ee")[0][2] < rec.static["plane_z"] < rec.series("ee")[-1][2]
+    assert "gripper 0.90 m (below the plane)" in prev.scene.caption(rec, 0)
+    assert "(above the plane)" in prev.scene.caption(rec, rec.last)
+
+
 def test_cli_writes_html(tmp_path):
     out = subprocess.run(
         [

@@ -10,8 +10,10 @@ import json
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -266,14 +268,21 @@ def test_a_browser_that_fails_to_start_is_reported_with_what_it_wrote(tmp_path):
         Browser(executable=str(fake), timeout=20).start()
 
 
-def test_a_browser_that_never_answers_is_named(tmp_path):
-    fake = tmp_path / "not-chromium"  # SILI_CHROMIUM naming some other program
-    fake.write_text("#!/bin/sh\nsleep 30\n")
+def test_a_browser_that_never_answers_is_named_and_killed_with_its_children(tmp_path):
+    """SILI_CHROMIUM naming some other program that hangs: named, and every process it
+    started (here its `sleep`, as Chromium's helpers) is killed with it."""
+    fake = tmp_path / "not-chromium"
+    fake.write_text("#!/bin/sh\nsleep 31.4159\ntrue\n")  # a child, not exec'd in its place
     fake.chmod(0o755)
     with pytest.raises(
         BrowserError, match=rf"timed out waiting for Chromium \({re.escape(str(fake))}"
     ):
         Browser(executable=str(fake), timeout=1).start()
+    time.sleep(0.5)
+    left = _alive_with("sleep 31.4159")
+    for pid in left:
+        os.kill(pid, signal.SIGKILL)
+    assert left == []
 
 
 def test_a_browser_stopped_by_an_address_space_limit_is_reported_with_the_limit():
@@ -416,3 +425,41 @@ def test_trained_agent_preview_from_a_checkpoint(tmp_path):
     assert "frames=102" in out.stdout  # interactions counted from the preview's start
     out = sili("preview", "speaker-listener", "--checkpoint", str(run))
     assert out.returncode == 2 and "was trained on 'circle-3', not 'speaker-listener'" in out.stderr
+
+
+def test_a_console_error_of_the_page_is_reported(browser, tmp_path):
+    """A page that logs console.error (meshcat reports some failures so) shows up in errors;
+    a warning does not."""
+    page = tmp_path / "p.html"
+    page.write_text(
+        "<html><body><script>console.error('scene', 'broken'); console.warn('just a warning');"
+        "</script></body></html>"
+    )
+    assert browser.render(page).errors == ["scene broken"]
+
+
+def test_a_png_without_a_page_names_no_page_and_leaves_no_temporary_file(monkeypatch, tmp_path):
+    """preview(out=None, png=...) renders through a temporary page it removes, and does not
+    hand back that removed page's name as result.html."""
+    import tempfile
+
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(scratch))
+    result = preview("circle-3", interactions=1, out=None, png=tmp_path / "p.png")
+    assert result.png == tmp_path / "p.png" and result.rendered.problems() == []
+    assert result.html is None
+    assert [p.name for p in scratch.iterdir() if p.suffix == ".html"] == []
+
+
+def test_a_picture_that_fails_its_checks_exits_1(monkeypatch, tmp_path):
+    """`sili preview --png` whose picture shows nothing says so and exits 1, not 0."""
+    from cli_helpers import sili
+
+    from sili_robots.preview.scenes.circle import CircleScene
+
+    monkeypatch.setattr(CircleScene, "draw", lambda self, vis, rec, anim: None)  # empty scene
+    res = sili("preview", "circle-3", "--interactions", "1", "--out", tmp_path / "p.html",
+               "--png", tmp_path / "p.png")  # fmt: skip
+    assert "the picture failed its checks:" in res.stderr and "ego not seen" in res.stderr
+    assert res.returncode == 1

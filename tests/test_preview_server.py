@@ -91,14 +91,15 @@ def test_server_stops_when_building_the_preview_fails(monkeypatch, tmp_path):
     assert not _children_running(os.getpid(), "meshcat_child")
 
 
-def test_server_stops_after_serving_for_a_while(tmp_path):
+@pytest.mark.parametrize("seconds", [0.3, 0])  # 0: allowed ("a number >= 0"), served, stopped
+def test_server_stops_after_serving_for_a_while(seconds, tmp_path):
     urls = []
     result = preview(
         "speaker-listener",
         interactions=1,
         out=None,
         serve=True,
-        serve_seconds=0.3,
+        serve_seconds=seconds,
         on_ready=lambda r: urls.append(r.url),
     )
     assert urls == [result.url] and result.url.startswith("http://127.0.0.1:")

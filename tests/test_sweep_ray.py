@@ -226,3 +226,27 @@ def test_a_sweep_without_an_address_starts_its_own_ray_whatever_ray_address_says
     assert out.returncode == 0, out.stderr
     assert json.loads(out.stdout)["failed"] == {}
     assert "sweep: 1 done, 0 failed" in out.stderr
+
+
+def test_ray_runs_at_most_workers_runs_at_once(ray_cluster, tmp_path):
+    """`--workers 1` on a cluster with room for two: one run trains at a time."""
+    import threading
+    import time
+
+    spec = _spec(methods=["sac"], interactions=30, checkpoint_every=10)
+    most, over = [0], threading.Event()
+
+    def watch() -> None:  # how many runs hold a worker's claim (worker.json) at one moment
+        while not over.is_set():
+            most[0] = max(most[0], len(list((tmp_path / "runs").glob("*/worker.json"))))
+            time.sleep(0.01)
+
+    watcher = threading.Thread(target=watch)
+    watcher.start()
+    try:
+        report = run_sweep(spec, tmp_path, RayBackend(workers=1), progress=False)
+    finally:
+        over.set()
+        watcher.join()
+    assert report.failed == {} and len(report.outcomes) == 2
+    assert most[0] == 1
