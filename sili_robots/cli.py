@@ -137,8 +137,8 @@ def _out_of_memory(err: BaseException) -> bool:
 
 
 def _allocation(err: BaseException) -> str:
-    """torch's "you tried to allocate 92000000000 bytes" as "85.68 GiB were asked for", in the
-    units of numpy's "Unable to allocate 5.68 PiB for an array" ("5.68 PiB were asked for")."""
+    """torch's "you tried to allocate 92000000000 bytes" as "85.7 GiB were asked for", as
+    numpy's "Unable to allocate 5.68 PiB for an array" reads "5.68 PiB were asked for"."""
     match = re.search(r"allocate (\d+) bytes", str(err))
     if match:
         return f"{_binary_size(int(match.group(1)))} were asked for"

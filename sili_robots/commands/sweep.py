@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from sili_robots.agent import LATENT_CHOICES, METHODS, PROFILES
+from sili_robots.build import unversioned_note
 from sili_robots.commands.common import (
     CONTROLLERS_HELP,
     LATENT_HELP,
@@ -208,8 +209,6 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
     )
     check_task_arguments(spec)  # new sweeps only, as --latent above
     _note_unused_settings(spec, parse_settings(args.agent_set))
-    from sili_robots.build import unversioned_note
-
     for task in spec.tasks:
         note = unversioned_note(task)
         if note:
