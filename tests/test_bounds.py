@@ -329,7 +329,10 @@ def test_bounds_of_another_controller_are_its_own_and_never_stored(tmp_path):
     assert osc["bounds"]["oracle"]["task_reward"] < mink["bounds"]["oracle"]["task_reward"] - 1
     for args, said in (
         (["--all", "--controller", "osc"], "apply to one TASK, not to --all"),
-        (["sawyer-reach", "--controller", "osc", "--write", str(tmp_path / "b.json")], "--write"),
+        (
+            ["sawyer-reach", "--controller", "osc", "--write", str(tmp_path / "b.json")],
+            "--write stores each task version at its default arguments, not controller='osc';",
+        ),
         (["circle-3", "--controller", "osc"], "task 'circle-3' takes no argument controller"),
     ):
         done = sili_in_process("bounds", *args)

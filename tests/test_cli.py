@@ -97,7 +97,8 @@ def test_bad_input_a_user_types_names_the_command_the_value_and_what_is_allowed(
         (
             ["train", "--task", "circle-3", "--controller", "osc", "--out", str(tmp_path / "r")],
             "sili train: error: task 'circle-3' takes no argument controller (--controller, "
-            "--env-kwarg); its arguments: variant, horizon, outside_margin",
+            "--env-kwarg); its arguments: horizon, outside_margin, near_moves (variant is fixed by "
+            "the name)",
         ),
         (
             ["rollout", "driving", "--policy", "blind", "--interactions", "1"],

@@ -181,7 +181,7 @@ def test_bad_arguments_are_named():
         env.step(np.zeros(3))
     with pytest.raises(ConfigError, match="finite"):
         env.step(np.array([np.nan, 0.0]))
-    with pytest.raises(ConfigError, match=r"takes no argument foo \(make_task\); its arguments: v"):
+    with pytest.raises(ConfigError, match=r"takes no argument foo \(make_task\); its arguments: h"):
         make_task("circle-3", foo=1)  # gymnasium's own TypeError names neither
     assert make_task("circle-3", max_episode_steps=5, render_mode=None).spec.max_episode_steps == 5
     for wrapper in (OracleObservation, StrategyFlag):  # they read what only a task's info has

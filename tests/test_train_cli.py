@@ -430,7 +430,7 @@ def test_every_latent_kind_trains(tmp_path, latent):
         (
             ["--task", "circle-3", "--controller", "osc"],
             "task 'circle-3' takes no argument controller (--controller, --env-kwarg); its "
-            "arguments: variant, horizon, outside_margin, near_moves",
+            "arguments: horizon, outside_margin, near_moves (variant is fixed by the name)",
         ),
     ],
 )

@@ -176,10 +176,12 @@ def _task_arguments(args: argparse.Namespace, specs: list) -> dict:
         raise ConfigError("--controller and --env-kwarg apply to one TASK, not to --all")
     (spec,) = specs
     check_task_builds(spec.name, env_kwargs, "--controller, --env-kwarg")
-    if args.write and other_task_arguments(spec.gym_id, env_kwargs):
+    other = other_task_arguments(spec.gym_id, env_kwargs)
+    if args.write and other:
+        given = ", ".join(f"{k}={v!r}" for k, v in other.items())
         raise ConfigError(
-            "--write stores each task version at its default arguments; print the bounds with "
-            "other ones without it"
+            f"--write stores each task version at its default arguments, not {given}; print "
+            "the bounds with other ones without it"
         )
     return env_kwargs
 

@@ -264,9 +264,12 @@ def check_argument_names(task: str, names: Iterable[str], options: str) -> None:
     where they were given, e.g. ``--env-kwarg``)."""
     unknown = [k for k in names if not task_accepts(task, k)]
     if unknown:
+        fixed = () if is_class_path(task) else _task_class(task_spec(task)).identity_arguments
+        settable = [n for n in task_arguments(task) if n not in fixed]
         raise ConfigError(
             f"task {task!r} takes no argument {', '.join(unknown)} ({options}); its arguments: "
-            f"{', '.join(task_arguments(task)) or 'none'}"
+            f"{', '.join(settable) or 'none'}"
+            + "".join(f" ({k} is fixed by the name)" for k in fixed)
         )
 
 
