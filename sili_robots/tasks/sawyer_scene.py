@@ -31,9 +31,9 @@ centred at the origin; the robot's base sits at x = -0.56 m as in robosuite's ta
 three goals lie 3 cm above the table on a circle of radius 0.2 m around the table centre, at 0,
 120 and 240 degrees. Every interaction starts at rest with the gripper pointing down at
 (0, 0, 1.0), 0.26 m from each goal (the class's default and v0's start; v1 starts at z = 0.9),
-or at another start the task asks for (the same joint
-configuration every time, found once per start by inverse kinematics from robosuite's Sawyer
-``init_qpos``). The height plane of the strategy rule is z = 0.95 m.
+or at another start the task asks for (the same joint configuration every time, found once per
+start by inverse kinematics from robosuite's Sawyer ``init_qpos``). The height plane of the
+strategy rule is z = 0.95 m.
 """
 
 from __future__ import annotations
