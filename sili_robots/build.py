@@ -31,7 +31,7 @@ from sili_robots.tasks.registry import (
     identity_conflict,
     is_class_path,
     same_argument,
-    task_arguments,
+    settable_arguments,
     task_class,
 )
 from sili_robots.wrappers import OracleObservation, StrategyFlag
@@ -64,9 +64,9 @@ def unversioned_note(task: str | type) -> str:
     if not names:
         return ""
     return (
-        f"{task.__name__} given as a class trains with its own defaults, which need not be any "
-        "task version's, and records no version (nor a version's bounds and scene); give a "
-        f"task name instead: {', '.join(names)}"
+        f"{task.__name__} built from its class trains with the class's own defaults, which need "
+        "not be any task version's, and records no version (nor a version's bounds and scene); "
+        f"give a task name instead, or build it with make_task(NAME): {', '.join(names)}"
     )
 
 
@@ -223,8 +223,7 @@ def built_task(task: str, kwargs: dict[str, Any], options: str | None = None) ->
         raise ConfigError(f"task {task!r} with {given}: {err}") from None
     except TypeError as err:  # e.g. a required argument not given
         raise ConfigError(
-            f"task {task!r} cannot be built with {given} ({err}); its arguments: "
-            f"{', '.join(task_arguments(task)) or 'none'}"
+            f"task {task!r} cannot be built with {given} ({err}); {settable_arguments(task)}"
         ) from None
     except Exception as err:  # e.g. a simulator missing here: named, not a traceback
         raise ConfigError(

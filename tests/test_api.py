@@ -160,11 +160,11 @@ def test_a_packaged_task_given_as_its_class_is_warned_about_and_a_version_is_not
 
     from sili_robots.tasks.circle import CircleEnv
 
-    told = "CircleEnv given as a class trains with its own defaults, which need not be any task "
-    names = "give a task name instead: circle-3, circle-8, circle-continuous, circle-unequal"
+    told = "CircleEnv built from its class trains with the class's own defaults, which need not "
+    names = "make_task(NAME): circle-3, circle-8, circle-continuous, circle-unequal"
     path = "sili_robots.tasks.circle:CircleEnv"
     for task in (CircleEnv(variant="3"), path):
-        with pytest.warns(UserWarning, match=f"^{told}.*{names}$"):
+        with pytest.warns(UserWarning, match=f"^{re.escape(told)}.*{re.escape(names)}$"):
             SILI(task, method="sac", settings=FAST_AGENT)
     with warnings.catch_warnings():
         warnings.simplefilter("error", UserWarning)

@@ -3,6 +3,7 @@
 import base64
 import json
 import re
+import shutil
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -503,6 +504,23 @@ def test_a_browser_that_will_not_start_is_one_error_line_and_exit_1(monkeypatch,
     err = capsys.readouterr().err
     assert err.startswith("sili preview: error: Chromium closed its DevTools pipe")
     assert err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_a_browser_gone_before_it_reads_its_first_command_is_a_browser_error(monkeypatch):
+    """A browser that has exited by the time its first command is written (a broken pipe, on a
+    loaded machine) is told as the one it closed is, not as a traceback."""
+    from sili_robots.preview import Browser, BrowserError
+
+    popen = subprocess.Popen
+
+    def exited_at_once(*args, **kwargs):
+        proc = popen(*args, **kwargs)
+        proc.wait(timeout=30)
+        return proc
+
+    monkeypatch.setattr(subprocess, "Popen", exited_at_once)
+    with pytest.raises(BrowserError, match=r"^Chromium closed its DevTools pipe \(/"):
+        Browser(executable=shutil.which("false"), timeout=20).start()
 
 
 def test_the_circle_legend_names_the_opponents_locations_only_where_there_are_some():

@@ -93,15 +93,25 @@ def test_server_stops_when_building_the_preview_fails(monkeypatch, tmp_path):
 
 @pytest.mark.parametrize("seconds", [0.3, 0])  # 0: allowed ("a number >= 0"), served, stopped
 def test_server_stops_after_serving_for_a_while(seconds, tmp_path):
-    urls = []
-    result = preview(
-        "speaker-listener",
-        interactions=1,
-        out=None,
-        serve=True,
-        serve_seconds=seconds,
-        on_ready=lambda r: urls.append(r.url),
+    """In a thread given a minute: 0 read as "until Ctrl-C" would fail the test, not hang it."""
+    urls, results = [], []
+    serving = threading.Thread(
+        target=lambda: results.append(
+            preview(
+                "speaker-listener",
+                interactions=1,
+                out=None,
+                serve=True,
+                serve_seconds=seconds,
+                on_ready=lambda r: urls.append(r.url),
+            )
+        ),
+        daemon=True,
     )
+    serving.start()
+    serving.join(timeout=60)
+    assert not serving.is_alive(), f"still serving after a minute (serve_seconds={seconds})"
+    (result,) = results
     assert urls == [result.url] and result.url.startswith("http://127.0.0.1:")
     assert not _children_running(os.getpid(), "meshcat_child")
 

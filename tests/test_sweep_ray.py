@@ -229,7 +229,8 @@ def test_a_sweep_without_an_address_starts_its_own_ray_whatever_ray_address_says
 
 
 def test_ray_runs_at_most_workers_runs_at_once(ray_cluster, tmp_path):
-    """`--workers 1` on a cluster with room for two: one run trains at a time."""
+    """RayBackend(workers=1) (what `--workers 1` builds) on a cluster with room for two: one
+    run trains at a time."""
     import threading
     import time
 

@@ -198,7 +198,10 @@ class Browser:
             msg["sessionId"] = session
         data = json.dumps(msg).encode() + b"\0"
         while data:
-            n = os.write(self._write_fd, data)
+            try:
+                n = os.write(self._write_fd, data)
+            except BrokenPipeError:  # it exited before reading (a missing library, say)
+                raise self._gone("Chromium closed its DevTools pipe") from None
             data = data[n:]
         return self._next_id
 

@@ -264,13 +264,20 @@ def check_argument_names(task: str, names: Iterable[str], options: str) -> None:
     where they were given, e.g. ``--env-kwarg``)."""
     unknown = [k for k in names if not task_accepts(task, k)]
     if unknown:
-        fixed = () if is_class_path(task) else _task_class(task_spec(task)).identity_arguments
-        settable = [n for n in task_arguments(task) if n not in fixed]
         raise ConfigError(
-            f"task {task!r} takes no argument {', '.join(unknown)} ({options}); its arguments: "
-            f"{', '.join(settable) or 'none'}"
-            + "".join(f" ({k} is fixed by the name)" for k in fixed)
+            f"task {task!r} takes no argument {', '.join(unknown)} ({options}); "
+            f"{settable_arguments(task)}"
         )
+
+
+def settable_arguments(task: str) -> str:
+    """ "its arguments: ..." for an error: those a user may give (a registered name fixes its
+    identity arguments, Circle's ``variant``, which are said to be fixed, not offered)."""
+    fixed = [] if is_class_path(task) else sorted(_task_class(task_spec(task)).identity_arguments)
+    settable = [n for n in task_arguments(task) if n not in fixed]
+    return f"its arguments: {', '.join(settable) or 'none'}" + "".join(
+        f" ({k} is fixed by the name)" for k in fixed
+    )
 
 
 def make_task(name: str, **kwargs: Any) -> gym.Env:
