@@ -26,12 +26,12 @@ from sili_robots.plugins import class_path
 from sili_robots.runs import CONFIG, RunConfig
 from sili_robots.tasks import make_task, task_spec
 from sili_robots.tasks.registry import (
+    arguments_hint,
     check_argument_names,
     current_names_of_class,
     identity_conflict,
     is_class_path,
     same_argument,
-    settable_arguments,
     task_class,
 )
 from sili_robots.wrappers import OracleObservation, StrategyFlag
@@ -223,7 +223,7 @@ def built_task(task: str, kwargs: dict[str, Any], options: str | None = None) ->
         raise ConfigError(f"task {task!r} with {given}: {err}") from None
     except TypeError as err:  # e.g. a required argument not given
         raise ConfigError(
-            f"task {task!r} cannot be built with {given} ({err}); {settable_arguments(task)}"
+            f"task {task!r} cannot be built with {given} ({err}); {arguments_hint(task)}"
         ) from None
     except Exception as err:  # e.g. a simulator missing here: named, not a traceback
         raise ConfigError(

@@ -53,6 +53,14 @@ def _commands(html: str) -> list[dict]:
     return [umsgpack.unpackb(base64.b64decode(c)) for c in json.loads(blob)]
 
 
+def _ego_clip(cmds: list[dict]) -> tuple[dict, dict]:
+    """The ego's animation clip in a page's commands, and its position track."""
+    (anim,) = [c for c in cmds if c["type"] == "set_animation"]
+    clip = {a["path"]: a["clip"] for a in anim["animations"]}["/meshcat/ego"]
+    (track,) = [t for t in clip["tracks"] if t["name"] == ".position"]
+    return clip, track
+
+
 def test_recording_has_every_step_of_every_interaction():
     prev = _record("circle-3", interactions=2)
     rec = prev.recording
@@ -92,9 +100,7 @@ def test_html_is_self_contained_and_animates_the_recorded_rollout():
     objects = {c["path"] for c in cmds if c["type"] == "set_object"}
     for part in ("ego", "opponent", "circle", "locations/7", "trail/dot050"):
         assert f"/meshcat/{part}" in objects
-    (anim,) = [c for c in cmds if c["type"] == "set_animation"]
-    clip = {a["path"]: a["clip"] for a in anim["animations"]}["/meshcat/ego"]
-    (track,) = [t for t in clip["tracks"] if t["name"] == ".position"]
+    clip, track = _ego_clip(cmds)
     keys = {k["time"]: k["value"] for k in track["keys"]}
     ego = prev.recording.series("ego")
     assert len(keys) == len(ego)
@@ -454,9 +460,7 @@ def test_preview_seed_picks_the_game_recorded(tmp_path, capsys):
         out = tmp_path / "page.html"
         assert main(["preview", "circle-8", "--interactions", "2", "--out", str(out), *extra]) == 0
         capsys.readouterr()
-        (anim,) = [c for c in _commands(out.read_text()) if c["type"] == "set_animation"]
-        clip = {a["path"]: a["clip"] for a in anim["animations"]}["/meshcat/ego"]
-        (track,) = [t for t in clip["tracks"] if t["name"] == ".position"]
+        _, track = _ego_clip(_commands(out.read_text()))
         return [(k["time"], list(k["value"])) for k in track["keys"]]
 
     default = ego()
@@ -537,29 +541,15 @@ def test_the_circle_legend_names_the_opponents_locations_only_where_there_are_so
     assert "opponent's locations" not in [label for _, label in cont.scene.legend(cont.recording)]
 
 
-def _driving_to(lane: int | None) -> Preview:
-    """One interaction of Driving with the ego steered into ``lane`` (None: straight on)."""
-    from sili_robots.tasks import sumo_scenario as sc
-
-    def to_lane(env, _obs):
-        if lane is None:
-            return np.array([0.0], np.float32)
-        target = (lane - sc.CENTRE_LANE) * sc.LANE_WIDTH
-        return np.array([np.clip((target - env.unwrapped.ego_y) / 2.0, -1, 1)], np.float32)
-
-    name, env, _, label = make_env_and_policy("driving")
+def test_driving_caption_names_the_egos_lane_and_whether_it_was_left_at_the_red_line():
+    """Merged into the left lane (the scripted stabilizing policy): "ego in the left lane",
+    "was left at the red line"; straight on (the still policy): the centre lane, "was not"."""
+    left = _record("driving", interactions=1)
+    env = make_task("driving")
     try:
-        return Preview.record(env, to_lane, 1, 0, name, label)
+        straight = Preview.record(env, scripted_policy(env, "still"), 1, 0, "driving", "still")
     finally:
         env.close()
-
-
-def test_driving_caption_names_the_egos_lane_and_whether_it_was_left_at_the_red_line():
-    """Merged into the left lane: "ego in the left lane", "was left at the red line"; straight
-    on: the centre lane, "was not"."""
-    from sili_robots.tasks.driving import LEFT
-
-    left, straight = _driving_to(LEFT), _driving_to(None)
     caption = left.scene.caption(left.recording, left.recording.last)
     assert "; ego in the left lane" in caption and "was left at the red line" in caption
     assert "; ego in the centre lane" in left.scene.caption(left.recording, 0)

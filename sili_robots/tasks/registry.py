@@ -266,11 +266,11 @@ def check_argument_names(task: str, names: Iterable[str], options: str) -> None:
     if unknown:
         raise ConfigError(
             f"task {task!r} takes no argument {', '.join(unknown)} ({options}); "
-            f"{settable_arguments(task)}"
+            f"{arguments_hint(task)}"
         )
 
 
-def settable_arguments(task: str) -> str:
+def arguments_hint(task: str) -> str:
     """ "its arguments: ..." for an error: those a user may give (a registered name fixes its
     identity arguments, Circle's ``variant``, which are said to be fixed, not offered)."""
     fixed = [] if is_class_path(task) else sorted(_task_class(task_spec(task)).identity_arguments)
