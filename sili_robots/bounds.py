@@ -37,6 +37,7 @@ from sili_robots.errors import MAX_SEED, ConfigError, check_seed
 from sili_robots.policies.scripted import KIND_DESCRIPTIONS, available_kinds, scripted_policy
 from sili_robots.rollout import run_interactions
 from sili_robots.tasks import make_task, task_spec
+from sili_robots.tasks.registry import title_arguments
 
 BOUND_KINDS = ("random", "still", "oracle", "stabilizing", "blind", "tracking")
 DEFAULT_INTERACTIONS = 1000
@@ -168,7 +169,8 @@ def compute_bounds(
 
 def format_table(result: dict[str, Any]) -> str:
     """The bounds of one task as an aligned text table."""
-    args = "".join(f", {k}={v!r}" for k, v in result.get("task_args", {}).items())
+    named = title_arguments(result["task_id"], result.get("task_args", {}))
+    args = "".join(f", {k}={v!r}" for k, v in named.items())
     lines = [
         f"{result['task']} ({result['task_id']}{args}): {result['interactions']} interactions in "
         f"{result['games']} game{'s' if result['games'] > 1 else ''} from seed {result['seed']} "

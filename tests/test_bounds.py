@@ -11,11 +11,17 @@ import pytest
 from cli_helpers import sili as sili_in_process
 from matplotlib.collections import LineCollection
 
-from sili_robots.bounds import BOUNDS_FILE, compute_bounds, read_bounds_file, stored_bounds
+from sili_robots.bounds import (
+    BOUNDS_FILE,
+    compute_bounds,
+    format_table,
+    read_bounds_file,
+    stored_bounds,
+)
 from sili_robots.cli import main
 from sili_robots.plotting import beta_sweep, learning_curves, overview
 from sili_robots.tasks import TASKS
-from sili_robots.tasks.registry import all_versions, other_task_arguments
+from sili_robots.tasks.registry import all_versions, other_task_arguments, title_arguments
 
 REQUIRED = ("random", "still", "oracle", "stabilizing")
 
@@ -316,6 +322,24 @@ def test_the_b_sweep_draws_a_line_per_task_arguments():
     lines.pop("_nolegend_", None)  # the error bars' caps
     assert lines.keys() == {"SILI", "SILI [outside_margin=0.3]"}
     assert list(lines["SILI [outside_margin=0.3]"]) == [-10.0, -10.0]
+
+
+def test_a_bounds_table_names_the_controller_even_at_its_default():
+    """An ablation's tables side by side say which controller each measured; other tasks (and
+    a user's class) name only the arguments given."""
+    mink = {"task": "sawyer-reach", "task_id": "sili/SawyerReach-v1", "bounds": {}}
+    mink |= {"interactions": 4, "games": 2, "seed": 0}
+    osc = mink | {"task_args": {"controller": "osc"}}
+    assert format_table(mink).startswith("sawyer-reach (sili/SawyerReach-v1, controller='mink'):")
+    assert format_table(osc).startswith("sawyer-reach (sili/SawyerReach-v1, controller='osc'):")
+    circle = mink | {"task": "circle-3", "task_id": "sili/Circle3-v1"}
+    assert format_table(circle).startswith("circle-3 (sili/Circle3-v1): 4 interactions")
+    assert title_arguments("sili/SawyerReach-v0", {"horizon": 9}) == {
+        "controller": "mink",
+        "horizon": 9,
+    }
+    doors = "sili_robots.examples.two_doors:TwoDoorsEnv"
+    assert title_arguments(doors, {"horizon": 9}) == {"horizon": 9}
 
 
 def test_bounds_of_another_controller_are_its_own_and_never_stored(tmp_path):

@@ -450,6 +450,21 @@ def test_a_scripted_preview_plays_the_controller_asked_for():
         assert label == "scripted stabilizing, controller=osc"  # on the picture's title
     finally:
         env.close()
+    _, env, _, label = make_env_and_policy("sawyer-reach")  # the default is named too
+    env.close()
+    assert label == "scripted stabilizing, controller=mink"
+
+
+def test_a_trained_runs_title_names_its_controller_given_or_not(tmp_path):
+    """A controller ablation's pictures say which controller each run was trained with."""
+    for controller in ("mink", "joint_velocity"):
+        given = [] if controller == "mink" else ["--controller", controller]
+        run = tmp_path / controller
+        train = ["train", "--task", "sawyer-reach", "--method", "sac", "--interactions", "1"]
+        assert main([*train, "--set", "hidden=8", "--no-progress", "--out", str(run), *given]) == 0
+        _, env, _, label = make_env_and_policy("sawyer-reach", checkpoint=run)
+        env.close()
+        assert label == f"trained SAC, seed 0, controller={controller} ({controller})"
 
 
 def test_preview_seed_picks_the_game_recorded(tmp_path, capsys):

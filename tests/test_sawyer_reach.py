@@ -201,7 +201,7 @@ def test_cli_rollout_runs_on_sawyer(capsys):
         cli_main(["rollout", "sawyer-reach", "--policy", "stabilizing", "--interactions", "2"]) == 0
     )
     out = capsys.readouterr().out
-    assert "task=sawyer-reach" in out
+    assert "task=sawyer-reach controller='mink' policy=stabilizing" in out  # the default, named
     assert "unchanged (after the first): 1.000" in out
 
 

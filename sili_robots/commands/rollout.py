@@ -19,6 +19,7 @@ from sili_robots.commands.common import (
 from sili_robots.policies import SCRIPTED_KINDS, scripted_policy
 from sili_robots.policies.scripted import KIND_DESCRIPTIONS
 from sili_robots.rollout import run_interactions
+from sili_robots.tasks.registry import title_arguments
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -52,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
         )
     finally:
         env.close()
-    given = "".join(f" {k}={v!r}" for k, v in env_kwargs.items())
+    given = "".join(f" {k}={v!r}" for k, v in title_arguments(args.task, env_kwargs).items())
     print(f"task={args.task}{given} policy={args.policy} interactions={args.interactions}")
     if len(summary) == 1:
         print(f"task reward of the one interaction: {summary[0].task_reward:.3f}")

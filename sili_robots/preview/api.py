@@ -163,6 +163,7 @@ def make_env_and_policy(
     ``env_kwargs`` build the task for a scripted policy (a trained run's are its own)."""
     from sili_robots.policies import scripted_policy
     from sili_robots.tasks import make_task, task_spec
+    from sili_robots.tasks.registry import title_arguments
 
     name = task_spec(task).name
     if env_kwargs is not None:
@@ -184,7 +185,8 @@ def make_env_and_policy(
         env = make_task(name, **(env_kwargs or {}))
         try:
             label = "random actions" if policy == "random" else f"scripted {SCRIPTED_KIND[policy]}"
-            label += "".join(f", {k}={v}" for k, v in (env_kwargs or {}).items())
+            named = title_arguments(name, env_kwargs or {})
+            label += "".join(f", {k}={v}" for k, v in named.items())
             return name, env, scripted_policy(env, SCRIPTED_KIND[policy]), label
         except BaseException:
             env.close()
@@ -219,7 +221,7 @@ def make_env_and_policy(
     from sili_robots.runs import read_config
 
     cfg = read_config(run_dir)  # the title says what was trained, then where
-    given = "".join(f", {k}={v}" for k, v in cfg.env_kwargs.items())
+    given = "".join(f", {k}={v}" for k, v in title_arguments(run_task, cfg.env_kwargs).items())
     method = METHOD_NAMES.get(cfg.method, cfg.method)
     return name, stepped, pol, f"trained {method}, seed {cfg.seed}{given} ({run_dir.name})"
 

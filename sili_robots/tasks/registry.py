@@ -164,6 +164,19 @@ def other_task_arguments(task_id: str | None, env_kwargs: dict[str, Any]) -> dic
     return {k: v for k, v in _not_at_defaults(spec, env_kwargs).items() if k not in same}
 
 
+def title_arguments(task: str | None, env_kwargs: dict[str, Any]) -> dict[str, Any]:
+    """The task arguments a title names: the version's ``named_in_titles`` at their values
+    (Sawyer-Reach's ``controller="mink"`` when none is given), then the others given. A user's
+    class: the given ones."""
+    try:
+        spec = task_spec(str(task))
+    except ConfigError:
+        return dict(env_kwargs)
+    defaults = _defaults(spec.gym_id)
+    named = {k: defaults[k] for k in _task_class(spec).named_in_titles if k in defaults}
+    return {**named, **env_kwargs}
+
+
 def _task_class(spec: TaskSpec) -> type:
     return load_env_creator(spec.entry_point)
 

@@ -57,6 +57,7 @@ class SawyerReachEnv(RepeatedInteractionEnv):
     strategy_low: ClassVar[float] = -1.0
     strategy_high: ClassVar[float] = 1.0
     game_state_fields: ClassVar[tuple[str, ...]] = ("goal",)
+    named_in_titles: ClassVar[tuple[str, ...]] = ("controller",)
 
     def __init__(
         self,
