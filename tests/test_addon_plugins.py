@@ -120,6 +120,15 @@ class PastTheEnd(AgentAddon):
         return j + self.agent.buffer.n  # rows not stored yet: the buffer's zeros, without a word
 
 
+class AtTheEnd(AgentAddon):
+    def rl_interactions(self, j):
+        return np.full_like(j, self.agent.buffer.n)  # one past the last stored: a zero row
+
+
+class NotAnAddon:
+    pass
+
+
 class BeforeTheFirst(AgentAddon):
     def rl_interactions(self, j):
         return (j - 1).tolist()  # -1 is numpy's last row, without a word
@@ -269,10 +278,14 @@ def test_an_addon_s_flags_and_numpy_numbers_are_written_as_numbers(tmp_path, mon
 def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "my_addons.py").write_text(textwrap.dedent(PLUGIN))
+    (tmp_path / "needs_dep.py").write_text("import not_installed\n")
     cases = {
         "no_such_module:X": r"cannot load add-on class 'no_such_module:X' \(No module named",
         "my_addons:Missing": r"cannot load add-on class 'my_addons:Missing' \(AttributeError",
         "my_addons:np": r"'my_addons:np' is not a subclass of AgentAddon",
+        "my_addons:NotAnAddon": r"'my_addons:NotAnAddon' is not a subclass of AgentAddon",
+        # a module that is there but imports what is missing: not "it must be ..."
+        "needs_dep:A": r"\(No module named 'not_installed'\); importing needs_dep failed: fix it",
         "my_addons": r"add-on 'my_addons' names no class",
     }
     for path, message in cases.items():
@@ -337,6 +350,7 @@ def test_a_hook_that_returns_the_wrong_thing_is_named_with_what_it_must_return(
         "PastTheEnd": "latent_pairs must return an integer array of shape (32,) in [1, 2), got "
         "an array of shape (32,) and dtype int64, entries 3 to 3",  # at the first update
         "BeforeTheFirst": "rl_interactions must return an integer array of shape (",
+        "AtTheEnd": "rl_interactions must return an integer array of shape (",
         "Ragged": "acting_latent must return None or an array of shape (10,), got "
         "[0.0, [1.0, 2.0]]",
         "FloatPairs": "latent_pairs must return an integer array of shape (32,) in [1, ",

@@ -197,6 +197,9 @@ def test_change_pairs_are_where_the_sure_posterior_category_changes():
     post.P = np.stack([sure[0], sure[0], sure[1], flat, sure[2], sure[2]])
     # 1 -> 2 changed; 2 -> 3 and 3 -> 4 involve an interaction that cannot tell (flat)
     np.testing.assert_array_equal(post.change_pairs(), [2])
+    half = np.array([0.0, 0.5, 0.25, 0.25], np.float32)  # exactly 0.5 on its category: sure
+    post.P = np.stack([sure[0], half, sure[1], flat, sure[2], sure[2]])
+    np.testing.assert_array_equal(post.change_pairs(), [1])
     with pytest.raises(ConfigError, match=r"change_fraction must be in \[0, 1\], got -1"):
         method_config("sili", latent_change_fraction=-1.0)
 
@@ -1034,6 +1037,26 @@ def test_smirls_reward_is_the_log_likelihood_under_the_states_seen_before():
     s0 = agent.buffer.obs[0, 1:].astype(np.float64)  # before any state: a unit Gaussian at 0
     first = -0.5 * (s0**2).sum(-1) - 1.5 * np.log(2 * np.pi)
     np.testing.assert_allclose(agent.buffer.aux[0], first, rtol=1e-5)
+
+
+def test_smirl_after_a_single_state_scores_under_a_unit_spread():
+    """With H = 1 (Driving allows it) the density has seen one state after the first
+    interaction: its spread is undefined and stays the unit Gaussian's, not the floor."""
+    agent = make_agent("smirl", horizon=1, sili__beta=1.0, hidden=32)
+    rng = np.random.default_rng(3)
+    for _ in range(2):
+        agent.observe_interaction(
+            rng.normal(size=(2, 3)).astype(np.float32),
+            rng.uniform(-1, 1, (1, 2)).astype(np.float32),
+            rng.normal(size=1).astype(np.float32),
+            rng.normal(size=3).astype(np.float32),
+            0.0,
+            {"strategy": np.array([1.0, 0.0], np.float32)},
+        )
+    z = agent.buffer.obs[1, 1].astype(np.float64) - agent.buffer.obs[0, 1]  # mean: s of j = 0
+    np.testing.assert_allclose(
+        agent.buffer.aux[1, 0], -0.5 * (z**2).sum() - 1.5 * np.log(2 * np.pi), rtol=1e-5
+    )
 
 
 @pytest.mark.parametrize("method", ["sili", "sac"])

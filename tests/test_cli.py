@@ -460,6 +460,9 @@ def test_resuming_a_run_whose_record_was_lost_exits_2(tmp_path):
     metrics.write_text("\n".join(kept[:3]) + "\n")  # 2 of the checkpoint's 4 rows
     code, _, err = _main("train", "--resume", str(run), "--interactions", "6", "--no-progress")
     assert code == 2 and "checkpoint is at interaction 4 but its metrics.csv holds 2 rows" in err
+    metrics.write_text("\n".join(kept[:4]) + "\n")  # only the last row lost
+    code, _, err = _main("train", "--resume", str(run), "--interactions", "6", "--no-progress")
+    assert code == 2 and "checkpoint is at interaction 4 but its metrics.csv holds 3 rows" in err
     metrics.unlink()
     code, _, err = _main("train", "--resume", str(run), "--interactions", "6", "--no-progress")
     assert code == 2 and "metrics.csv is missing" in err

@@ -64,6 +64,12 @@ def test_held_stops_hold_every_stop_and_the_first_acts_after_the_step_failed_too
         with pytest.raises(KeyboardInterrupt), HeldStops():
             signal.raise_signal(signal.SIGINT)
             signal.raise_signal(signal.SIGINT)  # again: still held, the step must not be cut
+        with pytest.raises(KeyboardInterrupt), HeldStops():
+            signal.raise_signal(signal.SIGINT)  # Ctrl-C first, then a scheduler's stop:
+            signal.raise_signal(signal.SIGTERM)  # both held, and the first one acts
+        with pytest.raises(Terminated), HeldStops():
+            signal.raise_signal(signal.SIGTERM)
+            signal.raise_signal(signal.SIGINT)
         with pytest.raises(Terminated) as stopped, HeldStops():  # a scheduler's SIGTERM ...
             signal.raise_signal(signal.SIGTERM)
             raise ValueError("the checkpoint could not be read")  # ... not lost to an error

@@ -792,6 +792,27 @@ class _Overshooting(gym.ObservationWrapper):
         return np.asarray(obs, np.float32) * 100.0
 
 
+class _Reshaped(gym.ObservationWrapper):
+    """The task's flat observation made another shape (a 0-D or 2-D Box)."""
+
+    def __init__(self, env, shape):
+        super().__init__(env)
+        size, base = int(np.prod(shape)), env.observation_space
+        self.shape = shape
+        low, high = base.low[:size].reshape(shape), base.high[:size].reshape(shape)
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+
+    def observation(self, obs):
+        return np.asarray(obs, np.float32)[: int(np.prod(self.shape))].reshape(self.shape)
+
+
+@pytest.mark.parametrize("wrap", [OracleObservation, StrategyFlag])
+@pytest.mark.parametrize("shape", [(), (1, 2)])
+def test_a_wrapper_refuses_an_observation_that_is_not_flat(wrap, shape):
+    with pytest.raises(ConfigError, match=rf"{wrap.__name__} appends to a flat observation"):
+        wrap(_Reshaped(TwoDoorsEnv(horizon=4), shape))
+
+
 @pytest.mark.parametrize("wrap", [OracleObservation, StrategyFlag])
 def test_wrapped_observations_stay_within_the_declared_space(wrap):
     env = wrap(_Overshooting(TwoDoorsEnv(horizon=4)))
