@@ -1,5 +1,7 @@
 """Sawyer-Reach on the real MuJoCo scene: contract, seeding, observation, strategy rule."""
 
+import json
+
 import gymnasium as gym
 import mujoco
 import numpy as np
@@ -203,6 +205,30 @@ def test_cli_rollout_runs_on_sawyer(capsys):
     out = capsys.readouterr().out
     assert "task=sawyer-reach controller='mink' policy=stabilizing" in out  # the default, named
     assert "unchanged (after the first): 1.000" in out
+
+
+def test_cli_eval_plays_a_trained_run_with_another_controller(tmp_path, capsys):
+    """A transfer ablation: a policy trained with mink, played greedily with OSC."""
+    run = str(tmp_path / "r")
+    train = ["train", "--task", "sawyer-reach", "--method", "sac", "--interactions", "1"]
+    assert cli_main([*train, "--set", "hidden=8", "--no-progress", "--out", run]) == 0
+    capsys.readouterr()
+    played = {}
+    for given in ([], ["--controller", "osc"], ["--controller", "osc"]):
+        assert cli_main(["eval", run, "--interactions", "2", *given]) == 0
+        result = json.loads(capsys.readouterr().out)
+        assert result["task_args"] == {"controller": "osc" if given else "mink"}
+        played.setdefault(tuple(given), []).append(result["mean_task_reward"])
+    (own,), (osc, again) = played.values()
+    assert osc == again and osc != own  # greedy: the same game, moved by another controller
+    refused = {
+        "--controller=foo": "unknown controller 'foo'; allowed: mink, osc, joint_velocity",
+        "--env-kwarg=foo=1": "takes no argument foo (--controller, --env-kwarg)",
+        "--env-kwarg=horizon=9": "env does not fit the run in",
+    }
+    for option, message in refused.items():
+        assert cli_main(["eval", run, "--interactions", "2", option]) == 2
+        assert message in capsys.readouterr().err
 
 
 def test_the_strategy_rule_compares_the_hand_with_the_plane_itself():

@@ -6,7 +6,12 @@ import argparse
 import json
 import sys
 
-from sili_robots.commands.common import path_arg, positive_int
+from sili_robots.commands.common import (
+    add_task_args,
+    path_arg,
+    positive_int,
+    task_arguments_given,
+)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -19,16 +24,28 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="interactions to play (default 100); the reward is their mean, the stability "
         "counts those after the first, whose change the training's last interaction caused",
     )
+    add_task_args(p, only="; the run's own task, built with these instead of its own")
     p.set_defaults(run=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from sili_robots.build import built_task
     from sili_robots.evaluation import evaluate
     from sili_robots.runs import read_config
+    from sili_robots.tasks.registry import title_arguments
     from sili_robots.verdict import random_only
 
-    result = evaluate(args.run_dir, args.interactions)
-    cfg, trained = read_config(args.run_dir), result["trained_interactions"]
+    cfg, given = read_config(args.run_dir), task_arguments_given(args)
+    task_args = {**cfg.env_kwargs, **given}
+    task_env = None
+    if given:  # e.g. a policy trained with one controller, played with another
+        task_env = built_task(cfg.task_id or cfg.task, task_args, "--controller, --env-kwarg")
+    try:
+        result = evaluate(args.run_dir, args.interactions, task_env)
+    finally:
+        if task_env is not None:
+            task_env.close()
+    trained = result["trained_interactions"]
     if trained < cfg.interactions:
         print(
             f"{args.run_dir} is unfinished: this evaluates its checkpoint at interaction "
@@ -40,5 +57,7 @@ def run(args: argparse.Namespace) -> int:
             f"{args.run_dir}: its policy has not trained: {random_only(cfg, trained)}",
             file=sys.stderr,
         )
-    print(json.dumps({"run_dir": str(args.run_dir), **result}, indent=2))
+    named = title_arguments(cfg.task_id or cfg.task, task_args)  # Sawyer-Reach: the controller
+    played = {"task_args": named} if named else {}
+    print(json.dumps({"run_dir": str(args.run_dir), **played, **result}, indent=2))
     return 0
