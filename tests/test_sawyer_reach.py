@@ -217,14 +217,14 @@ def test_cli_eval_plays_a_trained_run_with_another_controller(tmp_path, capsys):
     for given in ([], ["--controller", "osc"], ["--controller", "osc"]):
         assert cli_main(["eval", run, "--interactions", "2", *given]) == 0
         result = json.loads(capsys.readouterr().out)
-        assert result["task_args"] == {"controller": "osc" if given else "mink"}
+        assert result["played_with"] == {"controller": "osc" if given else "mink"}
         played.setdefault(tuple(given), []).append(result["mean_task_reward"])
     (own,), (osc, again) = played.values()
     assert osc == again and osc != own  # greedy: the same game, moved by another controller
     refused = {
         "--controller=foo": "unknown controller 'foo'; allowed: mink, osc, joint_velocity",
         "--env-kwarg=foo=1": "takes no argument foo (--controller, --env-kwarg)",
-        "--env-kwarg=horizon=9": "env does not fit the run in",
+        "--env-kwarg=horizon=9": "horizon=9: the run in ",  # its networks are 50 steps long
     }
     for option, message in refused.items():
         assert cli_main(["eval", run, "--interactions", "2", option]) == 2

@@ -5,13 +5,16 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 from sili_robots.commands.common import (
-    add_task_args,
+    add_env_kwarg_arg,
     path_arg,
     positive_int,
     task_arguments_given,
 )
+from sili_robots.errors import ConfigError
+from sili_robots.runs import RunConfig
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -24,7 +27,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="interactions to play (default 100); the reward is their mean, the stability "
         "counts those after the first, whose change the training's last interaction caused",
     )
-    add_task_args(p, only="; the run's own task, built with these instead of its own")
+    p.add_argument(
+        "--controller",
+        help="play with this controller (sawyer-reach: mink, osc or joint_velocity); default: "
+        "the run's own",
+    )
+    add_env_kwarg_arg(p, note="; replaces the run's own argument of that name")
     p.set_defaults(run=run)
 
 
@@ -39,6 +47,7 @@ def run(args: argparse.Namespace) -> int:
     task_args = {**cfg.env_kwargs, **given}
     task_env = None
     if given:  # e.g. a policy trained with one controller, played with another
+        _check_horizon(args.run_dir, cfg, given)
         task_env = built_task(cfg.task_id or cfg.task, task_args, "--controller, --env-kwarg")
     try:
         result = evaluate(args.run_dir, args.interactions, task_env)
@@ -57,7 +66,24 @@ def run(args: argparse.Namespace) -> int:
             f"{args.run_dir}: its policy has not trained: {random_only(cfg, trained)}",
             file=sys.stderr,
         )
-    named = title_arguments(cfg.task_id or cfg.task, task_args)  # Sawyer-Reach: the controller
-    played = {"task_args": named} if named else {}
-    print(json.dumps({"run_dir": str(args.run_dir), **played, **result}, indent=2))
+    played = title_arguments(cfg.task_id or cfg.task, task_args)  # Sawyer-Reach: the controller
+    print(json.dumps({"run_dir": str(args.run_dir), "played_with": played, **result}, indent=2))
     return 0
+
+
+def _check_horizon(run_dir: Path, cfg: RunConfig, given: dict) -> None:
+    """A trained run plays the horizon it was trained with: its networks and stored
+    interactions are that long (said here in the options' words, before anything loads)."""
+    from sili_robots.tasks.registry import task_defaults
+
+    if "horizon" not in given:
+        return
+    try:
+        own = cfg.env_kwargs.get("horizon", task_defaults(str(cfg.task_id)).get("horizon"))
+    except ConfigError:  # a user's task: the checkpoint's own check names the sizes
+        return
+    if own is not None and given["horizon"] != own:
+        raise ConfigError(
+            f"--env-kwarg horizon={given['horizon']!r}: the run in {run_dir} was trained "
+            f"with horizon {own}, and a trained run plays the horizon it was trained with"
+        )

@@ -33,7 +33,7 @@ from sili_robots.runs import (
     recorded_task_id,
 )
 from sili_robots.sweep.state import RESULTS, RUNS_DIR, RUNS_TABLE
-from sili_robots.tasks.registry import task_arguments_key, task_defaults
+from sili_robots.tasks.registry import task_arguments_key, title_arguments
 
 ID_COLUMNS = (
     "run",
@@ -137,12 +137,7 @@ def _identity(run_dir: Path, cfg: dict) -> dict:
 
 def _controller(task_id: str | None, env_kwargs: dict) -> str:
     """The controller a run used, named or its task's default alike ("" for tasks without)."""
-    if "controller" in env_kwargs:
-        return str(env_kwargs["controller"])
-    try:
-        return str(task_defaults(str(task_id)).get("controller", ""))
-    except ConfigError:  # a task this package does not register
-        return ""
+    return str(title_arguments(task_id, env_kwargs).get("controller", ""))
 
 
 SUMMARY_NUMBERS = ("final_task_reward", "final_stability", "wall_time_s")

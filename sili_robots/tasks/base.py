@@ -65,8 +65,8 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
     #: constructor arguments that say which task it is (Circle's ``variant``): each registered
     #: name fixes them, so a run built by name cannot be another task under that name
     identity_arguments: ClassVar[frozenset[str]] = frozenset()
-    #: constructor arguments an ablation varies (Sawyer-Reach's ``controller``): ``sili rollout``,
-    #: ``sili bounds`` and a preview's title name them at their defaults too
+    #: constructor arguments an ablation varies (Sawyer-Reach's ``controller``): the outputs of
+    #: ``rollout``, ``bounds``, ``eval`` and ``preview`` name them at their defaults too
     named_in_titles: ClassVar[tuple[str, ...]] = ()
     #: the arguments the instance was built with, by name (None when some have no name), so a
     #: run given an instance can record them and rebuild the same task

@@ -165,9 +165,10 @@ def other_task_arguments(task_id: str | None, env_kwargs: dict[str, Any]) -> dic
 
 
 def title_arguments(task: str | None, env_kwargs: dict[str, Any]) -> dict[str, Any]:
-    """The task arguments a title names: the version's ``named_in_titles`` at their values
-    (Sawyer-Reach's ``controller="mink"`` when none is given), then the others given. A user's
-    class: the given ones."""
+    """The task arguments an output names (titles, ``sili eval``'s JSON, a sweep's controller
+    column): the version's ``named_in_titles`` at their values (Sawyer-Reach's
+    ``controller="mink"`` when none is given), then the others given. A user's class: the given
+    ones."""
     try:
         spec = task_spec(str(task))
     except ConfigError:
