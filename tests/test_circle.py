@@ -144,3 +144,25 @@ def test_every_location_reachable_and_detour_feasible():
         assert np.linalg.norm(env.position) >= RADIUS
         env.location = (env.location + 1) % 8
         env.reset()
+
+
+def test_the_continuous_first_strategy_is_drawn_from_the_whole_circle():
+    env = make_task("circle-continuous").unwrapped
+    angles = []
+    for seed in range(200):
+        env.reset(seed=seed)
+        angles.append(env.angle)
+    angles = np.array(angles)
+    assert angles.min() >= 0.0 and angles.max() < 2 * math.pi
+    # each quarter of the circle gets about a quarter of the draws
+    counts = np.bincount((angles // (math.pi / 2)).astype(int), minlength=4)
+    assert counts.min() > 0.15 * len(angles), counts
+
+
+def test_on_v0_the_tracking_reference_ends_inside_so_the_opponent_always_moves_on():
+    env = make_task("sili/Circle3-v0")
+    summary = run_interactions(env, scripted_policy(env, "tracking"), 12, seed=0)
+    assert all(s.strategy_changed for s in summary[1:])
+    task = env.unwrapped
+    assert task.ends_inside(task.position)
+    assert np.linalg.norm(task.position) > 0.99  # it waits at the circle, just inside

@@ -15,7 +15,9 @@ from sili_robots.policies import scripted_policy
 from sili_robots.tasks import make_task
 from sili_robots.tasks import sumo_scenario as sc
 from sili_robots.tasks.driving import (
+    CENTRE,
     LEFT,
+    MAX_LATERAL_OFFSET,
     RIGHT,
     DrivingEnv,
     lane_of,
@@ -410,3 +412,24 @@ def test_the_scenario_cache_key_covers_the_routes(monkeypatch):
     key = sc.scenario_key()
     monkeypatch.setattr(sc, "OPPONENT_SPEED", 12.0)
     assert sc.scenario_key() != key
+
+
+def test_at_the_right_road_edge_the_ego_stays_on_the_road(env):
+    env.reset(seed=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # an observation outside its space warns
+        for _ in range(env.horizon):
+            obs, *_ = env.step(np.array([-1.0], np.float32))
+            assert env.ego_y >= -MAX_LATERAL_OFFSET - 1e-6
+    assert env.ego_y < -sc.LANE_WIDTH  # in the right lane, at its edge
+    assert env.ego_y == pytest.approx(-MAX_LATERAL_OFFSET, abs=0.05)
+    assert obs[1] * sc.LANE_WIDTH == pytest.approx(env.ego_y, abs=1e-5)
+
+
+def test_lane_edges_belong_to_the_centre_lane_on_both_sides():
+    edge = sc.LANE_WIDTH / 2
+    assert lane_of(edge) == lane_of(-edge) == CENTRE
+    assert lane_of(edge + 1e-9) == LEFT and lane_of(-edge - 1e-9) == RIGHT
+    # passed on the left edge of the centre lane: the opponent cuts in leftwards (centre, lean)
+    assert next_target_lane(False, edge) == LEFT
+    assert next_target_lane(False, -edge) == RIGHT

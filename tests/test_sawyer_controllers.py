@@ -2,6 +2,7 @@
 
 import re
 
+import mujoco
 import numpy as np
 import pytest
 from benchmark_scripts import load_script
@@ -10,7 +11,14 @@ from sili_robots.controllers import CONTROLLER_NAMES, controller_class
 from sili_robots.errors import ConfigError
 from sili_robots.tasks import make_task
 from sili_robots.tasks.sawyer_reach import RISE_MARGIN, action_toward
-from sili_robots.tasks.sawyer_scene import GOALS, PLANE_Z, SERVO_KP, scene_model
+from sili_robots.tasks.sawyer_scene import (
+    GOALS,
+    PLANE_Z,
+    SERVO_KP,
+    VELOCITY_LIMITS,
+    SawyerScene,
+    scene_model,
+)
 
 ABOVE_PLANE = GOALS.copy()
 ABOVE_PLANE[:, 2] = PLANE_Z + RISE_MARGIN
@@ -243,3 +251,49 @@ def test_gravity_compensation_counts_against_the_torque_limits():
     arm's torque limits bound the compensation too, as on the robot."""
     for actuation in ("position", "velocity"):
         assert scene_model(actuation).jnt_actgravcomp[:7].tolist() == [1] * 7
+
+
+def test_the_velocity_servos_cap_joint_speeds_at_the_sawyers_limits():
+    scene = SawyerScene("velocity")
+    scene.reset()
+    m, d, arm = scene.model, scene.data, scene.arm
+    ranges = m.actuator_ctrlrange[arm.velocity_actuators]
+    np.testing.assert_allclose(ranges, np.stack([-VELOCITY_LIMITS, VELOCITY_LIMITS], 1))
+    assert m.actuator_ctrllimited[arm.velocity_actuators].all()
+    # the wrist (joint 6) already turning at its limit, asked for twice the limit: the servo
+    # pushes no further (its reference is clamped to the limit), so the joint does not speed up
+    joint, vmax = 6, VELOCITY_LIMITS[6]
+    act, dof = arm.velocity_actuators[joint], arm.dof_adr[joint]
+    d.qvel[dof] = vmax
+    d.ctrl[act] = 2 * vmax
+    mujoco.mj_forward(m, d)
+    assert abs(d.actuator_force[act]) < 1e-6, d.actuator_force[act]
+    mujoco.mj_step(m, d, arm.n_substeps)  # one control step
+    assert d.qvel[dof] <= vmax + 1e-6, d.qvel[dof]
+
+
+def test_a_reset_position_scene_stays_at_rest_in_its_home_configuration():
+    scene = SawyerScene("position")
+    scene.reset()
+    m, d, arm = scene.model, scene.data, scene.arm
+    home = np.array(arm.home_qpos[arm.qpos_adr])
+    np.testing.assert_allclose(d.ctrl[arm.position_actuators], home)
+    start = scene.ee_pos.copy()
+    mujoco.mj_step(m, d, 5 * arm.n_substeps)  # 0.25 s with no controller
+    mujoco.mj_forward(m, d)
+    assert np.abs(d.qpos[arm.qpos_adr] - home).max() < 1e-2
+    assert np.linalg.norm(scene.ee_pos - start) < 5e-3
+
+
+def test_the_ik_step_keeps_every_joint_within_the_sawyers_speed_limits():
+    env = make_task("sawyer-reach").unwrapped
+    env.reset(seed=0)
+    ctrl, arm = env.controller, env.scene.arm
+    fastest = 0.0
+    for far in ([0.3, 0.3, -0.15], [-0.3, 0.3, 0.1], [0.25, -0.35, 0.0]):
+        v = ctrl.ik_step(env.scene.ee_pos + np.array(far))  # far beyond one step's reach
+        ratio = np.abs(v[arm.dof_adr]) / arm.velocity_limits
+        assert ratio.max() <= 1.0 + 1e-6, ratio
+        fastest = max(fastest, ratio.max())
+    assert fastest > 0.9  # a far target is pursued at the limit: the limit binds
+    env.close()

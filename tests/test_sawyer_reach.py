@@ -294,3 +294,17 @@ def test_goals_differ_in_worth_as_docs_say():
         costs.append(-played[1].task_reward)
     env.close()
     assert costs == pytest.approx([2.73, 2.50, 2.57], abs=0.01)
+
+
+def test_a_diverged_simulation_is_named_with_its_controller(monkeypatch):
+    env = make_task("sawyer-reach").unwrapped
+    env.reset(seed=0)
+    real_step = env.controller.step
+
+    def diverging(velocity):
+        real_step(velocity)
+        env.scene.data.qpos[env.scene.arm.qpos_adr[0]] = np.nan
+
+    monkeypatch.setattr(env.controller, "step", diverging)
+    with pytest.raises(RuntimeError, match=r"simulation diverged under controller 'mink'"):
+        env.step(np.zeros(3, np.float32))

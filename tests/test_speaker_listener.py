@@ -5,11 +5,19 @@ import warnings
 import numpy as np
 import pytest
 
+from sili_robots.errors import ConfigError
 from sili_robots.policies import scripted_policy
 from sili_robots.policies.scripted import Revealed
 from sili_robots.rollout import run_interactions
 from sili_robots.tasks import make_task
-from sili_robots.tasks.speaker_listener import ARENA, GOALS, MAPPINGS, SPEAKER
+from sili_robots.tasks.speaker_listener import (
+    ARENA,
+    GOALS,
+    MAPPINGS,
+    SPEAKER,
+    VISIT_RADIUS,
+    SpeakerListenerEnv,
+)
 from sili_robots.wrappers import StrategyFlag
 
 
@@ -227,3 +235,25 @@ def test_an_interactions_end_strategy_is_the_one_after_its_last_step():
     ends = [seen[(j + 1) * horizon - 1] for j in range(40)]
     assert [s.end_strategy_id for s in summaries] == ends
     assert any(s.end_strategy_id != seen[j * horizon] for j, s in enumerate(summaries))
+
+
+def test_the_speaker_may_stand_on_the_arenas_edge_but_not_beyond():
+    env = SpeakerListenerEnv(speaker=(ARENA, -ARENA))
+    np.testing.assert_array_equal(env.speaker, [2.0, -2.0])
+    env.reset(seed=0)
+    env.step(np.zeros(2))
+    with pytest.raises(ConfigError, match=r"speaker must be an \(x, y\) position in the arena"):
+        SpeakerListenerEnv(speaker=(0.0, -ARENA - 1e-9))
+
+
+def test_a_visit_counts_on_the_visit_circle_itself_and_not_beyond():
+    env = make_task("sili/SpeakerListener-v0").unwrapped
+    env.reset(seed=0)
+    env.position = SPEAKER + np.array([VISIT_RADIUS, 0.0])  # exactly 0.3 away (no rounding)
+    assert np.linalg.norm(env.position - SPEAKER) == VISIT_RADIUS
+    env.step(np.zeros(2))
+    assert env.visited_now and env.locked
+    env.reset(seed=0)
+    env.position = SPEAKER + np.array([VISIT_RADIUS + 1e-6, 0.0])
+    env.step(np.zeros(2))
+    assert not env.visited_now

@@ -1,6 +1,7 @@
 """The shared task contract, checked on every registered task."""
 
 import functools
+import math
 import re
 import warnings
 from typing import ClassVar
@@ -14,7 +15,7 @@ from gymnasium.utils.env_checker import check_env
 from sili_robots.errors import ConfigError
 from sili_robots.examples.two_doors import TwoDoorsEnv
 from sili_robots.tasks import TASKS, RepeatedInteractionEnv, make_task
-from sili_robots.tasks.circle import CircleEnv
+from sili_robots.tasks.circle import ARENA, RADIUS, CircleEnv
 from sili_robots.wrappers import OracleObservation, StrategyFlag
 
 LIGHT_TASKS = [n for n in TASKS if n.startswith(("circle", "speaker"))]
@@ -179,8 +180,13 @@ def test_bad_arguments_are_named():
     env.reset(seed=0)
     with pytest.raises(ConfigError, match=r"shape \(2,\).*got shape \(3,\)"):
         env.step(np.zeros(3))
-    with pytest.raises(ConfigError, match="finite"):
-        env.step(np.array([np.nan, 0.0]))
+    # refused as an action, before it moves the ego (the NaN reward of a move would be
+    # refused as not finite too, after the damage)
+    position = env.position.copy()
+    for bad in (np.nan, np.inf):
+        with pytest.raises(ConfigError, match=r"action must be finite, got \["):
+            env.step(np.array([bad, 0.0]))
+    np.testing.assert_array_equal(env.position, position)
     with pytest.raises(ConfigError, match=r"takes no argument foo \(make_task\); its arguments: h"):
         make_task("circle-3", foo=1)  # gymnasium's own TypeError names neither
     assert make_task("circle-3", max_episode_steps=5, render_mode=None).spec.max_episode_steps == 5
@@ -819,3 +825,48 @@ def test_wrapped_observations_stay_within_the_declared_space(wrap):
     obs, _ = env.reset(seed=0)
     assert env.observation_space.contains(obs)
     assert env.observation_space.contains(env.step(env.action_space.sample())[0])
+
+
+def test_restoring_a_game_saved_at_its_first_interaction_reports_no_change():
+    env = make_task("circle-3").unwrapped
+    _, first = env.reset(seed=0)
+    saved = env.game_state()
+    assert saved["last_strategy_id"] is None and first["strategy_changed"] is False
+    fresh = make_task("circle-3").unwrapped
+    _, info = fresh.restore_game_state(saved)
+    assert info["strategy_changed"] is False
+    assert info["interaction"] == 0 and info["strategy_id"] == first["strategy_id"]
+    # a later boundary with an unchanged strategy: also no change
+    env.position = env.position * 0 + [0.0, 1.5]  # end outside: circle-3 holds its location
+    for _ in range(env.horizon):
+        env.step([0.0, 0.0])
+    _, info = env.reset()
+    later = env.game_state()
+    _, restored = make_task("circle-3").unwrapped.restore_game_state(later)
+    assert restored["strategy_changed"] is info["strategy_changed"] is False
+
+
+def test_strategy_ids_are_the_same_within_1e_9_and_no_further():
+    env = make_task("circle-3")
+    _, info = env.reset(options={"strategy": 1 - 1e-12})  # rounding: it is 1
+    assert info["strategy_id"] == 1
+    with pytest.raises(ConfigError, match=r"unknown strategy 0.999999; allowed: 0, 1, 2"):
+        env.reset(options={"strategy": 1 - 1e-6})
+    task = make_task("circle-continuous").unwrapped
+    task.reset(seed=0, options={"strategy": 1.0})
+    task.step(np.zeros(2))
+    task.angle = 1.0 + 1e-6  # a (tiny) change of strategy within the interaction
+    *_, info = task.step(np.zeros(2))
+    assert info["strategy_changed"] is True
+    assert math.isclose(info["strategy_id"], 1.0 + 1e-6)
+
+
+def test_outside_margin_range_is_closed_at_zero_and_open_at_its_top():
+    assert CircleEnv(outside_margin=0.0).outside_margin == 0.0
+    assert CircleEnv(outside_margin=0.999).outside_margin == 0.999
+    with pytest.raises(
+        ConfigError, match=r"outside_margin must be a number in \[0, 1\) .*got 1\.0$"
+    ):
+        CircleEnv(outside_margin=ARENA - RADIUS)
+    with pytest.raises(ConfigError, match=r"outside_margin must be"):
+        CircleEnv(outside_margin=-1e-9)
