@@ -20,6 +20,7 @@ from sili_robots.agent.latent import (
     category_groups,
     decoder_targets,
     gumbel_straight_through,
+    target_scale,
     transitions,
 )
 from sili_robots.agent.matmul import onednn_available
@@ -1173,3 +1174,340 @@ def test_behaviour_groups_are_led_by_their_most_used_category():
         Heads(), buffer, "discrete", 3, np.random.default_rng(0), merge_threshold=0.5
     )
     assert list(cache._behaviour_groups(np.array([0, 0, 0, 1, 1, 2]))) == [0, 0, 2]
+
+
+def test_the_critic_sees_the_previous_interactions_latent_within_and_across_interactions():
+    agent = _agent()
+    _fill(agent, 6)
+    agent.Z = np.eye(4, dtype=np.float32)[[0, 1, 2, 3, 0, 1, 2]] * np.arange(1, 8)[:, None]
+    x, _, _, x2 = agent.sample_batches(50, beta=0.5)
+    x, x2 = x.reshape(-1, x.shape[-1]).numpy(), x2.reshape(-1, x2.shape[-1]).numpy()
+    b = agent.buffer
+    seen_first = False
+    for row, row2 in zip(x, x2, strict=True):
+        j, t = (int(i[0]) for i in np.where((b.obs[:, :-1] == row[:3]).all(-1)))
+        prev = agent.Z[j - 1] if j >= 1 else np.zeros(4, np.float32)  # z^{j-1}; none for j = 0
+        seen_first |= j == 0
+        np.testing.assert_array_equal(row[7:11], prev)
+        if t < H - 1:  # the next step of the same interaction: still z^j, z^{j-1}
+            np.testing.assert_array_equal(row2[7:11], prev)
+    assert seen_first
+
+
+def test_partial_stability_does_not_count_the_first_observations_flag_again():
+    agent = _agent(latent="partial")
+    flags = [np.array([1, 0, 0, 1, 0, 0, 0], np.float32)] * 2  # obs_0..obs_H, next_first
+    _fill(agent, 2, flags)
+    stats = agent._stats(1, np.array([0, 0, 0], np.float32), {})
+    assert stats.stability_reward == -1.0  # only the flag at t = 3; obs_0's belongs to j - 1
+
+
+def test_a_continuous_latent_that_stays_put_is_logged_unchanged():
+    agent = _agent(latent="continuous")
+    _fill(agent, 3)
+    agent.Z = np.array([[0, 0, 0, 0], [1, 0, 0, 0], [1, 0, 0, 0], [1, 2, 0, 0]], np.float32)
+    assert [agent._stats(j, np.zeros(3, np.float32), {}).latent_changed for j in range(3)] == [
+        False,
+        False,
+        True,
+    ]
+
+
+def test_an_update_takes_horizon_times_updates_per_step_sac_steps_carrying_fractions():
+    agent = _agent(random_interactions=0, updates_per_step=0.3)
+    _fill(agent, 3)
+    steps = []
+    for j in range(3):
+        agent.update(j)
+        state = agent.sac.critic_opt.state[next(agent.sac.critic.parameters())]
+        steps.append(int(state["step"]) if state else 0)
+    assert steps == [1, 3, 4]  # credit 1.5, 1.5 + 1.5 = 3.0, 4.5 (H = 5)
+
+
+def test_an_update_trains_on_the_reward_weighted_by_the_agents_b():
+    agent = _agent("stable", latent="partial", random_interactions=0, updates_per_step=0.2)
+    _fill(agent, 3, [np.array([0, 1, 0, 0, 1, 0, 1], np.float32)] * 3)
+    assert agent.beta == 1.0
+    seen = []
+    update = agent.sac.update
+    agent.sac.update = lambda x, a, r, x2: (
+        seen.append((r.clone(), x2.clone())) or update(x, a, r, x2)
+    )
+    agent.update(3)
+    assert len(seen) == 1
+    r, x2 = seen[0]
+    np.testing.assert_array_equal(r.numpy(), -x2[:, 2].numpy())  # R_stable alone: -flag
+
+
+def test_the_latent_model_learns_each_pair_from_the_previous_interaction_and_the_next():
+    agent = _agent()
+    _fill(agent, 8)
+    b = agent.buffer
+    calls = []
+    loss = agent.model.loss
+
+    def spy(prev, obs, act, next_obs, rew):
+        calls.append((prev.clone(), obs.clone(), act.clone(), next_obs.clone(), rew.clone()))
+        return loss(prev, obs, act, next_obs, rew)
+
+    agent.model.loss = spy
+    agent.update_latent_model(5)
+    assert len(calls) == 5
+    for prev, obs, act, next_obs, rew in calls:
+        j = np.array([np.where((b.obs[: b.n, 0] == o[0].numpy()).all(-1))[0][0] for o in obs])
+        assert (j >= 1).all()  # interaction 0 has no previous one to infer z^0 from
+        o, a, r = (torch.from_numpy(x[j]) for x in (b.obs, b.act, b.rew))
+        torch.testing.assert_close(obs, o[:, :-1], rtol=0, atol=0)
+        torch.testing.assert_close(next_obs, o[:, 1:], rtol=0, atol=0)
+        torch.testing.assert_close(act, a, rtol=0, atol=0)
+        torch.testing.assert_close(rew, r, rtol=0, atol=0)
+        expected = transitions(*(torch.from_numpy(x[j - 1]) for x in (b.obs, b.act, b.rew)))
+        torch.testing.assert_close(prev, expected, rtol=0, atol=0)
+
+
+def test_rl_batches_draw_from_every_stored_interaction_the_newest_too():
+    agent = _agent("lili")
+    _fill(agent, 3)
+    x, _, _, _ = agent.sample_batches(20, beta=0.0)
+    rows = x[..., :3].reshape(-1, 3).numpy()
+    obs = agent.buffer.obs[: agent.buffer.n, :-1]
+    j = {int(np.where((obs == r).all(-1))[0][0]) for r in rows}
+    assert j == {0, 1, 2}
+
+
+def _round_trip(a1, a2):
+    blob = io.BytesIO()
+    torch.save(a1.state_dict(), blob)
+    blob.seek(0)
+    a2.load_state_dict(torch.load(blob, weights_only=False))
+
+
+def test_a_checkpoint_restores_the_update_credit():
+    a1 = _agent(random_interactions=0, updates_per_step=0.3)
+    _fill(a1, 2)
+    a1.update(0)
+    assert a1._update_credit == pytest.approx(0.5)
+    a2 = _agent(random_interactions=0, updates_per_step=0.3)
+    _round_trip(a1, a2)
+    assert a2._update_credit == pytest.approx(0.5)
+
+
+def test_a_checkpoint_restores_torchs_random_state_for_the_next_draws():
+    """A resumed run draws the actions the uninterrupted one would (no reseeding between)."""
+    a1 = _agent()
+    _fill(a1, 3)
+    obs = np.ones(3, np.float32)
+    torch.manual_seed(11)
+    state = a1.state_dict()
+    act1 = a1.act(obs)  # the next draw after the save
+    a2 = _agent()
+    torch.manual_seed(0)  # torch's state moved on in between
+    a2.load_state_dict(state)
+    np.testing.assert_array_equal(act1, a2.act(obs))
+
+
+def test_a_checkpoint_restores_smirls_state_density():
+    a1 = _agent("smirl", sili__beta=1.0)
+    _fill(a1, 3)
+    a2 = _agent("smirl", sili__beta=1.0)
+    _round_trip(a1, a2)
+    assert a2.smirl.count == a1.smirl.count == 3 * H
+    np.testing.assert_array_equal(a2.smirl.mean, a1.smirl.mean)
+    np.testing.assert_array_equal(a2.smirl.m2, a1.smirl.m2)
+
+
+def test_a_checkpoint_restores_the_merged_category_mapping():
+    a1 = _agent()
+    a1.latents.category_map = np.array([0, 0, 2, 2])
+    a2 = _agent()
+    _round_trip(a1, a2)
+    np.testing.assert_array_equal(a2.latents.category_map, [0, 0, 2, 2])
+
+
+def test_latents_refresh_every_refresh_every_interactions_and_not_when_told_not_to():
+    agent = _agent(model__refresh_every=4)
+    refreshes = []
+    refresh = agent.latents.refresh
+    agent.latents.refresh = lambda: refreshes.append(agent.buffer.n) or refresh()
+    _fill(agent, 9)
+    assert refreshes == [4, 8]
+    rng = np.random.default_rng(5)
+    for _ in range(4):  # stored interactions 10..13: 12 would refresh, but not when told not to
+        agent.observe_interaction(
+            rng.normal(size=(H + 1, 3)).astype(np.float32),
+            np.zeros((H, 2), np.float32),
+            np.zeros(H, np.float32),
+            np.zeros(3, np.float32),
+            0.0,
+            {"strategy": np.zeros(2, np.float32)},
+            refresh=False,
+        )
+    assert refreshes == [4, 8]
+
+
+@pytest.mark.parametrize(
+    ("path", "value", "message"),
+    [
+        ("sac.tau", 1.5, r"sac.tau must be in \[0, 1\], got 1.5"),
+        ("model.dim", 0, r"model.dim must be >= 1, got 0"),
+        ("model.batch", 0, r"model.batch must be >= 1, got 0"),
+        ("model.refresh_every", 0, r"model.refresh_every must be >= 1, got 0"),
+        ("sili.scale", -1.0, r"sili.scale must be >= 0, got -1"),
+        ("sili.smirl_std_floor", 0.0, r"sili.smirl_std_floor must be >= 1e-09, got 0"),
+        ("sac.random_interactions", -1, r"sac.random_interactions must be >= 0, got -1"),
+        ("sili.scale", float("inf"), r"sili.scale must be a finite number, got inf"),
+    ],
+)
+def test_a_setting_out_of_its_range_is_refused_by_name(path, value, message):
+    with pytest.raises(ConfigError, match=message):
+        run_config("sili", **{path.replace(".", "__"): value})
+
+
+def test_the_true_latent_is_part_of_the_policys_input():
+    agent = make_agent("sili", "true", horizon=5, hidden=32, strategy_dim=2)
+    assert agent.n_latents == 2 and agent.in_dim == 3 + 2 * 2
+    assert make_agent("lili", "true", horizon=5, hidden=32, strategy_dim=2).in_dim == 3 + 2
+
+
+def test_a_discrete_head_predicting_the_raw_targets_has_no_error():
+    torch.manual_seed(0)
+    model = LatentModel(3, 2, latent_dim=4, hidden=16, kind="discrete", usage_bonus=0.0)
+    n, h = 6, 5
+    step = torch.tensor([1.0, -2.0, 3.0])
+    obs = torch.cumsum(step.expand(n, h + 1, 3), 1)  # s' - s = step on every transition
+    rew = torch.full((n, h), 7.0)
+    last = model.decoder[-1]
+    with torch.no_grad():
+        last.weight.zero_()
+        last.bias.copy_(torch.cat([step, torch.tensor([7.0])]).repeat(4))  # every head exact
+    prev = torch.randn(n, h, 3 + 2 + 1 + 3)
+    loss = model.loss(prev, obs[:, :-1], torch.randn(n, h, 2), obs[:, 1:], rew)
+    assert float(loss.detach()) == 0.0
+
+
+BATCH = 8
+
+
+def _estimator_model(estimator, bonus):
+    torch.manual_seed(0)
+    m = LatentModel(
+        3, 2, latent_dim=2, hidden=4, kind="discrete", estimator=estimator, usage_bonus=bonus
+    )
+    with torch.no_grad():
+        # encoder: category 0 when the previous interaction's first input is positive, else 1
+        for p in m.parameters():
+            p.zero_()
+        m.phi[0].weight[0, 0], m.phi[0].weight[1, 0] = 1.0, -1.0
+        m.phi[2].weight.copy_(torch.eye(4))
+        m.head.weight[0, 0], m.head.weight[1, 1] = 50.0, 50.0
+    return m
+
+
+def _estimator_data(seed=0):
+    g = torch.Generator().manual_seed(seed)
+    obs = torch.randn(BATCH, H + 1, 3, generator=g)
+    return obs, torch.randn(BATCH, H, 2, generator=g), torch.randn(BATCH, H, generator=g)
+
+
+def _first_inputs(signs):
+    prev = torch.zeros(BATCH, H, 9)
+    prev[..., 0] = torch.tensor(signs, dtype=torch.float32)[:, None]
+    return prev
+
+
+def _estimator_loss(m, signs, obs, act, rew):
+    with torch.no_grad():
+        return float(m.loss(_first_inputs(signs), obs[:, :-1], act, obs[:, 1:], rew))
+
+
+def test_the_marginal_likelihood_prefers_the_category_whose_head_predicts_the_interaction():
+    obs, act, rew = _estimator_data()
+    m = _estimator_model("marginal", 0.0)
+    with torch.no_grad():  # head 0 predicts the mean target, head 1 is far off
+        target = torch.cat([obs[:, 1:] - obs[:, :-1], rew[..., None]], -1).reshape(-1, 4)
+        bias = m.decoder[-1].bias.view(2, 4)
+        bias[0], bias[1] = target.mean(0), target.mean(0) + 5 * target.std(0)
+    assert _estimator_loss(m, [1.0] * BATCH, obs, act, rew) < _estimator_loss(
+        m, [-1.0] * BATCH, obs, act, rew
+    )
+
+
+@pytest.mark.parametrize("estimator", ["marginal", "expected"])
+def test_the_usage_bonus_prefers_a_batch_spread_over_categories(estimator):
+    obs, act, rew = _estimator_data()
+    m = _estimator_model(estimator, 0.5)  # every head predicts the same: only the bonus differs
+    spread, one = [1.0, -1.0] * (BATCH // 2), [1.0] * BATCH
+    assert _estimator_loss(m, spread, obs, act, rew) < _estimator_loss(m, one, obs, act, rew) - 0.1
+
+
+def _logit_model(estimator, logits):
+    torch.manual_seed(0)
+    m = LatentModel(
+        3, 2, latent_dim=3, hidden=8, kind="discrete", estimator=estimator, usage_bonus=0.0
+    )
+    with torch.no_grad():
+        m.head.weight.zero_()
+        m.head.bias.copy_(torch.tensor(logits))
+        m.decoder[-1].bias.view(3, 4)[:, -1] += torch.tensor([0.0, 3.0, 9.0])  # distinct errors
+    return m
+
+
+def test_the_gumbel_estimator_pays_one_sampled_categorys_error():
+    g = torch.Generator().manual_seed(1)
+    prev, obs = torch.randn(1, 5, 9, generator=g), torch.randn(1, 6, 3, generator=g)
+    act, rew = torch.randn(1, 5, 2, generator=g), torch.randn(1, 5, generator=g)
+    args = (prev, obs[:, :-1], act, obs[:, 1:], rew)
+    errs = []
+    for k in range(3):  # the expected estimator with a sure encoder: category k's error
+        sure = [-100.0] * 3
+        sure[k] = 100.0
+        errs.append(float(_logit_model("expected", sure).loss(*args).detach()))
+    assert len({round(e, 3) for e in errs}) == 3
+    gumbel = _logit_model("gumbel", [0.0, 0.0, 0.0])
+    for seed in range(5):
+        torch.manual_seed(seed)
+        assert float(gumbel.loss(*args).detach()) in [pytest.approx(e, rel=1e-5) for e in errs]
+
+
+def test_the_target_scale_is_each_outputs_standard_deviation():
+    t = torch.stack([torch.tensor([0.0, 5.0, 1.0]), torch.tensor([6.0, 5.0, 1.0 + 1e-6])])[None]
+    torch.testing.assert_close(target_scale(t), torch.tensor([6.0 / 2**0.5, 1.0, 1.0]))
+
+
+def test_the_preact_penalty_is_lambda_times_the_mean_squared_encoder_output():
+    torch.manual_seed(0)
+    prev, obs = torch.randn(4, 5, 9), torch.randn(4, 6, 3)
+    act, rew = torch.randn(4, 5, 2), torch.randn(4, 5)
+    model = LatentModel(3, 2, latent_dim=4, hidden=16, kind="continuous", preact_penalty=0.0)
+    with torch.no_grad():
+        model.head.bias.fill_(-3.0)  # outputs mostly negative: mean and mean square differ
+        base = float(model.loss(prev, obs[:, :-1], act, obs[:, 1:], rew))
+        model.preact_penalty = 0.5
+        penalised = float(model.loss(prev, obs[:, :-1], act, obs[:, 1:], rew))
+        expected = 0.5 * float(model.encode_logits(prev).pow(2).mean())
+    assert penalised - base == pytest.approx(expected, rel=1e-5)
+
+
+def test_deterministic_acting_is_the_squashed_mean_of_the_policy():
+    torch.manual_seed(0)
+    sac = SAC(5, 2, hidden=32)
+    with torch.no_grad():
+        sac.actor.head.bias[:2].fill_(3.0)  # a mean beyond the box, so tanh shows
+    x = torch.randn(16, 5)
+    first, second = sac.act(x, deterministic=True), sac.act(x, deterministic=True)
+    assert torch.equal(first, second)
+    with torch.no_grad():
+        torch.testing.assert_close(first, torch.tanh(sac.actor(x)[0]))
+    assert first.abs().max() < 1.0
+
+
+def test_silis_default_b_ramps_from_0_to_one_half_over_250_to_300():
+    beta = run_config("sili").agent.sili.beta
+    assert beta == Schedule(((250, 0.0), (300, 0.5)))
+    assert run_config("sili", sili__beta=0.3).agent.sili.beta == 0.3  # a setting, not fixed
+
+
+def test_smirl_has_no_latent_and_acts_on_the_state_alone():
+    assert run_config("smirl").agent.latent == "none"
+    agent = make_agent("smirl", horizon=5, hidden=32)
+    assert agent.model is None and agent.in_dim == 3

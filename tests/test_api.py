@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 from fast_settings import FAST_AGENT
 
-from sili_robots import SILI
-from sili_robots.build import task_class
+from sili_robots import SILI, training
+from sili_robots.agent import SILIAgent
+from sili_robots.build import make_run_config, task_class
 from sili_robots.cli import main
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import evaluate
@@ -835,3 +836,18 @@ def test_predict_samples_when_not_deterministic(tmp_path):
     sampled = [model.predict(obs, deterministic=False) for _ in range(4)]
     assert all(np.array_equal(a, greedy[0]) for a in greedy)
     assert len({tuple(np.asarray(a).ravel()) for a in sampled}) > 1
+
+
+def test_evaluate_acts_deterministically(tmp_path, monkeypatch):
+    cfg = make_run_config("circle-3", "sac", 0, 2, settings=FAST_AGENT)
+    training.train(cfg, tmp_path / "run", progress=False)
+    asked = []
+    act = SILIAgent.act
+
+    def recorded(self, obs, deterministic=False):
+        asked.append(deterministic)
+        return act(self, obs, deterministic)
+
+    monkeypatch.setattr(SILIAgent, "act", recorded)
+    evaluate(tmp_path / "run", 1)
+    assert asked and all(asked)
