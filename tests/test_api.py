@@ -838,16 +838,23 @@ def test_predict_samples_when_not_deterministic(tmp_path):
     assert len({tuple(np.asarray(a).ravel()) for a in sampled}) > 1
 
 
-def test_evaluate_acts_deterministically(tmp_path, monkeypatch):
+def test_evaluate_acts_deterministically_and_leaves_the_latents_unrefreshed(tmp_path, monkeypatch):
+    """No exploration, and the run's cached latents stay those it was trained with."""
     cfg = make_run_config("circle-3", "sac", 0, 2, settings=FAST_AGENT)
     training.train(cfg, tmp_path / "run", progress=False)
-    asked = []
-    act = SILIAgent.act
+    asked, refreshes = [], []
+    act, observe = SILIAgent.act, SILIAgent.observe_interaction
 
     def recorded(self, obs, deterministic=False):
         asked.append(deterministic)
         return act(self, obs, deterministic)
 
+    def observed(self, *args, refresh=True):
+        refreshes.append(refresh)
+        return observe(self, *args, refresh=refresh)
+
     monkeypatch.setattr(SILIAgent, "act", recorded)
-    evaluate(tmp_path / "run", 1)
+    monkeypatch.setattr(SILIAgent, "observe_interaction", observed)
+    evaluate(tmp_path / "run", 3)
     assert asked and all(asked)
+    assert refreshes == [False, False]  # each finished interaction fed, none refreshed
