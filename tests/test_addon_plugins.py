@@ -350,7 +350,7 @@ def test_a_hook_that_returns_the_wrong_thing_is_named_with_what_it_must_return(
         "PastTheEnd": "latent_pairs must return an integer array of shape (32,) in [1, 2), got "
         "an array of shape (32,) and dtype int64, entries 3 to 3",  # at the first update
         "BeforeTheFirst": "rl_interactions must return an integer array of shape (",
-        "AtTheEnd": "rl_interactions must return an integer array of shape (",
+        "AtTheEnd": "rl_interactions must return an integer array of shape (",  # [0, n): n
         "Ragged": "acting_latent must return None or an array of shape (10,), got "
         "[0.0, [1.0, 2.0]]",
         "FloatPairs": "latent_pairs must return an integer array of shape (32,) in [1, ",

@@ -840,10 +840,12 @@ def test_predict_samples_when_not_deterministic(tmp_path):
 
 def test_evaluate_acts_deterministically_and_leaves_the_latents_unrefreshed(tmp_path, monkeypatch):
     """No exploration, and the run's cached latents stay those it was trained with."""
-    cfg = make_run_config("circle-3", "sac", 0, 2, settings=FAST_AGENT)
+    settings = {**FAST_AGENT, "model.refresh_every": 1}  # training refreshes after each one
+    cfg = make_run_config("circle-3", "sili", 0, 2, settings=settings)
     training.train(cfg, tmp_path / "run", progress=False)
-    asked, refreshes = [], []
+    asked, refreshes, refreshed = [], [], []
     act, observe = SILIAgent.act, SILIAgent.observe_interaction
+    refresh = SILIAgent.refresh_latents
 
     def recorded(self, obs, deterministic=False):
         asked.append(deterministic)
@@ -855,6 +857,10 @@ def test_evaluate_acts_deterministically_and_leaves_the_latents_unrefreshed(tmp_
 
     monkeypatch.setattr(SILIAgent, "act", recorded)
     monkeypatch.setattr(SILIAgent, "observe_interaction", observed)
+    monkeypatch.setattr(
+        SILIAgent, "refresh_latents", lambda self: refreshed.append(1) or refresh(self)
+    )
     evaluate(tmp_path / "run", 3)
     assert asked and all(asked)
-    assert refreshes == [False, False]  # each finished interaction fed, none refreshed
+    # the first two are fed when the next begins (the last is never followed), none refreshed
+    assert refreshes == [False, False] and not refreshed

@@ -268,8 +268,6 @@ def test_the_velocity_servos_cap_joint_speeds_at_the_sawyers_limits():
     d.ctrl[act] = 2 * vmax
     mujoco.mj_forward(m, d)
     assert abs(d.actuator_force[act]) < 1e-6, d.actuator_force[act]
-    mujoco.mj_step(m, d, arm.n_substeps)  # one control step
-    assert d.qvel[dof] <= vmax + 1e-6, d.qvel[dof]
 
 
 def test_a_reset_position_scene_stays_at_rest_in_its_home_configuration():

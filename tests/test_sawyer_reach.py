@@ -224,7 +224,7 @@ def test_cli_eval_plays_a_trained_run_with_another_controller(tmp_path, capsys):
     refused = {
         "--controller=foo": "unknown controller 'foo'; allowed: mink, osc, joint_velocity",
         "--env-kwarg=foo=1": "takes no argument foo (--controller, --env-kwarg)",
-        "--env-kwarg=horizon=9": "horizon=9: the run in ",  # its networks are 50 steps long
+        "--env-kwarg=horizon=9": "horizon=9: the run in ",  # it was trained with horizon 50
     }
     for option, message in refused.items():
         assert cli_main(["eval", run, "--interactions", "2", option]) == 2
@@ -308,3 +308,4 @@ def test_a_diverged_simulation_is_named_with_its_controller(monkeypatch):
     monkeypatch.setattr(env.controller, "step", diverging)
     with pytest.raises(RuntimeError, match=r"simulation diverged under controller 'mink'"):
         env.step(np.zeros(3, np.float32))
+    env.close()

@@ -239,7 +239,7 @@ def test_an_interactions_end_strategy_is_the_one_after_its_last_step():
 
 def test_the_speaker_may_stand_on_the_arenas_edge_but_not_beyond():
     env = SpeakerListenerEnv(speaker=(ARENA, -ARENA))
-    np.testing.assert_array_equal(env.speaker, [2.0, -2.0])
+    np.testing.assert_array_equal(env.speaker, [ARENA, -ARENA])
     env.reset(seed=0)
     env.step(np.zeros(2))
     with pytest.raises(ConfigError, match=r"speaker must be an \(x, y\) position in the arena"):
