@@ -96,7 +96,7 @@ def test_train_writes_a_complete_run_and_eval_reads_it(tmp_path):
     assert result["interactions"] == 4 and 0.0 <= result["fraction_strategy_unchanged"] <= 1.0
     assert result["mean_task_reward"] < 0
     # greedy, from the checkpointed game, learning nothing: the same numbers again
-    assert {**evaluate(out, 4), "run_dir": str(out)} == result
+    assert {**evaluate(out, 4), "run_dir": str(out), "played_with": {}} == result  # Circle: none
     assert (out / "checkpoint.pt").read_bytes() == checkpoint
     # the numbers of a greedy play of the same interactions, step by step
     _, env, agent, state = load_trained(out)
