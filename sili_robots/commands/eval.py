@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from sili_robots.commands.common import (
     add_env_kwarg_arg,
@@ -14,7 +15,9 @@ from sili_robots.commands.common import (
     task_arguments_given,
 )
 from sili_robots.errors import ConfigError
-from sili_robots.runs import RunConfig
+
+if TYPE_CHECKING:
+    from sili_robots.runs import RunConfig
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -44,11 +47,11 @@ def run(args: argparse.Namespace) -> int:
     from sili_robots.verdict import random_only
 
     cfg, given = read_config(args.run_dir), task_arguments_given(args)
-    task_args = {**cfg.env_kwargs, **given}
+    task, task_args = cfg.task_id or cfg.task, {**cfg.env_kwargs, **given}
     task_env = None
     if given:  # e.g. a policy trained with one controller, played with another
-        _check_horizon(args.run_dir, cfg, given)
-        task_env = built_task(cfg.task_id or cfg.task, task_args, "--controller, --env-kwarg")
+        _check_horizon(args.run_dir, task, cfg, given)
+        task_env = built_task(task, task_args, "--controller, --env-kwarg")
     try:
         result = evaluate(args.run_dir, args.interactions, task_env)
     finally:
@@ -66,12 +69,12 @@ def run(args: argparse.Namespace) -> int:
             f"{args.run_dir}: its policy has not trained: {random_only(cfg, trained)}",
             file=sys.stderr,
         )
-    played = title_arguments(cfg.task_id or cfg.task, task_args)  # Sawyer-Reach: the controller
+    played = title_arguments(task, task_args)  # Sawyer-Reach: the controller, given or not
     print(json.dumps({"run_dir": str(args.run_dir), "played_with": played, **result}, indent=2))
     return 0
 
 
-def _check_horizon(run_dir: Path, cfg: RunConfig, given: dict) -> None:
+def _check_horizon(run_dir: Path, task: str, cfg: RunConfig, given: dict) -> None:
     """A trained run plays the horizon it was trained with: its networks and stored
     interactions are that long (said here in the options' words, before anything loads)."""
     from sili_robots.tasks.registry import task_defaults
@@ -79,8 +82,8 @@ def _check_horizon(run_dir: Path, cfg: RunConfig, given: dict) -> None:
     if "horizon" not in given:
         return
     try:
-        own = cfg.env_kwargs.get("horizon", task_defaults(str(cfg.task_id)).get("horizon"))
-    except ConfigError:  # a user's task: the checkpoint's own check names the sizes
+        own = cfg.env_kwargs.get("horizon", task_defaults(task).get("horizon"))
+    except ConfigError:  # a user's task (a class path): the checkpoint's check names the sizes
         return
     if own is not None and given["horizon"] != own:
         raise ConfigError(
