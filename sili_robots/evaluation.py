@@ -114,7 +114,7 @@ def fitting(run_dir: Path, cfg: RunConfig, env: gym.Env | None) -> Iterator[None
     try:
         yield
     except CheckpointMismatch as err:
-        if env is None:
+        if env is None or _is_the_runs_own(cfg, env):
             raise ConfigError(
                 f"{run_dir / CHECKPOINT} does not fit the agent {run_dir / CONFIG} describes: "
                 f"{err}; was it copied from another run? Train this run again (sili train ... "
@@ -133,6 +133,15 @@ def fitting(run_dir: Path, cfg: RunConfig, env: gym.Env | None) -> Iterator[None
         ) from None
 
 
+def _is_the_runs_own(cfg: RunConfig, env: gym.Env) -> bool:
+    """Whether ``env``, an instance of the run's task (``check_same_task``), was built with the
+    run's own arguments: then a checkpoint that does not fit it does not fit the run's config."""
+    try:
+        return task_kwargs_of(env) == cfg.env_kwargs
+    except ConfigError:  # built with *args: not comparable
+        return False
+
+
 def load_trained(
     run_dir: Path, task_env: gym.Env | None = None
 ) -> tuple[RunConfig, gym.Env, SILIAgent, dict[str, Any]]:
@@ -149,18 +158,39 @@ def load_trained(
     return cfg, env, agent, state
 
 
+def check_played_horizon(
+    run_dir: Path, cfg: RunConfig, given: Mapping[str, Any], option: str
+) -> None:
+    """A trained run plays the horizon it was trained with: its networks and stored
+    interactions are that long; said before anything loads, naming ``option``, where ``given``
+    (the task arguments to play with) came from."""
+    from sili_robots.tasks.registry import task_defaults
+
+    if "horizon" not in given:
+        return
+    try:
+        own = cfg.env_kwargs.get("horizon", task_defaults(cfg.task_id or cfg.task).get("horizon"))
+    except ConfigError:  # a user's task (a class path): the checkpoint's check names the sizes
+        return
+    if own is not None and given["horizon"] != own:
+        raise ConfigError(
+            f"{option} horizon={given['horizon']!r}: the run in {run_dir} was trained "
+            f"with horizon {own}, and a trained run plays the horizon it was trained with"
+        )
+
+
 def policy_from_run(
     run_dir: Path,
 ) -> tuple[str, dict[str, Any], Callable[[gym.Env], tuple[gym.Env, Callable]]]:
-    """(task version, env kwargs, make_policy) where ``make_policy(env)`` returns the env to step
+    """(task version, env kwargs, make_policy) where ``make_policy(env)``, ``env`` an instance
+    of the run's task (its own arguments or others: another controller), returns the env to step
     (the task as the method observes it, feeding the agent) and a deterministic
     ``policy(env, obs) -> action``; the task version is the gymnasium id the run trained on."""
     cfg = read_config(run_dir)
 
     def make_policy(env: gym.Env) -> tuple[gym.Env, Callable]:
-        _, own_env, agent, state = load_trained(run_dir)
-        own_env.close()
-        wrapped = AgentFeedback(observed_as(env, cfg), agent, state["game"])
+        _, observed, agent, state = load_trained(run_dir, env)
+        wrapped = AgentFeedback(observed, agent, state["game"])
         return wrapped, lambda _env, obs: agent.act(obs, deterministic=True)
 
     return cfg.task_id or cfg.task, dict(cfg.env_kwargs), make_policy

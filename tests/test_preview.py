@@ -423,18 +423,16 @@ def test_cli_rejects_bad_input_with_exit_2(tmp_path, capsys):
     capsys.readouterr()
     assert main(["preview", "circle-3", "--checkpoint", str(tmp_path / "doors")]) == 2
     assert f"was trained on {doors!r}, which has no scene" in capsys.readouterr().err
-    mine = [
-        "preview",
-        "circle-3",
-        "--checkpoint",
-        str(tmp_path / "doors"),
-        "--env-kwarg",
-        "horizon=9",
-    ]
-    assert main(mine) == 2
-    assert "previewed on its own task arguments (its config.json's), got horizon=9: drop" in (
+    circle = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "1"]
+    assert main([*circle, "--set", "hidden=8", "--out", str(tmp_path / "c"), "--no-progress"]) == 0
+    capsys.readouterr()
+    longer = ["preview", "circle-3", "--checkpoint", str(tmp_path / "c"), "--env-kwarg=horizon=9"]
+    assert main(longer) == 2
+    assert f"--env-kwarg horizon=9: the run in {tmp_path / 'c'} was trained with horizon 50" in (
         capsys.readouterr().err
     )
+    with pytest.raises(ConfigError, match=r"env_kwargs horizon=9: the run in .* horizon 50"):
+        make_env_and_policy("circle-3", checkpoint=tmp_path / "c", env_kwargs={"horizon": 9})
     assert (
         main(["preview", "circle-3", "--checkpoint", str(tmp_path / "doors"), "--seed", "7"]) == 2
     )
@@ -465,6 +463,29 @@ def test_a_trained_runs_title_names_its_controller_given_or_not(tmp_path):
         _, env, _, label = make_env_and_policy("sawyer-reach", checkpoint=run)
         env.close()
         assert label == f"trained SAC, seed 0, controller={controller} ({controller})"
+
+
+def test_a_trained_run_is_previewed_with_another_controller(tmp_path):
+    """A transfer ablation's picture: the run's agent, trained with mink, plays with OSC, and
+    the title says both; the run's own controller, given, is not named twice."""
+    run = tmp_path / "r"
+    train = ["train", "--task", "sawyer-reach", "--method", "sac", "--interactions", "1"]
+    assert main([*train, "--set", "hidden=8", "--no-progress", "--out", str(run)]) == 0
+    played = {}
+    for given in (None, "osc", "mink"):
+        kwargs = None if given is None else {"controller": given}
+        _, env, pol, label = make_env_and_policy("sawyer-reach", checkpoint=run, env_kwargs=kwargs)
+        try:
+            obs, _ = env.reset(seed=0)
+            played[given] = env.unwrapped.controller_name, label, pol(env, obs)
+        finally:
+            env.close()
+    own = "trained SAC, seed 0, controller=mink (r)"
+    assert [c for c, _, _ in played.values()] == ["mink", "osc", "mink"]
+    assert [t for _, t, _ in played.values()] == [own, f"{own}, played with controller=osc", own]
+    first = [a for _, _, a in played.values()]  # the run's agent, in the game it trained in
+    np.testing.assert_array_equal(first[0], first[1])
+    np.testing.assert_array_equal(first[0], first[2])
 
 
 def test_preview_seed_picks_the_game_recorded(tmp_path, capsys):

@@ -5,8 +5,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from pathlib import Path
-from typing import TYPE_CHECKING
 
 from sili_robots.commands.common import (
     add_env_kwarg_arg,
@@ -14,10 +12,6 @@ from sili_robots.commands.common import (
     positive_int,
     task_arguments_given,
 )
-from sili_robots.errors import ConfigError
-
-if TYPE_CHECKING:
-    from sili_robots.runs import RunConfig
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -41,7 +35,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.build import built_task
-    from sili_robots.evaluation import evaluate
+    from sili_robots.evaluation import check_played_horizon, evaluate
     from sili_robots.runs import read_config
     from sili_robots.tasks.registry import title_arguments
     from sili_robots.verdict import random_only
@@ -50,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
     task, task_args = cfg.task_id or cfg.task, {**cfg.env_kwargs, **given}
     task_env = None
     if given:  # e.g. a policy trained with one controller, played with another
-        _check_horizon(args.run_dir, task, cfg, given)
+        check_played_horizon(args.run_dir, cfg, given, "--env-kwarg")
         task_env = built_task(task, task_args, "--controller, --env-kwarg")
     try:
         result = evaluate(args.run_dir, args.interactions, task_env)
@@ -72,21 +66,3 @@ def run(args: argparse.Namespace) -> int:
     played = title_arguments(task, task_args)  # Sawyer-Reach: the controller, given or not
     print(json.dumps({"run_dir": str(args.run_dir), "played_with": played, **result}, indent=2))
     return 0
-
-
-def _check_horizon(run_dir: Path, task: str, cfg: RunConfig, given: dict) -> None:
-    """A trained run plays the horizon it was trained with: its networks and stored
-    interactions are that long (said here in the options' words, before anything loads)."""
-    from sili_robots.tasks.registry import task_defaults
-
-    if "horizon" not in given:
-        return
-    try:
-        own = cfg.env_kwargs.get("horizon", task_defaults(task).get("horizon"))
-    except ConfigError:  # a user's task (a class path): the checkpoint's check names the sizes
-        return
-    if own is not None and given["horizon"] != own:
-        raise ConfigError(
-            f"--env-kwarg horizon={given['horizon']!r}: the run in {run_dir} was trained "
-            f"with horizon {own}, and a trained run plays the horizon it was trained with"
-        )

@@ -76,7 +76,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "interaction's moment the ego draws level with the opponent",
     )
     p.add_argument("--serve", action="store_true", help="serve live on 127.0.0.1 until Ctrl-C")
-    add_task_args(p, only="; not with --checkpoint (a trained run plays its own)")
+    add_task_args(
+        p, only="; with --checkpoint: in place of the run's own (the horizon stays the run's)"
+    )
     p.set_defaults(run=run)
 
 
@@ -103,6 +105,12 @@ def run(args: argparse.Namespace) -> int:
         from sili_robots.build import check_task_builds
 
         check_task_builds(args.task, env_kwargs, "--controller, --env-kwarg")
+        if args.checkpoint is not None and Path(args.checkpoint).is_dir():
+            from sili_robots.evaluation import check_played_horizon
+            from sili_robots.runs import read_config
+
+            run_dir = Path(args.checkpoint)
+            check_played_horizon(run_dir, read_config(run_dir), env_kwargs, "--env-kwarg")
     for path, option in ((args.out, "--out"), (args.png, "--png")):
         if path is not None:
             check_output(writable_file(Path(path), option), option)

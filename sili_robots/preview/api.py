@@ -160,7 +160,8 @@ def make_env_and_policy(
 ) -> tuple[str, gym.Env, Callable, str]:
     """(task name, env to step, policy, policy label) for a scripted policy (``policy``:
     scripted, the default, or random) or a trained run (``checkpoint``), one of them;
-    ``env_kwargs`` build the task for a scripted policy (a trained run's are its own)."""
+    ``env_kwargs`` build the task (for a trained run they replace its own of those names: a
+    policy trained with one controller, played with another; the horizon stays the run's)."""
     from sili_robots.policies import scripted_policy
     from sili_robots.tasks import make_task, task_spec
     from sili_robots.tasks.registry import title_arguments
@@ -168,12 +169,6 @@ def make_env_and_policy(
     name = task_spec(task).name
     if env_kwargs is not None:
         env_kwargs = check_names("env_kwargs", env_kwargs)
-    if checkpoint is not None and env_kwargs:
-        given = ", ".join(f"{k}={v!r}" for k, v in env_kwargs.items())
-        raise ConfigError(
-            f"a trained run is previewed on its own task arguments (its config.json's), got "
-            f"{given}: drop them, or preview a scripted policy on them"
-        )
     if checkpoint is not None and policy is not None:
         raise ConfigError(
             f"policy {policy!r} and checkpoint {str(checkpoint)!r}: a preview plays one of them "
@@ -211,19 +206,27 @@ def make_env_and_policy(
             f"checkpoint {str(checkpoint)!r} was trained on {trained_on!r}, not {name!r} "
             f"(task version {run_task})"
         )
-    env = make_task(name, **kwargs)
+    from sili_robots.evaluation import check_played_horizon
+    from sili_robots.labels import METHOD_NAMES
+    from sili_robots.runs import read_config
+
+    cfg = read_config(run_dir)
+    check_played_horizon(run_dir, cfg, env_kwargs or {}, "env_kwargs")
+    env = make_task(name, **{**kwargs, **(env_kwargs or {})})  # given ones replace the run's
     try:
         stepped, pol = make_policy(env)
     except BaseException:
         env.close()
         raise
-    from sili_robots.labels import METHOD_NAMES
-    from sili_robots.runs import read_config
-
-    cfg = read_config(run_dir)  # the title says what was trained, then where
+    # the title says what was trained, where, then what it plays with when not its own
     given = "".join(f", {k}={v}" for k, v in title_arguments(run_task, cfg.env_kwargs).items())
     method = METHOD_NAMES.get(cfg.method, cfg.method)
-    return name, stepped, pol, f"trained {method}, seed {cfg.seed}{given} ({run_dir.name})"
+    label = f"trained {method}, seed {cfg.seed}{given} ({run_dir.name})"
+    own = {**title_arguments(run_task, cfg.env_kwargs), **cfg.env_kwargs}
+    other = [f"{k}={v}" for k, v in (env_kwargs or {}).items() if k not in own or own[k] != v]
+    if other:
+        label += ", played with " + ", ".join(other)
+    return name, stepped, pol, label
 
 
 def _policy_from_run() -> Callable:
