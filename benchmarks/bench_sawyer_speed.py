@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import logging
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -47,6 +48,8 @@ def lift_blocks(seed: int) -> tuple[Block, Block, float]:
     quiet_robosuite_import()
     import robosuite
 
+    # its controller loader logs each config file it reads, at INFO: the table is the output
+    logging.getLogger("robosuite_logs").setLevel(logging.WARNING)
     env = robosuite.make(
         "Lift",
         robots="Sawyer",

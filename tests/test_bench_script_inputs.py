@@ -76,3 +76,12 @@ def test_the_matmul_timing_names_the_machine_it_ran_on() -> None:
     result = run_script("bench_sac_speed.py", "--matmul-only")
     assert result.returncode == 0, result.stderr
     assert result.stdout.startswith("machine: ") and "GFLOP/s" in result.stdout
+
+
+def test_the_sawyer_speed_table_is_the_whole_output() -> None:
+    """robosuite's controller loader logged each config file it read, at INFO, between the
+    machine line and the table."""
+    result = run_script("bench_sawyer_speed.py", "--rounds", "1", "--block", "3")
+    assert result.returncode == 0, result.stderr
+    assert "robosuite Lift, Sawyer, OSC_POSE (reference)" in result.stdout
+    assert "INFO" not in result.stdout + result.stderr
