@@ -886,6 +886,25 @@ def test_a_damaged_summary_or_config_is_named_not_a_traceback(
     assert f"{run / 'config.json'} is damaged" in capsys.readouterr().err
 
 
+def test_every_damaged_run_is_named_at_once(sweep_and_collection, tmp_path, capsys):
+    """A long sweep's damaged runs are mended in one go: the tables and collect name them all,
+    not the first alone, and collect copies nothing."""
+    sweep, _ = sweep_and_collection
+    source = tmp_path / "sweep"
+    shutil.copytree(sweep, source)
+    summary = source / "runs" / "circle-3__sili-bschedule__s0" / "summary.json"
+    config = source / "runs" / "circle-3__sili-paper-b0.5__s0" / "config.json"
+    summary.write_text("")
+    config.write_text("{")
+    into = tmp_path / "into"
+    for args in (["runs", str(source)], ["collect", str(source), "--into", str(into)]):
+        assert main(args) == 2
+        err = capsys.readouterr().err
+        assert "2 runs cannot be read:" in err, err
+        assert f"\n  {summary} is damaged" in err and f"\n  {config} is damaged" in err
+    assert not into.exists()
+
+
 def test_collect_replaces_a_damaged_copy_and_never_copies_a_damaged_run(
     sweep_and_collection, tmp_path, capsys
 ):

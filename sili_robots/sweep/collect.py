@@ -37,7 +37,12 @@ from sili_robots.runs import (
     recorded_run,
     run_differences,
 )
-from sili_robots.sweep.results import finished_summary, run_identity, runs_of
+from sili_robots.sweep.results import (
+    check_none_damaged,
+    finished_summary,
+    run_identity,
+    runs_of,
+)
 from sili_robots.sweep.state import RUNS_DIR
 
 
@@ -69,6 +74,7 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
     report = CollectReport()
     chosen: dict[str, tuple[Path, dict, int]] = {}  # name -> source run, identity, length
     unfinished: dict[str, None] = {}  # (in order, once each)
+    damaged: list[str] = []  # all named at once, after every source is read
     for source in sources:
         for run_dir in runs_of(source):
             name = run_dir.name
@@ -77,8 +83,12 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
             if not (run_dir / SUMMARY).is_file() or metrics_file(run_dir) is None:
                 unfinished[name] = None
                 continue
-            length = _length(run_dir)
-            _check_sound(run_dir, length)  # a damaged copy never replaces a sound one
+            try:
+                length = _length(run_dir)
+                _check_sound(run_dir, length)  # a damaged copy never replaces a sound one
+            except ConfigError as err:
+                damaged.append(str(err))
+                continue
             ident = _identity(run_dir)
             target = Path(dest) / RUNS_DIR / name
             if name in chosen:
@@ -87,6 +97,7 @@ def collect(sources: list[Path], dest: Path, names: Collection[str] | None = Non
                 _check_same_run(name, target, _identity(target), run_dir, ident)
             if name not in chosen or length > chosen[name][2]:
                 chosen[name] = (run_dir, ident, length)
+    check_none_damaged(damaged)  # before anything is copied
     # a run unfinished in one source and finished in another is collected, not unfinished
     report.unfinished = [name for name in unfinished if name not in chosen]
     for name, (run_dir, _, length) in chosen.items():

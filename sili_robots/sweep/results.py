@@ -12,8 +12,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import pandas as pd
 
@@ -34,6 +35,8 @@ from sili_robots.runs import (
 )
 from sili_robots.sweep.state import RESULTS, RUNS_DIR, RUNS_TABLE
 from sili_robots.tasks.registry import task_arguments_key, title_arguments
+
+T = TypeVar("T")
 
 ID_COLUMNS = (
     "run",
@@ -161,45 +164,67 @@ def finished_summary(run_dir: Path) -> dict[str, Any] | None:
     return summary
 
 
+def each_run(sweep_dir: Path, read: Callable[[Path], T]) -> list[T]:
+    """``read(run_dir)`` of every run of the sweep, in order; a ConfigError naming every run
+    that cannot be read, not only the first, so a sweep's damaged runs are mended in one go."""
+    done, damaged = [], []
+    for run_dir in run_dirs(sweep_dir):
+        try:
+            done.append(read(run_dir))
+        except ConfigError as err:
+            damaged.append(str(err))
+    check_none_damaged(damaged)
+    return done
+
+
+def check_none_damaged(damaged: list[str]) -> None:
+    """One ConfigError for every damaged run's message (each names its file and the mend)."""
+    if len(damaged) > 1:
+        raise ConfigError(f"{len(damaged)} runs cannot be read:\n  " + "\n  ".join(damaged))
+    if damaged:
+        raise ConfigError(damaged[0])
+
+
 def results_table(sweep_dir: Path) -> pd.DataFrame:
     """All runs' per-interaction rows in one tidy frame (columns ``RESULT_COLUMNS``)."""
-    frames = []
-    for run_dir in run_dirs(sweep_dir):
-        df = run_metrics(run_dir)
-        if df is None:
-            continue
-        if df.empty:
-            continue
-        ident, _ = run_identity(run_dir)
-        for key, value in ident.items():
-            df[key] = value
-        df["true_stability"] = kept(df)
-        df["finished"] = finished_summary(run_dir) is not None
-        frames.append(df)
+    frames = [df for df in each_run(sweep_dir, _result_rows) if df is not None]
     if not frames:
         return pd.DataFrame(columns=list(RESULT_COLUMNS))
     return pd.concat(frames, ignore_index=True)[list(RESULT_COLUMNS)]
 
 
+def _result_rows(run_dir: Path) -> pd.DataFrame | None:
+    df = run_metrics(run_dir)
+    if df is None or df.empty:
+        return None
+    ident, _ = run_identity(run_dir)
+    for key, value in ident.items():
+        df[key] = value
+    df["true_stability"] = kept(df)
+    df["finished"] = finished_summary(run_dir) is not None
+    return df
+
+
 def runs_table(sweep_dir: Path) -> pd.DataFrame:
     """One row per run with its state and final numbers (from ``summary.json`` when done)."""
-    rows = []
-    for run_dir in run_dirs(sweep_dir):
-        ident, cfg = run_identity(run_dir)
-        error_path = run_dir / ERROR_FILE
-        metrics = run_metrics(run_dir)
-        logged = 0 if metrics is None else len(metrics)
-        row = {**ident, "interactions": int(cfg["interactions"]), "interactions_logged": logged}
-        summary = finished_summary(run_dir)
-        if summary is not None:
-            row.update(status="done", **{k: summary[k] for k in SUMMARY_NUMBERS})
-        elif error_path.is_file():
-            text = error_path.read_text().strip().splitlines()
-            row.update(status="failed", error=text[-1] if text else "")
-        else:
-            row.update(status="incomplete" if logged else "not started")
-        rows.append(row)
-    return pd.DataFrame(rows, columns=list(RUN_COLUMNS))
+    return pd.DataFrame(each_run(sweep_dir, _run_row), columns=list(RUN_COLUMNS))
+
+
+def _run_row(run_dir: Path) -> dict[str, Any]:
+    ident, cfg = run_identity(run_dir)
+    error_path = run_dir / ERROR_FILE
+    metrics = run_metrics(run_dir)
+    logged = 0 if metrics is None else len(metrics)
+    row = {**ident, "interactions": int(cfg["interactions"]), "interactions_logged": logged}
+    summary = finished_summary(run_dir)
+    if summary is not None:
+        row.update(status="done", **{k: summary[k] for k in SUMMARY_NUMBERS})
+    elif error_path.is_file():
+        text = error_path.read_text().strip().splitlines()
+        row.update(status="failed", error=text[-1] if text else "")
+    else:
+        row.update(status="incomplete" if logged else "not started")
+    return row
 
 
 def write_tables(sweep_dir: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
