@@ -51,7 +51,13 @@ from sili_robots.errors import (
     check_path,
     first_line,
 )
-from sili_robots.evaluation import AgentFeedback, check_same_task, evaluate, fitting
+from sili_robots.evaluation import (
+    AgentFeedback,
+    check_played_horizon,
+    check_same_task,
+    evaluate,
+    fitting,
+)
 from sili_robots.metrics import COMPRESSED_METRICS, METRICS, MetricsWriter
 from sili_robots.runs import (
     CHECKPOINT,
@@ -111,7 +117,7 @@ class SILI:
             if env_kwargs:
                 raise ConfigError(
                     "env_kwargs apply to a task built by name; this instance was built with "
-                    f"{env.unwrapped.init_kwargs}: give its arguments to its constructor"
+                    f"{_built_with(env)}: give its arguments to its constructor"
                 )
             self._task_env, task = env, task_name_of(env)
             env_kwargs = task_kwargs_of(env)
@@ -190,7 +196,8 @@ class SILI:
     @classmethod
     def load(cls, path: str | Path, env: gym.Env | None = None) -> SILI:
         """A model saved by ``save`` or a run directory of ``sili train``; ``env``: the task
-        instance for a run of a user's task class that cannot be imported by name."""
+        instance to play (and train) on: the run's task built with other arguments (another
+        controller; the run's horizon), or a user's task class that cannot be imported by name."""
         path = check_path("path", path)
         cfg = read_run_config(path)
         state = require_checkpoint(path)
@@ -198,6 +205,7 @@ class SILI:
             if not isinstance(env, gym.Env):
                 raise ConfigError(f"env must be a task instance (or None), got {env!r}")
             check_same_task(path, cfg, env)
+            check_played_horizon(path, cfg, {"horizon": env.unwrapped.horizon}, "env")
         model = cls.__new__(cls)
         model.cfg, model.run_dir, model._task_env, model._overwrite = cfg, path, env, False
         model._saved = {}
@@ -383,6 +391,14 @@ _TEMPORARY: dict[Path, weakref.finalize] = {}
 #: temporary runs a refused save kept (the error named them), until their model saves or another
 #: model loads them
 _KEPT: set[Path] = set()
+
+
+def _built_with(env: gym.Env) -> str:
+    """The arguments a task instance was given (less its registered version's own)."""
+    try:
+        return str(task_kwargs_of(env) or "its default arguments")
+    except ConfigError:  # built with *args
+        return "positional arguments"
 
 
 def _check_arguments(env: object, settings: object, env_kwargs: object) -> None:

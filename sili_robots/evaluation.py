@@ -151,6 +151,7 @@ def load_trained(
     state = require_checkpoint(run_dir)
     if task_env is not None:
         check_same_task(run_dir, cfg, task_env)
+        check_played_horizon(run_dir, cfg, {"horizon": task_env.unwrapped.horizon}, "env")
     with fitting(run_dir, cfg, task_env):
         env = make_run_env(cfg, run_dir) if task_env is None else observed_as(task_env, cfg)
         agent = build_agent(cfg, env)

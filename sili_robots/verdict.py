@@ -3,6 +3,8 @@ to what standing still and the scripted references earn on the same task version
 
 from __future__ import annotations
 
+import json
+import shlex
 from pathlib import Path
 from typing import Any
 
@@ -13,7 +15,7 @@ from sili_robots.errors import ConfigError, check_count
 from sili_robots.labels import METHOD_NAMES
 from sili_robots.metrics import HOLDING, METRICS, kept, kept_fraction, run_metrics
 from sili_robots.runs import MACHINE_SETTINGS, RunConfig, read_config, run_differences
-from sili_robots.tasks.registry import other_task_arguments
+from sili_robots.tasks.registry import other_task_arguments, task_spec
 
 
 def _rows(run_dir: Path) -> pd.DataFrame:
@@ -48,14 +50,27 @@ def random_only(cfg: RunConfig, interactions: int) -> str:
     random = cfg.agent.sac.random_interactions
     if interactions > random:
         return ""
-    return (
-        f"all its {interactions} interactions were random actions (sac.random_interactions="
-        f"{random})"
-    )
+    played = f"all its {interactions} interactions were"
+    if interactions == 1:
+        played = "its one interaction was"
+    return f"{played} random actions (sac.random_interactions={random})"
 
 
 #: said where a task version has no stored references (a user's task, other task arguments)
 NO_REFERENCE = "no references are stored for this task and its arguments: reward not judged"
+
+
+def _no_reference(cfg: RunConfig) -> str:
+    """``NO_REFERENCE``, and on a registered task the command that measures them."""
+    try:
+        name = task_spec(str(cfg.task_id)).name
+    except ConfigError:  # a user's task: sili bounds plays the registered ones
+        return NO_REFERENCE
+    options = ""
+    for k, v in other_task_arguments(cfg.task_id, cfg.env_kwargs).items():
+        given = f"--controller {v}" if k == "controller" else f"--env-kwarg {k}={json.dumps(v)}"
+        options += " " + shlex.join(given.split(" ", 1))
+    return f"{NO_REFERENCE}; `sili bounds {name}{options}` measures them"
 
 
 def _references(cfg: RunConfig) -> dict[str, dict[str, float]]:
@@ -121,7 +136,7 @@ def verdict(run_dir: Path, window: int = 50) -> str:
         refs.append(f"standing still: {still['task_reward']:.1f}")
     if stab:
         refs.append(f"the scripted stabilizing policy that sees z: {stab['task_reward']:.1f}")
-    line += f" ({', '.join(refs) if refs else NO_REFERENCE})"
+    line += f" ({', '.join(refs) if refs else _no_reference(cfg)})"
     why = random_only(cfg, len(rows))
     return line + (f"; {why}: they say nothing of its policy" if why else "")
 
@@ -165,7 +180,7 @@ def across_seeds(run_dirs: list[Path], window: int = 50) -> tuple[str, Path]:
     rule += (
         f" and earned more than standing still's {still['task_reward']:.1f}"
         if still
-        else f"; {NO_REFERENCE}"
+        else f"; {_no_reference(cfg)}"
     )
     name = METHOD_NAMES.get(cfg.method, cfg.method)
     line = f"{name} worked in {len(good)} of {len(runs)} seeds ({rule}): "

@@ -125,6 +125,16 @@ def test_a_new_model_never_trains_over_a_run_or_into_a_folder_of_other_files(tmp
     assert len((run / "metrics.csv").read_text().splitlines()) == 1 + 2
 
 
+def test_a_run_is_loaded_on_its_task_at_its_own_horizon_alone(tmp_path):
+    """Its networks and stored interactions are that long: said in those words, not as a
+    shape error."""
+    run = tmp_path / "run"
+    SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run).learn(1)
+    with pytest.raises(ConfigError, match=r"^env horizon=10: the run in .* with horizon 50, and"):
+        SILI.load(run, env=make_task("circle-3", horizon=10))
+    assert SILI.load(run, env=make_task("circle-3", horizon=50)).cfg.env_kwargs == {}
+
+
 def test_loading_a_run_with_a_task_instance_of_other_sizes_names_both(tmp_path):
     run = tmp_path / "doors"
     SILI(TwoDoorsEnv(horizon=8), method="sili", settings=FAST_AGENT, run_dir=run).learn(2)
@@ -195,6 +205,9 @@ def test_a_task_instance_is_recorded_with_its_arguments_and_rebuilt_with_them(tm
     assert made.cfg.env_kwargs == {"outside_margin": 0.3}  # not the version's own arguments
     with pytest.raises(ConfigError, match=r"env_kwargs apply to a task built by name; this ins"):
         SILI(TwoDoorsEnv(horizon=6), env_kwargs={"horizon": 7})
+    for built, said in (({"outside_margin": 0.3}, "{'outside_margin': 0.3}"), ({}, "its default")):
+        with pytest.raises(ConfigError, match=f"this instance was built with {re.escape(said)}"):
+            SILI(gym.make("sili/Circle3-v1", **built), env_kwargs={"near_moves": 2})  # not variant
     numpy_horizon = SILI(TwoDoorsEnv(horizon=np.int64(6)), method="sac", settings=FAST_AGENT)
     assert type(numpy_horizon.cfg.env_kwargs["horizon"]) is int  # recorded as JSON can
     speaker = make_task("speaker-listener", speaker=np.array([0.3, -0.8]))
@@ -697,7 +710,7 @@ def test_evaluate_on_a_task_instance_refuses_another_task_as_load_does(tmp_path)
     SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run).learn(2)
     for task, said in (
         (make_task("circle-8"), r"env is sili/Circle8-v1; the run in .* was trained on"),
-        (make_task("circle-3", horizon=10), r"env does not fit the run in .*'horizon': 10"),
+        (make_task("circle-3", horizon=10), r"env horizon=10: the run in .* with horizon 50"),
         (make_task("speaker-listener"), r"env is sili/SpeakerListener-v1; the run in"),
     ):
         with pytest.raises(ConfigError, match=said):

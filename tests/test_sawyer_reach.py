@@ -218,6 +218,7 @@ def test_cli_eval_plays_a_trained_run_with_another_controller(tmp_path, capsys):
         assert cli_main(["eval", run, "--interactions", "2", *given]) == 0
         result = json.loads(capsys.readouterr().out)
         assert result["played_with"] == {"controller": "osc" if given else "mink"}
+        assert result["trained_with"] == {"controller": "mink"}
         played.setdefault(tuple(given), []).append(result["mean_task_reward"])
     (own,), (osc, again) = played.values()
     assert osc == again and osc != own  # greedy: the same game, moved by another controller

@@ -96,7 +96,8 @@ def test_train_writes_a_complete_run_and_eval_reads_it(tmp_path):
     assert result["interactions"] == 4 and 0.0 <= result["fraction_strategy_unchanged"] <= 1.0
     assert result["mean_task_reward"] < 0
     # greedy, from the checkpointed game, learning nothing: the same numbers again
-    assert {**evaluate(out, 4), "run_dir": str(out), "played_with": {}} == result  # Circle: none
+    own = {"run_dir": str(out), "trained_with": {}, "played_with": {}}  # Circle: none
+    assert {**evaluate(out, 4), **own} == result
     assert (out / "checkpoint.pt").read_bytes() == checkpoint
     # the numbers of a greedy play of the same interactions, step by step
     _, env, agent, state = load_trained(out)
@@ -431,6 +432,10 @@ def test_every_latent_kind_trains(tmp_path, latent):
             ["--task", "circle-3", "--controller", "osc"],
             "task 'circle-3' takes no argument controller (--controller, --env-kwarg); its "
             "arguments: horizon, outside_margin, near_moves (variant is fixed by the name)",
+        ),
+        (
+            ["--task", "sawyer-reach", "--controller", "mink,osc"],
+            "--controller mink,osc: one controller here; `sili sweep --controller mink,osc`",
         ),
     ],
 )

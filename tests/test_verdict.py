@@ -11,7 +11,8 @@ from fast_settings import FAST_ARGS
 
 from sili_robots.cli import main
 from sili_robots.errors import ConfigError
-from sili_robots.verdict import NONE_WORKED, across_seeds, held, verdict, worked
+from sili_robots.runs import read_config
+from sili_robots.verdict import NONE_WORKED, across_seeds, held, random_only, verdict, worked
 from sili_robots.verdict import main as verdict_main
 
 
@@ -82,6 +83,11 @@ def test_a_run_that_never_left_its_random_actions_says_its_policy_has_not_traine
     capsys.readouterr()
     assert main(["eval", str(exact), "--interactions", "2"]) == 0
     assert "has not trained" not in capsys.readouterr().err
+    cfg = read_config(run)
+    assert (
+        random_only(cfg, 1) == "its one interaction was random actions (sac.random_interactions=5)"
+    )
+    assert random_only(cfg, 6) == ""
 
 
 def test_true_stability_leaves_out_the_games_first_interaction_everywhere(tmp_path):
@@ -140,7 +146,8 @@ def test_a_run_with_other_task_arguments_is_not_read_against_the_defaults_refere
     line = verdict(run, window=4)
     assert "standing still" not in line and "stabilizing" not in line
     assert line.endswith(
-        "(no references are stored for this task and its arguments: reward not judged)"
+        "(no references are stored for this task and its arguments: reward not judged; "
+        "`sili bounds circle-3 --env-kwarg outside_margin=0.5` measures them)"
     )
     assert worked(run, window=4)  # no stored standing-still reward to fall below
     (run / "metrics.csv").rename(run / "kept.csv")
@@ -152,6 +159,19 @@ def test_a_run_with_other_task_arguments_is_not_read_against_the_defaults_refere
     metrics.head(0).to_csv(run / "metrics.csv", index=False)  # stopped before its first
     assert verdict_main([str(run)]) == 2
     assert "has logged no interaction yet" in capsys.readouterr().err
+
+
+def test_a_users_task_is_not_offered_sili_bounds(tmp_path):
+    """sili bounds plays the registered tasks: a user's task's verdict says no more than that
+    it has no references."""
+    run = tmp_path / "doors"
+    args = ["train", "--task", "sili_robots.examples.two_doors:TwoDoorsEnv", "--method", "sac"]
+    assert main([*args, "--interactions", "2", "--out", str(run), "--set", "hidden=8"]) == 0
+    assert verdict(run, window=2).endswith(
+        "(no references are stored for this task and its arguments: reward not judged); all its "
+        "2 interactions were random actions (sac.random_interactions=20): they say nothing of its "
+        "policy"
+    )
 
 
 def test_a_run_given_its_versions_own_arguments_is_read_against_the_references(tmp_path):
@@ -248,3 +268,23 @@ def test_a_window_of_exactly_90_percent_holds_wherever_its_changes_fall():
             stability[rng.choice(window, window // 10, replace=False)] = 0.0
             assert first_stable(stability, window) == 0, stability
     assert first_stable(np.r_[np.zeros(2), np.ones(8)], 10) is None  # 80%
+
+
+def test_the_command_that_measures_the_references_names_the_arguments_played():
+    """Another controller is given as --controller; another value as a shell-safe JSON
+    --env-kwarg; an earlier version by its versioned name."""
+    from sili_robots.build import make_run_config
+    from sili_robots.verdict import _no_reference
+
+    said = {
+        ("sawyer-reach", "controller", "osc"): "`sili bounds sawyer-reach --controller osc`",
+        ("circle-3-v0", "outside_margin", 0.5): (
+            "`sili bounds circle-3-v0 --env-kwarg outside_margin=0.5`"
+        ),
+        ("speaker-listener", "speaker", (0.5, -1.0)): (
+            "`sili bounds speaker-listener --env-kwarg 'speaker=[0.5, -1.0]'`"
+        ),
+    }
+    for (task, key, value), command in said.items():
+        cfg = make_run_config(task, "sac", env_kwargs={key: value})
+        assert _no_reference(cfg).endswith(f"reward not judged; {command} measures them")

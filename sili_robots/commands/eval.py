@@ -63,6 +63,8 @@ def run(args: argparse.Namespace) -> int:
             f"{args.run_dir}: its policy has not trained: {random_only(cfg, trained)}",
             file=sys.stderr,
         )
-    played = title_arguments(task, task_args)  # Sawyer-Reach: the controller, given or not
-    print(json.dumps({"run_dir": str(args.run_dir), "played_with": played, **result}, indent=2))
+    # Sawyer-Reach: the controller, given or not, and the run's own: an ablation's rows say both
+    played = title_arguments(task, task_args)
+    trained = {"trained_with": title_arguments(task, cfg.env_kwargs), "played_with": played}
+    print(json.dumps({"run_dir": str(args.run_dir), **trained, **result}, indent=2))
     return 0
