@@ -35,6 +35,14 @@ from sili_robots.runs import (
 )
 from sili_robots.stopping import StopBetweenInteractions
 from sili_robots.tasks.base import resume_game
+from sili_robots.tasks.registry import title_arguments
+
+
+def run_label(cfg: RunConfig) -> str:
+    """What the progress line calls a run: its task (and controller), method and seed."""
+    named = title_arguments(cfg.task_id or cfg.task, cfg.env_kwargs)
+    given = "".join(f" {k}={v}" for k, v in named.items())
+    return f"{cfg.task}{given} {cfg.method} seed {cfg.seed}"
 
 
 def train(
@@ -67,9 +75,7 @@ def train(
     recent: deque[tuple[float, bool]] = deque(maxlen=100)
     elapsed0 = float(state["wall_time"]) if state else 0.0
     t0 = time.perf_counter()
-    bar = TrainingProgress(
-        cfg.interactions, start, enabled=progress, label=f"{cfg.task} {cfg.method} seed {cfg.seed}"
-    )
+    bar = TrainingProgress(cfg.interactions, start, enabled=progress, label=run_label(cfg))
     # only add-ons that need each step as it is played make the loop report steps
     watch = None
     if agent.watches_steps:

@@ -310,3 +310,13 @@ def test_a_diverged_simulation_is_named_with_its_controller(monkeypatch):
     with pytest.raises(RuntimeError, match=r"simulation diverged under controller 'mink'"):
         env.step(np.zeros(3, np.float32))
     env.close()
+
+
+def test_the_progress_line_names_the_controller_given_or_not():
+    from sili_robots.build import make_run_config
+    from sili_robots.training import run_label
+
+    for given, named in ({}, "mink"), ({"controller": "osc"}, "osc"):
+        cfg = make_run_config("sawyer-reach", "sac", seed=2, env_kwargs=given)
+        assert run_label(cfg) == f"sawyer-reach controller={named} sac seed 2"
+    assert run_label(make_run_config("circle-3", "sili")) == "circle-3 sili seed 0"
