@@ -368,9 +368,15 @@ def read_config(run_dir: Path) -> RunConfig:
         folder = f": give {Path(run_dir).parent}" if Path(run_dir).name == CONFIG else ""
         raise ConfigError(f"{run_dir} is a file, not a run directory{folder}")
     if not path.is_file():
+        held = sorted(p.parent.name for p in Path(run_dir).glob(f"runs/*/{CONFIG}"))
         raise ConfigError(
             f"{run_dir} is not a run directory (no {CONFIG}); "
-            "give a directory written by `sili train --out`"
+            + (
+                f"it is a sweep or a collection: give one of its runs, e.g. "
+                f"{Path(run_dir) / 'runs' / held[0]}"
+                if held
+                else "give a directory written by `sili train --out`"
+            )
         )
     data = read_json(path, DAMAGED_CONFIG, "run")
     try:

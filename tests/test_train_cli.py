@@ -478,6 +478,13 @@ def test_eval_of_a_non_run_exits_2(tmp_path):
     res = _sili("eval", tmp_path / "config.json")
     said = f"{tmp_path / 'config.json'} is a file, not a run directory: give {tmp_path}\n"
     assert res.returncode == 2 and res.stderr.endswith(said), res.stderr
+    sweep = tmp_path / "sweep"  # its runs are one level down
+    for name in ("b", "a"):
+        (sweep / "runs" / name).mkdir(parents=True)
+        (sweep / "runs" / name / "config.json").write_text("{}")
+    res = _sili("eval", sweep)
+    said = f"is a sweep or a collection: give one of its runs, e.g. {sweep / 'runs' / 'a'}\n"
+    assert res.returncode == 2 and res.stderr.endswith(said), res.stderr
 
 
 def test_a_damaged_checkpoint_or_config_exits_2_naming_the_file(tmp_path):
