@@ -32,7 +32,7 @@ import numpy as np
 from sili_robots.agent.matmul import machine_key
 from sili_robots.commands.common import positive_int
 from sili_robots.commands.common import seed as seed_number
-from sili_robots.controllers import CONTROLLER_NAMES
+from sili_robots.controllers import CONTROLLER_NAMES, robosuite_logging
 from sili_robots.controllers.robosuite_logging import quiet_robosuite_import
 from sili_robots.errors import one_line_errors
 from sili_robots.tasks import make_task, task_spec
@@ -49,7 +49,7 @@ def lift_blocks(seed: int) -> tuple[Block, Block, float]:
     import robosuite
 
     # its controller loader logs each config file it reads, at INFO: the table is the output
-    logging.getLogger("robosuite_logs").setLevel(logging.WARNING)
+    logging.getLogger(robosuite_logging.LOGGER).setLevel(logging.WARNING)
     env = robosuite.make(
         "Lift",
         robots="Sawyer",

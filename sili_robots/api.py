@@ -196,8 +196,9 @@ class SILI:
     @classmethod
     def load(cls, path: str | Path, env: gym.Env | None = None) -> SILI:
         """A model saved by ``save`` or a run directory of ``sili train``; ``env``: the task
-        instance to play (and train) on: the run's task built with other arguments (another
-        controller; the run's horizon), or a user's task class that cannot be imported by name."""
+        instance to play on: the run's task built with other arguments (another controller; the
+        run's horizon; it trains with its own alone), or a user's task class that cannot be
+        imported by name."""
         path = check_path("path", path)
         cfg = read_run_config(path)
         state = require_checkpoint(path)
@@ -394,11 +395,11 @@ _KEPT: set[Path] = set()
 
 
 def _built_with(env: gym.Env) -> str:
-    """The arguments a task instance was given (less its registered version's own)."""
-    try:
-        return str(task_kwargs_of(env) or "its default arguments")
-    except ConfigError:  # built with *args
+    """The arguments a task instance was given (less its registered version's own); a
+    ConfigError of its own when it cannot be recorded at all (wrapped, another variant)."""
+    if getattr(env.unwrapped, "init_kwargs", None) is None:
         return "positional arguments"
+    return str(task_kwargs_of(env) or "its default arguments")
 
 
 def _check_arguments(env: object, settings: object, env_kwargs: object) -> None:

@@ -2,8 +2,8 @@
 
 Every sub-command module exposes ``add_parser(subparsers)`` and ``run(args) -> int``. Bad input
 (``ConfigError`` or an argparse error, a name too long for the file system) exits with code 2 and
-a one-line message, no traceback; so do, with code 1, an agent too large for the machine's memory
-and a file the disk refuses to take (full, over quota, read-only).
+a one-line message (a line per damaged run), no traceback; so do, with code 1, an agent too
+large for the machine's memory and a file the disk refuses to take (full, over quota, read-only).
 """
 
 from __future__ import annotations

@@ -19,12 +19,13 @@ from sili_robots.build import (
     build_agent,
     make_run_env,
     observed_as,
+    same_task_arguments,
     same_task_version,
     task_kwargs_of,
     task_name_of,
     task_version_of,
 )
-from sili_robots.errors import CheckpointMismatch, ConfigError, check_count
+from sili_robots.errors import CheckpointMismatch, ConfigError, check_count, compared
 from sili_robots.rollout import run_interactions
 from sili_robots.runs import CHECKPOINT, CONFIG, RunConfig, read_config, require_checkpoint
 from sili_robots.tasks.base import RESET_OPTIONS, resume_game
@@ -128,17 +129,18 @@ def fitting(run_dir: Path, cfg: RunConfig, env: gym.Env | None) -> Iterator[None
         given = f"{task_name_of(env)} with {task_kwargs_of(env)} ({sizes})"
         raise ConfigError(
             f"env does not fit the run in {run_dir}, trained on {cfg.task} with "
-            f"{cfg.env_kwargs}; env is {given}: give the task the run's horizon and sizes "
-            f"({str(err).splitlines()[0]})"
+            f"{cfg.env_kwargs}; env is {given}: give the task the run's horizon and sizes, or, "
+            f"if it has them, {run_dir / CHECKPOINT} is another run's ({str(err).splitlines()[0]})"
         ) from None
 
 
 def _is_the_runs_own(cfg: RunConfig, env: gym.Env) -> bool:
     """Whether ``env``, an instance of the run's task (``check_same_task``), was built with the
-    run's own arguments: then a checkpoint that does not fit it does not fit the run's config."""
+    run's own arguments (one at its default too): then a checkpoint that does not fit it does
+    not fit the run's config."""
     try:
-        return task_kwargs_of(env) == cfg.env_kwargs
-    except ConfigError:  # built with *args: not comparable
+        return same_task_arguments(env, cfg.env_kwargs)
+    except ConfigError:  # arguments it cannot record: not the run's
         return False
 
 
@@ -169,13 +171,15 @@ def check_played_horizon(
 
     if "horizon" not in given:
         return
-    try:
-        own = cfg.env_kwargs.get("horizon", task_defaults(cfg.task_id or cfg.task).get("horizon"))
-    except ConfigError:  # a user's task (a class path): the checkpoint's check names the sizes
-        return
+    own = cfg.env_kwargs.get("horizon")
+    if own is None:
+        try:
+            own = task_defaults(cfg.task_id or cfg.task).get("horizon")
+        except ConfigError:  # a user's task (a class path): the checkpoint's check names sizes
+            return
     if own is not None and given["horizon"] != own:
         raise ConfigError(
-            f"{option} horizon={given['horizon']!r}: the run in {run_dir} was trained "
+            f"{option} horizon={compared(given['horizon'])}: the run in {run_dir} was trained "
             f"with horizon {own}, and a trained run plays the horizon it was trained with"
         )
 

@@ -360,6 +360,23 @@ def read_json(path: Path, what: str, *keys: str) -> dict[str, Any]:
     return data
 
 
+def _give_a_run(folder: Path) -> str:
+    """What to give instead of ``folder``: one of its runs that kept its checkpoint when it is a
+    sweep (a collection keeps none: its sweep's runs have them)."""
+    from sili_robots.sweep.state import RUNS_DIR  # (the sweep's layout is built on runs)
+
+    held = sorted(p.parent for p in Path(folder).glob(f"{RUNS_DIR}/*/{CONFIG}"))
+    if not held:
+        return "give a directory written by `sili train --out`"
+    kept = [run for run in held if (run / CHECKPOINT).is_file()]
+    if not kept:
+        return (
+            f"it holds runs without their {CHECKPOINT} (a collection): give the run in the "
+            "sweep it was collected from"
+        )
+    return f"it is a sweep: give one of its runs, e.g. {kept[0]}"
+
+
 def read_config(run_dir: Path) -> RunConfig:
     path = Path(run_dir) / CONFIG
     if not Path(run_dir).exists():
@@ -368,16 +385,7 @@ def read_config(run_dir: Path) -> RunConfig:
         folder = f": give {Path(run_dir).parent}" if Path(run_dir).name == CONFIG else ""
         raise ConfigError(f"{run_dir} is a file, not a run directory{folder}")
     if not path.is_file():
-        held = sorted(p.parent.name for p in Path(run_dir).glob(f"runs/*/{CONFIG}"))
-        raise ConfigError(
-            f"{run_dir} is not a run directory (no {CONFIG}); "
-            + (
-                f"it is a sweep or a collection: give one of its runs, e.g. "
-                f"{Path(run_dir) / 'runs' / held[0]}"
-                if held
-                else "give a directory written by `sili train --out`"
-            )
-        )
+        raise ConfigError(f"{run_dir} is not a run directory (no {CONFIG}); {_give_a_run(run_dir)}")
     data = read_json(path, DAMAGED_CONFIG, "run")
     try:
         cfg = RunConfig.from_dict(data["run"])

@@ -39,7 +39,8 @@ from sili_robots.tasks.registry import title_arguments
 
 
 def run_label(cfg: RunConfig) -> str:
-    """What the progress line calls a run: its task (and controller), method and seed."""
+    """What the progress line calls a run: its task and the arguments outputs name
+    (``title_arguments``: Sawyer-Reach's controller, given or not), its method and seed."""
     named = title_arguments(cfg.task_id or cfg.task, cfg.env_kwargs)
     given = "".join(f" {k}={v}" for k, v in named.items())
     return f"{cfg.task}{given} {cfg.method} seed {cfg.seed}"

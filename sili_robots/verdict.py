@@ -66,11 +66,12 @@ def _no_reference(cfg: RunConfig) -> str:
         name = task_spec(str(cfg.task_id)).name
     except ConfigError:  # a user's task: sili bounds plays the registered ones
         return NO_REFERENCE
-    options = ""
+    command = ["sili", "bounds", name]
     for k, v in other_task_arguments(cfg.task_id, cfg.env_kwargs).items():
-        given = f"--controller {v}" if k == "controller" else f"--env-kwarg {k}={json.dumps(v)}"
-        options += " " + shlex.join(given.split(" ", 1))
-    return f"{NO_REFERENCE}; `sili bounds {name}{options}` measures them"
+        command += (
+            ["--controller", v] if k == "controller" else ["--env-kwarg", f"{k}={json.dumps(v)}"]
+        )
+    return f"{NO_REFERENCE}; `{shlex.join(command)}` measures them"
 
 
 def _references(cfg: RunConfig) -> dict[str, dict[str, float]]:

@@ -139,13 +139,16 @@ def test_loading_a_run_with_a_task_instance_of_other_sizes_names_both(tmp_path):
     run = tmp_path / "doors"
     SILI(TwoDoorsEnv(horizon=8), method="sili", settings=FAST_AGENT, run_dir=run).learn(2)
     assert SILI.load(run, env=TwoDoorsEnv(horizon=8)).predict([0.5, 0.0]).shape == (1,)
-    with pytest.raises(
-        ConfigError, match=r"env does not fit the run in .*'horizon': 8\}; env is"
-    ) as e:
-        SILI.load(run, env=TwoDoorsEnv(horizon=5))  # 5 steps where 8 are stored
+    with pytest.raises(ConfigError, match=r"^env horizon=5: the run in .* with horizon 8, and"):
+        SILI.load(run, env=TwoDoorsEnv(horizon=5))  # 5 steps where 8 are stored: said first
+    default = tmp_path / "default"  # its horizon unrecorded: the sizes tell
+    SILI(TwoDoorsEnv(), method="sili", settings=FAST_AGENT, run_dir=default).learn(2)
+    with pytest.raises(ConfigError, match=r"env does not fit the run in .* with \{\}; env is") as e:
+        SILI.load(default, env=TwoDoorsEnv(horizon=5))
     assert "{'horizon': 5} (horizon 5, observations (2,), actions (1,)): give the task" in str(
         e.value
     )
+    assert f"if it has them, {default / 'checkpoint.pt'} is another run's" in str(e.value)
 
 
 def test_a_task_given_by_any_name_is_recorded_by_its_name(tmp_path):
@@ -208,6 +211,8 @@ def test_a_task_instance_is_recorded_with_its_arguments_and_rebuilt_with_them(tm
     for built, said in (({"outside_margin": 0.3}, "{'outside_margin': 0.3}"), ({}, "its default")):
         with pytest.raises(ConfigError, match=f"this instance was built with {re.escape(said)}"):
             SILI(gym.make("sili/Circle3-v1", **built), env_kwargs={"near_moves": 2})  # not variant
+    with pytest.raises(ConfigError, match=r"^env is wrapped in ClipAction, which a run cannot"):
+        SILI(gym.wrappers.ClipAction(make_task("circle-3")), env_kwargs={"horizon": 7})
     numpy_horizon = SILI(TwoDoorsEnv(horizon=np.int64(6)), method="sac", settings=FAST_AGENT)
     assert type(numpy_horizon.cfg.env_kwargs["horizon"]) is int  # recorded as JSON can
     speaker = make_task("speaker-listener", speaker=np.array([0.3, -0.8]))

@@ -435,7 +435,8 @@ def test_every_latent_kind_trains(tmp_path, latent):
         ),
         (
             ["--task", "sawyer-reach", "--controller", "mink,osc"],
-            "--controller mink,osc: one controller here; `sili sweep --controller mink,osc`",
+            "--controller mink,osc: a run trains with one controller; a run with each: sili "
+            "sweep --tasks sawyer-reach --methods sili --controller mink,osc --out SWEEP_DIR",
         ),
     ],
 )
@@ -479,11 +480,16 @@ def test_eval_of_a_non_run_exits_2(tmp_path):
     said = f"{tmp_path / 'config.json'} is a file, not a run directory: give {tmp_path}\n"
     assert res.returncode == 2 and res.stderr.endswith(said), res.stderr
     sweep = tmp_path / "sweep"  # its runs are one level down
-    for name in ("b", "a"):
+    for name in ("c", "b", "a"):
         (sweep / "runs" / name).mkdir(parents=True)
         (sweep / "runs" / name / "config.json").write_text("{}")
-    res = _sili("eval", sweep)
-    said = f"is a sweep or a collection: give one of its runs, e.g. {sweep / 'runs' / 'a'}\n"
+    res = _sili("eval", sweep)  # a collection: none kept its checkpoint
+    said = "it holds runs without their checkpoint.pt (a collection): give the run in the sweep"
+    assert res.returncode == 2 and said in res.stderr, res.stderr
+    for name in ("c", "b"):
+        (sweep / "runs" / name / "checkpoint.pt").write_bytes(b"")
+    res = _sili("eval", sweep)  # the first that can be played, not the first by name
+    said = f"it is a sweep: give one of its runs, e.g. {sweep / 'runs' / 'b'}\n"
     assert res.returncode == 2 and res.stderr.endswith(said), res.stderr
 
 
@@ -537,11 +543,13 @@ def test_a_checkpoint_of_another_run_exits_2_and_leaves_the_run_as_it_was(tmp_pa
     # refused before the run changed: still a finished run of 2
     assert json.loads((run / "config.json").read_text())["run"]["interactions"] == 2
     assert run_state(run) == "done"
+    own = ["--env-kwarg", "horizon=50"]  # the run's own argument, given: still the run's task
     for command in (["eval", str(run), "--interactions", "1"], ["preview", "circle-3"]):
         if command[0] == "preview":
             command += ["--checkpoint", str(run), "--out", str(tmp_path / "p.html")]
-        assert main(command) == 2
-        assert said in capsys.readouterr().err
+        for given in ([], own):
+            assert main(command + given) == 2
+            assert said in capsys.readouterr().err
     with pytest.raises(ConfigError, match="does not fit the agent"):
         SILI.load(run)
     # another task's agent of the same sizes: refused by the task its checkpoint names

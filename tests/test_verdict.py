@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shlex
 
 import numpy as np
 import pandas as pd
@@ -288,3 +289,5 @@ def test_the_command_that_measures_the_references_names_the_arguments_played():
     for (task, key, value), command in said.items():
         cfg = make_run_config(task, "sac", env_kwargs={key: value})
         assert _no_reference(cfg).endswith(f"reward not judged; {command} measures them")
+    # as a shell splits it, it runs (one interaction after each game's first)
+    assert main([*shlex.split(command.strip("`"))[1:], "--interactions", "2"]) == 0

@@ -286,11 +286,6 @@ def task_arguments_given(args: argparse.Namespace) -> dict:
     ``--controller``."""
     env_kwargs = task_kwargs_arg(args)
     if args.controller is not None:
-        if "," in args.controller:  # a sweep's list
-            raise ConfigError(
-                f"--controller {args.controller}: one controller here; `sili sweep --controller "
-                f"{args.controller}` trains a run with each"
-            )
         env_kwargs["controller"] = args.controller
     return env_kwargs
 

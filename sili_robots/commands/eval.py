@@ -65,6 +65,6 @@ def run(args: argparse.Namespace) -> int:
         )
     # Sawyer-Reach: the controller, given or not, and the run's own: an ablation's rows say both
     played = title_arguments(task, task_args)
-    trained = {"trained_with": title_arguments(task, cfg.env_kwargs), "played_with": played}
-    print(json.dumps({"run_dir": str(args.run_dir), **trained, **result}, indent=2))
+    arguments = {"trained_with": title_arguments(task, cfg.env_kwargs), "played_with": played}
+    print(json.dumps({"run_dir": str(args.run_dir), **arguments, **result}, indent=2))
     return 0

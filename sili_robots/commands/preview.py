@@ -76,9 +76,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "interaction's moment the ego draws level with the opponent",
     )
     p.add_argument("--serve", action="store_true", help="serve live on 127.0.0.1 until Ctrl-C")
-    add_task_args(
-        p, only="; with --checkpoint: in place of the run's own (the horizon stays the run's)"
-    )
+    add_task_args(p, only="; with --checkpoint: in place of the run's own")
     p.set_defaults(run=run)
 
 

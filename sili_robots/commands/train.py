@@ -7,6 +7,7 @@ import contextlib
 import functools
 import json
 import os
+import shlex
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -156,6 +157,7 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     if args.latent is not None and "latent" in given:
         raise ConfigError(f"give one of --latent and --set {given['latent']}, not both")
     env_kwargs = task_arguments_given(args)
+    _check_one_controller(args.task, args.method, env_kwargs)
     cfg = make_run_config(
         args.task,
         args.method,
@@ -174,6 +176,24 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     if note:
         print(f"sili train: note: {note}", file=sys.stderr)
     return cfg
+
+
+def _check_one_controller(task: str, method: str, env_kwargs: dict) -> None:
+    """A run trains with one controller: a sweep's list (``mink,osc``) is pointed to the sweep,
+    on a task that takes a controller (another says it takes none)."""
+    from sili_robots.tasks.registry import check_argument_names
+
+    given = env_kwargs.get("controller")
+    if not isinstance(given, str) or "," not in given:
+        return
+    check_argument_names(task, ["controller"], "--controller, --env-kwarg")
+    sweep = shlex.join(
+        ["sili", "sweep", "--tasks", task, "--methods", method, "--controller", given]
+    )
+    raise ConfigError(
+        f"--controller {shlex.quote(given)}: a run trains with one controller; a run with each: "
+        f"{sweep} --out SWEEP_DIR"
+    )
 
 
 def beta_anneal(given: list[list[str]]) -> Schedule:

@@ -25,8 +25,12 @@ class _DropKnownImportWarnings(logging.Filter):
         return not any(msg.startswith(q) for q in _QUIET)
 
 
+#: robosuite's logger
+LOGGER = "robosuite_logs"
+
+
 def quiet_robosuite_import() -> None:
     """Install the filter on robosuite's logger (before robosuite is first imported)."""
-    logger = logging.getLogger("robosuite_logs")
+    logger = logging.getLogger(LOGGER)
     if not any(isinstance(f, _DropKnownImportWarnings) for f in logger.filters):
         logger.addFilter(_DropKnownImportWarnings())

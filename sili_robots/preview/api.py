@@ -164,7 +164,7 @@ def make_env_and_policy(
     policy trained with one controller, played with another; the horizon stays the run's)."""
     from sili_robots.policies import scripted_policy
     from sili_robots.tasks import make_task, task_spec
-    from sili_robots.tasks.registry import title_arguments
+    from sili_robots.tasks.registry import same_argument, task_defaults, title_arguments
 
     name = task_spec(task).name
     if env_kwargs is not None:
@@ -222,8 +222,13 @@ def make_env_and_policy(
     given = "".join(f", {k}={v}" for k, v in title_arguments(run_task, cfg.env_kwargs).items())
     method = METHOD_NAMES.get(cfg.method, cfg.method)
     label = f"trained {method}, seed {cfg.seed}{given} ({run_dir.name})"
-    own = {**title_arguments(run_task, cfg.env_kwargs), **cfg.env_kwargs}
-    other = [f"{k}={v}" for k, v in (env_kwargs or {}).items() if k not in own or own[k] != v]
+    own = {**task_defaults(run_task), **cfg.env_kwargs}  # one given at the run's own is not new
+    missing = object()
+    other = [
+        f"{k}={v}"
+        for k, v in (env_kwargs or {}).items()
+        if not same_argument(own.get(k, missing), v)
+    ]
     if other:
         label += ", played with " + ", ".join(other)
     return name, stepped, pol, label

@@ -167,7 +167,8 @@ def finished_summary(run_dir: Path) -> dict[str, Any] | None:
 def each_run(sweep_dir: Path, read: Callable[[Path], T]) -> list[T]:
     """``read(run_dir)`` of every run of the sweep, in order; a ConfigError naming every run
     that cannot be read, not only the first, so a sweep's damaged runs are mended in one go."""
-    done, damaged = [], []
+    done: list[T] = []
+    damaged: list[str] = []
     for run_dir in run_dirs(sweep_dir):
         try:
             done.append(read(run_dir))
