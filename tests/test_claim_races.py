@@ -116,3 +116,27 @@ def test_a_claim_written_on_another_host_names_no_local_trainer(tmp_path):
     (tmp_path / "worker.json").write_text(json.dumps(claim))
     assert training_worker(tmp_path) is None
     check_not_trained(tmp_path)  # nothing raised: nobody here trains it
+
+
+def test_a_claim_naming_no_process_names_no_trainer(tmp_path):
+    """A damaged claim of pid 0 (os.kill(0, 0) signals this process group, and succeeds), a
+    negative pid or one past the kernel's largest blocks nothing."""
+    for pid in (0, -1, 2**22):
+        _claim(tmp_path, pid)
+        assert training_worker(tmp_path) is None, pid
+        check_not_trained(tmp_path)  # nobody trains it
+
+
+def test_ending_a_claim_leaves_a_newer_claim_of_another_process(tmp_path, other_process):
+    """Our claim cleared as stale meanwhile and another trainer's written: ours ending leaves
+    theirs, which still protects their run."""
+    from sili_robots.sweep.state import training_claim
+
+    with training_claim(tmp_path):
+        assert training_worker(tmp_path) == os.getpid()
+        _claim(tmp_path, other_process)
+    assert training_worker(tmp_path) == other_process
+    (tmp_path / "worker.json").unlink()
+    with training_claim(tmp_path):
+        pass
+    assert not (tmp_path / "worker.json").exists()  # our own is removed when the block ends

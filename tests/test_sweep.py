@@ -532,6 +532,10 @@ def test_a_record_that_cannot_run_is_named_and_a_dry_run_refuses_it_too(tmp_path
     for dry in (["--dry-run"], []):  # a new invocation is added to the record: it must read
         assert main([*base, "--interactions", "2", *dry]) == 2
         assert f"{record} is damaged" in capsys.readouterr().err
+    record.write_text('{"invocations": []}')  # not a sweep of no runs to resume
+    for dry in (["--dry-run"], []):
+        assert main(["sweep", "--resume", str(out), *dry]) == 2
+        assert f"{record} is damaged (no invocation recorded)" in capsys.readouterr().err
 
 
 def test_a_new_run_is_not_made_in_a_sweeps_or_a_collections_runs(tmp_path, capsys):
@@ -761,6 +765,24 @@ def test_an_extension_checks_every_run_first_and_one_cut_short_is_finished_by_a_
         f"fewer than the 6 asked for now; extend the sweep's runs first (sili sweep --resume {out}"
     )
     assert said in capsys.readouterr().err
+
+
+def test_a_run_extended_but_left_with_its_short_summary_is_resumed_not_skipped(tmp_path):
+    """An extension stopped by an earlier version left the old summary beside the raised
+    target: the run is resumable, and a resume trains it to its new length."""
+    from sili_robots.runs import set_target
+    from sili_robots.sweep.state import run_state
+
+    spec = _spec(methods=["sac"], seeds=[0], interactions=3, checkpoint_every=1)
+    assert run_sweep(spec, tmp_path, LocalBackend(workers=1), progress=False).ok
+    run = tmp_path / "runs" / "circle-3__sac__s0"
+    set_target(run, 5)
+    assert json.loads((run / "summary.json").read_text())["interactions"] == 3
+    assert run_state(run) == "resumable"
+    specs = [replace(s, interactions=5) for s in recorded_specs(tmp_path)]
+    report = run_sweep(specs, tmp_path, LocalBackend(workers=1), progress=False, recorded=True)
+    assert report.ok and report.skipped == [] and list(report.outcomes) == [run.name]
+    assert len(pd.read_csv(run / "metrics.csv")) == 5
 
 
 def _alive(pid):
@@ -1342,9 +1364,11 @@ def test_a_sweep_given_through_python_names_what_each_field_takes(tmp_path):
         ({"tasks": "circle-3"}, "SweepSpec tasks must be a non-empty list of task names, got 'c"),
         ({"controllers": "osc", "tasks": ["sawyer-reach"]}, "controllers must be a non-empty"),
         ({"seeds": []}, "SweepSpec seeds must be a non-empty list of seeds, got"),
+        ({"seeds": None}, "SweepSpec seeds must be a non-empty list of seeds, got None"),
         ({"seeds": [0, 0]}, "SweepSpec seeds gives 0 twice"),
         ({"interactions": "1"}, "interactions must be an integer >= 1, got '1'"),
         ({"beta_schedule": "0:0.5"}, "beta_schedule must be a list of \\(interaction, value\\)"),
+        ({"lr_schedule": [(0, 3e-4, 7)]}, "lr_schedule must be a list of \\(interaction, value\\)"),
         ({"agent_overrides": {1: 2}}, "agent_overrides must be a dict of names to values"),
     ):
         with pytest.raises(ConfigError, match=said):

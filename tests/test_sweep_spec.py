@@ -28,6 +28,9 @@ def test_parse_seeds_ranges_lists_and_errors():
     assert len(parse_seeds("0-5000,0-5000")) == 5001  # overlaps count once under the cap
     with pytest.raises(ConfigError, match="more than 10,000 runs per variant"):
         parse_seeds("0-5000,6000-12000")
+    assert len(parse_seeds("0-9999")) == 10_000  # the cap itself is allowed, one more is not
+    with pytest.raises(ConfigError, match="more than 10,000 runs per variant"):
+        parse_seeds("0-10000")
     assert parse_seeds("3") == [3]
     with pytest.raises(ConfigError, match="'x'"):
         parse_seeds("0,x")
@@ -87,6 +90,18 @@ def test_schedules_reach_every_run_and_b_schedules_only_where_b_is_free():
     # the spec goes through sweep.json as JSON and plans the same runs again
     again = SweepSpec.from_dict(json.loads(json.dumps(spec.to_dict())))
     assert [r.config.to_dict() for r in expand(again)] == [r.config.to_dict() for r in expand(spec)]
+
+
+def test_two_b_values_that_print_alike_are_refused_not_planned_under_one_name():
+    """A name keeps b to 6 significant digits: two runs would share one folder."""
+    assert {r.name for r in expand(_spec(betas=[0.123456, 0.123457]))} == {
+        "circle-3__sili-b0.123456__s0",
+        "circle-3__sili-b0.123457__s0",
+    }
+    with pytest.raises(
+        ConfigError, match=r"two runs of this sweep would be named .*b0\.123456__s0"
+    ):
+        expand(_spec(betas=[0.1234561, 0.1234562]))
 
 
 def test_names_are_stable_and_unique():
@@ -358,3 +373,17 @@ def test_a_b_schedule_applies_to_smirl_too():
 def test_b_values_equal_as_numbers_are_one_b():
     assert parse_betas("0.5,0.50,5e-1") == [0.5]
     assert len(expand(_one_task(interactions=10, betas=parse_betas("0.5,0.50")))) == 1
+
+
+def test_the_same_invocation_is_recorded_once(tmp_path):
+    """Running a sweep again adds nothing to sweep.json; another invocation is appended."""
+    from sili_robots.sweep.state import record_invocation, recorded_specs
+
+    record_invocation(tmp_path, _spec())
+    record_invocation(tmp_path, _spec())
+    record_invocation(tmp_path, SweepSpec.from_dict(json.loads(json.dumps(_spec().to_dict()))))
+    assert recorded_specs(tmp_path) == [_spec()]
+    record_invocation(tmp_path, _spec(seeds=[1]))
+    record_invocation(tmp_path, _spec())
+    invocations = json.loads((tmp_path / "sweep.json").read_text())["invocations"]
+    assert [i["seeds"] for i in invocations] == [[0], [1]]
