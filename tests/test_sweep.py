@@ -1,6 +1,7 @@
 """``sili sweep`` on the local process pool: real runs, the results table, TensorBoard scalars,
 resume after a SIGKILLed worker, a failing run isolated, bad input."""
 
+import functools
 import io
 import json
 import os
@@ -783,6 +784,60 @@ def test_a_run_extended_but_left_with_its_short_summary_is_resumed_not_skipped(t
     report = run_sweep(specs, tmp_path, LocalBackend(workers=1), progress=False, recorded=True)
     assert report.ok and report.skipped == [] and list(report.outcomes) == [run.name]
     assert len(pd.read_csv(run / "metrics.csv")) == 5
+
+
+def test_a_run_under_its_own_name_wins_over_a_folder_under_a_former_name(tmp_path, capsys):
+    """A user's leftover under the name an earlier version gave the run is neither taken as
+    the run nor renamed over it."""
+    out = tmp_path / "sweep"
+    args = ["sweep", "--tasks", "circle-3", "--methods", "sac,stable", "--latent", "continuous"]
+    assert main([*args, "--interactions", "2", *FAST_ARGS, "--out", str(out), "--no-progress"]) == 0
+    current, former = (out / "runs" / f"circle-3__sac{s}__s0" for s in ("", "-continuous"))
+    former.mkdir()
+    config = json.loads((current / "config.json").read_text())
+    config["run"]["seed"] = 7
+    (former / "config.json").write_text(json.dumps(config))
+    capsys.readouterr()
+    assert main(["sweep", "--resume", str(out), "--dry-run"]) == 0
+    assert capsys.readouterr().out.splitlines()[0] == "circle-3__sac__s0\tdone"
+    assert main(["sweep", "--resume", str(out), "--no-progress"]) == 0
+    assert json.loads(capsys.readouterr().out)["already_done"] == 2
+    assert json.loads((former / "config.json").read_text())["run"]["seed"] == 7
+    assert (current / "summary.json").is_file()
+
+
+def test_overwrite_of_a_folder_with_an_empty_runs_folder_starts_the_sweep(tmp_path, capsys):
+    """An --overwrite cut short after it removed the record leaves runs/ empty: that is no
+    results collection."""
+    out = tmp_path / "sweep"
+    (out / "runs").mkdir(parents=True)
+    args = ["sweep", "--tasks", "circle-3", "--methods", "sac", "--seeds", "0"]
+    args += ["--interactions", "2", *FAST_ARGS, "--out", str(out), "--overwrite"]
+    assert main([*args, "--dry-run"]) == 0
+    assert capsys.readouterr().out == "circle-3__sac__s0\tnew\n1 run\n"
+    assert main([*args, "--no-progress"]) == 0
+    (out / "sweep.json").unlink()  # runs/ holding a run, no record: a results collection
+    assert main([*args, "--dry-run"]) == 2
+    assert "is a results collection, not a sweep" in capsys.readouterr().err
+
+
+def test_the_closing_line_counts_the_runs_finished_earlier(tmp_path, capsys):
+    spec = functools.partial(_spec, methods=["sac"], interactions=2)
+    assert run_sweep(spec(seeds=[0]), tmp_path, LocalBackend(workers=1), progress=False).ok
+    capsys.readouterr()
+    report = run_sweep(spec(seeds=[0, 1]), tmp_path, LocalBackend(workers=1), progress=False)
+    assert report.ok and report.skipped == ["circle-3__sac__s0"]
+    printed = capsys.readouterr()
+    assert "sweep: 2 done (1 of them earlier), 0 failed, 0 not run" in printed.out + printed.err
+
+
+def test_a_stop_file_left_by_an_earlier_sweep_does_not_stop_the_next(tmp_path):
+    run = tmp_path / "runs" / "circle-3__sac__s0"
+    run.mkdir(parents=True)
+    (run / "stop").touch()  # as a sweep killed while it stopped its workers leaves it
+    spec = _spec(methods=["sac"], seeds=[0], interactions=3)
+    assert run_sweep(spec, tmp_path, LocalBackend(workers=1), progress=False).ok
+    assert len(pd.read_csv(run / "metrics.csv")) == 3 and not (run / "stop").exists()
 
 
 def _alive(pid):

@@ -387,3 +387,17 @@ def test_the_same_invocation_is_recorded_once(tmp_path):
     record_invocation(tmp_path, _spec())
     invocations = json.loads((tmp_path / "sweep.json").read_text())["invocations"]
     assert [i["seeds"] for i in invocations] == [[0], [1]]
+
+
+def test_a_run_planned_twice_keeps_the_first_invocations_plan():
+    """Two invocations that differ in how often a run is saved: the first's plan goes on, as
+    the run began."""
+    (run,) = plan([_spec(checkpoint_every=4), _spec(checkpoint_every=9)])
+    assert run.config.checkpoint_every == 4
+    (run,) = plan([_spec(checkpoint_every=9), _spec(checkpoint_every=4)])
+    assert run.config.checkpoint_every == 9
+    runs = plan([_spec(checkpoint_every=4), _spec(seeds=[0, 1], checkpoint_every=9)])
+    assert [(r.name, r.config.checkpoint_every) for r in runs] == [
+        ("circle-3__sili-bschedule__s0", 4),
+        ("circle-3__sili-bschedule__s1", 9),
+    ]
