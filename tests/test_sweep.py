@@ -11,6 +11,7 @@ import socket
 import subprocess
 import sys
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -840,6 +841,26 @@ def test_a_stop_file_left_by_an_earlier_sweep_does_not_stop_the_next(tmp_path):
     assert len(pd.read_csv(run / "metrics.csv")) == 3 and not (run / "stop").exists()
 
 
+def test_a_sweep_stopped_by_ctrl_c_leaves_no_stop_file_behind(tmp_path):
+    """A stop file left in a run's folder would stop `sili train --resume` of it at once."""
+    from sili_robots.sweep.backend import NullMonitor
+
+    class CtrlCOnceTraining(NullMonitor):
+        def started(self, job):
+            self.metrics = Path(job.run_dir) / "metrics.csv"
+
+        def tick(self):
+            if metrics_rows(self.metrics) >= 2:
+                raise KeyboardInterrupt
+
+    spec = _spec(methods=["sac"], seeds=[0], interactions=2000)
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(spec, tmp_path, LocalBackend(workers=1), monitor=CtrlCOnceTraining())
+    run = tmp_path / "runs" / "circle-3__sac__s0"
+    assert (run / "metrics.csv").is_file() and not (run / "summary.json").exists()
+    assert not (run / "stop").exists() and not (run / "worker.json").exists()
+
+
 def _alive(pid):
     try:
         os.kill(pid, 0)
@@ -1314,9 +1335,39 @@ def test_the_runs_table_tells_a_run_not_started_from_one_under_way(tiny_sweep, t
     (out / "runs" / under_way / "summary.json").unlink()
     for name in ("summary.json", "metrics.csv", "checkpoint.pt"):
         (out / "runs" / not_started / name).unlink()
-    status = runs_table(out).set_index("run")["status"]
+    metrics = out / "runs" / under_way / "metrics.csv"
+    pd.read_csv(metrics).head(5).to_csv(metrics, index=False)  # 5 of its 8 logged so far
+    (out / "runs" / "notes").mkdir()  # a user's folder, no config: not a run
+    (out / "runs" / "notes" / "todo.txt").write_text("mine")
+    table = runs_table(out).set_index("run")
+    assert "notes" not in table.index
+    status = table["status"]
     assert status[under_way] == "incomplete" and status[not_started] == "not started"
     assert status["circle-3__sili-bschedule__s0"] == "done"
+    logged = table["interactions_logged"]
+    assert logged[under_way] == 5 and logged["circle-3__sili-bschedule__s0"] == 8
+    finished = results_table(out).groupby("run")["finished"].unique().map(list).to_dict()
+    assert finished[under_way] == [False]
+    assert finished["circle-3__sili-bschedule__s0"] == [True]
+
+
+def test_a_run_recorded_before_profiles_is_tabled_as_the_package_profile(tiny_sweep, tmp_path):
+    from sili_robots.sweep.results import runs_table
+
+    out = tmp_path / "sweep"
+    shutil.copytree(tiny_sweep[0], out)
+    config = out / "runs" / "circle-3__sac__s0" / "config.json"
+    record = json.loads(config.read_text())
+    assert record["run"]["agent"].pop("profile") == "package"
+    config.write_text(json.dumps(record))
+    assert set(runs_table(out)["profile"]) == {"package"}
+
+
+def test_a_run_given_where_a_sweep_belongs_is_named_a_run(tiny_sweep, capsys):
+    run = tiny_sweep[0] / "runs" / "circle-3__sac__s0"
+    for command in (["runs", str(run)], ["plot", str(run), "--formats", "png"]):
+        assert main(command) == 2
+        assert f"{run} is a run, not a sweep or a collection" in capsys.readouterr().err
 
 
 def test_a_sweep_notes_runs_whose_kernels_are_slow_on_this_machine(tmp_path, monkeypatch):
@@ -1438,6 +1489,7 @@ def test_a_sweep_given_through_python_names_what_each_field_takes(tmp_path):
         (lambda: run_sweep(numpy, tmp_path, backend="local"), "backend must be a sweep backend"),
         (lambda: LocalBackend(workers=1.5), r"workers must be an integer >= 1, got 1\.5"),
         (lambda: LocalBackend(retries="1"), "retries must be an integer >= 0, got '1'"),
+        (lambda: LocalBackend(start_method="fork"), "start method 'fork' is not allowed"),
         (lambda: RayBackend(workers=0), "workers must be an integer >= 1, got 0"),
         (lambda: RayBackend(workers=1.5), r"workers must be an integer >= 1, got 1\.5"),
         (lambda: RayBackend(retries=-1), "retries must be an integer >= 0, got -1"),
