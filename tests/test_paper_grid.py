@@ -102,6 +102,12 @@ def test_collect_reports_each_unfinished_run_once_and_not_one_collected_from_ano
     report = collect([copy, collection, copy], tmp_path / "into")
     assert report.unfinished == ["circle-3__sac__s0"]  # was listed per source, and bschedule too
     assert sorted(report.added) == ["circle-3__sili-bschedule__s0", "circle-3__sili-paper-b0.5__s0"]
+    gone = tmp_path / "gone"  # a summary without its metrics: unfinished, the others collected
+    shutil.copytree(sweep, gone)
+    (gone / "runs" / "circle-3__sili-paper-b0.5__s0" / "metrics.csv").unlink()
+    report = collect([gone], tmp_path / "into-gone")
+    assert sorted(report.unfinished) == ["circle-3__sac__s0", "circle-3__sili-paper-b0.5__s0"]
+    assert report.added == ["circle-3__sili-bschedule__s0"]
 
 
 def test_collect_refuses_a_different_run_of_the_same_name(sweep_and_collection, tmp_path, capsys):

@@ -401,3 +401,19 @@ def test_a_run_planned_twice_keeps_the_first_invocations_plan():
         ("circle-3__sili-bschedule__s0", 4),
         ("circle-3__sili-bschedule__s1", 9),
     ]
+
+
+def test_settings_a_recorded_run_lacks_keep_their_planned_value():
+    """A config recorded before a setting existed (sac.precision, checkpoint_every) goes on
+    with the planned value, not a failure."""
+    from sili_robots.runs import with_settings_of
+
+    (run,) = expand(_spec())
+    planned = run.config
+    recorded = {"threads": 2, "agent": {"matmul": "aten"}}
+    made = with_settings_of(
+        planned, recorded, ("agent.matmul", "agent.sac.precision", "threads", "checkpoint_every")
+    )
+    assert made.agent.matmul == "aten" and made.threads == 2
+    assert made.agent.sac.precision == planned.agent.sac.precision
+    assert made.checkpoint_every == planned.checkpoint_every

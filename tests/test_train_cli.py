@@ -195,6 +195,26 @@ def test_a_revision_unknown_on_one_side_is_no_continuation(tmp_path):
     assert continued["versions"]["sili_robots_revision"] == now
 
 
+def test_a_run_is_compared_with_the_software_it_last_ran_on(tmp_path):
+    """Going on where its latest session ran adds no continuation; other software does."""
+    args = ["train", "--task", "circle-3", "--method", "sac", "--interactions", "1", *FAST]
+    run = tmp_path / "run"
+    assert main([*args, "--out", str(run)]) == 0
+    cfg = read_config(run)
+    now = cfg.provenance()
+    record = json.loads((run / "config.json").read_text())
+    began, middle = ({**now, "torch": f"0.0.{i}"} for i in (1, 2))
+    record["versions"] = began
+    for sessions, noted in (((middle, now), [1, 2]), ((now, middle), [1, 2, 3])):
+        record["continued"] = [
+            {"from_interaction": i, "versions": v} for i, v in enumerate(sessions, start=1)
+        ]
+        (run / "config.json").write_text(json.dumps(record))
+        record_continuation(run, cfg, 3)
+        continued = json.loads((run / "config.json").read_text())["continued"]
+        assert [c["from_interaction"] for c in continued] == noted
+
+
 def test_the_first_interactions_are_random_and_learning_starts_after_them(tmp_path, monkeypatch):
     from sili_robots.agent import SILIAgent
     from sili_robots.build import make_run_config
