@@ -17,7 +17,7 @@ import sili_robots.sweep.runner as runner
 from sili_robots import SILI
 from sili_robots.cli import main
 from sili_robots.errors import ConfigError
-from sili_robots.sweep.state import check_not_trained, training_worker
+from sili_robots.sweep.state import check_not_trained, training_claim, training_worker
 
 
 @pytest.fixture
@@ -120,8 +120,8 @@ def test_a_claim_written_on_another_host_names_no_local_trainer(tmp_path):
 
 def test_a_claim_naming_no_process_names_no_trainer(tmp_path):
     """A damaged claim of pid 0 (os.kill(0, 0) signals this process group, and succeeds), a
-    negative pid or one past the kernel's largest blocks nothing."""
-    for pid in (0, -1, 2**22):
+    negative pid or one past the kernel's largest (os.kill overflows) blocks nothing."""
+    for pid in (0, -1, 2**31):  # os.kill would overflow on the last
         _claim(tmp_path, pid)
         assert training_worker(tmp_path) is None, pid
         check_not_trained(tmp_path)  # nobody trains it
@@ -130,8 +130,6 @@ def test_a_claim_naming_no_process_names_no_trainer(tmp_path):
 def test_ending_a_claim_leaves_a_newer_claim_of_another_process(tmp_path, other_process):
     """Our claim cleared as stale meanwhile and another trainer's written: ours ending leaves
     theirs, which still protects their run."""
-    from sili_robots.sweep.state import training_claim
-
     with training_claim(tmp_path):
         assert training_worker(tmp_path) == os.getpid()
         _claim(tmp_path, other_process)

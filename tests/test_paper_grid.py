@@ -102,10 +102,18 @@ def test_collect_reports_each_unfinished_run_once_and_not_one_collected_from_ano
     report = collect([copy, collection, copy], tmp_path / "into")
     assert report.unfinished == ["circle-3__sac__s0"]  # was listed per source, and bschedule too
     assert sorted(report.added) == ["circle-3__sili-bschedule__s0", "circle-3__sili-paper-b0.5__s0"]
-    gone = tmp_path / "gone"  # a summary without its metrics: unfinished, the others collected
+
+
+def test_a_finished_run_without_its_metrics_is_unfinished_and_the_others_collected(
+    sweep_and_collection, tmp_path
+):
+    from sili_robots.sweep.collect import collect
+
+    sweep, _ = sweep_and_collection
+    gone = tmp_path / "sweep"
     shutil.copytree(sweep, gone)
     (gone / "runs" / "circle-3__sili-paper-b0.5__s0" / "metrics.csv").unlink()
-    report = collect([gone], tmp_path / "into-gone")
+    report = collect([gone], tmp_path / "into")
     assert sorted(report.unfinished) == ["circle-3__sac__s0", "circle-3__sili-paper-b0.5__s0"]
     assert report.added == ["circle-3__sili-bschedule__s0"]
 

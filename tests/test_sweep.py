@@ -1,7 +1,6 @@
 """``sili sweep`` on the local process pool: real runs, the results table, TensorBoard scalars,
 resume after a SIGKILLed worker, a failing run isolated, bad input."""
 
-import functools
 import io
 import json
 import os
@@ -11,7 +10,6 @@ import socket
 import subprocess
 import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -773,14 +771,12 @@ def test_a_run_extended_but_left_with_its_short_summary_is_resumed_not_skipped(t
     """An extension stopped by an earlier version left the old summary beside the raised
     target: the run is resumable, and a resume trains it to its new length."""
     from sili_robots.runs import set_target
-    from sili_robots.sweep.state import run_state
 
-    spec = _spec(methods=["sac"], seeds=[0], interactions=3, checkpoint_every=1)
+    spec = _spec(methods=["sac"], seeds=[0], interactions=3)
     assert run_sweep(spec, tmp_path, LocalBackend(workers=1), progress=False).ok
     run = tmp_path / "runs" / "circle-3__sac__s0"
     set_target(run, 5)
     assert json.loads((run / "summary.json").read_text())["interactions"] == 3
-    assert run_state(run) == "resumable"
     specs = [replace(s, interactions=5) for s in recorded_specs(tmp_path)]
     report = run_sweep(specs, tmp_path, LocalBackend(workers=1), progress=False, recorded=True)
     assert report.ok and report.skipped == [] and list(report.outcomes) == [run.name]
@@ -823,13 +819,14 @@ def test_overwrite_of_a_folder_with_an_empty_runs_folder_starts_the_sweep(tmp_pa
 
 
 def test_the_closing_line_counts_the_runs_finished_earlier(tmp_path, capsys):
-    spec = functools.partial(_spec, methods=["sac"], interactions=2)
-    assert run_sweep(spec(seeds=[0]), tmp_path, LocalBackend(workers=1), progress=False).ok
+    small = {"methods": ["sac"], "interactions": 2}
+    first = _spec(**small, seeds=[0])
+    assert run_sweep(first, tmp_path, LocalBackend(workers=1), progress=False).ok
     capsys.readouterr()
-    report = run_sweep(spec(seeds=[0, 1]), tmp_path, LocalBackend(workers=1), progress=False)
+    again = _spec(**small, seeds=[0, 1])
+    report = run_sweep(again, tmp_path, LocalBackend(workers=1), progress=False)
     assert report.ok and report.skipped == ["circle-3__sac__s0"]
-    printed = capsys.readouterr()
-    assert "sweep: 2 done (1 of them earlier), 0 failed, 0 not run" in printed.out + printed.err
+    assert "sweep: 2 done (1 of them earlier), 0 failed, 0 not run" in capsys.readouterr().err
 
 
 def test_a_stop_file_left_by_an_earlier_sweep_does_not_stop_the_next(tmp_path):
@@ -839,26 +836,6 @@ def test_a_stop_file_left_by_an_earlier_sweep_does_not_stop_the_next(tmp_path):
     spec = _spec(methods=["sac"], seeds=[0], interactions=3)
     assert run_sweep(spec, tmp_path, LocalBackend(workers=1), progress=False).ok
     assert len(pd.read_csv(run / "metrics.csv")) == 3 and not (run / "stop").exists()
-
-
-def test_a_sweep_stopped_by_ctrl_c_leaves_no_stop_file_behind(tmp_path):
-    """A stop file left in a run's folder would stop `sili train --resume` of it at once."""
-    from sili_robots.sweep.backend import NullMonitor
-
-    class CtrlCOnceTraining(NullMonitor):
-        def started(self, job):
-            self.metrics = Path(job.run_dir) / "metrics.csv"
-
-        def tick(self):
-            if metrics_rows(self.metrics) >= 2:
-                raise KeyboardInterrupt
-
-    spec = _spec(methods=["sac"], seeds=[0], interactions=2000)
-    with pytest.raises(KeyboardInterrupt):
-        run_sweep(spec, tmp_path, LocalBackend(workers=1), monitor=CtrlCOnceTraining())
-    run = tmp_path / "runs" / "circle-3__sac__s0"
-    assert (run / "metrics.csv").is_file() and not (run / "summary.json").exists()
-    assert not (run / "stop").exists() and not (run / "worker.json").exists()
 
 
 def _alive(pid):
@@ -1337,18 +1314,26 @@ def test_the_runs_table_tells_a_run_not_started_from_one_under_way(tiny_sweep, t
         (out / "runs" / not_started / name).unlink()
     metrics = out / "runs" / under_way / "metrics.csv"
     pd.read_csv(metrics).head(5).to_csv(metrics, index=False)  # 5 of its 8 logged so far
-    (out / "runs" / "notes").mkdir()  # a user's folder, no config: not a run
-    (out / "runs" / "notes" / "todo.txt").write_text("mine")
     table = runs_table(out).set_index("run")
-    assert "notes" not in table.index
+    done = "circle-3__sili-bschedule__s0"
     status = table["status"]
     assert status[under_way] == "incomplete" and status[not_started] == "not started"
-    assert status["circle-3__sili-bschedule__s0"] == "done"
-    logged = table["interactions_logged"]
-    assert logged[under_way] == 5 and logged["circle-3__sili-bschedule__s0"] == 8
-    finished = results_table(out).groupby("run")["finished"].unique().map(list).to_dict()
-    assert finished[under_way] == [False]
-    assert finished["circle-3__sili-bschedule__s0"] == [True]
+    assert status[done] == "done"
+    assert table.loc[under_way, "interactions_logged"] == 5
+    assert table.loc[done, "interactions_logged"] == 8
+    finished = results_table(out).groupby("run")["finished"]
+    assert not finished.any()[under_way] and finished.all()[done]
+
+
+def test_a_users_folder_among_the_runs_is_not_a_run(tiny_sweep, tmp_path):
+    from sili_robots.sweep.results import runs_table
+
+    out = tmp_path / "sweep"
+    shutil.copytree(tiny_sweep[0], out)
+    (out / "runs" / "notes").mkdir()  # no config.json
+    (out / "runs" / "notes" / "todo.txt").write_text("mine")
+    assert "notes" not in set(runs_table(out)["run"]) | set(results_table(out)["run"])
+    assert len(runs_table(out)) == 4
 
 
 def test_a_run_recorded_before_profiles_is_tabled_as_the_package_profile(tiny_sweep, tmp_path):
@@ -1360,14 +1345,7 @@ def test_a_run_recorded_before_profiles_is_tabled_as_the_package_profile(tiny_sw
     record = json.loads(config.read_text())
     assert record["run"]["agent"].pop("profile") == "package"
     config.write_text(json.dumps(record))
-    assert set(runs_table(out)["profile"]) == {"package"}
-
-
-def test_a_run_given_where_a_sweep_belongs_is_named_a_run(tiny_sweep, capsys):
-    run = tiny_sweep[0] / "runs" / "circle-3__sac__s0"
-    for command in (["runs", str(run)], ["plot", str(run), "--formats", "png"]):
-        assert main(command) == 2
-        assert f"{run} is a run, not a sweep or a collection" in capsys.readouterr().err
+    assert runs_table(out).set_index("run").loc["circle-3__sac__s0", "profile"] == "package"
 
 
 def test_a_sweep_notes_runs_whose_kernels_are_slow_on_this_machine(tmp_path, monkeypatch):

@@ -14,7 +14,7 @@ from sili_robots.cli import main
 from sili_robots.errors import ConfigError
 from sili_robots.runs import run_differences, same_run
 from sili_robots.sweep import SweepSpec, expand, parse_betas, parse_seeds, plan
-from sili_robots.sweep.state import check_existing, run_path
+from sili_robots.sweep.state import check_existing, record_invocation, recorded_specs, run_path
 
 
 def _spec(**kw):
@@ -377,8 +377,6 @@ def test_b_values_equal_as_numbers_are_one_b():
 
 def test_the_same_invocation_is_recorded_once(tmp_path):
     """Running a sweep again adds nothing to sweep.json; another invocation is appended."""
-    from sili_robots.sweep.state import record_invocation, recorded_specs
-
     record_invocation(tmp_path, _spec())
     record_invocation(tmp_path, _spec())
     record_invocation(tmp_path, SweepSpec.from_dict(json.loads(json.dumps(_spec().to_dict()))))
@@ -401,19 +399,3 @@ def test_a_run_planned_twice_keeps_the_first_invocations_plan():
         ("circle-3__sili-bschedule__s0", 4),
         ("circle-3__sili-bschedule__s1", 9),
     ]
-
-
-def test_settings_a_recorded_run_lacks_keep_their_planned_value():
-    """A config recorded before a setting existed (sac.precision, checkpoint_every) goes on
-    with the planned value, not a failure."""
-    from sili_robots.runs import with_settings_of
-
-    (run,) = expand(_spec())
-    planned = run.config
-    recorded = {"threads": 2, "agent": {"matmul": "aten"}}
-    made = with_settings_of(
-        planned, recorded, ("agent.matmul", "agent.sac.precision", "threads", "checkpoint_every")
-    )
-    assert made.agent.matmul == "aten" and made.threads == 2
-    assert made.agent.sac.precision == planned.agent.sac.precision
-    assert made.checkpoint_every == planned.checkpoint_every
