@@ -43,6 +43,8 @@ from sili_robots.tasks.registry import (
 )
 
 CONFIG, CHECKPOINT, SUMMARY = "config.json", "checkpoint.pt", "summary.json"
+#: the folder of a sweep or a collection that holds its run directories
+RUNS_DIR = "runs"
 #: what to do about a damaged file (``read_json``)
 DAMAGED_CONFIG = "it is not a run's config: train the run again"
 DAMAGED_SUMMARY = (
@@ -363,8 +365,6 @@ def read_json(path: Path, what: str, *keys: str) -> dict[str, Any]:
 def _give_a_run(folder: Path) -> str:
     """What to give instead of ``folder``: one of its runs that kept its checkpoint when it is a
     sweep (a collection keeps none: its sweep's runs have them)."""
-    from sili_robots.sweep.state import RUNS_DIR  # (the sweep's layout is built on runs)
-
     held = sorted(p.parent for p in Path(folder).glob(f"{RUNS_DIR}/*/{CONFIG}"))
     if not held:
         return "give a directory written by `sili train --out`"

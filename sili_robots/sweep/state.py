@@ -33,6 +33,7 @@ from sili_robots.runs import (
     CONFIG,
     ERROR_FILE,
     RUNNING_FILE,
+    RUNS_DIR,
     SUMMARY,
     check_resumable,
     clear_run,
@@ -44,9 +45,8 @@ from sili_robots.runs import (
 )
 from sili_robots.sweep.spec import PlannedRun, SweepSpec, expand
 
-SWEEP_FILE, RUNS_DIR, RESULTS, RUNS_TABLE, LOCK, FIGURES = (
+SWEEP_FILE, RESULTS, RUNS_TABLE, LOCK, FIGURES = (
     "sweep.json",
-    "runs",
     "results.csv",
     "runs.csv",
     ".lock",
