@@ -682,6 +682,18 @@ def test_a_run_an_earlier_version_named_after_the_default_controller_is_found(tm
         )
 
 
+def test_a_controller_given_as_a_task_argument_is_the_sweeps_controller(tmp_path, capsys):
+    """As sili train takes either: the run is named by it, as with --controller."""
+    args = ["sweep", "--tasks", "sawyer-reach", "--methods", "sac", "--interactions", "2"]
+    planned = []
+    for given in (["--controller", "osc"], ["--env-kwarg", "controller=osc"]):
+        assert main([*args, *given, "--out", str(tmp_path / "s"), "--dry-run"]) == 0
+        planned.append(capsys.readouterr().out)
+    assert planned[0] == planned[1] == "sawyer-reach-osc__sac__s0\tnew\n1 run\n"
+    assert main([*args, "--env-kwarg", "controller=3", "--out", str(tmp_path / "s")]) == 2
+    assert "--env-kwarg controller=3: give controller names, e.g. osc" in capsys.readouterr().err
+
+
 def test_a_run_an_earlier_version_named_after_the_sweeps_latent_is_resumed_not_retrained(
     tmp_path, capsys
 ):

@@ -94,7 +94,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         scope=" for every run",
         refused="; not b, the latent kind or the method (--beta or --beta-schedule, --latent, "
         "--methods)",
-        refused_kwargs="; not controller (--controller)",
+        refused_kwargs="; controller=C is --controller C",
     )
     p.add_argument("--out", type=path_arg, help="sweep directory (created, or continued)")
     p.add_argument(
@@ -188,6 +188,7 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
             f"the sweep ({', '.join(methods)}); the others fix latent = 'none'"
         )
     env_kwargs = task_kwargs_arg(args)
+    controllers = _controllers(_controller_text(args.controller, env_kwargs))
     schedules = schedule_args(args)
     spec = SweepSpec(
         tasks=parse_list(args.tasks),
@@ -200,7 +201,7 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
             for field, (path, _) in SWEEP_SCHEDULES.items()
             if path in schedules
         },
-        controllers=_controllers(args.controller),
+        controllers=controllers,
         latent=args.latent,
         profile=args.profile,
         agent_overrides=parse_settings(args.agent_set),
@@ -230,6 +231,18 @@ def _note_unused_settings(spec: SweepSpec, given: dict[str, Any]) -> None:
     for (name, why), methods in unread.items():
         where = "; ".join(f"{m} on {', '.join(tasks)}" for m, tasks in methods.items())
         print(f"sili sweep: note: --set {name} does nothing for {where}: {why}", file=sys.stderr)
+
+
+def _controller_text(given: str | None, env_kwargs: dict[str, Any]) -> str | None:
+    """``--controller``, or ``--env-kwarg controller=C`` taken as it (and out of the task
+    arguments), as ``sili train`` takes either: the sweep names its runs by controller
+    (``task_kwargs_arg`` refuses both given)."""
+    if "controller" not in env_kwargs:
+        return given
+    value = env_kwargs.pop("controller")
+    if not isinstance(value, str):
+        raise ConfigError(f"--env-kwarg controller={value!r}: give controller names, e.g. osc")
+    return value
 
 
 def _controllers(text: str | None) -> list[str] | None:
