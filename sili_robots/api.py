@@ -51,13 +51,7 @@ from sili_robots.errors import (
     check_path,
     first_line,
 )
-from sili_robots.evaluation import (
-    AgentFeedback,
-    check_played_horizon,
-    check_same_task,
-    evaluate,
-    fitting,
-)
+from sili_robots.evaluation import AgentFeedback, check_same_task, evaluate, fitting
 from sili_robots.metrics import COMPRESSED_METRICS, METRICS, MetricsWriter
 from sili_robots.runs import (
     CHECKPOINT,
@@ -206,7 +200,6 @@ class SILI:
             if not isinstance(env, gym.Env):
                 raise ConfigError(f"env must be a task instance (or None), got {env!r}")
             check_same_task(path, cfg, env)
-            check_played_horizon(path, cfg, {"horizon": env.unwrapped.horizon}, "env")
         model = cls.__new__(cls)
         model.cfg, model.run_dir, model._task_env, model._overwrite = cfg, path, env, False
         model._saved = {}

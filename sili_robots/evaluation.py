@@ -97,14 +97,16 @@ class AgentFeedback(gym.Wrapper):
 
 
 def check_same_task(run_dir: Path, cfg: RunConfig, env: gym.Env) -> None:
-    """ConfigError when the task instance ``env`` is another task (version) than the run's: the
-    run's game and agent are that task's (its arguments, such as the controller, may differ)."""
+    """ConfigError when the task instance ``env`` is another task (version) than the run's, or
+    of another horizon: the run's game and agent are that task's (its other arguments, such as
+    the controller, may differ)."""
     recorded = cfg.task_id or cfg.task
     if not same_task_version(recorded, task_version_of(env)):
         raise ConfigError(
             f"env is {task_version_of(env)}; the run in {run_dir} was trained on {recorded}: "
             "give an instance of that task (its arguments, such as the controller, may differ)"
         )
+    check_played_horizon(run_dir, cfg, {"horizon": env.unwrapped.horizon}, "env")
 
 
 @contextlib.contextmanager
@@ -153,7 +155,6 @@ def load_trained(
     state = require_checkpoint(run_dir)
     if task_env is not None:
         check_same_task(run_dir, cfg, task_env)
-        check_played_horizon(run_dir, cfg, {"horizon": task_env.unwrapped.horizon}, "env")
     with fitting(run_dir, cfg, task_env):
         env = make_run_env(cfg, run_dir) if task_env is None else observed_as(task_env, cfg)
         agent = build_agent(cfg, env)
