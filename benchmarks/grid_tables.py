@@ -2,10 +2,13 @@
 
     python benchmarks/grid_tables.py results/paper-grid [--tasks circle-8 driving]
 
-One row per (method, profile, b): each seed's task reward and true stability over its last
-100 interactions, the mean and score (0 = standing still, 1 = the scripted oracle), the first
-50-interaction window of true stability >= 0.9, the mean reward over the second half of the
-run, and the wall time per run (one thread per run, two runs at a time).
+One row per (method, profile, b, budget), methods in the paper's order, the b sweep last and
+by b: each seed's task reward and true stability over its last 100 interactions, the mean and
+score (0 = standing still, 1 = the scripted oracle), the first 50-interaction window of true
+stability >= 0.9, the mean reward over the second half of the run, and the wall time per run
+(one thread per run, two runs at a time). A row of shorter runs than the table's names their
+length; SILI names its profile where the task's runs have both, and which one ``--method sili``
+starts from there (the claims' SILI).
 """
 
 from __future__ import annotations
@@ -21,12 +24,13 @@ from sili_robots.claims import run_finals
 from sili_robots.errors import one_line_errors
 from sili_robots.paper_grid import TASKS
 from sili_robots.plot_data import load_results
+from sili_robots.tasks import task_spec
 
-NAMES = {
+NAMES = {  # in the paper's order
     "sili": "SILI",
+    "oracle": "Oracle",
     "lili": "LILI",
     "sac": "SAC",
-    "oracle": "Oracle",
     "stable": "Stable",
     "smirl": "SMiRL",
 }
@@ -48,6 +52,46 @@ def _wall_minutes(source: Path, runs: pd.Series) -> str:
     return f"{low} min" if low == high else f"{low}-{high} min"
 
 
+def _is_b_sweep(method: str, profile: str, logged: int, full: int) -> bool:
+    """SILI at a constant b, shorter than the task's grid runs (the b sweep on Circle 3)."""
+    return method == "sili" and profile == "package" and logged < full
+
+
+def _order(method: str, profile: str, beta: float, logged: int, full: int) -> tuple:
+    """Methods in the paper's order, the package profile first, the b sweep last by b."""
+    rank = list(NAMES).index(method) if method in NAMES else len(NAMES)
+    return (_is_b_sweep(method, profile, logged, full), rank, profile != "package", beta)
+
+
+def _label(
+    task: str,
+    method: str,
+    profile: str,
+    beta: float,
+    logged: int,
+    full: int,
+    profiles: set[str],
+    seeds: list[int],
+) -> str:
+    """``SILI, paper profile, the task's default (seeds 0-4)``, ``Stable (1,000)``."""
+    name = NAMES.get(method, method)
+    if _is_b_sweep(method, profile, logged, full):
+        name += f" b={beta:g}"
+    elif method == "sili" and len(profiles) > 1:
+        name += f", {profile} profile"
+        if profile == task_spec(task).sili_profile != "package":
+            name += ", the task's default"
+    elif profile != "package":
+        name += f" ({profile})"
+    notes = [f"{logged:,}"] if logged != full else []
+    if seeds != [0, 1, 2]:
+        consecutive = seeds == list(range(seeds[0], seeds[-1] + 1)) and len(seeds) > 2
+        notes.append(
+            f"seeds {seeds[0]}-{seeds[-1]}" if consecutive else f"seeds {_seeds(seeds, '{}')}"
+        )
+    return f"{name} ({', '.join(notes)})" if notes else name
+
+
 def task_table(df: pd.DataFrame, source: Path, task: str) -> str:
     runs = df[df.task == task]
     finals = run_finals(runs)
@@ -64,12 +108,12 @@ def task_table(df: pd.DataFrame, source: Path, task: str) -> str:
         "|---|---|---|---|---|---|---|---|",
     ]
     keys = ["method", "profile", "config_beta", "logged"]
-    for (method, profile, beta, logged), g in finals.groupby(keys, sort=False):
+    full = int(finals.logged.max())
+    profiles = set(finals.loc[finals.method == "sili", "profile"])
+    groups = sorted(finals.groupby(keys), key=lambda kg: _order(*kg[0], full))
+    for (method, profile, beta, logged), g in groups:
         g = g.sort_values("seed")
-        name = NAMES.get(method, method)
-        name = name if profile == "package" else f"{name} ({profile})"
-        if method == "sili" and profile == "package" and logged <= 1000:  # the b sweep
-            name += f" b={beta:g}"
+        name = _label(task, method, profile, beta, logged, full, profiles, list(g.seed))
         first = ", ".join("never" if pd.isna(v) else str(int(v)) for v in g.first_stable)
         lines.append(
             f"| {name} | {_seeds(g.task_reward, '{:.2f}')} | {g.task_reward.mean():.2f} "

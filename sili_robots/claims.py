@@ -27,7 +27,7 @@ Rules (the margins are the table's, fixed before the grid ran):
   method: holds; SILI's rate below every other method's: in part.
 - *Speaker-Listener: SILI stabilizes by about interaction 250 and beats the baselines*: every
   seed's first 50-interaction window of true stability >= 0.9 starts by 350, and SILI is above
-  LILI, SAC and SMiRL: holds; one of the two: in part.
+  Oracle, LILI, SAC and SMiRL (the paper: "including Oracle"): holds; one of the two: in part.
 - *The package default over the paper profile* (not a claim of the paper: the grid's choice of
   the default for ``--method sili``, on each task the paper profile runs on, over every seed
   the grid runs of both there: five on Driving, three elsewhere): the package profile's score
@@ -36,11 +36,26 @@ Rules (the margins are the table's, fixed before the grid ran):
 - *b sweet spot 0.4-0.8* (Circle 3, 5 seeds per b, 1,000 interactions): the b with the best
   score lies in [0.4, 0.8] and beats b = 0 and b = 1 by more than 0.05: holds; the best b in
   the range alone: in part.
+
+Claims of stabilizing (added after the grid ran, from the paper's text; true stability, no
+score). "Stabilizes" is a mean true stability >= 0.9 over the seeds' last windows:
+
+- *SILI stabilizes* (its figure's right column, every task): on every task holds; on some in part.
+- *Circle (Continuous): SILI and Oracle stabilize*: both holds; one in part.
+- *Circle (Unequal): only SILI stabilizes*: SILI does and none of LILI, SAC and SMiRL does
+  holds; SILI does and some of them too, or none does, in part.
+- *b >= 0.4 stabilizes* (the b figure's right panel): every b >= 0.4 stabilizes and every smaller
+  b does not: holds; every b >= 0.4 stabilizes: in part.
+- *SMiRL does not stabilize consistently* (the paper's limitations): SMiRL does not stabilize
+  on more than half the tasks: holds; on some: in part.
+
+A verdict "in part" names the part that does not hold.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cache
 
 import numpy as np
 import pandas as pd
@@ -56,6 +71,7 @@ ABOVE = 0.05
 STABLE_BY = 350
 NO_COLLISIONS = 0.01
 SWEET_SPOT = (0.4, 0.8)
+STABILIZING_B = 0.4
 
 HOLDS, PART, NO = "holds", "holds in part", "does not hold"
 
@@ -66,6 +82,8 @@ class Claim:
     task: str
     measured: str
     verdict: str
+    #: for a verdict in part: the part that does not hold
+    short_of: str = ""
 
 
 def run_finals(df: pd.DataFrame, upto: dict[str, int] | None = None) -> pd.DataFrame:
@@ -114,12 +132,19 @@ def _block_runs(finals: pd.DataFrame, b: Block, task: str, method: str) -> pd.Da
     names the grid gives them, so no other run of the same method (another seed, latent kind,
     b or budget) is counted, and on the task's own dynamics (an ablation's task arguments, e.g.
     ``--env-kwarg``, keep the run's name but are not the grid's task)."""
-    from sili_robots.sweep.runner import plan
-
-    names = {r.name for r in plan(b.specs((task,))) if r.config.method == method}
-    grids = finals.run.isin(names) & (finals.task_args == "")
+    grids = finals.run.isin(_grid_names(b.name, task, method)) & (finals.task_args == "")
     rows = finals[grids & (finals.logged == b.budget(task))]
     return rows.sort_values("seed")
+
+
+@cache
+def _grid_names(block_name: str, task: str, method: str) -> frozenset[str]:
+    """The names the grid gives a block's runs of ``method`` on ``task`` (planning builds every
+    run's config: once per block, task and method)."""
+    from sili_robots.sweep.runner import plan
+
+    planned = plan(block(block_name).specs((task,)))
+    return frozenset(r.name for r in planned if r.config.method == method)
 
 
 def _mean(rows: pd.DataFrame, col: str) -> float:
@@ -142,31 +167,57 @@ def decide(finals: pd.DataFrame, df: pd.DataFrame) -> list[Claim]:
     grid, half = block("sili-oracle"), block("stable-smirl")
     base = block("lili-sac")
     claims: list[Claim] = []
+    n = len(grid.seeds)
     for task in TASKS:
-        sili = _sili_runs(finals, task)
-        oracle = _block_runs(finals, grid, task, "oracle")
-        lili, sac = (_block_runs(finals, base, task, m) for m in ("lili", "sac"))
-        stable, smirl = (_block_runs(finals, half, task, m) for m in ("stable", "smirl"))
-        n = len(grid.seeds)
-        claims.append(_comparable(task, sili, oracle, n))
-        claims.append(_above(task, sili, {"LILI": lili, "SAC": sac, "SMiRL": smirl}, df, n))
-        claims.append(_stable(task, sili, stable, df, n))
+        runs = {label: _method_runs(finals, task, label) for label in METHOD_BLOCKS}
+        sili = runs["SILI"]
+        baselines = {label: runs[label] for label in ("LILI", "SAC", "SMiRL")}
+        claims.append(_comparable(task, sili, runs["Oracle"], n))
+        claims.append(_above(task, sili, baselines, df, n))
+        claims.append(_stable(task, sili, runs["Stable"], df, n))
     claims.append(_driving(finals, df, grid, base, half))
     claims.append(_speaker_listener(finals, df, grid, base, half))
     claims.append(_sweet_spot(finals))
+    claims.append(_stabilizing_b(finals))
+    claims += _stabilizing(finals, n)
     for task in block("paper-profile").tasks:
         claims.append(_default_profile(task, finals))
     return [_unscored(c, finals) for c in claims]
 
 
-#: the claims decided from task rewards alone, which need no score
-REWARD_CLAIMS = ("only SILI avoids all collisions",)
+#: each method's block in the grid (SILI: its task's registered profile, ``_sili_runs``)
+METHOD_BLOCKS = {
+    "SILI": "sili-oracle",
+    "Oracle": "sili-oracle",
+    "LILI": "lili-sac",
+    "SAC": "lili-sac",
+    "Stable": "stable-smirl",
+    "SMiRL": "stable-smirl",
+}
+
+
+def _method_runs(finals: pd.DataFrame, task: str, label: str) -> pd.DataFrame:
+    """The grid's runs of a method (a ``METHOD_BLOCKS`` label) on ``task``."""
+    if label == "SILI":
+        return _sili_runs(finals, task)
+    return _block_runs(finals, block(METHOD_BLOCKS[label]), task, label.lower())
+
+
+#: the claims decided from task rewards or true stability alone, which need no score
+UNSCORED_CLAIMS = (
+    "only SILI avoids all collisions",
+    "b >= 0.4 stabilizes",
+    "SILI stabilizes",
+    "SILI and Oracle stabilize",
+    "only SILI stabilizes",
+    "SMiRL does not stabilize consistently",
+)
 
 
 def _unscored(claim: Claim, finals: pd.DataFrame) -> Claim:
     """A claim on a task version without reference bounds is not measured, whatever its scores
     (NaN) would have decided."""
-    if claim.claim in REWARD_CLAIMS or claim.verdict not in (HOLDS, PART, NO):
+    if claim.claim in UNSCORED_CLAIMS or claim.verdict not in (HOLDS, PART, NO):
         return claim
     runs = finals[finals.task == claim.task]
     ids = sorted(runs.loc[runs.score.isna(), "task_id"].unique())
@@ -210,7 +261,7 @@ def _comparable(task: str, sili: pd.DataFrame, oracle: pd.DataFrame, n: int) -> 
         f"Oracle {o:.2f} ({_mean(oracle, 'task_reward'):.2f})"
     )
     verdict = HOLDS if s >= o - COMPARABLE else PART if s >= o - COMPARABLE_PART else NO
-    return Claim(name, task, measured, verdict)
+    return Claim(name, task, measured, verdict, f"more than {COMPARABLE:g} below Oracle")
 
 
 def _same_window(sili: pd.DataFrame, other: pd.DataFrame, df: pd.DataFrame) -> float:
@@ -231,13 +282,25 @@ def _above(
     missing = _missing({"SILI": sili, **baselines}, {k: n for k in ("SILI", *baselines)})
     if missing:
         return Claim(name, task, "", missing)
-    above, parts = 0, []
+    below, parts = [], []
     for label, rows in baselines.items():
         s, b = _same_window(sili, rows, df), _mean(rows, "score")
-        above += s - b > ABOVE
+        if not s - b > ABOVE:
+            below.append(label)
         parts.append(f"{label} {b:.2f} (SILI {s:.2f})")
-    verdict = HOLDS if above == len(baselines) else PART if above else NO
-    return Claim(name, task, "score " + ", ".join(parts), verdict)
+    verdict = NO if len(below) == len(baselines) else PART if below else HOLDS
+    short_of = f"not above {_listed(below)}"
+    return Claim(name, task, "score " + ", ".join(parts), verdict, short_of)
+
+
+def _listed(names: list[str], last: str = "or") -> str:
+    """``a, b or c``, for the parts of a verdict."""
+    return ", ".join(names[:-1]) + f" {last} " + names[-1] if len(names) > 1 else "".join(names)
+
+
+def _too(names: list[str], verb: str) -> str:
+    """``a and b stabilize too``, ``a stabilizes too``."""
+    return f"{_listed(names, 'and')} {verb if len(names) > 1 else verb + 's'} too"
 
 
 def _stable(task: str, sili: pd.DataFrame, stable: pd.DataFrame, df: pd.DataFrame, n: int) -> Claim:
@@ -246,9 +309,11 @@ def _stable(task: str, sili: pd.DataFrame, stable: pd.DataFrame, df: pd.DataFram
     if missing:
         return Claim(name, task, "", missing)
     st, sc, s = _mean(stable, "stability"), _mean(stable, "score"), _same_window(sili, stable, df)
-    ok = (st >= HOLDING) + (sc < s - COMPARABLE)
+    stable_, poor = st >= HOLDING, sc < s - COMPARABLE
     measured = f"Stable: stability {st:.2f}, score {sc:.2f} (SILI {s:.2f})"
-    return Claim(name, task, measured, HOLDS if ok == 2 else PART if ok else NO)
+    verdict = HOLDS if stable_ and poor else PART if stable_ or poor else NO
+    short_of = "not stable" if poor else f"score within {COMPARABLE:g} of SILI's"
+    return Claim(name, task, measured, verdict, short_of)
 
 
 def _driving(
@@ -282,7 +347,13 @@ def _driving(
         verdict = HOLDS
     else:
         verdict = PART if all(sili_rates[k] < rates[k] for k in rates) else NO
-    return Claim(name, task, measured, verdict)
+    short_of = []
+    if max(sili_worst.values()) > NO_COLLISIONS:
+        short_of.append(f"a SILI seed collides in over {NO_COLLISIONS:.0%}")
+    clean = [k for k in rates if rates[k] <= NO_COLLISIONS]
+    if clean:
+        short_of.append(f"at most {NO_COLLISIONS:.0%} for {_listed(clean, 'and')} too")
+    return Claim(name, task, measured, verdict, "; ".join(short_of))
 
 
 def _speaker_listener(
@@ -292,6 +363,7 @@ def _speaker_listener(
     task = "speaker-listener"
     sili = _sili_runs(finals, task)
     baselines = {
+        "Oracle": _block_runs(finals, grid, task, "oracle"),
         "LILI": _block_runs(finals, base, task, "lili"),
         "SAC": _block_runs(finals, base, task, "sac"),
         "SMiRL": _block_runs(finals, half, task, "smirl"),
@@ -304,7 +376,8 @@ def _speaker_listener(
     ok = early + (above.verdict == HOLDS)
     firsts_text = ", ".join("never" if f is None else str(f) for f in firsts)
     measured = f"first stable at {firsts_text}; {above.measured}"
-    return Claim(name, task, measured, HOLDS if ok == 2 else PART if ok else NO)
+    short_of = above.short_of if early else f"not stable by {STABLE_BY} in every seed"
+    return Claim(name, task, measured, HOLDS if ok == 2 else PART if ok else NO, short_of)
 
 
 def _sweet_spot(finals: pd.DataFrame) -> Claim:
@@ -326,7 +399,94 @@ def _sweet_spot(finals: pd.DataFrame) -> Claim:
         f"b={k:g} {v:.2f} ({_mean(per_b[k], 'stability'):.2f})" for k, v in scores.items()
     )
     verdict = HOLDS if in_range and separated else PART if in_range else NO
-    return Claim(name, task, measured, verdict)
+    short_of = f"b={best:g} not above both ends by more than {ABOVE:g}"
+    return Claim(name, task, measured, verdict, short_of)
+
+
+def _stabilizing_b(finals: pd.DataFrame) -> Claim:
+    name, task = "b >= 0.4 stabilizes", "circle-3"
+    b = block("b-sweep")
+    rows = _block_runs(finals, b, task, "sili")
+    per_b = {beta: rows[np.isclose(rows.config_beta, beta)] for beta in SWEEP_BETAS}
+    have = {f"b={k:g}": v for k, v in per_b.items()}
+    missing = _missing(have, {k: len(b.seeds) for k in have})
+    if missing:
+        return Claim(name, task, "", missing)
+    held = {beta: _mean(r, "stability") >= HOLDING for beta, r in per_b.items()}
+    large = [beta for beta in SWEEP_BETAS if beta >= STABILIZING_B]
+    measured = "true stability " + ", ".join(
+        f"b={k:g} {_mean(r, 'stability'):.2f}" for k, r in per_b.items()
+    )
+    small_held = [f"b={k:g}" for k in SWEEP_BETAS if k < STABILIZING_B and held[k]]
+    large_not = [f"b={k:g}" for k in large if not held[k]]
+    verdict = NO if large_not else PART if small_held else HOLDS
+    return Claim(name, task, measured, verdict, _too(small_held, "stabilize"))
+
+
+def _stabilizes(rows: pd.DataFrame) -> bool:
+    return _mean(rows, "stability") >= HOLDING
+
+
+def _stabilizing(finals: pd.DataFrame, n: int) -> list[Claim]:
+    """The paper's claims of who stabilizes (true stability alone)."""
+    runs = {
+        (label, task): _method_runs(finals, task, label)
+        for label in ("SILI", "Oracle", "LILI", "SAC", "SMiRL")
+        for task in TASKS
+    }
+
+    def text(label: str, tasks: tuple[str, ...]) -> str:
+        return ", ".join(f"{t} {_mean(runs[label, t], 'stability'):.2f}" for t in tasks)
+
+    def checked(name: str, task: str, want: dict[str, tuple[str, ...]]) -> Claim | str:
+        have = {f"{lbl} on {t}" if len(ts) > 1 else lbl: runs[lbl, t]
+                for lbl, ts in want.items() for t in ts}  # fmt: skip
+        missing = _missing(have, {k: n for k in have})
+        return Claim(name, task, "", missing) if missing else name
+
+    claims: list[Claim] = []
+    name = checked("SILI stabilizes", "all", {"SILI": TASKS})
+    if isinstance(name, Claim):
+        claims.append(name)
+    else:
+        not_held = [t for t in TASKS if not _stabilizes(runs["SILI", t])]
+        verdict = NO if len(not_held) == len(TASKS) else PART if not_held else HOLDS
+        claims.append(Claim(name, "all", "true stability " + text("SILI", TASKS), verdict,
+                            f"not on {_listed(not_held)}"))  # fmt: skip
+    task = "circle-continuous"
+    name = checked("SILI and Oracle stabilize", task, {"SILI": (task,), "Oracle": (task,)})
+    if isinstance(name, Claim):
+        claims.append(name)
+    else:
+        not_held = [lbl for lbl in ("SILI", "Oracle") if not _stabilizes(runs[lbl, task])]
+        measured = "true stability " + ", ".join(
+            f"{lbl} {_mean(runs[lbl, task], 'stability'):.2f}" for lbl in ("SILI", "Oracle")
+        )
+        verdict = NO if len(not_held) == 2 else PART if not_held else HOLDS
+        claims.append(Claim(name, task, measured, verdict, f"{_listed(not_held)} does not"))
+    task, others = "circle-unequal", ("LILI", "SAC", "SMiRL")
+    name = checked("only SILI stabilizes", task, {lbl: (task,) for lbl in ("SILI", *others)})
+    if isinstance(name, Claim):
+        claims.append(name)
+    else:
+        sili = _stabilizes(runs["SILI", task])
+        too = [lbl for lbl in others if _stabilizes(runs[lbl, task])]
+        measured = "true stability " + ", ".join(
+            f"{lbl} {_mean(runs[lbl, task], 'stability'):.2f}" for lbl in ("SILI", *others)
+        )
+        verdict = HOLDS if sili and not too else PART if sili or not too else NO
+        short_of = _too(too, "stabilize") if sili else "SILI does not stabilize"
+        claims.append(Claim(name, task, measured, verdict, short_of))
+    name = checked("SMiRL does not stabilize consistently", "all", {"SMiRL": TASKS})
+    if isinstance(name, Claim):
+        claims.append(name)
+    else:
+        held = [t for t in TASKS if _stabilizes(runs["SMiRL", t])]
+        not_held = len(TASKS) - len(held)
+        verdict = HOLDS if not_held > len(TASKS) / 2 else PART if not_held else NO
+        measured = "true stability (half the budget) " + text("SMiRL", TASKS)
+        claims.append(Claim(name, "all", measured, verdict, f"stabilizes on {_listed(held)}"))
+    return claims
 
 
 def _default_profile(task: str, finals: pd.DataFrame) -> Claim:
@@ -344,7 +504,7 @@ def _default_profile(task: str, finals: pd.DataFrame) -> Claim:
         f"paper {p:.2f} ({_reward_and_stability(paper)})"
     )
     verdict = HOLDS if s - p > ABOVE else PART if s - p >= -ABOVE else NO
-    return Claim(name, task, measured, verdict)
+    return Claim(name, task, measured, verdict, f"within {ABOVE:g}")
 
 
 def claims_table(df: pd.DataFrame) -> list[Claim]:
@@ -368,5 +528,7 @@ def markdown(claims: list[Claim]) -> str:
     lines.append("|---|---|---|---|")
     for c in claims:
         verdict = f"**{c.verdict}**" if c.verdict in (HOLDS, NO, PART) else c.verdict
+        if c.verdict == PART and c.short_of:
+            verdict += f": {c.short_of}"
         lines.append(f"| {c.claim} | {c.task} | {c.measured} | {verdict} |")
     return "\n".join(lines) + "\n"

