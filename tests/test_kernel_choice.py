@@ -19,7 +19,14 @@ def cache(tmp_path, monkeypatch):
     return tmp_path / "kernels.json"
 
 
-def test_the_faster_library_is_chosen_and_the_choice_cached(cache, monkeypatch):
+@pytest.fixture
+def float32_timed(monkeypatch):
+    """The precision's timing (a real one takes seconds: bfloat16 runs slowly without bfloat16
+    units) as a machine that keeps float32 would measure it."""
+    monkeypatch.setattr(matmul, "time_precisions", lambda _m: {"float32": 1e-2, "bfloat16": 2e-2})
+
+
+def test_the_faster_library_is_chosen_and_the_choice_cached(cache, monkeypatch, float32_timed):
     if not matmul.onednn_available():
         pytest.skip("this PyTorch has no oneDNN linear op: aten is the only library")
     timed = []
@@ -46,7 +53,7 @@ def test_a_damaged_cache_is_timed_again_and_rewritten(cache, monkeypatch, damage
 
 
 @pytest.mark.parametrize("aten", ["1e-3", 0, -1e-3])
-def test_damaged_timings_in_the_cache_give_no_note(cache, aten):
+def test_damaged_timings_in_the_cache_give_no_note(cache, aten, float32_timed):
     entry = {"matmul": "aten", "seconds": {"aten": aten, "onednn": 2e-3}}
     cache.write_text(json.dumps({matmul.machine_key(): entry}))
     assert matmul.default_matmul() == "aten"  # the choice stands; its timings are not read
@@ -94,7 +101,8 @@ def test_bfloat16_is_chosen_only_where_it_clearly_pays_and_the_choice_is_cached(
 
 def test_a_real_timing_measures_a_sac_update_in_both_precisions(cache):
     times = matmul.time_precisions("aten", updates=2, rounds=1)
-    assert set(times) == set(matmul.PRECISIONS) and all(0 < t < 1 for t in times.values())
+    # seconds per update; bfloat16 without its units: about 0.25 s idle, over 1 s on busy cores
+    assert set(times) == set(matmul.PRECISIONS) and all(0 < t < 10 for t in times.values())
     assert matmul.default_precision() in matmul.PRECISIONS
     assert json.loads(cache.read_text())[matmul.machine_key()]["precision"] in matmul.PRECISIONS
 
