@@ -20,9 +20,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from sili_robots.claims import run_finals
+from sili_robots.claims import grid_names, run_finals
 from sili_robots.errors import one_line_errors
-from sili_robots.paper_grid import TASKS
+from sili_robots.paper_grid import TASKS, block
 from sili_robots.plot_data import load_results
 from sili_robots.tasks import task_spec
 
@@ -52,19 +52,15 @@ def _wall_minutes(source: Path, runs: pd.Series) -> str:
     return f"{low} min" if low == high else f"{low}-{high} min"
 
 
-def _is_b_sweep(method: str, profile: str, logged: int, full: int) -> bool:
-    """SILI at a constant b, shorter than the task's grid runs (the b sweep on Circle 3)."""
-    return method == "sili" and profile == "package" and logged < full
-
-
-def _order(method: str, profile: str, beta: float, logged: int, full: int) -> tuple:
+def _order(b_sweep: bool, method: str, profile: str, beta: float, logged: int) -> tuple:
     """Methods in the paper's order, the package profile first, the b sweep last by b."""
     rank = list(NAMES).index(method) if method in NAMES else len(NAMES)
-    return (_is_b_sweep(method, profile, logged, full), rank, profile != "package", beta)
+    return (b_sweep, rank, profile != "package", beta, -logged)
 
 
 def _label(
     task: str,
+    b_sweep: bool,
     method: str,
     profile: str,
     beta: float,
@@ -75,11 +71,11 @@ def _label(
 ) -> str:
     """``SILI, paper profile, the task's default (seeds 0-4)``, ``Stable (1,000)``."""
     name = NAMES.get(method, method)
-    if _is_b_sweep(method, profile, logged, full):
+    if b_sweep:
         name += f" b={beta:g}"
     elif method == "sili" and len(profiles) > 1:
         name += f", {profile} profile"
-        if profile == task_spec(task).sili_profile != "package":
+        if profile == task_spec(task).sili_profile:
             name += ", the task's default"
     elif profile != "package":
         name += f" ({profile})"
@@ -107,13 +103,14 @@ def task_table(df: pd.DataFrame, source: Path, task: str) -> str:
         "| mean reward, second half (seeds) | wall time per run |",
         "|---|---|---|---|---|---|---|---|",
     ]
-    keys = ["method", "profile", "config_beta", "logged"]
+    finals["b_sweep"] = finals.run.isin(grid_names(block("b-sweep"), task, "sili"))
+    keys = ["b_sweep", "method", "profile", "config_beta", "logged"]
     full = int(finals.logged.max())
-    profiles = set(finals.loc[finals.method == "sili", "profile"])
-    groups = sorted(finals.groupby(keys), key=lambda kg: _order(*kg[0], full))
-    for (method, profile, beta, logged), g in groups:
+    profiles = set(finals.loc[(finals.method == "sili") & ~finals.b_sweep, "profile"])
+    groups = sorted(finals.groupby(keys), key=lambda kg: _order(*kg[0]))
+    for (b_sweep, method, profile, beta, logged), g in groups:
         g = g.sort_values("seed")
-        name = _label(task, method, profile, beta, logged, full, profiles, list(g.seed))
+        name = _label(task, b_sweep, method, profile, beta, logged, full, profiles, list(g.seed))
         first = ", ".join("never" if pd.isna(v) else str(int(v)) for v in g.first_stable)
         lines.append(
             f"| {name} | {_seeds(g.task_reward, '{:.2f}')} | {g.task_reward.mean():.2f} "

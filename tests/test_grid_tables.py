@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from benchmark_scripts import ScriptRun, run_script
+from benchmark_scripts import ScriptRun, load_script, run_script
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -20,12 +20,14 @@ def test_tables_come_from_the_committed_collection() -> None:
         for table in out.split("**driving**")
     )
     rows = {line.split(" | ")[0].lstrip("| "): line for line in out.splitlines()}
-    assert "-16.93, -15.86, -8.32 | -13.70 | 0.79" in rows["SILI, package profile"]
+    assert (
+        "-16.93, -15.86, -8.32 | -13.70 | 0.79" in rows["SILI, package profile, the task's default"]
+    )
     assert "| 16 min |" in rows["SILI, paper profile"]  # all three seeds took 16 min: no "16-16"
     assert "circle-8" not in out
     # the paper's order, runs of other budgets and seeds named so, the b sweep last and by b
     assert circle[1:] == [
-        "SILI, package profile", "SILI, paper profile", "Oracle", "LILI", "SAC",
+        "SILI, package profile, the task's default", "SILI, paper profile", "Oracle", "LILI", "SAC",
         "Stable (1,000)", "SMiRL (1,000)",
         *(f"SILI b={b} (1,000, seeds 0-4)" for b in ("0", "0.2", "0.4", "0.6", "0.8", "1")),
     ]  # fmt: skip
@@ -48,3 +50,25 @@ def test_tasks_without_runs_are_said_not_skipped_in_silence() -> None:
     some = tables("circle-3", "driving")
     assert some.returncode == 0 and "**circle-3**" in some.stdout
     assert "no runs of driving in" in some.stderr
+
+
+def test_a_row_names_its_profile_budget_and_seeds_only_where_they_differ() -> None:
+    label = load_script("grid_tables")._label
+    # SILI in one profile on the task: its name alone; two seeds are listed, three in a row
+    # are a range, the budget shown where it is not the table's
+    assert (
+        label("sawyer-reach", False, "sili", "package", 0.5, 1500, 1500, {"package"}, [0, 1, 2])
+        == "SILI"
+    )
+    assert (
+        label("sawyer-reach", False, "sili", "package", 0.5, 1500, 1500, {"package"}, [0, 1])
+        == "SILI (seeds 0, 1)"
+    )
+    assert (
+        label("circle-3", True, "sili", "package", 0.2, 1000, 2000, {"package"}, [0, 1, 2, 3])
+        == "SILI b=0.2 (1,000, seeds 0-3)"
+    )
+    assert (
+        label("circle-3", False, "lili", "package", 0.0, 2000, 2000, {"package"}, [0, 2, 4])
+        == "LILI (seeds 0, 2, 4)"
+    )

@@ -483,6 +483,8 @@ def test_the_sweet_spot_holds_only_where_the_best_b_stands_clear_of_both_ends(
                                beta=b, name=name))  # fmt: skip
     (claim,) = [c for c in claims_table(pd.concat(parts)) if c.claim == "b sweet spot 0.4-0.8"]
     assert claim.verdict == verdict, claim
+    if verdict == PART:
+        assert claim.short_of == "b=0.6 not above both ends by more than 0.05"
 
 
 @pytest.mark.parametrize(
@@ -512,7 +514,8 @@ def test_speaker_listener_needs_sili_stable_by_about_250(stable_from, verdict):
 
 
 def test_speaker_listener_s_sili_must_beat_oracle_too():
-    """The paper: SILI "outperforms all other baselines in task reward, including Oracle"."""
+    """The paper: SILI "outperforms all other baselines in task reward, including Oracle" (and
+    Stable, which "does not optimize for the task reward")."""
 
     def sili(n):
         return _const(n, -20.0), _const(n, 1)
@@ -523,10 +526,19 @@ def test_speaker_listener_s_sili_must_beat_oracle_too():
     curves = {"sili": sili, "oracle": curve(-10.0), "lili": curve(-30.0), "sac": curve(-30.0),
               "stable": curve(-30.0), "smirl": curve(-30.0)}  # fmt: skip
     task, task_id = "speaker-listener", "sili/SpeakerListener-v1"
-    parts = [p for b in ("sili-oracle", "lili-sac", "stable-smirl")
-             for p in _planned_rows(b, task, task_id, curves)]  # fmt: skip
-    (claim,) = [c for c in claims_table(pd.concat(parts)) if c.claim.startswith("SILI stable by")]
+
+    def decided():
+        parts = [p for b in ("sili-oracle", "lili-sac", "stable-smirl")
+                 for p in _planned_rows(b, task, task_id, curves)]  # fmt: skip
+        claims = claims_table(pd.concat(parts))
+        (claim,) = [c for c in claims if c.claim.startswith("SILI stable by")]
+        return claim
+
+    claim = decided()
     assert claim.verdict == PART and claim.short_of == "not above Oracle", claim
+    curves |= {"oracle": curve(-30.0), "stable": curve(-10.0)}  # Stable, at half the budget
+    claim = decided()
+    assert claim.verdict == PART and claim.short_of == "not above Stable", claim
 
 
 def test_score_is_zero_at_standing_still_and_one_at_the_oracle():
@@ -618,6 +630,22 @@ def test_above_baselines_compares_smirl_over_its_own_interactions():
     assert "| **holds in part**: not above SMiRL |" in markdown(claims)
 
 
+def test_above_is_more_than_the_margin(monkeypatch):
+    """A baseline exactly the margin below SILI is not beaten (a margin of 0.25 and scores
+    that are binary fractions: sums without rounding)."""
+    monkeypatch.setattr("sili_robots.claims.ABOVE", 0.25)
+    bounds = {"still": {"task_reward": 0.0}, "oracle": {"task_reward": 1.0}}
+    monkeypatch.setattr("sili_robots.claims.stored_bounds", lambda _task_id: bounds)
+    n, task, task_id = 2000, "circle-8", "sili/Circle8-v1"
+    parts = [_rows(task, task_id, "sili", s, _const(n, 0.5), _const(n, 1)) for s in range(3)]
+    for method, value, length in (("lili", 0.25, n), ("sac", 0.0, n), ("smirl", 0.0, n // 2)):
+        parts += [_rows(task, task_id, method, s, _const(length, value), _const(length, 0))
+                  for s in range(3)]  # fmt: skip
+    claims = claims_table(pd.concat(parts, ignore_index=True))
+    (above,) = [c for c in claims if c.task == task and c.claim.startswith("SILI above")]
+    assert (above.verdict, above.short_of) == (PART, "not above LILI")
+
+
 @pytest.mark.parametrize(("sili_early_rate", "verdict"), [(0.0, HOLDS), (0.5, NO)])
 def test_driving_only_sili_avoids_collisions(sili_early_rate, verdict):
     """Others collide in 30% of interactions; SILI in none at the end, but in
@@ -689,6 +717,9 @@ def test_stable_s_poor_reward_needs_a_score_clear_of_silis(below, held, verdict)
     claims = claims_table(pd.concat(parts, ignore_index=True))
     (claim,) = [c for c in claims if c.task == "circle-3" and c.claim.startswith("Stable")]
     assert claim.verdict == verdict, claim
+    # only a verdict in part says what falls short
+    short_of = {PART: "score not more than 0.1 below SILI's"}.get(verdict, "")
+    assert claim.short_of == short_of
 
 
 @pytest.mark.parametrize(("paper_reward", "verdict"), [(-30.0, HOLDS), (-6.0, PART), (-2.0, NO)])
@@ -706,7 +737,8 @@ def test_the_default_profile_is_decided_against_the_paper_profile(paper_reward, 
 def test_a_paper_profile_a_little_ahead_leaves_the_default_in_range():
     """The paper profile scores 0.03 above the package's: within the 0.05 margin, as equal."""
     paper = _reward_at("sili/Circle3-v1", score(-6.0, "sili/Circle3-v1") + 0.03)
-    assert _profile_claims(paper)["circle-3"].verdict == PART
+    claim = _profile_claims(paper)["circle-3"]
+    assert (claim.verdict, claim.short_of) == (PART, "within 0.05")
 
 
 def _profile_claims(paper_reward: float) -> dict:
@@ -765,6 +797,8 @@ def test_the_default_on_driving_is_decided_on_five_seeds_of_each_profile():
         ({0.0: 0, 0.2: 0, 0.4: 1, 0.6: 1, 0.8: 1, 1.0: 0.95}, HOLDS, ""),
         ({0.0: 0, 0.2: 1, 0.4: 1, 0.6: 1, 0.8: 1, 1.0: 1}, PART, "b=0.2 stabilizes too"),
         ({0.0: 0, 0.2: 0, 0.4: 1, 0.6: 0.85, 0.8: 1, 1.0: 1}, NO, ""),
+        ({0.0: 0, 0.2: 0, 0.4: 0.89, 0.6: 1, 0.8: 1, 1.0: 1}, NO, ""),
+        ({0.0: 0, 0.2: 0, 0.4: 0.9, 0.6: 1, 0.8: 1, 1.0: 1}, HOLDS, ""),  # 0.9 is stable
     ],
 )
 def test_b_from_0_4_stabilizes_and_smaller_b_does_not(held, verdict, short_of):
@@ -775,16 +809,26 @@ def test_b_from_0_4_stabilizes_and_smaller_b_does_not(held, verdict, short_of):
         for seed in range(5):
             name = run_name("circle-3", "sili", seed, beta=b)
             parts.append(_rows("circle-3", "sili/Circle3-v1", "sili", seed, _const(1000, -10),
-                               _const(1000, value), beta=b, name=name))  # fmt: skip
+                               _held(1000, value), beta=b, name=name))  # fmt: skip
     claims = claims_table(pd.concat(parts))
     (claim,) = [c for c in claims if c.claim == "b >= 0.4 stabilizes"]
     assert claim.verdict == verdict, claim
+    # decided from true stability alone: a version without reference bounds changes nothing
+    unbounded = pd.concat(parts).assign(task_id="sili/Circle3-v9")
+    assert [c for c in claims_table(unbounded) if c.claim == claim.claim] == [claim]
     assert claim.measured.startswith("true stability b=0 0.00, b=0.2 ")
     if short_of:
         assert claim.short_of == short_of
     one_short = pd.concat(parts[:-1])  # b=1 has 4 of its 5 seeds
     (claim,) = [c for c in claims_table(one_short) if c.claim == "b >= 0.4 stabilizes"]
     assert claim.verdict == "not measured yet (runs at the grid's budget: b=1 4/5)"
+
+
+def _held(n: int, share: float) -> np.ndarray:
+    """A run's true stability per interaction, its last 100 held in exactly ``share`` of them
+    (a mean of 0.9 that is 0.9 to the last bit)."""
+    last = (np.arange(100) < round(share * 100)).astype(float)
+    return np.r_[_const(n - 100, share), last]
 
 
 def _stability_claims(held: dict, task_ids: dict | None = None, drop: str = "") -> dict:
@@ -800,7 +844,7 @@ def _stability_claims(held: dict, task_ids: dict | None = None, drop: str = "") 
             task_id = (task_ids or {}).get(task, task_spec(task).gym_id)
 
             def curve(n, share):
-                return _const(n, -10.0), _const(n, share)
+                return _const(n, -10.0), _held(n, share)
 
             curves = {m: lambda n, m=m, t=task: curve(n, held.get((m, t), 0.0)) for m in methods}
             parts += _planned_rows(b, task, task_id, curves)
@@ -821,7 +865,7 @@ def test_who_stabilizes_is_decided_from_true_stability():
     # SILI not on Driving (its paper-profile runs) and Sawyer-Reach; Oracle on Circle
     # (Continuous); LILI on Circle (Unequal); SMiRL on four of the seven tasks
     held = {("sili", t): 1.0 for t in tasks if t not in ("driving", "sawyer-reach")}
-    held |= {("oracle", "circle-continuous"): 0.9, ("lili", "circle-unequal"): 1.0}
+    held |= {("oracle", "circle-continuous"): 0.9, ("lili", "circle-unequal"): 1.0}  # 0.9: holds
     held |= {("smirl", t): 1.0 for t in tasks[:4]}
     claims = _stability_claims(held)
     sili = claims["SILI stabilizes", "all"]
@@ -832,6 +876,14 @@ def test_who_stabilizes_is_decided_from_true_stability():
     assert (only.verdict, only.short_of) == (PART, "LILI and SMiRL stabilize too")
     smirl = claims["SMiRL does not stabilize consistently", "all"]
     assert smirl.verdict == PART and smirl.short_of.startswith("stabilizes on circle-3, circle-8")
+    # SMiRL holds on three tasks, not on four: more than half; Oracle too on Circle (Unequal)
+    held = {("sili", t): 1.0 for t in tasks} | {("smirl", t): 1.0 for t in tasks[4:]}
+    claims = _stability_claims(held | {("oracle", "circle-unequal"): 0.89})
+    assert claims["SMiRL does not stabilize consistently", "all"].verdict == HOLDS
+    assert claims["only SILI stabilizes", "circle-unequal"].verdict == HOLDS
+    claims = _stability_claims(held | {("oracle", "circle-unequal"): 0.9})
+    only = claims["only SILI stabilizes", "circle-unequal"]
+    assert (only.verdict, only.short_of) == (PART, "Oracle stabilizes too")
     # nobody holds anywhere, then only SMiRL, everywhere
     claims = _stability_claims({})
     assert claims["SILI stabilizes", "all"].verdict == NO
