@@ -49,20 +49,21 @@ def _strip(df):
 
 def test_ray_sweep_runs_each_run_in_a_fresh_worker_and_isolates_a_failure(ray_cluster, tmp_path):
     bad = _spec(tasks=["sawyer-reach"], methods=["sac"], seeds=[0], controllers=["bogus"])
-    report = run_sweep([_spec(), bad], tmp_path, RayBackend(), progress=False)
+    good = _spec(seeds=[1])  # SILI and SAC
+    report = run_sweep([good, bad], tmp_path, RayBackend(), progress=False)
     assert ray.is_initialized()  # the test's instance is used, not shut down
     assert report.failed == {
         "sawyer-reach-bogus__sac__s0": "ConfigError: unknown controller 'bogus'; "
         "allowed: mink, osc, joint_velocity"
     }
     done = [o for o in report.outcomes.values() if o.status == "done"]
-    assert len(done) == 4
-    assert len({o.pid for o in report.outcomes.values()}) == 5  # max_calls=1: a process each
+    assert len(done) == 2
+    assert len({o.pid for o in report.outcomes.values()}) == 3  # max_calls=1: a process each
     assert os.getpid() not in {o.pid for o in done}
     table = pd.read_csv(tmp_path / "results.csv")
-    assert len(table) == 4 * 6 and set(table["run"]) == {o.name for o in done}
+    assert len(table) == 2 * 6 and set(table["run"]) == {o.name for o in done}
     # the same run as the local training loop makes
-    cfg = {r.name: r.config for r in expand(_spec())}["circle-3__sili-bschedule__s1"]
+    cfg = {r.name: r.config for r in expand(good)}["circle-3__sili-bschedule__s1"]
     train(cfg, tmp_path / "ref", progress=False)
     ref = pd.read_csv(tmp_path / "ref" / "metrics.csv")
     got = pd.read_csv(tmp_path / "runs" / "circle-3__sili-bschedule__s1" / "metrics.csv")
