@@ -22,7 +22,7 @@ import pandas as pd
 
 from sili_robots.claims import grid_names, run_finals
 from sili_robots.errors import one_line_errors
-from sili_robots.paper_grid import TASKS, block
+from sili_robots.paper_grid import SEEDS, TASKS, block
 from sili_robots.plot_data import load_results
 from sili_robots.tasks import task_spec
 
@@ -60,6 +60,7 @@ def _order(b_sweep: bool, method: str, profile: str, beta: float, logged: int) -
 
 def _label(
     task: str,
+    *,
     b_sweep: bool,
     method: str,
     profile: str,
@@ -80,7 +81,7 @@ def _label(
     elif profile != "package":
         name += f" ({profile})"
     notes = [f"{logged:,}"] if logged != full else []
-    if seeds != [0, 1, 2]:
+    if seeds != list(SEEDS):
         consecutive = seeds == list(range(seeds[0], seeds[-1] + 1)) and len(seeds) > 2
         notes.append(
             f"seeds {seeds[0]}-{seeds[-1]}" if consecutive else f"seeds {_seeds(seeds, '{}')}"
@@ -110,7 +111,8 @@ def task_table(df: pd.DataFrame, source: Path, task: str) -> str:
     groups = sorted(finals.groupby(keys), key=lambda kg: _order(*kg[0]))
     for (b_sweep, method, profile, beta, logged), g in groups:
         g = g.sort_values("seed")
-        name = _label(task, b_sweep, method, profile, beta, logged, full, profiles, list(g.seed))
+        name = _label(task, b_sweep=b_sweep, method=method, profile=profile, beta=beta,
+                      logged=logged, full=full, profiles=profiles, seeds=list(g.seed))  # fmt: skip
         first = ", ".join("never" if pd.isna(v) else str(int(v)) for v in g.first_stable)
         lines.append(
             f"| {name} | {_seeds(g.task_reward, '{:.2f}')} | {g.task_reward.mean():.2f} "

@@ -165,34 +165,6 @@ def _missing(have: dict[str, pd.DataFrame], want: dict[str, int]) -> str | None:
     return f"not measured yet (runs at the grid's budget: {', '.join(parts)})"
 
 
-def decide(finals: pd.DataFrame, df: pd.DataFrame) -> list[Claim]:
-    """Every claim of the paper, in the table's order."""
-    grid, half = block("sili-oracle"), block("stable-smirl")
-    base = block("lili-sac")
-    claims: list[Claim] = []
-    n = len(grid.seeds)
-    for task in TASKS:
-        runs = {label: _method_runs(finals, task, label) for label in METHOD_BLOCKS}
-        sili = runs["SILI"]
-        baselines = {label: runs[label] for label in ("LILI", "SAC", "SMiRL")}
-        claims.append(_comparable(task, sili, runs["Oracle"], n))
-        claims.append(_above(task, sili, baselines, df, n))
-        claims.append(_stable(task, sili, runs["Stable"], df, n))
-    claims.append(_driving(finals, df, grid, base, half))
-    claims.append(_speaker_listener(finals, df, grid, base, half))
-    claims.append(_sweet_spot(finals))
-    claims.append(_stabilizing_b(finals))
-    claims += _stabilizing(finals, n)
-    for task in block("paper-profile").tasks:
-        claims.append(_default_profile(task, finals))
-    return [_only_in_part(_unscored(c, finals)) for c in claims]
-
-
-def _only_in_part(claim: Claim) -> Claim:
-    """``short_of`` is kept for a verdict in part alone (what falls short of holding)."""
-    return claim if claim.verdict == PART else replace(claim, short_of="")
-
-
 #: each method's block in the grid (SILI: its task's registered profile, ``_sili_runs``)
 METHOD_BLOCKS = {
     "SILI": "sili-oracle",
@@ -211,6 +183,32 @@ def _method_runs(finals: pd.DataFrame, task: str, label: str) -> pd.DataFrame:
     return _block_runs(finals, block(METHOD_BLOCKS[label]), task, label.lower())
 
 
+def decide(finals: pd.DataFrame, df: pd.DataFrame) -> list[Claim]:
+    """Every claim of the paper, in the table's order."""
+    claims: list[Claim] = []
+    n = len(block("sili-oracle").seeds)
+    for task in TASKS:
+        runs = {label: _method_runs(finals, task, label) for label in METHOD_BLOCKS}
+        sili = runs["SILI"]
+        baselines = {label: runs[label] for label in ("LILI", "SAC", "SMiRL")}
+        claims.append(_comparable(task, sili, runs["Oracle"], n))
+        claims.append(_above(task, sili, baselines, df, n))
+        claims.append(_stable(task, sili, runs["Stable"], df, n))
+    claims.append(_driving(finals, df, n))
+    claims.append(_speaker_listener(finals, df, n))
+    claims.append(_sweet_spot(finals))
+    claims.append(_stabilizing_b(finals))
+    claims += _stabilizing(finals, n)
+    for task in block("paper-profile").tasks:
+        claims.append(_default_profile(task, finals))
+    return [_only_in_part(_unscored(c, finals)) for c in claims]
+
+
+def _only_in_part(claim: Claim) -> Claim:
+    """``short_of`` is kept for a verdict in part alone (what falls short of holding)."""
+    return claim if claim.verdict == PART else replace(claim, short_of="")
+
+
 #: the claims on one task decided from task rewards or true stability alone, which need no
 #: score (those on every task, ``ALL``, have no one task version to lack bounds)
 UNSCORED_CLAIMS = (
@@ -225,7 +223,11 @@ ALL = "all"
 def _unscored(claim: Claim, finals: pd.DataFrame) -> Claim:
     """A claim on a task version without reference bounds is not measured, whatever its scores
     (NaN) would have decided."""
-    if claim.claim in UNSCORED_CLAIMS or claim.verdict not in (HOLDS, PART, NO):
+    if (
+        claim.task == ALL
+        or claim.claim in UNSCORED_CLAIMS
+        or claim.verdict not in (HOLDS, PART, NO)
+    ):
         return claim
     runs = finals[finals.task == claim.task]
     ids = sorted(runs.loc[runs.score.isna(), "task_id"].unique())
@@ -317,26 +319,17 @@ def _stable(task: str, sili: pd.DataFrame, stable: pd.DataFrame, df: pd.DataFram
     if missing:
         return Claim(name, task, "", missing)
     st, sc, s = _mean(stable, "stability"), _mean(stable, "score"), _same_window(sili, stable, df)
-    stable_, poor = st >= HOLDING, sc < s - COMPARABLE
+    held, poor = st >= HOLDING, sc < s - COMPARABLE
     measured = f"Stable: stability {st:.2f}, score {sc:.2f} (SILI {s:.2f})"
-    verdict = HOLDS if stable_ and poor else PART if stable_ or poor else NO
+    verdict = HOLDS if held and poor else PART if held or poor else NO
     short_of = "not stable" if poor else f"score not more than {COMPARABLE:g} below SILI's"
     return Claim(name, task, measured, verdict, short_of)
 
 
-def _driving(
-    finals: pd.DataFrame, df: pd.DataFrame, grid: Block, base: Block, half: Block
-) -> Claim:
+def _driving(finals: pd.DataFrame, df: pd.DataFrame, n: int) -> Claim:
     name, task = "only SILI avoids all collisions", "driving"
-    runs = {
-        "SILI": _sili_runs(finals, task),
-        "Oracle": _block_runs(finals, grid, task, "oracle"),
-        "LILI": _block_runs(finals, base, task, "lili"),
-        "SAC": _block_runs(finals, base, task, "sac"),
-        "Stable": _block_runs(finals, half, task, "stable"),
-        "SMiRL": _block_runs(finals, half, task, "smirl"),
-    }
-    missing = _missing(runs, {k: len(grid.seeds) for k in runs})
+    runs = {label: _method_runs(finals, task, label) for label in METHOD_BLOCKS}
+    missing = _missing(runs, {k: n for k in runs})
     if missing:
         return Claim(name, task, "", missing)
     sili = runs.pop("SILI")
@@ -364,20 +357,13 @@ def _driving(
     return Claim(name, task, measured, verdict, "; ".join(short_of))
 
 
-def _speaker_listener(
-    finals: pd.DataFrame, df: pd.DataFrame, grid: Block, base: Block, half: Block
-) -> Claim:
+def _speaker_listener(finals: pd.DataFrame, df: pd.DataFrame, n: int) -> Claim:
     name = "SILI stable by ~250, beats baselines"
     task = "speaker-listener"
     sili = _sili_runs(finals, task)
-    baselines = {
-        "Oracle": _block_runs(finals, grid, task, "oracle"),
-        "LILI": _block_runs(finals, base, task, "lili"),
-        "SAC": _block_runs(finals, base, task, "sac"),
-        "Stable": _block_runs(finals, half, task, "stable"),
-        "SMiRL": _block_runs(finals, half, task, "smirl"),
-    }
-    above = _above(task, sili, baselines, df, len(grid.seeds))
+    baselines = {label: _method_runs(finals, task, label) for label in METHOD_BLOCKS}
+    del baselines["SILI"]  # every other method: "all other baselines ..., including Oracle"
+    above = _above(task, sili, baselines, df, n)
     if above.verdict.startswith("not measured"):
         return Claim(name, task, "", above.verdict)
     firsts = [None if pd.isna(f) else int(f) for f in sili["first_stable"]]
@@ -436,66 +422,80 @@ def _stabilizes(rows: pd.DataFrame) -> bool:
     return _mean(rows, "stability") >= HOLDING
 
 
+#: (method, task) -> the grid's runs of it there
+Runs = dict[tuple[str, str], pd.DataFrame]
+
+
 def _stabilizing(finals: pd.DataFrame, n: int) -> list[Claim]:
-    """The paper's claims of who stabilizes (true stability alone)."""
-    runs = {
-        (label, task): _method_runs(finals, task, label)
-        for label in ("SILI", "Oracle", "LILI", "SAC", "SMiRL")
-        for task in TASKS
-    }
-
-    def text(label: str, tasks: tuple[str, ...]) -> str:
-        return ", ".join(f"{t} {_mean(runs[label, t], 'stability'):.2f}" for t in tasks)
-
-    def checked(name: str, task: str, want: dict[str, tuple[str, ...]]) -> Claim | str:
-        have = {f"{lbl} on {t}" if len(ts) > 1 else lbl: runs[lbl, t]
-                for lbl, ts in want.items() for t in ts}  # fmt: skip
+    """The paper's claims of who stabilizes (true stability alone), each decided once all the
+    runs it reads are in."""
+    labels = ("SILI", "Oracle", "LILI", "SAC", "Stable", "SMiRL")
+    runs = {(label, task): _method_runs(finals, task, label) for label in labels for task in TASKS}
+    continuous, unequal = "circle-continuous", "circle-unequal"
+    rules = (
+        ("SILI stabilizes", ALL, {"SILI": TASKS}, _sili_everywhere),
+        ("SILI and Oracle stabilize", continuous, {"SILI": (continuous,), "Oracle": (continuous,)},
+         _sili_and_oracle),
+        ("only SILI stabilizes", unequal, {m: (unequal,) for m in ("SILI", *UNEQUAL_OTHERS)},
+         _only_sili),
+        ("SMiRL does not stabilize consistently", ALL, {"SMiRL": TASKS}, _smirl_inconsistent),
+    )  # fmt: skip
+    claims = []
+    for name, task, want, rule in rules:
+        have = {
+            f"{m} on {t}" if len(ts) > 1 else m: runs[m, t] for m, ts in want.items() for t in ts
+        }
         missing = _missing(have, {k: n for k in have})
-        return Claim(name, task, "", missing) if missing else name
-
-    claims: list[Claim] = []
-    name = checked("SILI stabilizes", ALL, {"SILI": TASKS})
-    if isinstance(name, Claim):
-        claims.append(name)
-    else:
-        not_held = [t for t in TASKS if not _stabilizes(runs["SILI", t])]
-        verdict = NO if len(not_held) == len(TASKS) else PART if not_held else HOLDS
-        claims.append(Claim(name, ALL, "true stability " + text("SILI", TASKS), verdict,
-                            f"not on {_listed(not_held)}"))  # fmt: skip
-    task = "circle-continuous"
-    name = checked("SILI and Oracle stabilize", task, {"SILI": (task,), "Oracle": (task,)})
-    if isinstance(name, Claim):
-        claims.append(name)
-    else:
-        not_held = [lbl for lbl in ("SILI", "Oracle") if not _stabilizes(runs[lbl, task])]
-        measured = "true stability " + ", ".join(
-            f"{lbl} {_mean(runs[lbl, task], 'stability'):.2f}" for lbl in ("SILI", "Oracle")
-        )
-        verdict = NO if len(not_held) == 2 else PART if not_held else HOLDS
-        claims.append(Claim(name, task, measured, verdict, f"{_listed(not_held)} does not"))
-    task, others = "circle-unequal", ("Oracle", "LILI", "SAC", "SMiRL")
-    name = checked("only SILI stabilizes", task, {lbl: (task,) for lbl in ("SILI", *others)})
-    if isinstance(name, Claim):
-        claims.append(name)
-    else:
-        sili = _stabilizes(runs["SILI", task])
-        too = [lbl for lbl in others if _stabilizes(runs[lbl, task])]
-        measured = "true stability " + ", ".join(
-            f"{lbl} {_mean(runs[lbl, task], 'stability'):.2f}" for lbl in ("SILI", *others)
-        )
-        verdict = HOLDS if sili and not too else PART if sili or not too else NO
-        short_of = _too(too, "stabilize") if sili else "SILI does not stabilize"
-        claims.append(Claim(name, task, measured, verdict, short_of))
-    name = checked("SMiRL does not stabilize consistently", ALL, {"SMiRL": TASKS})
-    if isinstance(name, Claim):
-        claims.append(name)
-    else:
-        held = [t for t in TASKS if _stabilizes(runs["SMiRL", t])]
-        not_held = len(TASKS) - len(held)
-        verdict = HOLDS if not_held > len(TASKS) / 2 else PART if not_held else NO
-        measured = "true stability (half the budget) " + text("SMiRL", TASKS)
-        claims.append(Claim(name, ALL, measured, verdict, f"stabilizes on {_listed(held)}"))
+        claims.append(Claim(name, task, "", missing) if missing else rule(name, task, runs))
     return claims
+
+
+#: the baselines that "greedily try to track" on Circle (Unequal); Stable, rewarded for
+#: stability alone, is shown beside them, not counted
+UNEQUAL_OTHERS = ("Oracle", "LILI", "SAC", "SMiRL")
+
+
+def _stability_text(runs: Runs, task: str, labels: tuple[str, ...]) -> str:
+    return ", ".join(f"{m} {_mean(runs[m, task], 'stability'):.2f}" for m in labels)
+
+
+def _sili_everywhere(name: str, task: str, runs: Runs) -> Claim:
+    not_held = [t for t in TASKS if not _stabilizes(runs["SILI", t])]
+    verdict = NO if len(not_held) == len(TASKS) else PART if not_held else HOLDS
+    measured = "true stability " + ", ".join(
+        f"{t} {_mean(runs['SILI', t], 'stability'):.2f}" for t in TASKS
+    )
+    return Claim(name, task, measured, verdict, f"not on {_listed(not_held)}")
+
+
+def _sili_and_oracle(name: str, task: str, runs: Runs) -> Claim:
+    both = ("SILI", "Oracle")
+    not_held = [m for m in both if not _stabilizes(runs[m, task])]
+    verdict = NO if len(not_held) == 2 else PART if not_held else HOLDS
+    measured = "true stability " + _stability_text(runs, task, both)
+    return Claim(name, task, measured, verdict, f"{_listed(not_held)} does not")
+
+
+def _only_sili(name: str, task: str, runs: Runs) -> Claim:
+    sili = _stabilizes(runs["SILI", task])
+    too = [m for m in UNEQUAL_OTHERS if _stabilizes(runs[m, task])]
+    measured = "true stability " + _stability_text(runs, task, ("SILI", *UNEQUAL_OTHERS))
+    if len(runs["Stable", task]):
+        stable = _mean(runs["Stable", task], "stability")
+        measured += f" (Stable {stable:.2f}: rewarded for stability alone, not counted)"
+    verdict = HOLDS if sili and not too else PART if sili or not too else NO
+    short_of = _too(too, "stabilize") if sili else "SILI does not stabilize"
+    return Claim(name, task, measured, verdict, short_of)
+
+
+def _smirl_inconsistent(name: str, task: str, runs: Runs) -> Claim:
+    held = [t for t in TASKS if _stabilizes(runs["SMiRL", t])]
+    not_held = len(TASKS) - len(held)
+    verdict = HOLDS if not_held > len(TASKS) / 2 else PART if not_held else NO
+    measured = "true stability (half the budget) " + ", ".join(
+        f"{t} {_mean(runs['SMiRL', t], 'stability'):.2f}" for t in TASKS
+    )
+    return Claim(name, task, measured, verdict, f"stabilizes on {_listed(held)}")
 
 
 def _default_profile(task: str, finals: pd.DataFrame) -> Claim:

@@ -298,9 +298,15 @@ def test_train_into_or_resuming_a_folder_that_cannot_be_written_exits_2(tmp_path
 
 def test_a_path_option_expands_a_tilde_the_shell_left(tmp_path, monkeypatch):
     """``--out=~/runs``: bash leaves this ~ alone; trained into ./~ but read from $HOME before."""
+    import shutil
+
     from sili_robots.cache import cache_dir
 
-    monkeypatch.setenv("SILI_ROBOTS_CACHE", str(cache_dir()))  # the kernels, not timed again
+    kernels = cache_dir() / "kernels.json"  # this machine's choice, not timed again
+    (tmp_path / "cache").mkdir()
+    if kernels.is_file():
+        shutil.copy(kernels, tmp_path / "cache")
+    monkeypatch.setenv("SILI_ROBOTS_CACHE", str(tmp_path / "cache"))
     monkeypatch.setenv("HOME", str(tmp_path / "home"))
     monkeypatch.chdir(tmp_path)
     code, _, err = _main("train", "--task", "circle-3", "--method", "sac", "--interactions", "1",

@@ -19,7 +19,8 @@ def test_tables_come_from_the_committed_collection() -> None:
         [line.split(" | ")[0].lstrip("| ") for line in table.splitlines() if line.startswith("| ")]
         for table in out.split("**driving**")
     )
-    rows = {line.split(" | ")[0].lstrip("| "): line for line in out.splitlines()}
+    circle_lines = out.split("**driving**")[0].splitlines()
+    rows = {line.split(" | ")[0].lstrip("| "): line for line in circle_lines}
     assert (
         "-16.93, -15.86, -8.32 | -13.70 | 0.79" in rows["SILI, package profile, the task's default"]
     )
@@ -54,21 +55,13 @@ def test_tasks_without_runs_are_said_not_skipped_in_silence() -> None:
 
 def test_a_row_names_its_profile_budget_and_seeds_only_where_they_differ() -> None:
     label = load_script("grid_tables")._label
+    sawyer = {"b_sweep": False, "method": "sili", "profile": "package", "beta": 0.5}
+    sawyer |= {"logged": 1500, "full": 1500, "profiles": {"package"}}
     # SILI in one profile on the task: its name alone; two seeds are listed, three in a row
     # are a range, the budget shown where it is not the table's
-    assert (
-        label("sawyer-reach", False, "sili", "package", 0.5, 1500, 1500, {"package"}, [0, 1, 2])
-        == "SILI"
-    )
-    assert (
-        label("sawyer-reach", False, "sili", "package", 0.5, 1500, 1500, {"package"}, [0, 1])
-        == "SILI (seeds 0, 1)"
-    )
-    assert (
-        label("circle-3", True, "sili", "package", 0.2, 1000, 2000, {"package"}, [0, 1, 2, 3])
-        == "SILI b=0.2 (1,000, seeds 0-3)"
-    )
-    assert (
-        label("circle-3", False, "lili", "package", 0.0, 2000, 2000, {"package"}, [0, 2, 4])
-        == "LILI (seeds 0, 2, 4)"
-    )
+    assert label("sawyer-reach", **sawyer, seeds=[0, 1, 2]) == "SILI"
+    assert label("sawyer-reach", **sawyer, seeds=[0, 1]) == "SILI (seeds 0, 1)"
+    b_sweep = {**sawyer, "b_sweep": True, "beta": 0.2, "logged": 1000, "full": 2000}
+    assert label("circle-3", **b_sweep, seeds=[0, 1, 2, 3]) == "SILI b=0.2 (1,000, seeds 0-3)"
+    lili = {**sawyer, "method": "lili", "beta": 0.0}
+    assert label("circle-3", **lili, seeds=[0, 2, 4]) == "LILI (seeds 0, 2, 4)"

@@ -60,6 +60,7 @@ def test_the_readme_is_a_guide_not_a_notebook():
     text = README.read_text()
     lines = text.splitlines()
     claims = set(text.split(START, 1)[1].split(END, 1)[0].splitlines())  # a generated table's rows
+    # a user's guide of one sitting: what, install, tasks, methods, CLI, API, figures, results
     assert len(lines) <= 360 and max(len(line) for line in lines if line not in claims) <= 200
 
 
