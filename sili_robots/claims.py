@@ -176,6 +176,10 @@ METHOD_BLOCKS = {
 }
 
 
+#: (method label, task) -> the grid's runs of it there
+Runs = dict[tuple[str, str], pd.DataFrame]
+
+
 def _method_runs(finals: pd.DataFrame, task: str, label: str) -> pd.DataFrame:
     """The grid's runs of a method (a ``METHOD_BLOCKS`` label) on ``task``."""
     if label == "SILI":
@@ -187,18 +191,18 @@ def decide(finals: pd.DataFrame, df: pd.DataFrame) -> list[Claim]:
     """Every claim of the paper, in the table's order."""
     claims: list[Claim] = []
     n = len(block("sili-oracle").seeds)
+    runs = {(m, task): _method_runs(finals, task, m) for m in METHOD_BLOCKS for task in TASKS}
     for task in TASKS:
-        runs = {label: _method_runs(finals, task, label) for label in METHOD_BLOCKS}
-        sili = runs["SILI"]
-        baselines = {label: runs[label] for label in ("LILI", "SAC", "SMiRL")}
-        claims.append(_comparable(task, sili, runs["Oracle"], n))
+        sili = runs["SILI", task]
+        baselines = {m: runs[m, task] for m in ("LILI", "SAC", "SMiRL")}
+        claims.append(_comparable(task, sili, runs["Oracle", task], n))
         claims.append(_above(task, sili, baselines, df, n))
-        claims.append(_stable(task, sili, runs["Stable"], df, n))
-    claims.append(_driving(finals, df, n))
-    claims.append(_speaker_listener(finals, df, n))
+        claims.append(_stable(task, sili, runs["Stable", task], df, n))
+    claims.append(_driving(runs, df, n))
+    claims.append(_speaker_listener(runs, df, n))
     claims.append(_sweet_spot(finals))
     claims.append(_stabilizing_b(finals))
-    claims += _stabilizing(finals, n)
+    claims += _stabilizing(runs, n)
     for task in block("paper-profile").tasks:
         claims.append(_default_profile(task, finals))
     return [_only_in_part(_unscored(c, finals)) for c in claims]
@@ -326,9 +330,9 @@ def _stable(task: str, sili: pd.DataFrame, stable: pd.DataFrame, df: pd.DataFram
     return Claim(name, task, measured, verdict, short_of)
 
 
-def _driving(finals: pd.DataFrame, df: pd.DataFrame, n: int) -> Claim:
+def _driving(grid_runs: Runs, df: pd.DataFrame, n: int) -> Claim:
     name, task = "only SILI avoids all collisions", "driving"
-    runs = {label: _method_runs(finals, task, label) for label in METHOD_BLOCKS}
+    runs = {m: grid_runs[m, task] for m in METHOD_BLOCKS}
     missing = _missing(runs, {k: n for k in runs})
     if missing:
         return Claim(name, task, "", missing)
@@ -357,12 +361,12 @@ def _driving(finals: pd.DataFrame, df: pd.DataFrame, n: int) -> Claim:
     return Claim(name, task, measured, verdict, "; ".join(short_of))
 
 
-def _speaker_listener(finals: pd.DataFrame, df: pd.DataFrame, n: int) -> Claim:
+def _speaker_listener(runs: Runs, df: pd.DataFrame, n: int) -> Claim:
     name = "SILI stable by ~250, beats baselines"
     task = "speaker-listener"
-    sili = _sili_runs(finals, task)
-    baselines = {label: _method_runs(finals, task, label) for label in METHOD_BLOCKS}
-    del baselines["SILI"]  # every other method: "all other baselines ..., including Oracle"
+    sili = runs["SILI", task]
+    # every other method: "all other baselines ..., including Oracle"
+    baselines = {m: runs[m, task] for m in METHOD_BLOCKS if m != "SILI"}
     above = _above(task, sili, baselines, df, n)
     if above.verdict.startswith("not measured"):
         return Claim(name, task, "", above.verdict)
@@ -375,14 +379,18 @@ def _speaker_listener(finals: pd.DataFrame, df: pd.DataFrame, n: int) -> Claim:
     return Claim(name, task, measured, HOLDS if ok == 2 else PART if ok else NO, short_of)
 
 
+def _b_sweep(finals: pd.DataFrame) -> tuple[dict[float, pd.DataFrame], str | None]:
+    """The b sweep's runs on Circle (3 Goals) per b, and what is missing of them."""
+    b = block("b-sweep")
+    rows = _block_runs(finals, b, "circle-3", "sili")
+    per_b = {beta: rows[np.isclose(rows.config_beta, beta)] for beta in SWEEP_BETAS}
+    have = {f"b={k:g}": v for k, v in per_b.items()}
+    return per_b, _missing(have, {k: len(b.seeds) for k in have})
+
+
 def _sweet_spot(finals: pd.DataFrame) -> Claim:
     name, task = "b sweet spot 0.4-0.8", "circle-3"
-    b = block("b-sweep")
-    rows = _block_runs(finals, b, task, "sili")
-    per_b = {beta: rows[np.isclose(rows.config_beta, beta)] for beta in SWEEP_BETAS}
-    missing = _missing(
-        {f"b={k:g}": v for k, v in per_b.items()}, {f"b={k:g}": len(b.seeds) for k in per_b}
-    )
+    per_b, missing = _b_sweep(finals)
     if missing:
         return Claim(name, task, "", missing)
     scores = {beta: _mean(r, "score") for beta, r in per_b.items()}
@@ -400,11 +408,7 @@ def _sweet_spot(finals: pd.DataFrame) -> Claim:
 
 def _stabilizing_b(finals: pd.DataFrame) -> Claim:
     name, task = "b >= 0.4 stabilizes", "circle-3"
-    b = block("b-sweep")
-    rows = _block_runs(finals, b, task, "sili")
-    per_b = {beta: rows[np.isclose(rows.config_beta, beta)] for beta in SWEEP_BETAS}
-    have = {f"b={k:g}": v for k, v in per_b.items()}
-    missing = _missing(have, {k: len(b.seeds) for k in have})
+    per_b, missing = _b_sweep(finals)
     if missing:
         return Claim(name, task, "", missing)
     held = {beta: _mean(r, "stability") >= HOLDING for beta, r in per_b.items()}
@@ -422,15 +426,9 @@ def _stabilizes(rows: pd.DataFrame) -> bool:
     return _mean(rows, "stability") >= HOLDING
 
 
-#: (method, task) -> the grid's runs of it there
-Runs = dict[tuple[str, str], pd.DataFrame]
-
-
-def _stabilizing(finals: pd.DataFrame, n: int) -> list[Claim]:
+def _stabilizing(runs: Runs, n: int) -> list[Claim]:
     """The paper's claims of who stabilizes (true stability alone), each decided once all the
     runs it reads are in."""
-    labels = ("SILI", "Oracle", "LILI", "SAC", "Stable", "SMiRL")
-    runs = {(label, task): _method_runs(finals, task, label) for label in labels for task in TASKS}
     continuous, unequal = "circle-continuous", "circle-unequal"
     rules = (
         ("SILI stabilizes", ALL, {"SILI": TASKS}, _sili_everywhere),
@@ -459,12 +457,14 @@ def _stability_text(runs: Runs, task: str, labels: tuple[str, ...]) -> str:
     return ", ".join(f"{m} {_mean(runs[m, task], 'stability'):.2f}" for m in labels)
 
 
+def _per_task_stability(runs: Runs, label: str) -> str:
+    return ", ".join(f"{t} {_mean(runs[label, t], 'stability'):.2f}" for t in TASKS)
+
+
 def _sili_everywhere(name: str, task: str, runs: Runs) -> Claim:
     not_held = [t for t in TASKS if not _stabilizes(runs["SILI", t])]
     verdict = NO if len(not_held) == len(TASKS) else PART if not_held else HOLDS
-    measured = "true stability " + ", ".join(
-        f"{t} {_mean(runs['SILI', t], 'stability'):.2f}" for t in TASKS
-    )
+    measured = "true stability " + _per_task_stability(runs, "SILI")
     return Claim(name, task, measured, verdict, f"not on {_listed(not_held)}")
 
 
@@ -492,9 +492,7 @@ def _smirl_inconsistent(name: str, task: str, runs: Runs) -> Claim:
     held = [t for t in TASKS if _stabilizes(runs["SMiRL", t])]
     not_held = len(TASKS) - len(held)
     verdict = HOLDS if not_held > len(TASKS) / 2 else PART if not_held else NO
-    measured = "true stability (half the budget) " + ", ".join(
-        f"{t} {_mean(runs['SMiRL', t], 'stability'):.2f}" for t in TASKS
-    )
+    measured = "true stability (half the budget) " + _per_task_stability(runs, "SMiRL")
     return Claim(name, task, measured, verdict, f"stabilizes on {_listed(held)}")
 
 
