@@ -45,6 +45,7 @@ from sili_robots.build import (
 )
 from sili_robots.errors import (
     ConfigError,
+    UnreadSettingWarning,
     check_count,
     check_flag,
     check_names,
@@ -53,6 +54,7 @@ from sili_robots.errors import (
 )
 from sili_robots.evaluation import AgentFeedback, check_same_task, evaluate, fitting
 from sili_robots.metrics import COMPRESSED_METRICS, METRICS, MetricsWriter
+from sili_robots.migrations import setting_path
 from sili_robots.runs import (
     CHECKPOINT,
     CONFIG,
@@ -133,12 +135,16 @@ class SILI:
             env_kwargs=env_kwargs,
             checkpoint_every=checkpoint_every,
         )
+        given = {setting_path(name): name for name in settings or {}}
+        for path, why in cfg.unread_settings(given).items():  # recorded all the same
+            unread = f"setting {given[path]!r} does nothing here: {why}"
+            warnings.warn(unread, UnreadSettingWarning, stacklevel=2)
         if run_dir is None:  # removed with the model, unless saved or loaded where it is
             run_dir = tempfile.mkdtemp(prefix="sili-run-")
             _remove_with(self, Path(run_dir))
         else:
-            run_dir = check_path("run_dir", run_dir)
-            check_not_in_a_sweep(run_dir, "run_dir")
+            run_dir = check_path("run_dir", run_dir).absolute()  # the folder given, wherever
+            check_not_in_a_sweep(run_dir, "run_dir")  # the process goes (os.chdir) since
         self.run_dir, self._overwrite = Path(run_dir), overwrite
         self._saved: dict[Path, tuple] = {}  # where this model saved, and what it left there
         self._check_run_dir()
@@ -160,14 +166,14 @@ class SILI:
         else:
             base = make_run_env(self.cfg, None if state is None else self.run_dir)
         self.agent: SILIAgent = build_agent(self.cfg, base)
-        game = None
+        game, seed = None, self.cfg.seed  # a new model's game: its training's first
         if state is not None:
             self.agent.load_state_dict(state["agent"])
-            game = state["game"]
+            game, seed = state["game"], None
         if isinstance(getattr(self, "env", None), AgentFeedback):  # the one a user may hold
-            self.env.rebind(base, self.agent, game)
+            self.env.rebind(base, self.agent, game, seed)
         else:
-            self.env: gym.Env = AgentFeedback(base, self.agent, game)
+            self.env: gym.Env = AgentFeedback(base, self.agent, game, seed)
         #: the checkpoint's interaction this model holds, and what its run's files were then
         self._done = 0 if state is None else int(state["interaction"])
         self._loaded = None if state is None else _stamp(self.run_dir)
@@ -193,7 +199,7 @@ class SILI:
         instance to play on: the run's task built with other arguments (another controller; the
         run's horizon; it trains with its own alone), or a user's task class that cannot be
         imported by name."""
-        path = check_path("path", path)
+        path = check_path("path", path).absolute()
         cfg = read_run_config(path)
         state = require_checkpoint(path)
         if env is not None:
@@ -306,7 +312,7 @@ class SILI:
         self._refresh()
         self._check_trained("save")
         try:
-            path = check_path("save path", path)
+            path = check_path("save path", path).absolute()
             overwrite = check_flag("overwrite", overwrite)
             self._copy_to(path, overwrite)
         except (ConfigError, OSError) as exc:  # a script ends here: its training must stay
@@ -378,6 +384,19 @@ class SILI:
     @property
     def config(self) -> RunConfig:
         return self.cfg
+
+    @property
+    def trained_interactions(self) -> int:
+        """The interactions the model's checkpoint has trained (``config.interactions`` is the
+        target of the last ``learn``, which a Ctrl-C may have stopped short of)."""
+        self._refresh()
+        return self._done
+
+    def __deepcopy__(self, memo: dict) -> SILI:
+        raise TypeError(
+            "a SILI model is its run directory and simulation, which a copy would share: "
+            "save it and SILI.load the saved copy"
+        )
 
 
 #: temporary run directories of live models, removed with their model

@@ -21,6 +21,12 @@ class RenderModeRefused(ConfigError, TypeError):
     (stable-baselines3's ``make_vec_env`` asks for ``rgb_array`` first)."""
 
 
+class UnreadSettingWarning(UserWarning):
+    """A setting the run records but its method never reads (``sili train`` prints a note):
+    a category of its own, so a script giving one dict of settings to every method can filter
+    it."""
+
+
 class TrainingDiverged(ConfigError):
     """A loss became infinite or NaN: settings far outside their usual range."""
 
@@ -71,8 +77,9 @@ def check_count(name: str, value: object, low: int = 1, high: int | None = None)
 
 
 def check_path(name: str, value: object) -> Path:
-    """``value`` (a string or path-like) as a ``Path``, or ``ConfigError``: pathlib's own
-    ``TypeError`` or NUL-byte ``ValueError`` would escape a check that catches ``OSError``."""
+    """``value`` (a string or path-like) as a ``Path``, ``~`` expanded, or ``ConfigError``:
+    pathlib's own ``TypeError`` or NUL-byte ``ValueError`` would escape a check that catches
+    ``OSError``."""
     wrong = ConfigError(f"{name} must be a path (a string or pathlib.Path), got {value!r}")
     if isinstance(value, bytes) or not isinstance(value, (str, os.PathLike)):
         raise wrong
@@ -85,7 +92,13 @@ def check_path(name: str, value: object) -> Path:
         raise ConfigError(
             f"{name} {given!r} is not a usable path (empty, blank or with a NUL byte)"
         )
-    return path
+    try:  # "~" as the shell (and the CLI's path options) expand it
+        return path.expanduser()
+    except RuntimeError:  # ~name of no user here
+        raise ConfigError(
+            f"{name} {given!r}: {given.split(os.sep, 1)[0]!r} names no user with a home on this "
+            "machine"
+        ) from None
 
 
 def first_line(err: Exception) -> str:

@@ -34,21 +34,35 @@ from sili_robots.tasks.base import RESET_OPTIONS, resume_game
 class AgentFeedback(gym.Wrapper):
     """Feeds each finished interaction back to the agent so z^{j+1} = E(tau^j) is inferred.
 
-    The first ``reset`` continues the checkpointed game (whatever its seed: evaluations and
-    previews pass one), unless its ``options`` ask for another game (``restart``, ``strategy``,
-    ``restore``). In another game the agent starts as in a run's first interaction, with no
-    history: the interactions of the game before are not its history.
+    The first ``reset`` continues the checkpointed game, unless it asks for another one: a
+    ``seed``, or ``options`` ``restart``, ``strategy`` or ``restore`` (as every reset of the task
+    does). In another game the agent starts as in a run's first interaction, with no history:
+    the interactions of the game before are not its history. Without a checkpointed game, a
+    first reset that gives no seed takes ``seed`` (a new model's game is its training's).
     """
 
-    def __init__(self, env: gym.Env, agent: SILIAgent, game_state: dict[str, Any] | None) -> None:
-        self.rebind(env, agent, game_state)
+    def __init__(
+        self,
+        env: gym.Env,
+        agent: SILIAgent,
+        game_state: dict[str, Any] | None,
+        seed: int | None = None,
+    ) -> None:
+        self.rebind(env, agent, game_state, seed)
 
-    def rebind(self, env: gym.Env, agent: SILIAgent, game_state: dict[str, Any] | None) -> None:
+    def rebind(
+        self,
+        env: gym.Env,
+        agent: SILIAgent,
+        game_state: dict[str, Any] | None,
+        seed: int | None = None,
+    ) -> None:
         """Play ``env`` with ``agent`` from ``game_state`` from now on, as a new wrapper would:
         a model's ``env`` stays the object a user holds when training replaces its agent."""
         super().__init__(env)
         self.agent = agent
         self._game_state = game_state
+        self._seed = seed
         self._steps: list[tuple[np.ndarray, np.ndarray, float]] = []
         self._first_obs: np.ndarray | None = None
         self._last_obs: np.ndarray | None = None
@@ -60,11 +74,14 @@ class AgentFeedback(gym.Wrapper):
             return self.env.reset(**kwargs)
         another = options.get("restart") or "strategy" in options or options.get("restore")
         another = another or set(options) - set(RESET_OPTIONS)  # the task names what it lacks
-        if self._game_state is not None and not another:
+        if self._game_state is not None and not (another or kwargs.get("seed") is not None):
             obs, info = resume_game(self.env, self._game_state)
             self._game_state = None
         else:
+            if kwargs.get("seed") is None and self._seed is not None:  # the first reset alone
+                kwargs = {**kwargs, "seed": self._seed}
             obs, info = self.env.reset(**kwargs)
+            self._seed = None
             self._game_state = None  # only once reset took it: a refused one keeps the game
             goes_on = info["interaction"] == self._first_info.get("interaction", -2) + 1
             if not goes_on:  # another game (restart, strategy, seed, restore): no history

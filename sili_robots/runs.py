@@ -367,7 +367,7 @@ def _give_a_run(folder: Path) -> str:
     sweep (a collection keeps none: its sweep's runs have them)."""
     held = sorted(p.parent for p in Path(folder).glob(f"{RUNS_DIR}/*/{CONFIG}"))
     if not held:
-        return "give a directory written by `sili train --out`"
+        return "give a directory written by `sili train --out` or `SILI.save`"
     kept = [run for run in held if (run / CHECKPOINT).is_file()]
     if not kept:
         return (
@@ -380,9 +380,12 @@ def _give_a_run(folder: Path) -> str:
 def read_config(run_dir: Path) -> RunConfig:
     path = Path(run_dir) / CONFIG
     if not Path(run_dir).exists():
-        raise ConfigError(f"{run_dir} does not exist; give a run directory (`sili train --out`)")
+        raise ConfigError(
+            f"{run_dir} does not exist; give a run directory (`sili train --out`, `SILI.save`)"
+        )
     if Path(run_dir).is_file():
-        folder = f": give {Path(run_dir).parent}" if Path(run_dir).name == CONFIG else ""
+        own = Path(run_dir).name in (CONFIG, CHECKPOINT, METRICS, SUMMARY)  # a run's own file
+        folder = f": give {Path(run_dir).parent}" if own else ""
         raise ConfigError(f"{run_dir} is a file, not a run directory{folder}")
     if not path.is_file():
         raise ConfigError(f"{run_dir} is not a run directory (no {CONFIG}); {_give_a_run(run_dir)}")
@@ -509,6 +512,8 @@ def require_checkpoint(run_dir: Path) -> dict[str, Any]:
     """The last checkpoint, or ConfigError saying why there is none."""
     state = load_checkpoint(run_dir)
     if state is None:
+        if not Path(run_dir).is_dir():  # removed since (a temporary run goes with its model)
+            raise ConfigError(f"{run_dir} does not exist (any more): no run is there")
         check_resumable(run_dir)  # a run kept without its checkpoint says so
         raise ConfigError(f"{run_dir} has no checkpoint yet (no {CHECKPOINT}); train it first")
     return state

@@ -18,7 +18,7 @@ from sili_robots import SILI, training
 from sili_robots.agent import SILIAgent
 from sili_robots.build import make_run_config, task_class
 from sili_robots.cli import main
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, UnreadSettingWarning
 from sili_robots.evaluation import evaluate
 from sili_robots.examples.two_doors import TwoDoorsEnv
 from sili_robots.tasks import make_task
@@ -432,7 +432,9 @@ def test_learn_stopped_by_ctrl_c_leaves_the_model_at_its_checkpoint_and_counts_o
     finally:
         signal.signal(signal.SIGINT, previous)
     assert model.agent.buffer.n == 4  # the checkpoint's agent, not the untrained one
+    assert model.trained_interactions == 4 and model.config.interactions == 2000
     model.learn(2)
+    assert model.trained_interactions == 6
     assert len((run / "metrics.csv").read_text().splitlines()) == 1 + 6
     assert model.agent.buffer.n == 6 and SILI.load(run).cfg.interactions == 6
 
@@ -882,3 +884,90 @@ def test_evaluate_acts_deterministically_and_leaves_the_latents_unrefreshed(tmp_
     assert asked and all(asked)
     # the first two are fed when the next begins (the last is never followed), none refreshed
     assert refreshes == [False, False] and not refreshed
+
+
+def test_a_models_folders_stay_where_they_were_given_and_a_tilde_is_home(tmp_path, monkeypatch):
+    """A notebook changes directory: a relative run_dir, load or save path is the folder it
+    named when given; ``~`` is the home folder, as in the CLI's paths."""
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    (tmp_path / "a").mkdir()
+    monkeypatch.chdir(tmp_path / "a")
+    model = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir="rel").learn(1)
+    saved = model.save("~/saved")
+    assert saved == tmp_path / "home" / "saved" and (saved / "checkpoint.pt").is_file()
+    monkeypatch.chdir(tmp_path)
+    model.learn(1)  # trains the run in a/rel, not a new one in ./rel
+    assert model.run_dir == tmp_path / "a" / "rel" and not (tmp_path / "rel").exists()
+    assert model.trained_interactions == 2 and model.evaluate(1)["trained_interactions"] == 2
+    loaded = SILI.load("a/rel")
+    monkeypatch.chdir(tmp_path / "home")
+    assert loaded.trained_interactions == 2 and loaded.run_dir == tmp_path / "a" / "rel"
+    assert SILI.load("~/saved").trained_interactions == 1
+    with pytest.raises(ConfigError, match="'~nobody-here' names no user with a home"):
+        SILI("circle-3", run_dir="~nobody-here/run")
+
+
+def test_a_seed_on_model_envs_first_reset_starts_another_game_and_a_new_models_is_its_training(
+    tmp_path,
+):
+    """gymnasium's reset(seed=...) restarts the game on the first reset too (before, the first
+    continued the trained game whatever its seed); a new model's first reset plays the game its
+    training begins with (its seed's), as stable-baselines3 seeds ``model.env``."""
+    run = tmp_path / "run"
+    SILI("circle-unequal", method="sac", seed=4, settings=FAST_AGENT, run_dir=run).learn(4)
+    firsts = [float(r["strategy_id"]) for r in csv.DictReader((run / "metrics.csv").open())]
+    model = SILI.load(run)
+    _, info = model.env.reset()
+    assert info["interaction"] == 4  # the trained game goes on
+    games = []
+    for seed in (1, 2, 1):
+        model = SILI.load(run)
+        _, info = model.env.reset(seed=seed)
+        assert info["interaction"] == 0 and model.agent.buffer.n == 4
+        games.append(_strategies(model, info, 6))
+    assert games[0] == games[2] != games[1]
+    for _ in range(2):  # the same seed: the same game, the one its training played
+        new = SILI("circle-unequal", method="sac", seed=4, settings=FAST_AGENT)
+        _, info = new.env.reset()
+        assert _strategies(new, info, 4) == firsts
+    others = {tuple(_strategies(SILI("circle-unequal", seed=s), None, 6)) for s in range(4)}
+    assert len(others) > 1  # not one game whatever the seed
+
+
+def _strategies(model: SILI, info: dict | None, interactions: int) -> list[float]:
+    """The strategy of each of ``interactions`` interactions played on ``model.env`` from
+    ``info`` (None: its first reset's), standing still."""
+    if info is None:
+        info = model.env.reset()[1]
+    out = [float(info["strategy_id"])]
+    still = np.zeros(model.env.action_space.shape, np.float32)
+    for _ in range(interactions - 1):
+        for _ in range(model.env.unwrapped.horizon):
+            model.env.step(still)
+        out.append(float(model.env.reset()[1]["strategy_id"]))
+    return out
+
+
+def test_the_api_says_what_the_command_line_notes_and_names_a_runs_files(tmp_path):
+    """A setting the method never reads warns as ``sili train`` notes it; a schedule given in
+    another shape names both shapes; a run's file given for its run names the run; a copy,
+    which would share the run and its simulation, is refused; a model's run removed since is
+    said to be gone, not untrained."""
+    import copy
+
+    unread = r"setting 'model\.dim' does nothing here: it learns no latent"
+    with pytest.warns(UnreadSettingWarning, match=unread):
+        SILI("circle-3", method="sac", settings={**FAST_AGENT, "model.dim": 4})
+    with pytest.raises(ConfigError, match=r"sili\.beta must be a number or a schedule \(INTER"):
+        SILI("circle-3", settings={"sili.beta": [(0, 0.0), (100, 0.5)]})
+    model = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=tmp_path / "r").learn(1)
+    run = re.escape(str(tmp_path / "r"))
+    with pytest.raises(
+        ConfigError, match=f"checkpoint.pt is a file, not a run directory: give {run}$"
+    ):
+        SILI.load(tmp_path / "r" / "checkpoint.pt")
+    with pytest.raises(TypeError, match=r"save it and SILI\.load the saved copy"):
+        copy.deepcopy(model)
+    shutil.rmtree(tmp_path / "r")
+    with pytest.raises(ConfigError, match="r does not exist \\(any more\\): no run is there"):
+        model.evaluate(1)

@@ -439,6 +439,10 @@ def test_cli_rejects_bad_input_with_exit_2(tmp_path, capsys):
     assert "--seed 7 and --checkpoint: a trained run's agent goes on with the game" in (
         capsys.readouterr().err
     )
+    with pytest.raises(ConfigError, match="seed 7 and checkpoint: a trained run's agent goes on"):
+        preview("circle-3", checkpoint=tmp_path / "c", seed=7, out=None)
+    played = preview("circle-3", checkpoint=tmp_path / "c", interactions=1, out=tmp_path / "p.html")
+    assert played.preview.recording.frames[0]["game_interaction"] == 1  # the trained game goes on
 
 
 def test_a_scripted_preview_plays_the_controller_asked_for():

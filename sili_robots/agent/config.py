@@ -186,6 +186,11 @@ def convert(name: str, tp: Any, value: Any) -> Any:
                 return Schedule.parse(value)
             except ConfigError as err:
                 raise ConfigError(f"setting {name}: {err}") from None
+        if Schedule in args and not is_number(value):
+            raise ConfigError(
+                f"setting {name} must be a number or a schedule (INTERACTION:VALUE,... or "
+                f'{{"points": [[INTERACTION, VALUE], ...]}}), got {value!r}'
+            )
         for kind in (float, int, bool, str):
             if kind in args:
                 return convert(name, kind, value)

@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
             policy=args.policy,
             checkpoint=args.checkpoint,
             interactions=args.interactions,
-            seed=0 if args.seed is None else args.seed,
+            seed=args.seed,
             out=args.out,
             png=args.png,
             serve=args.serve,

@@ -71,13 +71,15 @@ class Preview:
         env: gym.Env,
         policy: Callable[[gym.Env, np.ndarray], np.ndarray],
         interactions: int,
-        seed: int = 0,
+        seed: int | None = 0,
         task: str = "",
         policy_name: str = "",
         live: meshcat.Visualizer | None = None,
     ) -> Preview:
-        """Roll ``policy`` out on ``env`` and build the scene (also into ``live`` if given)."""
-        interactions, seed = check_count("interactions", interactions), check_seed(seed)
+        """Roll ``policy`` out on ``env`` and build the scene (also into ``live`` if given);
+        ``seed`` restarts the game, None goes on with ``env``'s (a trained model's ``env``)."""
+        interactions = check_count("interactions", interactions)
+        seed = None if seed is None else check_seed(seed)
         if not isinstance(env, gym.Env):  # a task's name goes to preview(), which builds it
             raise ConfigError(f"env must be a task instance (preview() takes names), got {env!r}")
         if not callable(policy):
@@ -263,7 +265,7 @@ def preview(
     policy: str | None = None,
     checkpoint: str | Path | None = None,
     interactions: int = 3,
-    seed: int = 0,
+    seed: int | None = None,
     out: str | Path | None = "preview.html",
     png: str | Path | None = None,
     serve: bool = False,
@@ -273,17 +275,23 @@ def preview(
 ) -> PreviewResult:
     """Record ``interactions`` interactions of ``task`` and write/render/serve the preview.
 
-    ``png`` renders the scene's picture frame (the last; on Driving the last interaction's
-    moment the ego draws level with the opponent) in headless Chromium (found before the
-    recording, a ConfigError without it; ``out`` is written first; a temporary file is used
-    when ``out`` is None, and removed). ``serve`` starts a live meshcat server on 127.0.0.1,
-    calls ``on_ready`` with the result so far (files written, picture checked, ``url`` set)
-    and blocks for ``serve_seconds`` (None: until Ctrl-C); the server is stopped on every exit
-    path.
+    ``seed``: the game's (default 0); none with ``checkpoint``, whose agent goes on with the
+    game it trained in. ``png`` renders the scene's picture frame (the last; on Driving the last
+    interaction's moment the ego draws level with the opponent) in headless Chromium (found
+    before the recording, a ConfigError without it; ``out`` is written first; a temporary file
+    is used when ``out`` is None, and removed). ``serve`` starts a live meshcat server on
+    127.0.0.1, calls ``on_ready`` with the result so far (files written, picture checked,
+    ``url`` set) and blocks for ``serve_seconds`` (None: until Ctrl-C); the server is stopped on
+    every exit path.
     """
     from sili_robots.preview.server import LiveServer
 
     serve = check_flag("serve", serve)
+    if checkpoint is not None and seed is not None:
+        raise ConfigError(
+            f"seed {seed!r} and checkpoint: a trained run's agent goes on with the game it "
+            "trained in; give no seed"
+        )
     if serve_seconds is not None and not (is_number(serve_seconds) and serve_seconds >= 0):
         raise ConfigError(f"serve_seconds must be a number >= 0 (or None), got {serve_seconds!r}")
     for path, option in ((out, "out"), (png, "png")):
@@ -303,7 +311,7 @@ def preview(
             env,
             pol,
             interactions,
-            seed,
+            0 if seed is None and checkpoint is None else seed,
             name,
             label,
             live=server.visualizer if server is not None else None,

@@ -28,7 +28,7 @@ class Recording:
     policy: str
     horizon: int
     interactions: int
-    seed: int
+    seed: int | None
     frames: list[dict[str, Any]] = field(default_factory=list)
     #: snapshot of things that never change (layout), taken once
     static: dict[str, Any] = field(default_factory=dict)
@@ -50,7 +50,7 @@ def record_rollout(
     policy: Callable[[gym.Env, np.ndarray], np.ndarray],
     snapshot: Snapshot,
     interactions: int,
-    seed: int = 0,
+    seed: int | None = 0,
     task: str = "",
     policy_name: str = "",
     static: Snapshot | None = None,
