@@ -149,6 +149,38 @@ class OneLatent(AgentAddon):
         return z  # not the pair (steps t, t + 1)
 
 
+class BareReadout(AgentAddon):
+    def encoder_readouts(self):
+        return lambda h: h[:, -1]  # a function, not a list of them
+
+
+class NarrowReadout(AgentAddon):
+    def encoder_readouts(self):
+        return [lambda h: h[:, -1, :3]]  # [N, 3], not [N, hidden]: met in the encoder's head
+
+
+class Negative(AgentAddon):
+    def stability_distance(self, j):
+        return -np.ones(j.shape)  # R_stable would pay for changes
+
+
+class Counter(AgentAddon):
+    name = "counter"
+
+    def __init__(self):
+        self.n = 0
+
+    def interaction_stored(self, j):
+        self.n += 1
+        return {}
+
+    def state_dict(self):
+        return {"n": self.n}
+
+    def load_state_dict(self, state):
+        self.n = state["n"]
+
+
 class OtherTypes(AgentAddon):
     """Returns of other types that hold what each hook needs: taken."""
 
@@ -311,6 +343,11 @@ def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, caps
     plugins = "addons.plugins=my_addons:Constant,my_addons:Twin"  # one checkpoint entry by name
     assert main([*fresh, *FAST_ARGS, "--interactions", "1", "--set", plugins]) == 2
     assert "my_addons:Constant and my_addons:Twin are both named 'addon'" in capsys.readouterr().err
+    plugins = "addons.plugins=my_addons:Constant, my_addons:Constant"
+    assert main([*fresh, *FAST_ARGS, "--interactions", "1", "--set", plugins]) == 2
+    assert "addons.plugins lists my_addons:Constant twice; give each once" in (
+        capsys.readouterr().err
+    )
     plugins = "addons.plugins=my_addons:Constant,my_addons:SameColumn"
     assert main([*fresh, *FAST_ARGS, "--interactions", "1", "--set", plugins]) == 2
     assert (
@@ -319,10 +356,12 @@ def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, caps
     )
     assert not (tmp_path / "u").exists()  # each refused before a run was written
     wrong = {
-        "my_addons:Scalar": "add-on Scalar: stability_distance must return finite values of j's "
-        "shape (1,), got shape ()",
-        "my_addons:NaN": "add-on NaN: stability_distance must return finite values of j's shape "
-        "(1,), got shape (1,) (not finite)",
+        "my_addons:Scalar": "add-on Scalar: stability_distance must return finite values >= 0 of "
+        "j's shape (1,), got shape ()",
+        "my_addons:NaN": "add-on NaN: stability_distance must return finite values >= 0 of j's "
+        "shape (1,), got shape (1,) (not finite)",
+        "my_addons:Negative": "add-on Negative: stability_distance must return finite values >= 0 "
+        "of j's shape (1,), got shape (1,) (negative)",
         # the packaged posteriors add-on replaces d too: one of them would be ignored
         "my_addons:Constant --set addons.stability_distance=posterior": "add-ons "
         "HindsightPosteriors, Constant each replace stability_distance: keep one",
@@ -355,6 +394,10 @@ def test_a_hook_that_returns_the_wrong_thing_is_named_with_what_it_must_return(
         "[0.0, [1.0, 2.0]]",
         "FloatPairs": "latent_pairs must return an integer array of shape (32,) in [1, ",
         "OneLatent": "batch_latents must return None or two arrays of shape (",
+        "BareReadout": "encoder_readouts must return a list of functions of per-step features "
+        "[N, H, 32] to [N, 32], got <function BareReadout.",
+        "NarrowReadout": "encoder_readouts must return a list of functions of per-step features "
+        "[N, H, 32] to [N, 32] (given [2, H, hidden]), got (2, 3)",
     }
     errors = {}
     for name, message in wrong.items():
@@ -383,3 +426,28 @@ def test_a_history_with_a_column_of_no_add_on_is_damaged_unless_the_run_has_add_
         check_history(tmp_path, 0)
     with pytest.raises(ConfigError, match=r"my_note that no add-on of the run \(mine:A\) declares"):
         check_history(tmp_path, 0, plugins="mine:A")
+
+
+def test_an_addon_renamed_since_its_checkpoint_is_named_with_the_states_it_holds(
+    tmp_path, monkeypatch, capsys
+):
+    """A checkpoint keeps each add-on's state by its ``name``: renamed, the add-on finds none,
+    and its own error (a KeyError traceback) is named with the states the checkpoint holds."""
+    monkeypatch.chdir(tmp_path)
+    module = tmp_path / "my_addons.py"
+    module.write_text(textwrap.dedent(PLUGIN))
+    monkeypatch.syspath_prepend(tmp_path)
+    monkeypatch.delitem(sys.modules, "my_addons", raising=False)
+    run = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--out", str(run), "--no-progress", *FAST_ARGS]
+    assert main([*args, "--set", "addons.plugins=my_addons:Counter", "--interactions", "2"]) == 0
+    module.write_text(module.read_text().replace('name = "counter"', 'name = "tally"'))
+    del sys.modules["my_addons"]
+    capsys.readouterr()
+    assert main(["train", "--resume", str(run), "--no-progress", "--interactions", "3"]) == 2
+    err = capsys.readouterr().err
+    assert (
+        "add-on Counter (name 'tally') could not load its state from the checkpoint: KeyError: "
+        "'n'; the checkpoint holds states named ['counter']" in err
+    )
+    assert "Traceback" not in err

@@ -484,6 +484,20 @@ def test_a_tasks_strategy_and_reward_mistakes_are_named_where_they_are_made():
     with pytest.raises(ConfigError, match=r"NoDim.strategy_dim is None; a task sets it"):
         NoDim()
 
+    class Lettered(Doors):  # ids are numbers: a string failed deep in the comparison
+        def strategy_choices(self):
+            return ["left", "right"]
+
+    class Misspelt(Doors):  # an AttributeError at the first reset
+        game_state_fields = ("dor",)
+
+    for cls, said in (
+        (Lettered, r"strategy_choices\(\) returned \['left', 'right'\]; it must return None or"),
+        (Misspelt, r"Misspelt.game_state_fields names dor, which it does not have after its re"),
+    ):
+        with pytest.raises(ConfigError, match=said):
+            cls().reset(seed=0)
+
     class Huge(Doors):
         def strategy_id(self):
             return 10**400

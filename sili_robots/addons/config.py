@@ -69,6 +69,9 @@ class AddonsConfig:
         if not self.plugins.strip():
             return []
         names = [p.strip() for p in self.plugins.split(",") if p.strip()]
+        twice = sorted({p for p in names if names.count(p) > 1})
+        if twice:  # else refused as two add-ons declaring one name or column
+            raise ConfigError(f"addons.plugins lists {', '.join(twice)} twice; give each once")
         return [load_class(p, AgentAddon, "add-on") for p in names]
 
     def active(self) -> list[str]:

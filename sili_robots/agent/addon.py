@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 import numpy as np
 import torch
 
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, first_line
 
 if TYPE_CHECKING:
     from sili_robots.agent.agent import SILIAgent
@@ -143,6 +143,57 @@ def refused(addon: AgentAddon, hook: str, value: object, wanted: str) -> ConfigE
         if array.dtype.kind in "iu" and array.size:
             shown += f", entries {array.min()} to {array.max()}"
     return ConfigError(f"add-on {type(addon).__name__}: {hook} must return {wanted}, got {shown}")
+
+
+def readouts(addon: AgentAddon, hidden: int, horizon: int) -> list[Callable]:
+    """An ``encoder_readouts`` return checked: functions, each tried on zero features
+    [2, horizon, hidden] to give [2, hidden] (a wrong one failed later in the encoder's head,
+    in torch's words)."""
+    given = addon.encoder_readouts()
+    wanted = f"a list of functions of per-step features [N, H, {hidden}] to [N, {hidden}]"
+    if not isinstance(given, list | tuple) or not all(callable(r) for r in given):
+        raise refused(addon, "encoder_readouts", given, wanted)
+    probe = torch.zeros(2, horizon, hidden)
+    for readout in given:
+        try:
+            out = readout(probe)
+        except Exception as err:  # the add-on's own code, named with it
+            raise ConfigError(
+                f"add-on {type(addon).__name__}: an encoder_readouts function failed on "
+                f"features of shape {tuple(probe.shape)}: {first_line(err)}"
+            ) from err
+        if not isinstance(out, torch.Tensor) or tuple(out.shape) != (2, hidden):
+            got = tuple(out.shape) if isinstance(out, torch.Tensor) else out
+            raise refused(addon, "encoder_readouts", got, wanted + " (given [2, H, hidden])")
+    return list(given)
+
+
+def distances(name: str, d: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """A ``stability_distance`` return checked: finite (else met as a diverged training), of
+    the batch's shape and >= 0 (a negative d would pay for changes)."""
+    if d.shape != shape or not np.isfinite(d).all() or (d < 0).any():
+        wrong = " (not finite)" if not np.isfinite(d).all() else " (negative)"
+        raise ConfigError(
+            f"add-on {name}: stability_distance must return finite values >= 0 of j's shape "
+            f"{shape}, got shape {d.shape}{'' if d.shape != shape else wrong}"
+        )
+    return d
+
+
+def load_states(addons: list[AgentAddon], saved: Mapping[str, Any]) -> None:
+    """Each add-on's state from a checkpoint, by its ``name``; an error of its own is named
+    with it and the states the checkpoint holds under other names (an add-on renamed since
+    finds none of its own)."""
+    for addon in addons:
+        try:
+            addon.load_state_dict(saved.get(addon.name, {}))
+        except Exception as err:
+            others = sorted(set(saved) - {a.name for a in addons})
+            held = f"; the checkpoint holds states named {others}" if others else ""
+            raise ConfigError(
+                f"add-on {type(addon).__name__} (name {addon.name!r}) could not load its state "
+                f"from the checkpoint: {first_line(err)}{held}"
+            ) from err
 
 
 def as_indices(value: object, shape: tuple[int, ...], low: int, high: int) -> np.ndarray | None:

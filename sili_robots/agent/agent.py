@@ -115,7 +115,11 @@ class SILIAgent:
                 usage_bonus=value_at(m.usage_bonus, 0),
                 preact_penalty=value_at(m.preact_penalty, 0),
                 squash=m.squash,
-                readouts=[r for a in self.hooks["encoder_readouts"] for r in a.encoder_readouts()],
+                readouts=[
+                    r
+                    for a in self.hooks["encoder_readouts"]
+                    for r in addon_checks.readouts(a, cfg.hidden, horizon)
+                ],
                 matmul=cfg.matmul,
             )
             self.model_opt = torch.optim.Adam(  # foreach: the same steps, a third faster on CPU
@@ -276,12 +280,7 @@ class SILIAgent:
             names = ", ".join(name for name, _ in given)
             raise ConfigError(f"add-ons {names} each replace stability_distance: keep one")
         [(name, d)] = given
-        if d.shape != j.shape or not np.isfinite(d).all():  # else met as a diverged training
-            raise ConfigError(
-                f"add-on {name}: stability_distance must return finite values of j's shape "
-                f"{j.shape}, got shape {d.shape}{'' if d.shape != j.shape else ' (not finite)'}"
-            )
-        return d
+        return addon_checks.distances(name, d, j.shape)
 
     def _stats(self, j: int, next_first: np.ndarray, extra: dict[str, float]) -> InteractionStats:
         if self.cfg.latent == "partial":
@@ -422,8 +421,7 @@ class SILIAgent:
                 f"it is another agent's state ({' '.join(lines[:2])})"
             ) from None
         saved = state.get("addons", {})
-        for addon in self.addons:  # their own computations: errors there are not a mismatch
-            addon.load_state_dict(saved.get(addon.name, {}))
+        addon_checks.load_states(self.addons, saved)  # their own: errors there are no mismatch
         self.begin_interaction()
 
     def _load_learned(self, state: dict[str, Any]) -> None:

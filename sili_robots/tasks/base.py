@@ -158,6 +158,19 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         strategy override this (``_check_start`` refuses the rest)."""
         raise NotImplementedError
 
+    def _choices(self) -> list[StrategyId] | None:
+        """``strategy_choices()``, checked: None or numbers (an id is a number)."""
+        choices = self.strategy_choices()
+        if choices is None:
+            return None
+        wrong = not isinstance(choices, list | tuple) or not choices
+        if wrong or not all(is_number(c) and math.isfinite(c) for c in choices):
+            raise ConfigError(
+                f"{type(self).__name__}.strategy_choices() returned {choices!r:.80}; it must "
+                "return None or a list of finite numbers (the ids strategy_id() returns)"
+            )
+        return list(choices)
+
     def _check_start(self, strategy: Any) -> StrategyId:
         """The task's own value of a chosen first strategy (the choice it equals, within
         rounding), refusing one this task cannot start from before ``reset`` changes anything,
@@ -167,7 +180,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
                 f"{type(self).__name__} cannot start from a chosen strategy (a task that can "
                 "overrides _set_strategy, and strategy_choices when its strategies are few)"
             )
-        choices = self.strategy_choices()
+        choices = self._choices()
         matched = None
         number = isinstance(strategy, (int, float, np.number)) and not isinstance(strategy, bool)
         with contextlib.suppress(OverflowError):  # an int beyond a float's range matches none
@@ -276,7 +289,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         self._boundary_state = self._capture_game_state()
         self._begin_interaction()
         sid = self._checked_strategy()
-        if start is not None and self.strategy_choices() is not None and not _same(sid, start):
+        if start is not None and self._choices() is not None and not _same(sid, start):
             raise ConfigError(
                 f"{type(self).__name__}._set_strategy({start!r}) left strategy_id() at {sid!r}; "
                 f"it must make {start!r} the current strategy"
@@ -325,6 +338,13 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
 
     # ----------------------------------------------------------------- resumable games
     def _capture_game_state(self) -> dict[str, Any]:
+        missing = [k for k in self.game_state_fields if not hasattr(self, k)]
+        if missing:  # else an AttributeError from here, at the first reset
+            raise ConfigError(
+                f"{type(self).__name__}.game_state_fields names {', '.join(missing)}, which it "
+                "does not have after its reset; name the attributes that hold the opponent's "
+                "strategy"
+            )
         return {
             "fields": {k: _copy(getattr(self, k)) for k in self.game_state_fields},
             "rng": self.np_random.bit_generator.state,
@@ -361,7 +381,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         self.np_random.bit_generator.state = state["rng"]
         for k, v in state["fields"].items():
             setattr(self, k, _copy(v))
-        choices = self.strategy_choices()
+        choices = self._choices()
         if choices is not None and not any(_same(self.strategy_id(), c) for c in choices):
             raise ConfigError(  # before the scene is set up for it (an index out of its range)
                 f"a saved game's fields {dict(state['fields'])} give strategy "
@@ -439,7 +459,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
             finite = False
         if not finite:  # else written to metrics.csv, which then reads as damaged
             raise ConfigError(f"{name}.strategy_id() returned {sid!r}; it must be finite")
-        choices = self.strategy_choices()
+        choices = self._choices()
         if choices is not None and not any(_same(sid, c) for c in choices):
             raise ConfigError(  # else a saved game at it could not be resumed
                 f"{name}.strategy_id() returned {sid!r}, not one of its strategy_choices(): "
