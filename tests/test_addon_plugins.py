@@ -10,6 +10,7 @@ import re
 import sys
 import textwrap
 
+import pandas as pd
 import pytest
 from fast_settings import FAST_ARGS
 
@@ -451,3 +452,15 @@ def test_an_addon_renamed_since_its_checkpoint_is_named_with_the_states_it_holds
         "'n'; the checkpoint holds states named ['counter']" in err
     )
     assert "Traceback" not in err
+
+
+def test_a_sweeps_table_carries_the_columns_of_its_runs_addons(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "my_addons.py").write_text(textwrap.dedent(PLUGIN))
+    out = tmp_path / "sweep"
+    args = ["sweep", "--tasks", "circle-3", "--methods", "sac", "--seeds", "0", "--out", str(out)]
+    args += ["--interactions", "2", "--workers", "1", "--no-progress", *FAST_ARGS]
+    assert main([*args, "--set", "addons.plugins=my_addons:Flags"]) == 0
+    table = pd.read_csv(out / "results.csv")
+    assert list(table.columns[-3:]) == ["odd", "seen", "half"]
+    assert table["half"].tolist() == [0.0, 0.5] and table["odd"].tolist() == [0, 1]

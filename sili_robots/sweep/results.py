@@ -5,7 +5,8 @@
   ``controller`` (named or the task's default), ``task_args`` (the task arguments other than
   its version's defaults, as JSON; "" for none), ``config_beta`` (a schedule's last b),
   ``beta_scheduled``) + every ``metrics.csv`` column + ``true_stability`` (1 -
-  strategy_changed; empty for interaction 0, which has no strategy before it) + ``finished``.
+  strategy_changed; empty for interaction 0, which has no strategy before it) + ``finished``
+  + the columns the runs' own add-ons declare (``metric_columns``).
 - ``runs.csv``: one row per run: status (done / failed / incomplete / not started), interactions
   logged, final task reward and true stability, wall time, error.
 """
@@ -187,11 +188,13 @@ def check_none_damaged(damaged: list[str]) -> None:
 
 
 def results_table(sweep_dir: Path) -> pd.DataFrame:
-    """All runs' per-interaction rows in one tidy frame (columns ``RESULT_COLUMNS``)."""
+    """All runs' per-interaction rows in one tidy frame (columns ``RESULT_COLUMNS``, then the
+    columns of the runs' own add-ons, empty for runs without them)."""
     frames = [df for df in each_run(sweep_dir, _result_rows) if df is not None]
     if not frames:
         return pd.DataFrame(columns=list(RESULT_COLUMNS))
-    return pd.concat(frames, ignore_index=True)[list(RESULT_COLUMNS)]
+    own = dict.fromkeys(c for df in frames for c in df.columns if c not in RESULT_COLUMNS)
+    return pd.concat(frames, ignore_index=True)[[*RESULT_COLUMNS, *own]]
 
 
 def _result_rows(run_dir: Path) -> pd.DataFrame | None:
