@@ -493,7 +493,9 @@ def test_lr_schedule_sets_every_sac_optimizers_step_size_at_each_update():
 
 def test_mistyped_settings_fail_by_name():
     """A --set value of the wrong type is refused up front, naming the setting and the value."""
-    with pytest.raises(ConfigError, match=r"setting sac.lr must be a number, got 'abc'"):
+    with pytest.raises(
+        ConfigError, match=r"setting sac.lr must be a number or a schedule .*, got 'abc'"
+    ):
         method_config("sili", lr="abc")
     with pytest.raises(ConfigError, match=r"target_entropy must be .*, got 'x'"):
         method_config("sili", target_entropy="x")

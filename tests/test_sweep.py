@@ -523,7 +523,10 @@ def test_a_record_that_cannot_run_is_named_and_a_dry_run_refuses_it_too(tmp_path
     first = {**kept["invocations"][0], "betas": None}
     for edit, said in (
         ({"seeds": [-1]}, "seed -1 is not allowed"),  # found where its runs are made
-        ({"agent_overrides": {"sac.lr": "x"}}, "setting sac.lr must be a number, got 'x'"),
+        (
+            {"agent_overrides": {"sac.lr": "x"}},
+            "setting sac.lr must be a number or a schedule (INTERACTION:VALUE",
+        ),
     ):
         record.write_text(json.dumps({"invocations": [{**first, **edit}]}))
         assert main(["sweep", "--resume", str(out), "--dry-run"]) == 2
