@@ -317,9 +317,21 @@ def record_continuation(run_dir: Path, cfg: RunConfig, interaction: int) -> None
     (its own classes' code too) or on another kind of processor than it last ran on: seeded runs
     repeat only on the same, so its results are then a mix (``continued``: where, and with
     what)."""
-    path = Path(run_dir) / CONFIG
-    record = read_json(path, DAMAGED_CONFIG, "run")
-    now = cfg.provenance()
+    now, changed = other_software(run_dir, cfg)
+    if changed:
+        path = Path(run_dir) / CONFIG
+        record = read_json(path, DAMAGED_CONFIG, "run")
+        record.setdefault("continued", []).append(
+            {"from_interaction": interaction, "versions": now}
+        )
+        write_text(path, json.dumps(record, indent=2, sort_keys=True))
+
+
+def other_software(run_dir: Path, cfg: RunConfig) -> tuple[dict[str, str], list[str]]:
+    """The software and processor run ``cfg`` uses now (``provenance``), and where they differ
+    from what it last ran with (``config.json``'s last ``continued``, else its own record)."""
+    record = read_json(Path(run_dir) / CONFIG, DAMAGED_CONFIG, "run")
+    now = full = cfg.provenance()
     last = (record.get("continued") or [record])[-1].get("versions") or {}
     # what one side does not know (an earlier version wrote it, or git could not tell) is no
     # difference; a class's code known on both sides but under other names is
@@ -329,11 +341,7 @@ def record_continuation(run_dir: Path, cfg: RunConfig, interaction: int) -> None
             now, last = (
                 {k: v for k, v in d.items() if k not in keys[0] | keys[1]} for d in (now, last)
             )
-    if now != last:
-        record.setdefault("continued", []).append(
-            {"from_interaction": interaction, "versions": now}
-        )
-        write_text(path, json.dumps(record, indent=2, sort_keys=True))
+    return full, sorted(k for k in now.keys() | last.keys() if now.get(k) != last.get(k))
 
 
 def set_target(run_dir: Path, interactions: int) -> None:

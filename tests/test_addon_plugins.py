@@ -245,7 +245,9 @@ def test_an_addon_scales_the_default_distance_through_the_public_function(tmp_pa
     assert doubled == [2 * d for d in plain] and min(plain) == -1.0
 
 
-def test_a_run_records_its_addon_s_code_and_notes_a_resume_on_other_code(tmp_path, monkeypatch):
+def test_a_run_records_its_addon_s_code_and_notes_a_resume_on_other_code(
+    tmp_path, monkeypatch, capsys
+):
     """An add-on's settings are its class attributes, which the package's revision does not
     cover: the run records a digest of its module's file, and a resume on another says so."""
     monkeypatch.chdir(tmp_path)
@@ -260,11 +262,17 @@ def test_a_run_records_its_addon_s_code_and_notes_a_resume_on_other_code(tmp_pat
     record = json.loads((run / "config.json").read_text())
     assert record["versions"][key] == hashlib.sha256(module.read_bytes()).hexdigest()[:12]
     resume = ["train", "--resume", str(run), "--no-progress", "--interactions"]
+    capsys.readouterr()
     assert main([*resume, "3"]) == 0  # the same code: nothing to note
     assert "continued" not in json.loads((run / "config.json").read_text())
+    assert "goes on with another" not in capsys.readouterr().err
     module.write_text(module.read_text().replace("0.37", "0.5"))
     del sys.modules["my_addons"]  # as a new process would import it
     assert main([*resume, "4"]) == 0
+    assert (
+        f"sili train: note: {run} goes on with another code of my_addons:Constant than it last "
+        "ran with: its results mix both" in capsys.readouterr().err
+    )
     (continued,) = json.loads((run / "config.json").read_text())["continued"]
     assert continued["from_interaction"] == 3
     assert continued["versions"][key] == hashlib.sha256(module.read_bytes()).hexdigest()[:12]

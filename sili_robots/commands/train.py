@@ -44,6 +44,7 @@ from sili_robots.runs import (
     RunConfig,
     check_new_run_dir,
     make_run_dir,
+    other_software,
     read_config,
     ready_new_run_dir,
 )
@@ -278,6 +279,7 @@ def run(args: argparse.Namespace) -> int:
         if not done:  # (nothing to train, nothing to say of its speed)
             _note_threads_beyond_cores(recorded.threads)
             _note_slow_kernels(recorded)
+            _note_other_software(args.resume, recorded)
         scalars = _keeps_scalars(args.resume)
         with (
             _resume_hint(args.resume),
@@ -354,6 +356,18 @@ def _note_slow_kernels(cfg: RunConfig) -> None:
         print(
             f"sili train: note: {setting} is {ratio:.1f}x as slow as {fastest} on this machine "
             "(as timed for its default); the run keeps it, as its numbers depend on it",
+            file=sys.stderr,
+        )
+
+
+def _note_other_software(run_dir: Path, cfg: RunConfig) -> None:
+    """A run resumed on other code (its own add-ons' and task's too), libraries or processor
+    than it last ran on goes on as a mix, which ``continued`` records; say so up front."""
+    _, changed = other_software(run_dir, cfg)
+    if changed:
+        print(
+            f"sili train: note: {run_dir} goes on with another {', '.join(changed)} than it last "
+            "ran with: its results mix both (config.json's continued records where)",
             file=sys.stderr,
         )
 
