@@ -24,7 +24,7 @@ import tempfile
 import warnings
 import weakref
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import gymnasium as gym
 import numpy as np
@@ -143,8 +143,9 @@ class SILI:
             run_dir = tempfile.mkdtemp(prefix="sili-run-")
             _remove_with(self, Path(run_dir))
         else:
-            run_dir = check_path("run_dir", run_dir).absolute()  # the folder given, wherever
-            check_not_in_a_sweep(run_dir, "run_dir")  # the process goes (os.chdir) since
+            # the folder given, wherever the process goes (os.chdir) since
+            run_dir = check_path("run_dir", run_dir).absolute()
+            check_not_in_a_sweep(run_dir, "run_dir")
         self.run_dir, self._overwrite = Path(run_dir), overwrite
         self._saved: dict[Path, tuple] = {}  # where this model saved, and what it left there
         self._check_run_dir()
@@ -392,11 +393,14 @@ class SILI:
         self._refresh()
         return self._done
 
-    def __deepcopy__(self, memo: dict) -> SILI:
+    def __copy__(self) -> NoReturn:
         raise TypeError(
             "a SILI model is its run directory and simulation, which a copy would share: "
             "save it and SILI.load the saved copy"
         )
+
+    def __deepcopy__(self, memo: dict) -> NoReturn:
+        self.__copy__()
 
 
 #: temporary run directories of live models, removed with their model

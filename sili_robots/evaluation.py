@@ -57,8 +57,9 @@ class AgentFeedback(gym.Wrapper):
         game_state: dict[str, Any] | None,
         seed: int | None = None,
     ) -> None:
-        """Play ``env`` with ``agent`` from ``game_state`` from now on, as a new wrapper would:
-        a model's ``env`` stays the object a user holds when training replaces its agent."""
+        """Play ``env`` with ``agent`` from ``game_state`` (``seed``: the first reset's without
+        one) from now on, as a new wrapper would: a model's ``env`` stays the object a user holds
+        when training replaces its agent."""
         super().__init__(env)
         self.agent = agent
         self._game_state = game_state
@@ -67,6 +68,11 @@ class AgentFeedback(gym.Wrapper):
         self._first_obs: np.ndarray | None = None
         self._last_obs: np.ndarray | None = None
         self._first_info: dict[str, Any] = {}
+
+    @property
+    def continues_game(self) -> bool:
+        """Whether the next reset, given no seed or other game, goes on with a trained game."""
+        return self._game_state is not None
 
     def reset(self, **kwargs: Any) -> tuple[np.ndarray, dict[str, Any]]:
         options = kwargs.get("options") or {}

@@ -46,6 +46,22 @@ METRIC_COLUMNS = (
     "wall_time",
     "filter_step",
 )
+#: what a sweep's ``results.csv`` adds to each run's rows (``sweep/results.py``): its identity
+#: before them, and after them whether the strategy stayed and the run finished
+ID_COLUMNS = (
+    "run",
+    "task",
+    "task_id",
+    "method",
+    "profile",
+    "latent",
+    "seed",
+    "controller",
+    "task_args",
+    "config_beta",
+    "beta_scheduled",
+)
+ROW_COLUMNS = ("true_stability", "finished")
 
 
 def kept(rows: Any) -> Any:

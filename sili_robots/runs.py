@@ -30,7 +30,13 @@ from sili_robots.agent.config import LARGEST_INT, AgentConfig, set_path
 from sili_robots.agent.config import check as check_ranges
 from sili_robots.atomic import write_bytes, write_text
 from sili_robots.errors import ConfigError, check_count, check_seed, first_line, is_number
-from sili_robots.metrics import COMPRESSED_METRICS, METRIC_COLUMNS, METRICS
+from sili_robots.metrics import (
+    COMPRESSED_METRICS,
+    ID_COLUMNS,
+    METRIC_COLUMNS,
+    METRICS,
+    ROW_COLUMNS,
+)
 from sili_robots.migrations import migrate_agent_state, migrate_run, setting_path
 from sili_robots.plugins import class_path
 from sili_robots.provenance import OWN_CODE, REVISION, source_digests, versions
@@ -146,6 +152,12 @@ class RunConfig:
                 raise ConfigError(
                     f"add-on {path} declares metric_columns {', '.join(taken)}, which metrics.csv "
                     "has already; name its own otherwise"
+                )
+            table = [c for c in declared if c in (*ID_COLUMNS, *ROW_COLUMNS)]
+            if table and new_run:  # results.csv's own values would replace the add-on's
+                raise ConfigError(
+                    f"add-on {path} declares metric_columns {', '.join(table)}, which a sweep's "
+                    "results.csv has already; name its own otherwise"
                 )
             shared = [f"{c} ({own[c]})" for c in declared if c in own]
             if shared and new_run:
@@ -327,9 +339,12 @@ def record_continuation(run_dir: Path, cfg: RunConfig, interaction: int) -> None
         write_text(path, json.dumps(record, indent=2, sort_keys=True))
 
 
-def other_software(run_dir: Path, cfg: RunConfig) -> tuple[dict[str, str], list[str]]:
+def other_software(
+    run_dir: Path, cfg: RunConfig
+) -> tuple[dict[str, str], dict[str, tuple[str | None, str | None]]]:
     """The software and processor run ``cfg`` uses now (``provenance``), and where they differ
-    from what it last ran with (``config.json``'s last ``continued``, else its own record)."""
+    from what it last ran with (``config.json``'s last ``continued``, else its own record):
+    ``{key: (then, now)}``, None where one side has no such key."""
     record = read_json(Path(run_dir) / CONFIG, DAMAGED_CONFIG, "run")
     now = full = cfg.provenance()
     last = (record.get("continued") or [record])[-1].get("versions") or {}
@@ -341,7 +356,8 @@ def other_software(run_dir: Path, cfg: RunConfig) -> tuple[dict[str, str], list[
             now, last = (
                 {k: v for k, v in d.items() if k not in keys[0] | keys[1]} for d in (now, last)
             )
-    return full, sorted(k for k in now.keys() | last.keys() if now.get(k) != last.get(k))
+    keys = sorted(k for k in now.keys() | last.keys() if now.get(k) != last.get(k))
+    return full, {k: (last.get(k), now.get(k)) for k in keys}
 
 
 def set_target(run_dir: Path, interactions: int) -> None:
@@ -392,7 +408,7 @@ def read_config(run_dir: Path) -> RunConfig:
             f"{run_dir} does not exist; give a run directory (`sili train --out`, `SILI.save`)"
         )
     if Path(run_dir).is_file():
-        own = Path(run_dir).name in (CONFIG, CHECKPOINT, METRICS, SUMMARY)  # a run's own file
+        own = Path(run_dir).name in (CONFIG, CHECKPOINT, METRICS, COMPRESSED_METRICS, SUMMARY)
         folder = f": give {Path(run_dir).parent}" if own else ""
         raise ConfigError(f"{run_dir} is a file, not a run directory{folder}")
     if not path.is_file():

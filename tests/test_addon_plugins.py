@@ -66,6 +66,10 @@ class Scalar(AgentAddon):
         return 0.5  # not one per interaction j
 
 
+class Seeded(Constant):
+    metric_columns = ("seed",)  # results.csv's run identity would replace its values
+
+
 class Letters(Constant):
     metric_columns = "score"  # a string, not a tuple of names
 
@@ -199,6 +203,15 @@ class OtherTypes(AgentAddon):
 '''
 
 
+@pytest.fixture
+def edited_module():
+    """A test that edits its my_addons.py imports it afresh (not another test's, imported
+    before) and leaves no edited one behind for the next test on its worker."""
+    sys.modules.pop("my_addons", None)
+    yield
+    sys.modules.pop("my_addons", None)
+
+
 def _rows(run):
     with (run / "metrics.csv").open(newline="") as f:
         return list(csv.DictReader(f))
@@ -246,15 +259,14 @@ def test_an_addon_scales_the_default_distance_through_the_public_function(tmp_pa
 
 
 def test_a_run_records_its_addon_s_code_and_notes_a_resume_on_other_code(
-    tmp_path, monkeypatch, capsys
+    tmp_path, monkeypatch, capsys, edited_module
 ):
     """An add-on's settings are its class attributes, which the package's revision does not
     cover: the run records a digest of its module's file, and a resume on another says so."""
     monkeypatch.chdir(tmp_path)
     module = tmp_path / "my_addons.py"
     module.write_text(textwrap.dedent(PLUGIN))
-    monkeypatch.syspath_prepend(tmp_path)  # not another test's my_addons, imported before
-    monkeypatch.delitem(sys.modules, "my_addons", raising=False)
+    monkeypatch.syspath_prepend(tmp_path)
     run = tmp_path / "run"
     args = ["train", "--task", "circle-3", "--out", str(run), "--no-progress", *FAST_ARGS]
     assert main([*args, "--set", "addons.plugins=my_addons:Constant", "--interactions", "2"]) == 0
@@ -265,13 +277,17 @@ def test_a_run_records_its_addon_s_code_and_notes_a_resume_on_other_code(
     capsys.readouterr()
     assert main([*resume, "3"]) == 0  # the same code: nothing to note
     assert "continued" not in json.loads((run / "config.json").read_text())
-    assert "goes on with another" not in capsys.readouterr().err
-    module.write_text(module.read_text().replace("0.37", "0.5"))
+    assert "goes on with other software" not in capsys.readouterr().err
+    code = module.read_text()
+    module.write_text(code.replace("0.37", "0.5"))
     del sys.modules["my_addons"]  # as a new process would import it
     assert main([*resume, "4"]) == 0
+    before, after = (
+        hashlib.sha256(t.encode()).hexdigest()[:12] for t in (code, module.read_text())
+    )
     assert (
-        f"sili train: note: {run} goes on with another code of my_addons:Constant than it last "
-        "ran with: its results mix both" in capsys.readouterr().err
+        f"sili train: note: {run} goes on with other software than it last ran with (code of "
+        f"my_addons:Constant {before} -> {after}): its results mix both" in capsys.readouterr().err
     )
     (continued,) = json.loads((run / "config.json").read_text())["continued"]
     assert continued["from_interaction"] == 3
@@ -346,6 +362,10 @@ def test_a_users_addon_that_cannot_be_built_is_named(tmp_path, monkeypatch, caps
         capsys.readouterr().err
     )
     assert not (tmp_path / "u" / "config.json").exists()  # refused before a run was written
+    assert main([*fresh, "--set", "addons.plugins=my_addons:Seeded"]) == 2
+    assert "declares metric_columns seed, which a sweep's results.csv has already" in (
+        capsys.readouterr().err
+    )
     for bad in ("Letters", "Unnamed"):  # "score" wrote the columns s, c, o, r, e
         assert main([*fresh, "--set", f"addons.plugins=my_addons:{bad}"]) == 2
         assert f"my_addons:{bad} declares metric_columns" in capsys.readouterr().err
@@ -438,7 +458,7 @@ def test_a_history_with_a_column_of_no_add_on_is_damaged_unless_the_run_has_add_
 
 
 def test_an_addon_renamed_since_its_checkpoint_is_named_with_the_states_it_holds(
-    tmp_path, monkeypatch, capsys
+    tmp_path, monkeypatch, capsys, edited_module
 ):
     """A checkpoint keeps each add-on's state by its ``name``: renamed, the add-on finds none,
     and its own error (a KeyError traceback) is named with the states the checkpoint holds."""
@@ -446,7 +466,6 @@ def test_an_addon_renamed_since_its_checkpoint_is_named_with_the_states_it_holds
     module = tmp_path / "my_addons.py"
     module.write_text(textwrap.dedent(PLUGIN))
     monkeypatch.syspath_prepend(tmp_path)
-    monkeypatch.delitem(sys.modules, "my_addons", raising=False)
     run = tmp_path / "run"
     args = ["train", "--task", "circle-3", "--out", str(run), "--no-progress", *FAST_ARGS]
     assert main([*args, "--set", "addons.plugins=my_addons:Counter", "--interactions", "2"]) == 0

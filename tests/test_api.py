@@ -967,8 +967,9 @@ def test_the_api_says_what_the_command_line_notes_and_names_a_runs_files(tmp_pat
         ConfigError, match=f"checkpoint.pt is a file, not a run directory: give {run}$"
     ):
         SILI.load(tmp_path / "r" / "checkpoint.pt")
-    with pytest.raises(TypeError, match=r"save it and SILI\.load the saved copy"):
-        copy.deepcopy(model)
+    for copied in (copy.copy, copy.deepcopy):
+        with pytest.raises(TypeError, match=r"save it and SILI\.load the saved copy"):
+            copied(model)
     shutil.rmtree(tmp_path / "r")
     with pytest.raises(ConfigError, match="r does not exist \\(any more\\): no run is there"):
         model.evaluate(1)

@@ -482,7 +482,8 @@ def test_a_trained_run_is_previewed_with_another_controller(tmp_path):
             kwargs["horizon"] = np.int64(50)
         _, env, pol, label = make_env_and_policy("sawyer-reach", checkpoint=run, env_kwargs=kwargs)
         try:
-            obs, _ = env.reset(seed=0)
+            obs, info = env.reset()
+            assert info["interaction"] == 1  # the game it trained in, restored on this controller
             played[given] = env.unwrapped.controller_name, label, pol(env, obs)
         finally:
             env.close()

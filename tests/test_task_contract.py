@@ -491,9 +491,20 @@ def test_a_tasks_strategy_and_reward_mistakes_are_named_where_they_are_made():
     class Misspelt(Doors):  # an AttributeError at the first reset
         game_state_fields = ("dor",)
 
+    class Unbounded(Doors):  # an OverflowError of math.isfinite
+        def strategy_choices(self):
+            return [-1.0, 1.0, 10**400]
+
+    class Arrayed(Doors):  # any sequence of numbers
+        def strategy_choices(self):
+            return np.array([-1.0, 1.0])
+
+    assert Arrayed().reset(options={"strategy": -1.0})[1]["strategy_id"] == -1.0
+
     for cls, said in (
         (Lettered, r"strategy_choices\(\) returned \['left', 'right'\]; it must return None or"),
         (Misspelt, r"Misspelt.game_state_fields names dor, which it does not have after its re"),
+        (Unbounded, r"Unbounded.strategy_choices\(\) returned \[-1.0, 1.0, 1000+.*; it must"),
     ):
         with pytest.raises(ConfigError, match=said):
             cls().reset(seed=0)

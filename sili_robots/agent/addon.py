@@ -148,7 +148,7 @@ def refused(addon: AgentAddon, hook: str, value: object, wanted: str) -> ConfigE
 def readouts(addon: AgentAddon, hidden: int, horizon: int) -> list[Callable]:
     """An ``encoder_readouts`` return checked: functions, each tried on zero features
     [2, horizon, hidden] to give [2, hidden] (a wrong one failed later in the encoder's head,
-    in torch's words)."""
+    in torch's words); tried without gradients, torch's random state put back."""
     given = addon.encoder_readouts()
     wanted = f"a list of functions of per-step features [N, H, {hidden}] to [N, {hidden}]"
     if not isinstance(given, list | tuple) or not all(callable(r) for r in given):
@@ -156,7 +156,8 @@ def readouts(addon: AgentAddon, hidden: int, horizon: int) -> list[Callable]:
     probe = torch.zeros(2, horizon, hidden)
     for readout in given:
         try:
-            out = readout(probe)
+            with torch.no_grad(), torch.random.fork_rng(devices=[]):
+                out = readout(probe)
         except Exception as err:  # the add-on's own code, named with it
             raise ConfigError(
                 f"add-on {type(addon).__name__}: an encoder_readouts function failed on "
@@ -187,7 +188,7 @@ def load_states(addons: list[AgentAddon], saved: Mapping[str, Any]) -> None:
     for addon in addons:
         try:
             addon.load_state_dict(saved.get(addon.name, {}))
-        except Exception as err:
+        except (KeyError, TypeError, ValueError, AttributeError, IndexError) as err:
             others = sorted(set(saved) - {a.name for a in addons})
             held = f"; the checkpoint holds states named {others}" if others else ""
             raise ConfigError(

@@ -362,12 +362,14 @@ def _note_slow_kernels(cfg: RunConfig) -> None:
 
 def _note_other_software(run_dir: Path, cfg: RunConfig) -> None:
     """A run resumed on other code (its own add-ons' and task's too), libraries or processor
-    than it last ran on goes on as a mix, which ``continued`` records; say so up front."""
+    than it last ran on goes on as a mix, which ``continued`` records; say so up front (what
+    an earlier version did not record is no news)."""
     _, changed = other_software(run_dir, cfg)
-    if changed:
+    known = [f"{k} {then} -> {now}" for k, (then, now) in changed.items() if then and now]
+    if known:
         print(
-            f"sili train: note: {run_dir} goes on with another {', '.join(changed)} than it last "
-            "ran with: its results mix both (config.json's continued records where)",
+            f"sili train: note: {run_dir} goes on with other software than it last ran with "
+            f"({'; '.join(known)}): its results mix both (config.json's continued records where)",
             file=sys.stderr,
         )
 

@@ -71,14 +71,17 @@ class Preview:
         env: gym.Env,
         policy: Callable[[gym.Env, np.ndarray], np.ndarray],
         interactions: int,
-        seed: int | None = 0,
+        seed: int | None = None,
         task: str = "",
         policy_name: str = "",
         live: meshcat.Visualizer | None = None,
     ) -> Preview:
         """Roll ``policy`` out on ``env`` and build the scene (also into ``live`` if given);
-        ``seed`` restarts the game, None goes on with ``env``'s (a trained model's ``env``)."""
+        ``seed`` starts a game of that seed; None: 0, or the game a trained model's ``env``
+        goes on with (``AgentFeedback.continues_game``)."""
         interactions = check_count("interactions", interactions)
+        if seed is None and not getattr(env, "continues_game", False):
+            seed = 0
         seed = None if seed is None else check_seed(seed)
         if not isinstance(env, gym.Env):  # a task's name goes to preview(), which builds it
             raise ConfigError(f"env must be a task instance (preview() takes names), got {env!r}")
@@ -107,8 +110,8 @@ class Preview:
 
     def write_html(self, path: str | Path) -> Path:
         """Write the page to ``path``: a new file or an earlier preview, never another file."""
-        check_output(path, "path")
-        return write_html(self.recorder, overlay(self.scene, self.recording), path)
+        checked = check_output(path, "path")
+        return write_html(self.recorder, overlay(self.scene, self.recording), checked)
 
     def markers(self, frame: int | None = None) -> list[tuple[Marker, tuple[float, ...]]]:
         """What must be visible in ``frame`` (default: the scene's picture frame), with
@@ -294,9 +297,8 @@ def preview(
         )
     if serve_seconds is not None and not (is_number(serve_seconds) and serve_seconds >= 0):
         raise ConfigError(f"serve_seconds must be a number >= 0 (or None), got {serve_seconds!r}")
-    for path, option in ((out, "out"), (png, "png")):
-        if path is not None:
-            check_output(path, option)
+    out = None if out is None else check_output(out, "out")  # "~" expanded, as written
+    png = None if png is None else check_output(png, "png")
     if png is not None:
         find_chromium()  # before the recording: a missing browser is told before any work
     seconds: dict[str, float] = {}
@@ -311,7 +313,7 @@ def preview(
             env,
             pol,
             interactions,
-            0 if seed is None and checkpoint is None else seed,
+            seed,
             name,
             label,
             live=server.visualizer if server is not None else None,
@@ -359,7 +361,7 @@ def marked_png(png: bytes) -> bytes:
     return png[:PNG_HEADER] + mark + png[PNG_HEADER:]
 
 
-def check_output(path: str | Path, option: str) -> None:
+def check_output(path: str | Path, option: str) -> Path:
     """An output a preview may write (``option``: how the caller names it): an HTML or PNG
     name (Chromium opens a page by its suffix), and an existing file only if a preview wrote
     it or it is empty (as ``tempfile`` makes one): a run's or a user's file is never replaced;
@@ -380,6 +382,7 @@ def check_output(path: str | Path, option: str) -> None:
     folder = nearest_existing(path.parent)
     if not folder.is_dir():  # checked before the rollout, not at the write after it
         raise ConfigError(f"{option} {path}: {folder} is a file, so no folder can be made there")
+    return path
 
 
 def _written_by_a_preview(path: Path) -> bool:

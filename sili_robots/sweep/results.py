@@ -23,7 +23,7 @@ from sili_robots.agent.schedule import Schedule
 from sili_robots.atomic import replacing
 from sili_robots.errors import ConfigError, is_number
 from sili_robots.labels import shell_path
-from sili_robots.metrics import METRIC_COLUMNS, kept, run_metrics
+from sili_robots.metrics import ID_COLUMNS, METRIC_COLUMNS, ROW_COLUMNS, kept, run_metrics
 from sili_robots.migrations import migrate_run
 from sili_robots.runs import (
     CONFIG,
@@ -39,20 +39,7 @@ from sili_robots.tasks.registry import task_arguments_key, title_arguments
 
 T = TypeVar("T")
 
-ID_COLUMNS = (
-    "run",
-    "task",
-    "task_id",
-    "method",
-    "profile",
-    "latent",
-    "seed",
-    "controller",
-    "task_args",
-    "config_beta",
-    "beta_scheduled",
-)
-RESULT_COLUMNS = (*ID_COLUMNS, *METRIC_COLUMNS, "true_stability", "finished")
+RESULT_COLUMNS = (*ID_COLUMNS, *METRIC_COLUMNS, *ROW_COLUMNS)
 RUN_COLUMNS = (
     *ID_COLUMNS,
     "status",

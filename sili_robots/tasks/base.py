@@ -163,13 +163,16 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         choices = self.strategy_choices()
         if choices is None:
             return None
-        wrong = not isinstance(choices, list | tuple) or not choices
-        if wrong or not all(is_number(c) and math.isfinite(c) for c in choices):
+        try:
+            listed = list(choices)  # a range or an array too
+        except TypeError:
+            listed = []
+        if not listed or not all(is_number(c) and _finite(c) for c in listed):
             raise ConfigError(
                 f"{type(self).__name__}.strategy_choices() returned {choices!r:.80}; it must "
                 "return None or a list of finite numbers (the ids strategy_id() returns)"
             )
-        return list(choices)
+        return listed
 
     def _check_start(self, strategy: Any) -> StrategyId:
         """The task's own value of a chosen first strategy (the choice it equals, within
@@ -453,11 +456,7 @@ class RepeatedInteractionEnv(gym.Env[np.ndarray, np.ndarray], ABC):
         name, sid = type(self).__name__, self.strategy_id()
         if isinstance(sid, bool) or not isinstance(sid, (int, float, np.integer, np.floating)):
             raise ConfigError(f"{name}.strategy_id() returned {sid!r}; it must be a number")
-        try:
-            finite = math.isfinite(sid)
-        except OverflowError:  # an int beyond a float's range
-            finite = False
-        if not finite:  # else written to metrics.csv, which then reads as damaged
+        if not _finite(sid):  # else written to metrics.csv, which then reads as damaged
             raise ConfigError(f"{name}.strategy_id() returned {sid!r}; it must be finite")
         choices = self._choices()
         if choices is not None and not any(_same(sid, c) for c in choices):
@@ -568,6 +567,14 @@ def _unfit(current: Any, saved: Any) -> str | None:
 
 def _copy(value: Any) -> Any:
     return value.copy() if isinstance(value, np.ndarray) else value
+
+
+def _finite(x: float) -> bool:
+    """``math.isfinite``, False for an int beyond a float's range (which it raises for)."""
+    try:
+        return math.isfinite(x)
+    except OverflowError:
+        return False
 
 
 def _same(a: StrategyId | None, b: StrategyId | None) -> bool:
