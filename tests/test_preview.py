@@ -741,3 +741,18 @@ def test_a_view_covered_by_text_boxes_is_blank():
     rgb[:, ::2] = 255  # column stripes: drawn, not background, under the boxes
     problem = blank_problem(rgb, [(0, 0, 40, 20), (0, 20, 40, 40)])
     assert problem == "picture is blank: the 3D view is covered by text boxes"
+
+
+def test_a_preview_writes_where_its_tilde_path_names_and_checks_that_file(tmp_path, monkeypatch):
+    """``~`` is the home folder for the check and the write alike (it was checked there and
+    written to ./~ before)."""
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "home").mkdir()
+    (tmp_path / "home" / "notes.html").write_text("a user's page")
+    with pytest.raises(ConfigError, match=r"notes\.html exists and is not a preview"):
+        preview("circle-3", policy="scripted", interactions=1, out="~/notes.html")
+    result = preview("circle-3", policy="scripted", interactions=1, out="~/p.html", png="~/p.png")
+    assert result.html == tmp_path / "home" / "p.html" and result.html.is_file()
+    assert result.png == tmp_path / "home" / "p.png" and result.png.is_file()
+    assert not (tmp_path / "~").exists()
