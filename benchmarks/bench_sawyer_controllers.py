@@ -114,9 +114,14 @@ def press_slide(controller: str) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
-        "--extra", type=non_negative_int, default=14, help="random workspace targets"
+        "--extra",
+        type=non_negative_int,
+        default=14,
+        help="random workspace targets (default %(default)s)",
     )
-    parser.add_argument("--seed", type=seed_number, default=0, help="of the random targets")
+    parser.add_argument(
+        "--seed", type=seed_number, default=0, help="of the random targets (default %(default)s)"
+    )
     args = parser.parse_args()
     print(f"machine: {machine_key()}", flush=True)  # every timing names its CPU
     points = targets(args.extra, args.seed)

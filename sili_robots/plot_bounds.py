@@ -46,6 +46,14 @@ def bound_ids(rows: pd.DataFrame, task: str) -> list[str]:
     return _task_ids(default, task) if len(default) else []
 
 
+def bounds_left_out(rows: pd.DataFrame, task: str) -> bool:
+    """Whether the runs' task versions have stored bounds that no run can be shown with: every
+    run was given other task arguments than those the bounds were measured with."""
+    from sili_robots.bounds import stored_bounds
+
+    return not bound_ids(rows, task) and any(stored_bounds(t) for t in _task_ids(rows, task))
+
+
 def draw_bounds(ax: Axes, metric: str, task_ids: Sequence[str], note: str = "") -> None:
     """The stored bounds of ``task_ids`` as labelled horizontal lines across ``ax`` (a panel of
     ``BOUND_METRICS``), all kept in view; bounds close together share one label at the right

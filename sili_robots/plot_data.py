@@ -131,6 +131,16 @@ def arguments_label(task_args: str) -> str:
     return f" [{', '.join(f'{k}={v}' for k, v in sorted(args.items()))}]" if args else ""
 
 
+def shared_arguments(rows: pd.DataFrame) -> str:
+    """`` (controller=osc)``: the task arguments other than its version's defaults that every
+    run of ``rows`` was given, for a figure's title (as a preview's names them; the curves'
+    labels name only what tells them apart); ``""`` when they differ or are the defaults."""
+    given = rows["task_args"].unique()
+    if len(given) != 1 or not given[0]:
+        return ""
+    return f" ({', '.join(f'{k}={v}' for k, v in sorted(json.loads(given[0]).items()))})"
+
+
 def default_smoothing(n_interactions: int) -> int:
     """About 2% of the run length (at least 1): enough to read a trend, not to hide a jump."""
     return max(1, round(n_interactions / 50))

@@ -37,7 +37,7 @@ from matplotlib.figure import Figure
 from sili_robots.atomic import replacing
 from sili_robots.errors import ConfigError
 from sili_robots.labels import METHOD_NAMES, VARIANT_KEYS, file_stem
-from sili_robots.plot_bounds import bound_ids, draw_bounds
+from sili_robots.plot_bounds import bound_ids, bounds_left_out, draw_bounds
 from sili_robots.plot_data import (
     FINAL_METRICS,
     arguments_label,
@@ -47,6 +47,7 @@ from sili_robots.plot_data import (
     default_smoothing,
     final_values,
     load_results,
+    shared_arguments,
     variant_labels,
     with_profile,
 )
@@ -221,10 +222,13 @@ def learning_curves(df: pd.DataFrame, task: str, smooth: int | None = None) -> F
     ids = ", ".join(bound_ids(rows, task))
     if ids and (rows["task_args"] != "").any():
         ids += " (its default task arguments)"
+    shared = shared_arguments(rows)
+    bounds = f"\nbounds: scripted policies on {ids}" if ids else ""
+    if bounds_left_out(rows, task):
+        bounds = "\nno bounds: they were measured with the task's default arguments"
     fig.suptitle(
-        f"{task_title(task)}: mean ± std over {_seed_note(rows)}, "
-        f"smoothed over {window} interaction{'s' if window > 1 else ''}"
-        + (f"\nbounds: scripted policies on {ids}" if ids else "")
+        f"{task_title(task)}{shared}: mean ± std over {_seed_note(rows)}, "
+        f"smoothed over {window} interaction{'s' if window > 1 else ''}{bounds}"
     )
     fig.legend(*axes[0].get_legend_handles_labels(), loc="outside right upper")
     return fig
@@ -312,7 +316,7 @@ def overview(df: pd.DataFrame, smooth: int | None = None) -> Figure:
         rows = shown[task]
         window = smooth or default_smoothing(int(rows["interaction"].max()) + 1)
         _draw_curves(row, rows, metrics, window, profiled, palette)
-        row[0].set_title(task_title(task), loc="left", fontsize=10)
+        row[0].set_title(task_title(task) + shared_arguments(rows), loc="left", fontsize=10)
         row[-1].set_title(
             f"mean ± std over {_seed_note(rows)}, smoothed over {window} "
             f"interaction{'s' if window > 1 else ''}",

@@ -322,8 +322,8 @@ def test_plot_of_a_non_sweep_exits_2(tmp_path, capsys):
         assert f"{config} is a file, not a folder; give a directory written by" in (
             capsys.readouterr().err
         )
-    assert main(["plot", str(tmp_path), "--formats", "gif"]) == 2
-    assert "unknown figure format" in capsys.readouterr().err
+    assert main(["plot", str(tmp_path), "--formats", "gif,png,jpg"]) == 2
+    assert "unknown figure format 'gif', 'jpg'; allowed: png, pdf, svg" in capsys.readouterr().err
 
 
 def test_the_stability_band_stays_within_0_and_1():
@@ -518,7 +518,7 @@ def test_formats_that_name_none_are_bad_input(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(plotting, "plot_sweep", lambda *a, **k: drawn.append(k) or [])
     for given in (",", " "):
         assert main(["plot", str(tmp_path), "--formats", given]) == 2
-        assert "unknown figure format" in capsys.readouterr().err
+        assert f"unknown figure format {given!r}; allowed" in capsys.readouterr().err
     assert drawn == []
 
 
@@ -566,3 +566,32 @@ def test_bound_labels_stay_inside_their_panel():
     for t in labels:
         ext = t.get_window_extent(renderer)
         assert box.y0 - 0.5 <= ext.y0 and ext.y1 <= box.y1 + 0.5, (t.get_text(), ext, box)
+
+
+def test_runs_all_given_one_controller_say_it_in_the_title_and_why_no_bounds_are_drawn():
+    """A sweep of one controller (osc) read as the default's: its curves are labelled by what
+    sets them apart, which was nothing, and the bounds (measured with mink) were left out
+    without a word."""
+    run = {"task": "sawyer-reach", "run": "r", "seed": 0, "task_reward": -3.0}
+    df = pd.DataFrame([{**run, "interaction": i} for i in range(3)]).assign(
+        method="sac",
+        profile="package",
+        config_beta=0.0,
+        beta_scheduled=False,
+        controller="osc",
+        task_args='{"controller": "osc"}',
+        latent="none",
+        task_id="sili/SawyerReach-v1",
+        strategy_changed=0,
+        stability_reward=0.0,
+        true_stability=1.0,
+    )
+    title = learning_curves(df, "sawyer-reach").get_suptitle()
+    assert title.startswith("Sawyer-Reach (controller=osc): mean ± std over 1 seed")
+    assert title.endswith("\nno bounds: they were measured with the task's default arguments")
+    row = overview(df).axes[0]
+    assert row.get_title(loc="left") == "Sawyer-Reach (controller=osc)"
+    default = df.assign(controller="", task_args="")
+    title = learning_curves(default, "sawyer-reach").get_suptitle()
+    assert "(controller" not in title
+    assert "\nbounds: scripted policies on sili/SawyerReach-v1" in title

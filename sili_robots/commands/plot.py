@@ -57,7 +57,8 @@ def run(args: argparse.Namespace) -> int:
     bad = [f for f in formats if f not in FORMATS]
     if bad or not formats:
         raise ConfigError(
-            f"unknown figure format {bad or args.formats!r}; allowed: {', '.join(FORMATS)}"
+            f"unknown figure format {', '.join(map(repr, bad)) or repr(args.formats)}; allowed: "
+            f"{', '.join(FORMATS)}"
         )
     tasks = None
     if args.tasks is not None:
