@@ -247,6 +247,10 @@ def test_an_existing_run_with_other_settings_is_refused(tmp_path):
     saved = {**run.config.to_dict(), "checkpoint_every": run.config.checkpoint_every + 1}
     (path / "config.json").write_text(json.dumps({"run": saved}))
     check_existing(tmp_path, run)  # saved more often: the same run (it logs the same numbers)
+    given = {**run.config.to_dict(), "env_kwargs": {"outside_margin": 0.2}}
+    (path / "config.json").write_text(json.dumps({"run": given}))
+    with pytest.raises(ConfigError, match=r"outside_margin: 0\.2 on disk, its default now\)"):
+        check_existing(tmp_path, run)  # not None: the run was given no such argument
     (path / "config.json").write_text(json.dumps({"run": run.config.to_dict()}))
     check_existing(tmp_path, run)  # the same run: fine
     older = run.config.to_dict()
