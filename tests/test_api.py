@@ -926,7 +926,10 @@ def test_a_seed_on_model_envs_first_reset_starts_another_game_and_a_new_models_i
         _, info = model.env.reset(seed=seed)
         assert info["interaction"] == 0 and model.agent.buffer.n == 4
         games.append(_strategies(model, info, 6))
+        assert model.env.reset()[1]["interaction"] == 6  # the new game goes on, not the saved
     assert games[0] == games[2] != games[1]
+    new = SILI("circle-unequal", method="sac", seed=0, settings=FAST_AGENT)
+    assert _strategies(new, new.env.reset(seed=1)[1], 6) == games[0]  # its own seed given way
     for _ in range(2):  # the same seed: the same game, the one its training played
         new = SILI("circle-unequal", method="sac", seed=4, settings=FAST_AGENT)
         _, info = new.env.reset()
@@ -973,3 +976,42 @@ def test_the_api_says_what_the_command_line_notes_and_names_a_runs_files(tmp_pat
     shutil.rmtree(tmp_path / "r")
     with pytest.raises(ConfigError, match="r does not exist \\(any more\\): no run is there"):
         model.evaluate(1)
+
+
+def test_a_learn_refused_by_a_file_in_the_run_dir_leaves_the_model_and_its_game(tmp_path):
+    """Refused before anything changes: the agent and the interaction played on model.env
+    stay (the check inside the training claim alone would rebuild them)."""
+    run = tmp_path / "run"
+    model = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run)
+    agent, still = model.agent, np.zeros(2, np.float32)
+    model.env.reset()
+    model.env.step(still)
+    run.mkdir()
+    (run / "notes.txt").write_text("mine")
+    with pytest.raises(ConfigError, match=r"notes\.txt"):
+        model.learn(1)
+    assert model.agent is agent
+    assert model.env.step(still)[-1]["t"] == 2  # the interaction under way goes on
+
+
+def test_a_run_made_in_the_folder_while_learn_starts_is_refused_and_kept(tmp_path, monkeypatch):
+    """Another process's run, finished in the folder between the model's checks and its
+    claim: refused, and its files stay (the model clears only a run of its own)."""
+    from sili_robots import api
+
+    other = tmp_path / "other"
+    SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=other).learn(1)
+    run = tmp_path / "run"
+    model = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run)
+    made = api.make_run_dir
+
+    def meanwhile(path, out="--out"):
+        made(path, out)
+        for f in other.iterdir():
+            if f.is_file():
+                shutil.copy2(f, run / f.name)
+
+    monkeypatch.setattr(api, "make_run_dir", meanwhile)
+    with pytest.raises(ConfigError):
+        model.learn(1)
+    assert (run / "config.json").is_file() and (run / "checkpoint.pt").is_file()

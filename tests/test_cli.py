@@ -16,7 +16,7 @@ from cli_helpers import sili as sili_in_process
 from fast_settings import FAST_ARGS
 
 from sili_robots.agent.config import LARGEST_INT
-from sili_robots.commands.common import NAME_MAX, path_arg, positive_int, threads_arg
+from sili_robots.commands.common import NAME_MAX, counted, path_arg, positive_int, threads_arg
 from sili_robots.commands.sweep import ray_address
 from sili_robots.policies import scripted_policy
 from sili_robots.rollout import run_interactions
@@ -713,3 +713,7 @@ def test_eval_plays_100_interactions_by_default(tmp_path):
     done = sili_in_process("eval", run)
     assert done.returncode == 0, done.stderr
     assert json.loads(done.stdout)["interactions"] == 100
+
+
+def test_counts_are_said_in_the_plural_but_for_one():
+    assert [counted(n, "run") for n in (0, 1, 2)] == ["0 runs", "1 run", "2 runs"]
