@@ -278,7 +278,11 @@ def test_runs_given_another_controller_get_no_bounds_and_a_curve_of_their_own():
         "[default" not in t.get_text() for t in learning_curves(mink, "sawyer-reach").axes[0].texts
     )
     alone = learning_curves(osc, "sawyer-reach", smooth=1)
-    assert _bound_lines(alone.axes[0]) == {} and "bounds:" not in alone.get_suptitle()
+    assert _bound_lines(alone.axes[0]) == {} and "scripted policies" not in alone.get_suptitle()
+    assert alone.get_suptitle().startswith("Sawyer-Reach (controller=osc): ")
+    assert alone.get_suptitle().endswith(
+        "no bounds: they were measured with the task's default arguments"
+    )
 
 
 def test_runs_given_another_task_argument_are_not_averaged_with_the_default_ones():
