@@ -48,18 +48,8 @@ class AgentFeedback(gym.Wrapper):
         game_state: dict[str, Any] | None,
         seed: int | None = None,
     ) -> None:
-        self.rebind(env, agent, game_state, seed)
-
-    def rebind(
-        self,
-        env: gym.Env,
-        agent: SILIAgent,
-        game_state: dict[str, Any] | None,
-        seed: int | None = None,
-    ) -> None:
         """Play ``env`` with ``agent`` from ``game_state`` (``seed``: the first reset's without
-        one) from now on, as a new wrapper would: a model's ``env`` stays the object a user holds
-        when training replaces its agent."""
+        one)."""
         super().__init__(env)
         self.agent = agent
         self._game_state = game_state
@@ -68,6 +58,10 @@ class AgentFeedback(gym.Wrapper):
         self._first_obs: np.ndarray | None = None
         self._last_obs: np.ndarray | None = None
         self._first_info: dict[str, Any] = {}
+
+    #: the wrapper made anew in place, as ``__init__`` takes it: a model's ``env`` stays the
+    #: object a user holds when training replaces its agent
+    rebind = __init__
 
     @property
     def continues_game(self) -> bool:

@@ -204,12 +204,23 @@ class OtherTypes(AgentAddon):
 
 
 @pytest.fixture
-def edited_module():
-    """A test that edits its my_addons.py imports it afresh (not another test's, imported
-    before) and leaves no edited one behind for the next test on its worker."""
+def edited_module(tmp_path, monkeypatch):
+    """my_addons.py in the test's folder (its current directory), for a test that edits it:
+    imported afresh (not another test's, imported before), and no edited one left behind for
+    the next test on its worker."""
+    monkeypatch.chdir(tmp_path)
+    module = tmp_path / "my_addons.py"
+    module.write_text(textwrap.dedent(PLUGIN))
+    monkeypatch.syspath_prepend(tmp_path)
     sys.modules.pop("my_addons", None)
-    yield
+    yield module
     sys.modules.pop("my_addons", None)
+
+
+def _train_with(run, addon):
+    """Two interactions of a run with the add-on ``my_addons:ADDON``."""
+    args = ["train", "--task", "circle-3", "--out", str(run), "--no-progress", *FAST_ARGS]
+    assert main([*args, "--set", f"addons.plugins=my_addons:{addon}", "--interactions", "2"]) == 0
 
 
 def _rows(run):
@@ -263,13 +274,8 @@ def test_a_run_records_its_addon_s_code_and_notes_a_resume_on_other_code(
 ):
     """An add-on's settings are its class attributes, which the package's revision does not
     cover: the run records a digest of its module's file, and a resume on another says so."""
-    monkeypatch.chdir(tmp_path)
-    module = tmp_path / "my_addons.py"
-    module.write_text(textwrap.dedent(PLUGIN))
-    monkeypatch.syspath_prepend(tmp_path)
-    run = tmp_path / "run"
-    args = ["train", "--task", "circle-3", "--out", str(run), "--no-progress", *FAST_ARGS]
-    assert main([*args, "--set", "addons.plugins=my_addons:Constant", "--interactions", "2"]) == 0
+    module, run = edited_module, tmp_path / "run"
+    _train_with(run, "Constant")
     key = "code of my_addons:Constant"
     record = json.loads((run / "config.json").read_text())
     assert record["versions"][key] == hashlib.sha256(module.read_bytes()).hexdigest()[:12]
@@ -462,13 +468,8 @@ def test_an_addon_renamed_since_its_checkpoint_is_named_with_the_states_it_holds
 ):
     """A checkpoint keeps each add-on's state by its ``name``: renamed, the add-on finds none,
     and its own error (a KeyError traceback) is named with the states the checkpoint holds."""
-    monkeypatch.chdir(tmp_path)
-    module = tmp_path / "my_addons.py"
-    module.write_text(textwrap.dedent(PLUGIN))
-    monkeypatch.syspath_prepend(tmp_path)
-    run = tmp_path / "run"
-    args = ["train", "--task", "circle-3", "--out", str(run), "--no-progress", *FAST_ARGS]
-    assert main([*args, "--set", "addons.plugins=my_addons:Counter", "--interactions", "2"]) == 0
+    module, run = edited_module, tmp_path / "run"
+    _train_with(run, "Counter")
     module.write_text(module.read_text().replace('name = "counter"', 'name = "tally"'))
     del sys.modules["my_addons"]
     capsys.readouterr()

@@ -243,19 +243,30 @@ def test_b_sweep_runs_of_other_settings_are_lines_of_their_own_not_seeds(sweep_d
         np.testing.assert_allclose(xy[:, 1], finals.to_numpy())
 
 
-def test_a_curve_of_one_interaction_is_drawn_as_a_point(tmp_path):
-    run = {"task": "circle-3", "run": "r", "seed": 0, "interaction": 0, "task_reward": -40.0}
-    df = pd.DataFrame([run]).assign(
+def _sac_run(task: str, task_id: str, interactions: int, **columns) -> pd.DataFrame:
+    """A results table of one SAC run of ``task`` (seed 0), ``columns`` on every row."""
+    rows = [{"task": task, "run": "r", "seed": 0, "interaction": i} for i in range(interactions)]
+    return pd.DataFrame(rows).assign(
         method="sac",
         profile="package",
         config_beta=0.0,
         beta_scheduled=False,
-        controller="",
-        task_args="",
         latent="none",
-        task_id="sili/Circle3-v1",
+        task_id=task_id,
         strategy_changed=0,
         stability_reward=0.0,
+        **columns,
+    )
+
+
+def test_a_curve_of_one_interaction_is_drawn_as_a_point(tmp_path):
+    df = _sac_run(
+        "circle-3",
+        "sili/Circle3-v1",
+        1,
+        task_reward=-40.0,
+        controller="",
+        task_args="",
         true_stability=float("nan"),
     )
     ax = learning_curves(df, "circle-3").axes[0]
@@ -572,18 +583,13 @@ def test_runs_all_given_one_controller_say_it_in_the_title_and_why_no_bounds_are
     """A sweep of one controller (osc) read as the default's: its curves are labelled by what
     sets them apart, which was nothing, and the bounds (measured with mink) were left out
     without a word."""
-    run = {"task": "sawyer-reach", "run": "r", "seed": 0, "task_reward": -3.0}
-    df = pd.DataFrame([{**run, "interaction": i} for i in range(3)]).assign(
-        method="sac",
-        profile="package",
-        config_beta=0.0,
-        beta_scheduled=False,
+    df = _sac_run(
+        "sawyer-reach",
+        "sili/SawyerReach-v1",
+        3,
+        task_reward=-3.0,
         controller="osc",
         task_args='{"controller": "osc"}',
-        latent="none",
-        task_id="sili/SawyerReach-v1",
-        strategy_changed=0,
-        stability_reward=0.0,
         true_stability=1.0,
     )
     title = learning_curves(df, "sawyer-reach").get_suptitle()
