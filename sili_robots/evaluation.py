@@ -13,6 +13,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import EnvSpec
 
 from sili_robots.agent import SILIAgent
 from sili_robots.build import (
@@ -62,6 +63,12 @@ class AgentFeedback(gym.Wrapper):
     #: the wrapper made anew in place, as ``__init__`` takes it: a model's ``env`` stays the
     #: object a user holds when training replaces its agent
     rebind = __init__
+
+    @property
+    def spec(self) -> EnvSpec | None:
+        """The task's: no spec can make this wrapper (it holds a live agent), so ``spec.make()``,
+        as gymnasium's ``check_env`` calls it, makes the task alone."""
+        return self.env.spec
 
     @property
     def continues_game(self) -> bool:

@@ -698,6 +698,19 @@ def test_another_game_on_model_env_starts_the_agent_with_no_history(tmp_path):
     np.testing.assert_array_equal(model.agent.policy_input(obs)[len(obs) :], 0.0)
 
 
+def test_model_env_passes_gymnasiums_check_env_and_its_spec_makes_the_task():
+    """Tools that remake an env from its spec (``check_env``, recorders) get the task: the
+    wrapper holding the agent cannot be made from a spec."""
+    from gymnasium.utils.env_checker import check_env
+
+    model = SILI("circle-3", method="sili", seed=0, settings=FAST_AGENT)
+    with pytest.warns(UserWarning, match="different from the unwrapped"):
+        check_env(model.env, skip_render_check=True)
+    made = model.env.spec.make()
+    assert made.spec.id == "sili/Circle3-v1" and made.unwrapped is not model.env.unwrapped
+    made.close()
+
+
 def test_model_env_feeds_the_agent_the_action_the_task_applied(tmp_path):
     """The task clips an action outside its box (as gymnasium's ClipAction); the agent was fed
     the action as given, so it inferred z from actions that were never played."""
