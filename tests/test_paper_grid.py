@@ -1335,3 +1335,13 @@ def test_a_tiny_rehearsal_of_the_b_sweep_still_runs_one_interaction(tmp_path, ca
     own = ["--sweep-dir", str(tmp_path / "s"), "--into", str(tmp_path / "r")]
     assert main(["grid", "--fraction", "0.0001", "--dry-run", "--blocks", "b-sweep", *own]) == 0
     assert "b-sweep on circle-3 (1 interaction): 30 runs, 0 done" in capsys.readouterr().out
+
+
+def test_grid_refuses_a_file_as_its_sweep_dir_in_a_dry_run_too(tmp_path, capsys):
+    """A dry run said nothing of --sweep-dir being a file (exit 0); the grid itself then fails."""
+    mine = tmp_path / "notes.txt"
+    mine.write_text("mine\n")
+    grid = ["grid", "--tasks", "circle-3", "--blocks", "sili-oracle", "--dry-run"]
+    assert main([*grid, "--sweep-dir", str(mine), "--into", str(tmp_path / "c")]) == 2
+    assert f"--sweep-dir {mine} is a file; give a directory" in capsys.readouterr().err
+    assert mine.read_text() == "mine\n" and not (tmp_path / "c").exists()

@@ -1573,3 +1573,12 @@ def test_resume_with_the_sweeps_own_budget_is_accepted(tmp_path, capsys):
     capsys.readouterr()
     assert main(["sweep", "--resume", str(out), "--interactions", "1", "--dry-run"]) == 0
     assert "would shorten" not in capsys.readouterr().err
+
+
+def test_a_run_whose_runs_folder_is_yet_to_be_made_is_in_no_sweep(tmp_path):
+    """``--out results/runs/first`` in a folder where nothing is yet: a new run, not a sweep's
+    (``runs`` does not exist, so nothing in it can be listed)."""
+    from sili_robots.sweep.state import check_not_in_a_sweep
+
+    check_not_in_a_sweep(tmp_path / "runs" / "first", "--out")
+    assert not (tmp_path / "runs").exists()

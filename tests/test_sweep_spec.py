@@ -403,3 +403,15 @@ def test_a_run_planned_twice_keeps_the_first_invocations_plan():
         ("circle-3__sili-bschedule__s0", 4),
         ("circle-3__sili-bschedule__s1", 9),
     ]
+
+
+def test_parse_seeds_checks_both_ends_of_a_range():
+    with pytest.raises(ConfigError, match=r"seed 4294967296 is not allowed"):
+        parse_seeds("4294967290-4294967296")
+    assert parse_seeds("4294967290-4294967295")[-1] == 2**32 - 1  # the top seed itself is fine
+
+
+def test_parse_betas_refuses_a_b_below_zero():
+    with pytest.raises(ConfigError, match=r"b value -0.5 is outside the allowed range \[0, 1\]"):
+        parse_betas("-0.5")
+    assert parse_betas("0") == [0.0]

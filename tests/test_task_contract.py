@@ -895,3 +895,73 @@ def test_outside_margin_range_is_closed_at_zero_and_open_at_its_top():
         CircleEnv(outside_margin=ARENA - RADIUS)
     with pytest.raises(ConfigError, match=r"outside_margin must be"):
         CircleEnv(outside_margin=-1e-9)
+
+
+def test_a_saved_game_with_a_field_the_task_does_not_save_is_refused():
+    """A save naming an attribute outside game_state_fields (here the horizon) would have it
+    set on the task by restore; it is no save this task wrote, and the game goes on as it was."""
+    env = TwoDoorsEnv()
+    env.reset(seed=0)
+    saved = env.game_state()
+    horizon = env.horizon
+    with pytest.raises(ConfigError, match=r"a saved game must be what game_state\(\) returns"):
+        env.restore_game_state({**saved, "fields": {**saved["fields"], "horizon": 1}})
+    assert env.horizon == horizon
+    env.step(np.zeros(1))
+    assert env.t == 1
+
+
+class CountingDoors(TwoDoorsEnv):
+    """A user's task whose game keeps an array it moves on in place between interactions."""
+
+    game_state_fields = ("door", "visits")
+
+    def __init__(self, **kw):
+        super().__init__(**kw)
+        self.visits = np.zeros(2)
+        self.fail_next_begin = False
+
+    def _initial_strategy(self):
+        super()._initial_strategy()
+        self.visits = np.zeros(2)
+
+    def _advance_strategy(self, trajectory):
+        super()._advance_strategy(trajectory)
+        self.visits += 1  # in place, as numpy code often does
+
+    def _begin_interaction(self):
+        if self.fail_next_begin:
+            self.fail_next_begin = False
+            raise RuntimeError("the simulator would not start")
+        super()._begin_interaction()
+
+
+def test_a_failed_reset_rolls_back_an_array_the_task_moved_on_in_place():
+    env = CountingDoors()
+    env.reset(seed=0)
+    env.reset()
+    before = env.visits.copy()
+    env.fail_next_begin = True
+    with pytest.raises(RuntimeError, match="would not start"):
+        env.reset()
+    np.testing.assert_array_equal(env.visits, before)
+    assert env.reset()[1]["interaction"] == 2  # the game goes on from where it was
+    np.testing.assert_array_equal(env.visits, before + 1)
+
+
+def test_a_restored_game_leaves_the_saved_state_as_it_was():
+    """Restoring the same save twice continues the same game: playing on from it never
+    changes the save's arrays."""
+    env = CountingDoors()
+    env.reset(seed=0)
+    env.reset()
+    saved = env.game_state()
+    kept = saved["fields"]["visits"].copy()
+    fresh = CountingDoors()
+    fresh.restore_game_state(saved)
+    fresh.reset()
+    fresh.reset()
+    np.testing.assert_array_equal(saved["fields"]["visits"], kept)
+    again = CountingDoors()
+    again.restore_game_state(saved)
+    np.testing.assert_array_equal(again.visits, kept)
