@@ -23,6 +23,7 @@ from typing import Any, NoReturn
 
 from sili_robots import __version__
 from sili_robots.errors import STORAGE_ERRORS, ConfigError
+from sili_robots.stopping import RepeatedStops
 
 #: sub-commands, in the order ``sili --help`` lists them
 COMMANDS = (
@@ -110,21 +111,30 @@ class Terminated(KeyboardInterrupt):
 _received: list[int] = []
 
 
-def _terminate(signum: int, frame: object) -> None:
-    _received.append(signum)
-    raise Terminated(signum)
-
-
 @contextlib.contextmanager
 def _stop_signals_as_ctrl_c() -> Iterator[None]:
-    """While a command runs; a signal already ignored (``nohup``'s SIGHUP) stays ignored."""
-    handled = []
+    """While a command runs; a signal already ignored (``nohup``'s SIGHUP) stays ignored, and
+    one stop delivered twice (to the process, then to its group) acts once."""
     _received.clear()
+    stops = RepeatedStops()
+
+    def interrupt(signum: int, frame: object) -> None:
+        if not stops.repeated(signum):
+            raise KeyboardInterrupt
+
+    def terminate(signum: int, frame: object) -> None:
+        if not stops.repeated(signum):
+            _received.append(signum)
+            raise Terminated(signum)
+
+    handled = {}
     if threading.current_thread() is threading.main_thread():
-        handled = [
-            s for s in (signal.SIGTERM, signal.SIGHUP) if signal.getsignal(s) == signal.SIG_DFL
-        ]
-    previous = {s: signal.signal(s, _terminate) for s in handled}
+        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            handled[signal.SIGINT] = interrupt
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            if signal.getsignal(sig) == signal.SIG_DFL:
+                handled[sig] = terminate
+    previous = {s: signal.signal(s, handler) for s, handler in handled.items()}
     try:
         yield
     finally:

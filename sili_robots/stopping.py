@@ -5,6 +5,10 @@ arrives while an interaction is played or learned from is held until the interac
 the training loop then checkpoints and lets the signal act as it would have (its previous
 handler: ``KeyboardInterrupt``, the CLI's exit code, a sweep worker's exit). A second stop
 acts at once, as itself. Signals that are ignored stay ignored.
+
+``timeout`` and job schedulers signal a process and then its whole process group, so one stop
+can reach a process twice, a moment apart: the same signal again within ``SAME_STOP_S`` is
+that one stop, not a second.
 """
 
 from __future__ import annotations
@@ -12,9 +16,29 @@ from __future__ import annotations
 import os
 import signal
 import threading
+import time
 from types import FrameType
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+#: seconds within which the same stop signal again is the one stop sent twice (to a process
+#: and to its group); a person's second Ctrl-C comes later
+SAME_STOP_S = 1.0
+
+
+class RepeatedStops:
+    """Tells a stop signal from the same one delivered twice: one per handler, so a held stop
+    passed on to the handler it met is that handler's first."""
+
+    def __init__(self) -> None:
+        self._first: dict[int, float] = {}
+
+    def repeated(self, signum: int) -> bool:
+        """Whether ``signum`` is the stop received just before; else it is noted as a stop."""
+        now, first = time.monotonic(), self._first.get(signum)
+        if first is not None and now - first < SAME_STOP_S:
+            return True
+        self._first[signum] = now
+        return False
 
 
 def exit_on_signal(signum: int, _frame: object) -> None:
@@ -39,6 +63,7 @@ class StopBetweenInteractions:
     def __init__(self) -> None:
         self.signum: int | None = None
         self._previous: dict[int, signal.Handlers | object] = {}
+        self._stops = RepeatedStops()
 
     @property
     def requested(self) -> bool:
@@ -68,6 +93,8 @@ class StopBetweenInteractions:
         act_as(signum, handler)
 
     def _hold(self, signum: int, _frame: FrameType | None) -> None:
+        if self._stops.repeated(signum):
+            return
         if self.signum is not None:  # asked twice: at once, as the second signal says
             self.signum = signum
             self.deliver()

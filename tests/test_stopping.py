@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import signal
+import time
 
 import pytest
 
+from sili_robots import stopping
 from sili_robots.stopping import HeldStops, StopBetweenInteractions
 
 
@@ -20,11 +22,15 @@ def handlers():
         signal.signal(sig, handler)
 
 
-def test_a_stop_is_held_until_delivered_and_a_second_acts_at_once(handlers):
+def test_a_stop_is_held_until_delivered_and_a_second_acts_at_once(handlers, monkeypatch):
+    monkeypatch.setattr(stopping, "SAME_STOP_S", 0.2)
     with StopBetweenInteractions() as stop:
         assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN  # ignored stays ignored
         signal.raise_signal(signal.SIGINT)
         assert stop.requested  # held: no KeyboardInterrupt mid-interaction
+        signal.raise_signal(signal.SIGINT)  # the same stop again (to the process group)
+        assert stop.requested
+        time.sleep(0.2)
         with pytest.raises(KeyboardInterrupt):
             signal.raise_signal(signal.SIGINT)  # asked twice
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

@@ -942,6 +942,39 @@ def test_a_sigterm_to_the_whole_process_group_loses_no_interaction(tmp_path):
         assert not (run / "stop").exists() and not (run / "worker.json").exists()
 
 
+def test_one_ctrl_c_delivered_twice_by_timeout_still_checkpoints_the_run(tmp_path):
+    """``timeout -s INT`` signals the sweep, then its process group: the sweep gets SIGINT
+    twice, a moment apart on a busy machine. That is one stop: the worker still logs and
+    checkpoints its interaction (the second used to stop it at once, losing every interaction
+    since its last checkpoint)."""
+    out = tmp_path / "sweep"
+    args = ["--tasks", "circle-3", "--methods", "sac", "--seeds", "0", "--interactions", 5000]
+    args += ["--workers", 1, "--checkpoint-every", 1000, "--no-progress", "--out", out]
+    # an interaction of 100 updates: the sweep's stop waits a second or so for it to end
+    args += ["--set", "updates_per_step=2", "--set", "random_interactions=1"]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sili_robots.cli", "sweep", *map(str, args)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    run = out / "runs" / "circle-3__sac__s0"
+    try:
+        assert wait_for(lambda: metrics_rows(run / "metrics.csv") >= 2, 240)
+        proc.send_signal(signal.SIGINT)  # timeout's signal to the sweep ...
+        assert wait_for(lambda: (run / "stop").exists(), 30)
+        os.killpg(proc.pid, signal.SIGINT)  # ... and to its group, while the sweep stops
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130 and "Traceback" not in stderr, stderr
+    assert "1 stopped midway, resumable" in stderr
+    checkpointed = torch.load(run / "checkpoint.pt", weights_only=False)["interaction"]
+    assert checkpointed == metrics_rows(run / "metrics.csv") >= 3
+
+
 def test_progress_display_counts_runs_and_interactions(tmp_path):
     import io
 
