@@ -248,6 +248,29 @@ def test_a_setting_the_method_never_reads_is_recorded_with_a_note(tmp_path, caps
     assert "note: --set model.dim does nothing for sili on speaker-listener: it learns" in err
 
 
+def test_a_setting_that_departs_from_the_paper_profile_is_noted(capsys, tmp_path):
+    """A run of --profile paper is recorded (and named, and labelled) as that profile: one
+    given another value than the paper's is told so; the paper's own value, or the package
+    profile, says nothing."""
+    from sili_robots.agent.methods import paper_departures
+
+    paper = method_config("sili", profile="paper", overrides={"model.estimator": "expected"})
+    assert paper_departures(paper, ["model.estimator", "hidden"]) == {"model.estimator": "gumbel"}
+    assert paper_departures(method_config("sili", overrides={"hidden": 32}), ["hidden"]) == {}
+    args = ["train", "--task", "circle-3", "--method", "sili", "--profile", "paper"]
+    args += ["--interactions", "1", "--no-progress", "--set", "model.estimator=gumbel"]
+    assert main([*args, "--set", "hidden=32", "--out", str(tmp_path / "r")]) == 0
+    err = capsys.readouterr().err
+    assert "note: --set hidden departs from the paper profile (hidden 256 there)" in err
+    assert "estimator" not in err
+    sweep = ["sweep", "--tasks", "circle-3,driving", "--methods", "sili,sac", "--seeds", "0"]
+    assert main([*sweep, "--set", "hidden=32", "--out", str(tmp_path / "s"), "--dry-run"]) == 0
+    err = capsys.readouterr().err  # SILI starts from the paper profile on Driving alone
+    assert (
+        "--set hidden departs from the paper profile (hidden 256 there) for sili on driving:" in err
+    )
+
+
 def test_an_addon_setting_that_does_nothing_is_noted_and_its_addon_not_built(capsys, tmp_path):
     """Settings of a switched-off add-on, a fraction of a batch that rounds to no draw, and a
     stability distance where there is no stability term were silently ignored (the last one

@@ -155,6 +155,17 @@ def test_latent_kind_other_than_the_default_is_named():
     assert lili.name == "speaker-listener__lili__s0"
 
 
+def test_a_sweep_says_lili_learns_a_discrete_latent_where_it_asks_for_partial(tmp_path, capsys):
+    """``sili train --method lili --latent partial`` is refused; a sweep of several methods
+    gives LILI the discrete latent instead, and says so."""
+    sweep = ["sweep", "--tasks", "circle-3", "--seeds", "0", "--dry-run", "--out", str(tmp_path)]
+    assert main([*sweep, "--methods", "sili,lili", "--latent", "partial"]) == 0
+    assert "--latent partial learns no latent strategy and LILI" in capsys.readouterr().err
+    assert main([*sweep, "--methods", "sili,lili", "--latent", "continuous"]) == 0
+    assert main([*sweep, "--methods", "sili,sac", "--latent", "partial"]) == 0
+    assert "LILI" not in capsys.readouterr().err
+
+
 def test_a_run_is_named_by_the_latent_it_learns_not_the_one_the_sweep_asked_for():
     """SAC learns no latent and LILI turns partial into discrete: the same run whatever
     --latent says, so the same name (earlier versions named it after --latent)."""

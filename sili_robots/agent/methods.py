@@ -25,7 +25,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-from sili_robots.agent.config import AgentConfig, set_path
+from sili_robots.agent.config import AgentConfig, get_path, set_path
 from sili_robots.agent.schedule import Schedule
 from sili_robots.errors import ConfigError
 
@@ -146,6 +146,25 @@ def method_config(
     if profile == "paper" and cfg.latent == "continuous" and "model.squash" not in given:
         cfg.model.squash = False  # the raw output (recorded for continuous latents alone)
     return cfg.validate()
+
+
+def paper_departures(cfg: AgentConfig, given: Iterable[str]) -> dict[str, Any]:
+    """The settings among ``given`` (dotted paths) at which ``cfg``, an agent of the paper
+    profile, departs from the profile's own configuration, with the profile's values: the run
+    is recorded as that profile all the same, so a reader is told."""
+    if cfg.profile != "paper":
+        return {}
+    latent = cfg.latent if cfg.method in LATENT_METHODS else None
+    own = method_config(cfg.method, latent, "paper")
+    out = {}
+    for path in given:
+        try:
+            value = get_path(own, path)
+        except AttributeError:  # not the agent's (an add-on's setting)
+            continue
+        if value != get_path(cfg, path):
+            out[path] = value
+    return out
 
 
 def unused_settings(cfg: AgentConfig, given: Iterable[str]) -> dict[str, str]:

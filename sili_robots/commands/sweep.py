@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from sili_robots.agent import LATENT_CHOICES, METHODS, PROFILES
+from sili_robots.agent.methods import paper_departures
 from sili_robots.build import unversioned_note
 from sili_robots.commands.common import (
     CONTROLLERS_HELP,
@@ -29,7 +30,7 @@ from sili_robots.commands.common import (
     track_typed_options,
     writable_dir,
 )
-from sili_robots.errors import ConfigError
+from sili_robots.errors import ConfigError, compared
 from sili_robots.migrations import setting_path
 from sili_robots.sweep.spec import (
     SWEEP_SCHEDULES,
@@ -187,6 +188,12 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
             f"--latent applies to methods {', '.join(LATENT_METHODS)} only, none of which is in "
             f"the sweep ({', '.join(methods)}); the others fix latent = 'none'"
         )
+    if args.latent == "partial" and "lili" in methods:  # as on speaker-listener by default
+        print(
+            "sili sweep: note: --latent partial learns no latent strategy and LILI always learns "
+            "one: its runs learn a discrete latent",
+            file=sys.stderr,
+        )
     env_kwargs = task_kwargs_arg(args)
     controllers = _controllers(_controller_text(args.controller, env_kwargs))
     schedules = schedule_args(args)
@@ -209,7 +216,7 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
         checkpoint_every=args.checkpoint_every,
     )
     check_task_arguments(spec)  # new sweeps only, as --latent above
-    _note_unused_settings(spec, parse_settings(args.agent_set))
+    _note_settings(spec, parse_settings(args.agent_set))
     for task in spec.tasks:
         note = unversioned_note(task)
         if note:
@@ -217,20 +224,45 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
     return spec
 
 
-def _note_unused_settings(spec: SweepSpec, given: dict[str, Any]) -> None:
+def _note_settings(spec: SweepSpec, given: dict[str, Any]) -> None:
     """A note per ``--set`` setting some of the sweep's methods never read (every run records
-    it; a sweep gives its settings to all its methods, so it is not refused)."""
+    it; a sweep gives its settings to all its methods, so it is not refused), and per one that
+    departs from the paper profile of runs recorded as that profile."""
     from sili_robots.sweep import expand
 
     paths = {setting_path(name): name for name in given}
     unread: dict[tuple[str, str], dict[str, list[str]]] = {}  # (name, why) -> method -> tasks
+    departs: dict[tuple[str, str], dict[str, list[str]]] = {}  # (name, paper's) -> ...
     for run in expand(spec):
-        for path, why in run.config.unread_settings(paths).items():
-            tasks = unread.setdefault((paths[path], why), {}).setdefault(run.config.method, [])
-            tasks += [run.config.task] if run.config.task not in tasks else []
+        cfg = run.config
+        for path, why in cfg.unread_settings(paths).items():
+            _add(unread, (paths[path], why), cfg.method, cfg.task)
+        for path, value in paper_departures(cfg.agent, paths).items():
+            _add(departs, (paths[path], f"{path} {compared(value)}"), cfg.method, cfg.task)
     for (name, why), methods in unread.items():
-        where = "; ".join(f"{m} on {', '.join(tasks)}" for m, tasks in methods.items())
-        print(f"sili sweep: note: --set {name} does nothing for {where}: {why}", file=sys.stderr)
+        print(
+            f"sili sweep: note: --set {name} does nothing for {_where(methods)}: {why}",
+            file=sys.stderr,
+        )
+    for (name, paper), methods in departs.items():
+        print(
+            f"sili sweep: note: --set {name} departs from the paper profile ({paper} there) for "
+            f"{_where(methods)}: recorded as profile paper with it",
+            file=sys.stderr,
+        )
+
+
+def _where(methods: dict[str, list[str]]) -> str:
+    """``sili on circle-3, driving; lili on driving``"""
+    return "; ".join(f"{m} on {', '.join(tasks)}" for m, tasks in methods.items())
+
+
+def _add(
+    notes: dict[tuple[str, str], dict[str, list[str]]], key: tuple[str, str], method: str, task: str
+) -> None:
+    """Note ``key`` for ``method`` on ``task`` (each once, in the sweep's order)."""
+    tasks = notes.setdefault(key, {}).setdefault(method, [])
+    tasks += [task] if task not in tasks else []
 
 
 def _controller_text(given: str | None, env_kwargs: dict[str, Any]) -> str | None:

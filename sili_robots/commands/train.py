@@ -13,6 +13,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from sili_robots.agent import BETA_METHODS, LATENT_CHOICES, METHODS, PROFILES, Schedule
+from sili_robots.agent.methods import paper_departures
 from sili_robots.build import make_run_config, unversioned_note
 from sili_robots.commands.common import (
     CONTROLLERS_HELP,
@@ -34,7 +35,7 @@ from sili_robots.commands.common import (
     unit_float,
     writable_dir,
 )
-from sili_robots.errors import STORAGE_ERRORS, ConfigError
+from sili_robots.errors import STORAGE_ERRORS, ConfigError, compared
 from sili_robots.labels import shell_path
 from sili_robots.migrations import setting_path
 from sili_robots.runs import (
@@ -173,6 +174,12 @@ def config_from_args(args: argparse.Namespace) -> RunConfig:
     )
     for path, why in cfg.unread_settings(given).items():
         print(f"sili train: note: --set {given[path]} does nothing here: {why}", file=sys.stderr)
+    for path, value in paper_departures(cfg.agent, given).items():
+        print(
+            f"sili train: note: --set {given[path]} departs from the paper profile "
+            f"({path} {compared(value)} there); the run is recorded as profile paper with it",
+            file=sys.stderr,
+        )
     note = unversioned_note(args.task)
     if note:
         print(f"sili train: note: {note}", file=sys.stderr)
