@@ -872,6 +872,24 @@ def test_a_continuous_filter_started_late_leaves_the_run_unchanged_before_it(tmp
     assert res.returncode == 0 and "mean_task_reward" in res.stdout, res.stderr
 
 
+def test_resuming_a_run_killed_before_its_first_checkpoint_says_it_starts_again(tmp_path, capsys):
+    """Its logged interactions were never saved: they are trained and written anew, said so
+    (a run with a checkpoint goes on from it without the note)."""
+    run = tmp_path / "run"
+    args = ["train", "--task", "circle-3", "--method", "sac", *FAST_ARGS, "--no-progress"]
+    assert main([*args, "--interactions", "3", "--out", str(run)]) == 0
+    (run / "checkpoint.pt").unlink()  # as if killed before it: neither checkpoint nor summary
+    (run / "summary.json").unlink()
+    capsys.readouterr()
+    assert main(["train", "--resume", str(run), "--interactions", "4", "--no-progress"]) == 0
+    err = capsys.readouterr().err
+    assert f"note: {run} was stopped before its first checkpoint: it trains again" in err
+    assert "(its 3 logged interactions were never saved;" in err
+    assert len((run / "metrics.csv").read_text().splitlines()) == 1 + 4
+    assert main(["train", "--resume", str(run), "--interactions", "5", "--no-progress"]) == 0
+    assert "first checkpoint" not in capsys.readouterr().err
+
+
 def test_a_filtered_run_records_what_it_acted_on_and_resumes_exactly(tmp_path):
     args = ["--task", "circle-3", "--seed", 1, "--checkpoint-every", 8, *FAST]
     args += ["--set", "latent_filter=0.1"]

@@ -21,6 +21,7 @@ from sili_robots.commands.common import (
     add_override_args,
     add_schedule_args,
     check_schedule_overrides,
+    counted,
     given_options,
     non_negative_int,
     parse_settings,
@@ -37,6 +38,7 @@ from sili_robots.commands.common import (
 )
 from sili_robots.errors import STORAGE_ERRORS, ConfigError, compared
 from sili_robots.labels import shell_path
+from sili_robots.metrics import METRICS
 from sili_robots.migrations import setting_path
 from sili_robots.runs import (
     CHECKPOINT,
@@ -287,6 +289,7 @@ def run(args: argparse.Namespace) -> int:
             _note_threads_beyond_cores(recorded.threads)
             _note_slow_kernels(recorded)
             _note_other_software(args.resume, recorded)
+            _note_starting_over(args.resume)
         scalars = _keeps_scalars(args.resume)
         with (
             _resume_hint(args.resume),
@@ -379,6 +382,22 @@ def _note_other_software(run_dir: Path, cfg: RunConfig) -> None:
             f"({'; '.join(known)}): its results mix both (config.json's continued records where)",
             file=sys.stderr,
         )
+
+
+def _note_starting_over(run_dir: Path) -> None:
+    """A run killed before its first checkpoint has nothing to go on from: it trains again from
+    its first interaction, and the interactions it logged are written anew."""
+    if (run_dir / CHECKPOINT).is_file():
+        return
+    with contextlib.suppress(OSError):
+        logged = len((run_dir / METRICS).read_text().splitlines()) - 1
+        if logged > 0:
+            print(
+                f"sili train: note: {run_dir} was stopped before its first checkpoint: it trains "
+                f"again from its first interaction (its {counted(logged, 'logged interaction')} "
+                "were never saved; --checkpoint-every sets how often a run saves)",
+                file=sys.stderr,
+            )
 
 
 @contextlib.contextmanager
