@@ -285,6 +285,14 @@ def test_unfinished_runs_are_left_out_unless_asked(sweep_dir, tmp_path, capsys):
     np.testing.assert_allclose(xy[:, 1], only_s0)
     assert "circle-3__sac__s1" in set(load_results(copy, include_unfinished=True)["run"])
     assert "fewer where" not in learning_curves(df, "circle-3").get_suptitle()
+    plot = ["plot", str(copy), "--formats", "png", "--out", str(tmp_path / "f"), "--tasks"]
+    capsys.readouterr()
+    assert main([*plot, "circle-3"]) == 0  # the command names what it left out
+    left = "note: left out 1 unfinished run (circle-3__sac__s1): --include-unfinished draws them"
+    assert left in capsys.readouterr().err
+    assert main([*plot, "speaker-listener"]) == 0 and "left out" not in capsys.readouterr().err
+    assert main([*plot, "circle-3", "--include-unfinished"]) == 0
+    assert "left out" not in capsys.readouterr().err
     metrics = copy / "runs" / "circle-3__sac__s1" / "metrics.csv"
     pd.read_csv(metrics).head(3).to_csv(metrics, index=False)  # it stopped at 3
     partial = learning_curves(load_results(copy, include_unfinished=True), "circle-3")
@@ -301,6 +309,22 @@ def test_unfinished_runs_are_left_out_unless_asked(sweep_dir, tmp_path, capsys):
     assert not figures.exists()
     args = ["plot", str(copy), "--tasks", "circle-3", "--formats", "png", "--include-unfinished"]
     assert main(args) == 0 and (figures / "circle-3.png").is_file()
+
+
+def test_a_b_sweep_figure_an_earlier_plot_left_is_named_when_none_is_drawn(
+    sweep_dir, tmp_path, capsys
+):
+    copy = tmp_path / "sweep"
+    shutil.copytree(sweep_dir, copy)
+    plot = ["plot", str(copy), "--formats", "png"]
+    assert main(plot) == 0 and "earlier" not in capsys.readouterr().err
+    earlier = copy / "figures" / "circle-3_beta.png"
+    assert earlier.is_file()
+    for seed in (0, 1):  # SILI's runs at b = 1 are unfinished now: one b, no b sweep
+        (copy / "runs" / f"circle-3__sili-b1__s{seed}" / "summary.json").unlink()
+    assert main(plot) == 0
+    err = capsys.readouterr().err
+    assert f"note: {earlier} is an earlier plot's: this one draws no b sweep for circle-3" in err
 
 
 def test_a_sweep_whose_figures_folder_cannot_be_written_is_named(sweep_dir, tmp_path, capsys):

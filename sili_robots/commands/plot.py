@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
-from sili_robots.commands.common import path_arg, positive_int, writable_dir
+from sili_robots.commands.common import counted, path_arg, positive_int, writable_dir
 from sili_robots.errors import ConfigError
 from sili_robots.sweep.state import FIGURE_FORMATS as FORMATS
 from sili_robots.sweep.state import FIGURES
@@ -70,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
         writable_dir(args.out, "--out")
     elif args.sweep_dir.is_dir():  # its figures folder; else plot_sweep names what it is
         writable_dir(args.sweep_dir / FIGURES, "--out (its default)")
-    for path in plot_sweep(
+    written = plot_sweep(
         args.sweep_dir,
         args.out,
         smooth=args.smooth,
@@ -78,6 +80,51 @@ def run(args: argparse.Namespace) -> int:
         formats=formats,
         include_unfinished=args.include_unfinished,
         tasks=tasks,
-    ):
+    )
+    for path in written:
         print(path)
+    if not args.include_unfinished:
+        _note_left_out(args.sweep_dir, tasks)
+    _note_earlier_b_sweeps(written)
     return 0
+
+
+def _note_left_out(sweep_dir: Path, tasks: list[str] | None) -> None:
+    """Runs that logged interactions but have not finished are drawn only with
+    --include-unfinished: named, so that a figure without a method or a seed is explained."""
+    from sili_robots.build import canonical_task, is_class_path
+    from sili_robots.metrics import COMPRESSED_METRICS, METRICS
+    from sili_robots.runs import read_config
+    from sili_robots.sweep.results import finished_summary, run_dirs
+
+    def task_of(run_dir: Path) -> str:
+        task = read_config(run_dir).task
+        return task if is_class_path(task) else canonical_task(task)
+
+    left = [
+        d.name
+        for d in run_dirs(sweep_dir)
+        if ((d / METRICS).is_file() or (d / COMPRESSED_METRICS).is_file())
+        and finished_summary(d) is None
+        and (tasks is None or task_of(d) in tasks)
+    ]
+    if left:
+        names = ", ".join(left[:3]) + (f" and {len(left) - 3} more" if len(left) > 3 else "")
+        print(
+            f"sili plot: note: left out {counted(len(left), 'unfinished run')} ({names}): "
+            "--include-unfinished draws them",
+            file=sys.stderr,
+        )
+
+
+def _note_earlier_b_sweeps(written: list[Path]) -> None:
+    """A task's b-sweep figure from an earlier plot, beside a task figure drawn now without one
+    (its runs at other b unfinished or gone), no longer matches it."""
+    for path in written:
+        earlier = path.with_name(f"{path.stem}_beta{path.suffix}")
+        if path.stem != "overview" and earlier not in written and earlier.is_file():
+            print(
+                f"sili plot: note: {earlier} is an earlier plot's: this one draws no b sweep "
+                f"for {path.stem}",
+                file=sys.stderr,
+            )
