@@ -929,9 +929,16 @@ def test_claims_write_replaces_the_readme_block(sweep_and_collection, tmp_path, 
     printed = capsys.readouterr()
     assert "measures none of the claims" in printed.err and printed.out == ""  # no table
     assert "stale-table" in readme.read_text()  # a table of "not measured yet" replaces nothing
+    assert main(["claims", str(collection)]) == 0  # the table, and why it is empty
+    printed = capsys.readouterr()
+    assert "| not measured yet" in printed.out
+    assert "measures none of the claims: each judges only runs finished at" in printed.err
     committed = Path(__file__).resolve().parents[1] / "results" / "paper-grid"
     assert main(["claims", str(committed), "--write", str(readme)]) == 0
     table = capsys.readouterr().out
+    assert main(["claims", str(committed)]) == 0
+    printed = capsys.readouterr()
+    assert printed.out == table and "measures none" not in printed.err  # the grid's: no note
     text = readme.read_text()
     assert text.startswith(f"# x\n{START}\n| claim |") and text.endswith(f"{END}\ntail\n")
     assert table in text and "stale-table" not in text

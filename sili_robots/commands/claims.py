@@ -57,6 +57,12 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.write is not None:
         _check_keeps_measured(args.write, claims, args.directory)
+    elif all(c.verdict.startswith("not measured") for c in claims):
+        print(
+            f"sili claims: note: {args.directory} measures none of the claims: each judges only "
+            "runs finished at the grid's budget (`sili grid --dry-run` lists its runs)",
+            file=sys.stderr,
+        )
     print(table, end="")
     if args.write is not None:
         write_block(args.write, table)
