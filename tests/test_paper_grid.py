@@ -132,6 +132,7 @@ def test_collect_refuses_a_different_run_of_the_same_name(sweep_and_collection, 
     assert main(["collect", str(sweep), "--into", str(other)]) == 2
     err = capsys.readouterr().err
     assert "holds a different run named circle-3__sili-bschedule__s0 (seed: 7 there, 0 here;" in err
+    assert err.rstrip().endswith("collect the other into another folder (--into)")
     assert main(["collect", str(tmp_path / "nothing"), "--into", str(other)]) == 2
     run = sweep / "runs" / "circle-3__sac__s0"
     before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}

@@ -197,5 +197,6 @@ def _check_same_run(name: str, there: Path, ident: dict, run_dir: Path, mine: di
         more = f" and {len(diffs) - 3} more" if len(diffs) > 3 else ""
         raise ConfigError(
             f"{there} holds a different run named {name} ({'; '.join(diffs[:3])}{more}; "
-            f"here: {run_dir}); remove one of them first"
+            f"here: {run_dir}); a collection holds one run of a name: collect the other into "
+            "another folder (--into)"
         )
