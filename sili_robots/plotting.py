@@ -85,9 +85,9 @@ CURVE_METRICS = (
     ("stability_reward", "stability term, before b\n(−latent change, or −flagged steps)"),
 )
 
-#: metrics that are fractions: their seed band is clipped to the range (a mean +- std of a
-#: fraction can leave it, which would draw a stability below 0 or above 1)
-METRIC_RANGES = {"true_stability": (0.0, 1.0)}
+#: metrics with a range: their seed band is clipped to it (a mean +- std of a fraction can
+#: leave it, which would draw a stability above 1, or a stability term, -d <= 0, above 0)
+METRIC_RANGES = {"true_stability": (0.0, 1.0), "stability_reward": (-np.inf, 0.0)}
 
 
 def spread(metric: str, mean: np.ndarray, std: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

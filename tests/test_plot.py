@@ -361,35 +361,39 @@ def test_plot_of_a_non_sweep_exits_2(tmp_path, capsys):
     assert "unknown figure format 'gif', 'jpg'; allowed: png, pdf, svg" in capsys.readouterr().err
 
 
-def test_the_stability_band_stays_within_0_and_1():
-    # three seeds at stability 1, 1, 0: mean 0.67 +- 0.47 would reach 1.14
+def test_the_stability_bands_stay_within_their_ranges():
+    # three seeds at stability 1, 1, 0: mean 0.67 +- 0.47 would reach 1.14; their stability
+    # terms 0, 0, -1: mean -0.33 +- 0.47 would reach 0.14
     n, parts = 6, []
     for seed, stable in enumerate((1.0, 1.0, 0.0)):
         parts.append(
             pd.DataFrame(
                 {
-                    "run": f"circle-3__sac__s{seed}",
+                    "run": f"circle-3__lili__s{seed}",
                     "task": "circle-3",
                     "task_id": "sili/Circle3-v1",
-                    "method": "sac",
+                    "method": "lili",
                     "profile": "package",
                     "config_beta": 0.0,
                     "beta_scheduled": False,
                     "controller": "",
-                    "latent": "",
+                    "latent": "discrete",
                     "seed": seed,
                     "interaction": np.arange(n),
                     "task_reward": np.full(n, -50.0),
                     "true_stability": np.full(n, stable),
-                    "stability_reward": np.zeros(n),
+                    "stability_reward": np.full(n, stable - 1.0),
                 }
             )
         )
     fig = learning_curves(pd.concat(parts, ignore_index=True), "circle-3", smooth=1)
-    ax = {a.get_gid(): a for a in fig.axes}["true_stability"]
-    verts = np.concatenate([p.vertices for p in _band(ax, _line(ax, "SAC")).get_paths()])
-    assert verts[:, 1].max() == pytest.approx(1.0)  # clipped
-    assert verts[:, 1].min() == pytest.approx(2 / 3 - np.sqrt(2) / 3, abs=1e-9)  # mean - std
+    axes = {a.get_gid(): a for a in fig.axes}
+    for metric, top in (("true_stability", 1.0), ("stability_reward", 0.0)):
+        ax = axes[metric]
+        verts = np.concatenate([p.vertices for p in _band(ax, _line(ax, "LILI")).get_paths()])
+        assert verts[:, 1].max() == pytest.approx(top)  # clipped
+        low = top - 1 / 3 - np.sqrt(2) / 3  # mean - std
+        assert verts[:, 1].min() == pytest.approx(low, abs=1e-9)
 
 
 def _sili_in_profiles(layout) -> pd.DataFrame:
