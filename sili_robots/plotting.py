@@ -202,9 +202,14 @@ def _seed_note(rows: pd.DataFrame) -> str:
     lo, hi = int(seeds.min()), int(seeds.max())
     note = f"{lo} seed{'s' if lo > 1 else ''}" if lo == hi else f"{lo}-{hi} seeds"
     ends = rows.groupby([*keys, "run"], dropna=False)["interaction"].max()
+    asides = []
     if (ends.groupby(level=keys, dropna=False).nunique() > 1).any():
-        note += " (fewer where a run ended early)"
-    return note
+        asides.append("fewer where a run ended early")
+    if "finished" in rows:  # --include-unfinished: a curve may stop short of its run's end
+        unfinished = rows.loc[~rows["finished"].astype(bool), "run"].nunique()
+        if unfinished:
+            asides.append(f"{unfinished} run{'s' if unfinished > 1 else ''} unfinished")
+    return note + (f" ({'; '.join(asides)})" if asides else "")
 
 
 def learning_curves(df: pd.DataFrame, task: str, smooth: int | None = None) -> Figure:

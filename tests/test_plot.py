@@ -296,7 +296,7 @@ def test_unfinished_runs_are_left_out_unless_asked(sweep_dir, tmp_path, capsys):
     metrics = copy / "runs" / "circle-3__sac__s1" / "metrics.csv"
     pd.read_csv(metrics).head(3).to_csv(metrics, index=False)  # it stopped at 3
     partial = learning_curves(load_results(copy, include_unfinished=True), "circle-3")
-    assert "2 seeds (fewer where a run ended early)" in partial.get_suptitle()
+    assert "2 seeds (fewer where a run ended early; 1 run unfinished)" in partial.get_suptitle()
     one = load_results(copy).query("seed == 0")
     assert "mean ± std over 1 seed, smoothed" in learning_curves(one, "circle-3").get_suptitle()
     for summary in (copy / "runs").glob("*/summary.json"):  # none finished: the command says so
