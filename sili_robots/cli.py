@@ -18,7 +18,7 @@ import select
 import signal
 import sys
 import threading
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any, NoReturn
 
 from sili_robots import __version__
@@ -127,7 +127,7 @@ def _stop_signals_as_ctrl_c() -> Iterator[None]:
             _received.append(signum)
             raise Terminated(signum)
 
-    handled = {}
+    handled: dict[int, Callable[[int, object], None]] = {}
     if threading.current_thread() is threading.main_thread():
         if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
             handled[signal.SIGINT] = interrupt

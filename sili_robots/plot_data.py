@@ -21,9 +21,14 @@ B_SWEEP_VARIANT = tuple(k for k in VARIANT_KEYS if k != "config_beta")
 B_SETTING = "agent.sili.beta"
 
 
+#: ``load_results``' table's ``attrs`` key: the (run, task) of the unfinished runs it left out
+LEFT_OUT = "unfinished_left_out"
+
+
 def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFrame:
     """The tidy table of a sweep (rebuilt from its run directories and written to results.csv)
-    or of a results collection (``sili collect``: read only, nothing written)."""
+    or of a results collection (``sili collect``: read only, nothing written); the runs with
+    rows it leaves out are in its ``attrs[LEFT_OUT]``."""
     from sili_robots.sweep.results import check_exists, results_table, run_dirs, write_tables
     from sili_robots.sweep.state import SWEEP_FILE
 
@@ -40,6 +45,7 @@ def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFr
             f"{sweep_dir} holds no runs (no {SWEEP_FILE} and no runs/*/config.json); give a "
             "directory written by `sili sweep --out` or `sili collect`"
         )
+    left_out = df.loc[~df["finished"].astype(bool), ["run", "task"]].drop_duplicates()
     if not include_unfinished:
         df = df[df["finished"].astype(bool)]
     if df.empty:
@@ -47,7 +53,9 @@ def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFr
             f"{sweep_dir} has no finished runs yet (`sili runs` shows how far they are; sili "
             "plot --include-unfinished plots partial runs)"
         )
-    return _with_settings(df, sweep_dir)
+    df = _with_settings(df, sweep_dir)
+    df.attrs[LEFT_OUT] = [] if include_unfinished else list(left_out.itertuples(index=False))
+    return df
 
 
 def _with_settings(df: pd.DataFrame, sweep_dir: Path) -> pd.DataFrame:

@@ -359,6 +359,19 @@ def plot_sweep(
     """Write every figure of a sweep, or only those of ``tasks`` (no overview then); returns
     the files written."""
     df = load_results(sweep_dir, include_unfinished)
+    return plot_results(df, sweep_dir, out_dir, smooth, window, formats, tasks)
+
+
+def plot_results(
+    df: pd.DataFrame,
+    sweep_dir: Path,
+    out_dir: Path | None = None,
+    smooth: int | None = None,
+    window: int = 100,
+    formats: Sequence[str] = ("png", "pdf"),
+    tasks: Sequence[str] | None = None,
+) -> list[Path]:
+    """``plot_sweep`` of the table ``df`` read from ``sweep_dir`` (``load_results``)."""
     out_dir = Path(out_dir) if out_dir is not None else Path(sweep_dir) / FIGURES
     written: list[Path] = []
     present = [t for t in TASK_TITLES if t in set(df["task"])] + sorted(

@@ -519,7 +519,7 @@ def _finished_files(run_dir: Path) -> list[str]:
 def check_resumable(run_dir: Path) -> None:
     """Refuse a finished run kept without its checkpoint (``sili collect``, or the checkpoint
     deleted): resuming it would train it again from the start over its results. A run killed
-    before its first checkpoint has neither and starts over, losing nothing."""
+    before its first checkpoint has neither and starts over (its logged interactions with it)."""
     run_dir = Path(run_dir)
     if (run_dir / CHECKPOINT).is_file():
         return

@@ -20,14 +20,16 @@ import time
 from types import FrameType
 
 STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-#: seconds within which the same stop signal again is the one stop sent twice (to a process
-#: and to its group); a person's second Ctrl-C comes later
-SAME_STOP_S = 1.0
+#: seconds within which the same stop signal again is the one stop sent twice (``timeout``'s
+#: two sends are microseconds apart, a busy machine's milliseconds); a person's second Ctrl-C
+#: comes later
+SAME_STOP_S = 0.3
+#: the stops ``act_as`` is passing on now: a held stop, never the same one again
+_passed_on: list[int] = []
 
 
 class RepeatedStops:
-    """Tells a stop signal from the same one delivered twice: one per handler, so a held stop
-    passed on to the handler it met is that handler's first."""
+    """Tells a stop signal from the same one delivered twice (one per handler)."""
 
     def __init__(self) -> None:
         self._first: dict[int, float] = {}
@@ -35,7 +37,7 @@ class RepeatedStops:
     def repeated(self, signum: int) -> bool:
         """Whether ``signum`` is the stop received just before; else it is noted as a stop."""
         now, first = time.monotonic(), self._first.get(signum)
-        if first is not None and now - first < SAME_STOP_S:
+        if first is not None and now - first < SAME_STOP_S and signum not in _passed_on:
             return True
         self._first[signum] = now
         return False
@@ -51,7 +53,11 @@ def act_as(signum: int, handler: object) -> None:
     """Let ``signum`` act through ``handler`` as the signal itself would (called like a signal
     handler, or raised again for the default); an ignored one does nothing."""
     if callable(handler):
-        handler(signum, None)
+        _passed_on.append(signum)
+        try:
+            handler(signum, None)
+        finally:
+            _passed_on.pop()
     elif handler != signal.SIG_IGN:
         signal.raise_signal(signum)
 

@@ -257,6 +257,10 @@ def test_a_setting_that_departs_from_the_paper_profile_is_noted(capsys, tmp_path
     paper = method_config("sili", profile="paper", overrides={"model.estimator": "expected"})
     assert paper_departures(paper, ["model.estimator", "hidden"]) == {"model.estimator": "gumbel"}
     assert paper_departures(method_config("sili", overrides={"hidden": 32}), ["hidden"]) == {}
+    held = method_config("sili", profile="paper", overrides={"sili.beta": Schedule(((0, 0.5),))})
+    assert paper_departures(held, ["sili.beta"]) == {}  # a schedule holding the paper's b
+    sac = method_config("sac", profile="paper", overrides={"model.dim": 4})
+    assert paper_departures(sac, ["model.dim"]) == {}  # a setting it never reads
     args = ["train", "--task", "circle-3", "--method", "sili", "--profile", "paper"]
     args += ["--interactions", "1", "--no-progress", "--set", "model.estimator=gumbel"]
     assert main([*args, "--set", "hidden=32", "--out", str(tmp_path / "r")]) == 0

@@ -322,9 +322,14 @@ def test_a_b_sweep_figure_an_earlier_plot_left_is_named_when_none_is_drawn(
     assert earlier.is_file()
     for seed in (0, 1):  # SILI's runs at b = 1 are unfinished now: one b, no b sweep
         (copy / "runs" / f"circle-3__sili-b1__s{seed}" / "summary.json").unlink()
+    started = copy / "runs" / "circle-3__sac__s0"  # a run just started: a header, no rows
+    (started / "summary.json").unlink()
+    metrics = started / "metrics.csv"
+    metrics.write_text(metrics.read_text().splitlines()[0] + "\n")
     assert main(plot) == 0
     err = capsys.readouterr().err
     assert f"note: {earlier} is an earlier plot's: this one draws no b sweep for circle-3" in err
+    assert "left out 2 unfinished runs (circle-3__sili-b1__s0, circle-3__sili-b1__s1)" in err
 
 
 def test_a_sweep_whose_figures_folder_cannot_be_written_is_named(sweep_dir, tmp_path, capsys):

@@ -9,6 +9,7 @@ import signal
 import socket
 import subprocess
 import sys
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -26,6 +27,7 @@ from sili_robots.cli import main
 from sili_robots.errors import ConfigError
 from sili_robots.evaluation import load_trained
 from sili_robots.runs import RunConfig
+from sili_robots.stopping import SAME_STOP_S
 from sili_robots.sweep import LocalBackend, RayBackend, SweepSpec, expand, run_sweep
 from sili_robots.sweep import tensorboard as tb
 from sili_robots.sweep.progress import SweepProgress, logged_interactions
@@ -963,12 +965,16 @@ def test_one_ctrl_c_delivered_twice_by_timeout_still_checkpoints_the_run(tmp_pat
     try:
         assert wait_for(lambda: metrics_rows(run / "metrics.csv") >= 2, 240)
         proc.send_signal(signal.SIGINT)  # timeout's signal to the sweep ...
+        sent = time.monotonic()
         assert wait_for(lambda: (run / "stop").exists(), 30)
         os.killpg(proc.pid, signal.SIGINT)  # ... and to its group, while the sweep stops
+        gap = time.monotonic() - sent
         _, stderr = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
+    if gap >= SAME_STOP_S:  # a second stop, as a person's: not what this test is about
+        pytest.skip(f"the machine took {gap:.2f} s to see the sweep stopping")
     assert proc.returncode == 130 and "Traceback" not in stderr, stderr
     assert "1 stopped midway, resumable" in stderr
     checkpointed = torch.load(run / "checkpoint.pt", weights_only=False)["interaction"]

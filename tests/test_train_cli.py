@@ -883,8 +883,8 @@ def test_resuming_a_run_killed_before_its_first_checkpoint_says_it_starts_again(
     capsys.readouterr()
     assert main(["train", "--resume", str(run), "--interactions", "4", "--no-progress"]) == 0
     err = capsys.readouterr().err
-    assert f"note: {run} was stopped before its first checkpoint: it trains again" in err
-    assert "(its 3 logged interactions were never saved;" in err
+    assert f"note: {run} was stopped before its first checkpoint: its 3 logged interactions" in err
+    assert "are discarded and it trains again from its first (no checkpoint holds them)" in err
     assert len((run / "metrics.csv").read_text().splitlines()) == 1 + 4
     assert main(["train", "--resume", str(run), "--interactions", "5", "--no-progress"]) == 0
     assert "first checkpoint" not in capsys.readouterr().err

@@ -156,15 +156,23 @@ def paper_departures(cfg: AgentConfig, given: Iterable[str]) -> dict[str, Any]:
         return {}
     latent = cfg.latent if cfg.method in LATENT_METHODS else None
     own = method_config(cfg.method, latent, "paper")
+    unread = unused_settings(cfg, given)  # a setting it never reads departs from nothing
     out = {}
     for path in given:
         try:
             value = get_path(own, path)
         except AttributeError:  # not the agent's (an add-on's setting)
             continue
-        if value != get_path(cfg, path):
+        if path not in unread and _held(value) != _held(get_path(cfg, path)):
             out[path] = value
     return out
+
+
+def _held(value: Any) -> Any:
+    """A schedule that holds one value is that value (``sili.beta=0:0.5`` is b = 0.5)."""
+    if isinstance(value, Schedule) and len({v for _, v in value.points}) == 1:
+        return value.points[0][1]
+    return value
 
 
 def unused_settings(cfg: AgentConfig, given: Iterable[str]) -> dict[str, str]:

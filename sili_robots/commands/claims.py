@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.write is not None:
         _check_keeps_measured(args.write, claims, args.directory)
-    elif all(c.verdict.startswith("not measured") for c in claims):
+    elif all(c.verdict.startswith("not measured yet (runs at the grid's") for c in claims):
         print(
             f"sili claims: note: {args.directory} measures none of the claims: each judges only "
             "runs finished at the grid's budget (`sili grid --dry-run` lists its runs)",

@@ -53,7 +53,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sili_robots.build import canonical_task, is_class_path
-    from sili_robots.plotting import plot_sweep
+    from sili_robots.plot_data import LEFT_OUT, load_results
+    from sili_robots.plotting import plot_results
 
     formats = list(dict.fromkeys(f.strip() for f in args.formats.split(",") if f.strip()))
     bad = [f for f in formats if f not in FORMATS]
@@ -70,44 +71,29 @@ def run(args: argparse.Namespace) -> int:
             raise ConfigError(f"--tasks {args.tasks!r} names none; leave it out for every task")
     if args.out is not None:
         writable_dir(args.out, "--out")
-    elif args.sweep_dir.is_dir():  # its figures folder; else plot_sweep names what it is
+    elif args.sweep_dir.is_dir():  # its figures folder; else load_results names what it is
         writable_dir(args.sweep_dir / FIGURES, "--out (its default)")
-    written = plot_sweep(
+    results = load_results(args.sweep_dir, args.include_unfinished)
+    written = plot_results(
+        results,
         args.sweep_dir,
         args.out,
         smooth=args.smooth,
         window=args.window,
         formats=formats,
-        include_unfinished=args.include_unfinished,
         tasks=tasks,
     )
     for path in written:
         print(path)
-    if not args.include_unfinished:
-        _note_left_out(args.sweep_dir, tasks)
+    _note_left_out(results.attrs[LEFT_OUT], tasks)
     _note_earlier_b_sweeps(written)
     return 0
 
 
-def _note_left_out(sweep_dir: Path, tasks: list[str] | None) -> None:
-    """Runs that logged interactions but have not finished are drawn only with
-    --include-unfinished: named, so that a figure without a method or a seed is explained."""
-    from sili_robots.build import canonical_task, is_class_path
-    from sili_robots.metrics import COMPRESSED_METRICS, METRICS
-    from sili_robots.runs import read_config
-    from sili_robots.sweep.results import finished_summary, run_dirs
-
-    def task_of(run_dir: Path) -> str:
-        task = read_config(run_dir).task
-        return task if is_class_path(task) else canonical_task(task)
-
-    left = [
-        d.name
-        for d in run_dirs(sweep_dir)
-        if ((d / METRICS).is_file() or (d / COMPRESSED_METRICS).is_file())
-        and finished_summary(d) is None
-        and (tasks is None or task_of(d) in tasks)
-    ]
+def _note_left_out(left_out: list[tuple[str, str]], tasks: list[str] | None) -> None:
+    """Unfinished runs are drawn only with --include-unfinished: named, so that a figure without
+    a method or a seed is explained."""
+    left = [run for run, task in left_out if tasks is None or task in tasks]
     if left:
         names = ", ".join(left[:3]) + (f" and {len(left) - 3} more" if len(left) > 3 else "")
         print(

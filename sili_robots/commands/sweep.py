@@ -188,12 +188,6 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
             f"--latent applies to methods {', '.join(LATENT_METHODS)} only, none of which is in "
             f"the sweep ({', '.join(methods)}); the others fix latent = 'none'"
         )
-    if args.latent == "partial" and "lili" in methods:  # as on speaker-listener by default
-        print(
-            "sili sweep: note: --latent partial learns no latent strategy and LILI always learns "
-            "one: its runs learn a discrete latent",
-            file=sys.stderr,
-        )
     env_kwargs = task_kwargs_arg(args)
     controllers = _controllers(_controller_text(args.controller, env_kwargs))
     schedules = schedule_args(args)
@@ -217,6 +211,12 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
     )
     check_task_arguments(spec)  # new sweeps only, as --latent above
     _note_settings(spec, parse_settings(args.agent_set))
+    if args.latent == "partial" and "lili" in methods:  # (on Speaker-Listener's default too)
+        print(
+            "sili sweep: note: --latent partial learns no latent strategy and LILI always learns "
+            "one: its runs learn a discrete latent",
+            file=sys.stderr,
+        )
     for task in spec.tasks:
         note = unversioned_note(task)
         if note:

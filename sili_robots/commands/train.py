@@ -386,16 +386,16 @@ def _note_other_software(run_dir: Path, cfg: RunConfig) -> None:
 
 def _note_starting_over(run_dir: Path) -> None:
     """A run killed before its first checkpoint has nothing to go on from: it trains again from
-    its first interaction, and the interactions it logged are written anew."""
+    its first interaction, and the interactions it logged are trained and written anew."""
     if (run_dir / CHECKPOINT).is_file():
         return
-    with contextlib.suppress(OSError):
-        logged = len((run_dir / METRICS).read_text().splitlines()) - 1
+    with contextlib.suppress(OSError, ValueError):  # unreadable: nothing to count
+        logged = (run_dir / METRICS).read_text().count("\n") - 1  # whole lines past the header
         if logged > 0:
             print(
-                f"sili train: note: {run_dir} was stopped before its first checkpoint: it trains "
-                f"again from its first interaction (its {counted(logged, 'logged interaction')} "
-                "were never saved; --checkpoint-every sets how often a run saves)",
+                f"sili train: note: {run_dir} was stopped before its first checkpoint: its "
+                f"{counted(logged, 'logged interaction')} {'is' if logged == 1 else 'are'} "
+                "discarded and it trains again from its first (no checkpoint holds them)",
                 file=sys.stderr,
             )
 
