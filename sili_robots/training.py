@@ -73,7 +73,7 @@ def train(
         if own_env:
             env.close()
         raise
-    recent: deque[tuple[float, bool]] = deque(maxlen=100)
+    recent = _recent_window(run_dir, start)
     elapsed0 = float(state["wall_time"]) if state else 0.0
     t0 = time.perf_counter()
     bar = TrainingProgress(cfg.interactions, start, enabled=progress, label=run_label(cfg))
@@ -186,6 +186,18 @@ def _start_or_resume(
     start = int(state["interaction"])
     record_continuation(run_dir, cfg, start)
     return agent, obs, info, start, MetricsWriter(run_dir, cfg.metric_columns(), keep_rows=start)
+
+
+def _recent_window(run_dir: Path, start: int) -> deque[tuple[float, bool | None]]:
+    """The progress line's last 100 (task reward, strategy changed), as an uninterrupted run
+    holds them at ``start``: a resumed run's line then reads as its summary will."""
+    window: deque[tuple[float, bool | None]] = deque(maxlen=100)
+    if start:
+        rows = read_metrics(run_dir / METRICS)
+        for row in rows[rows["interaction"] < start].tail(100).itertuples():
+            changed = bool(row.strategy_changed) if row.interaction else None
+            window.append((float(row.task_reward), changed))
+    return window
 
 
 def write_summary(run_dir: Path, window: int = 100) -> dict[str, Any]:

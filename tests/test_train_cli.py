@@ -890,6 +890,22 @@ def test_resuming_a_run_killed_before_its_first_checkpoint_says_it_starts_again(
     assert "first checkpoint" not in capsys.readouterr().err
 
 
+def test_a_resumed_runs_progress_line_reads_as_an_uninterrupted_runs(tmp_path, monkeypatch):
+    """Its window of the last 100 interactions holds those before the resume too."""
+    from sili_robots.progress import TrainingProgress
+
+    lines: list[tuple[float, float]] = []
+    monkeypatch.setattr(TrainingProgress, "advance", lambda _, r, s: lines.append((r, s)))
+    args = ["train", "--task", "circle-3", "--method", "sac", *FAST_ARGS, "--no-progress"]
+    assert main([*args, "--interactions", "8", "--out", str(tmp_path / "whole")]) == 0
+    whole = lines[:]
+    assert main([*args, "--interactions", "4", "--out", str(tmp_path / "cut")]) == 0
+    lines.clear()
+    assert main(["train", "--resume", str(tmp_path / "cut"), "--interactions", "8"]) == 0
+    assert len(lines) == 4
+    np.testing.assert_allclose(lines, whole[4:])
+
+
 def test_a_filtered_run_records_what_it_acted_on_and_resumes_exactly(tmp_path):
     args = ["--task", "circle-3", "--seed", 1, "--checkpoint-every", 8, *FAST]
     args += ["--set", "latent_filter=0.1"]
