@@ -433,3 +433,15 @@ def test_lane_edges_belong_to_the_centre_lane_on_both_sides():
     # passed on the left edge of the centre lane: the opponent cuts in leftwards (centre, lean)
     assert next_target_lane(False, edge) == LEFT
     assert next_target_lane(False, -edge) == RIGHT
+
+
+@pytest.mark.parametrize("steps", [3, 10])
+def test_a_closed_env_says_so_whether_or_not_its_interaction_had_ended(make_env, steps):
+    env = make_env()
+    env.reset(seed=0)
+    for _ in range(steps):
+        env.step(np.zeros(1, np.float32))
+    env.close()
+    for call in (lambda: env.step(np.zeros(1, np.float32)), lambda: env.reset()):
+        with pytest.raises(RuntimeError, match="this Driving environment was closed"):
+            call()

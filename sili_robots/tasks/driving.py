@@ -272,6 +272,11 @@ class DrivingEnv(RepeatedInteractionEnv):
             )
         return self.__dict__
 
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if self._closed:  # said first: the base's checks would point to a reset, refused too
+            raise RuntimeError("this Driving environment was closed; make a new one")
+        return super().step(action)
+
     def close(self) -> None:
         """Stop SUMO and release this process's libsumo simulation for a later environment."""
         self._closed = True
