@@ -272,9 +272,12 @@ class SILI:
         if self._task_env is None or self._done == 0:
             return  # built from the run's record, or recorded from the instance itself
         if not same_task_arguments(self._task_env, self.cfg.env_kwargs):
+            from sili_robots.tasks.registry import title_arguments
+
             given = task_kwargs_of(self._task_env)
+            own = title_arguments(self.cfg.task_id or self.cfg.task, self.cfg.env_kwargs)
             raise ConfigError(
-                f"the run in {self.run_dir} was trained with {self.cfg.env_kwargs}; env, built "
+                f"the run in {self.run_dir} was trained with {own}; env, built "
                 f"with {given}, can play it but not train it (the run records one task): "
                 "load it without env, or with an instance built as the run says"
             )

@@ -567,6 +567,20 @@ def test_what_a_run_cannot_record_or_train_on_is_refused(tmp_path):
     assert len((run / "metrics.csv").read_text().splitlines()) == 1 + 2
 
 
+def test_a_sawyer_run_played_with_another_controller_names_its_own_when_it_refuses_to_train(
+    tmp_path,
+):
+    """As ``sili eval``'s ``trained_with``: the controller the run used, given or not."""
+    run = tmp_path / "run"
+    SILI("sawyer-reach", method="sac", settings=FAST_AGENT, run_dir=run).learn(1)
+    other = SILI.load(run, env=make_task("sawyer-reach", controller="joint_velocity"))
+    try:
+        with pytest.raises(ConfigError, match=r"was trained with \{'controller': 'mink'\}; env"):
+            other.learn(1)
+    finally:
+        other.close()
+
+
 def test_predict_env_and_learn_as_a_user_of_numpy_and_torch_expects(tmp_path):
     import torch
 
