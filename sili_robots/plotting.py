@@ -85,6 +85,9 @@ CURVE_METRICS = (
     ("stability_reward", "stability term, before b\n(−latent change, or −flagged steps)"),
 )
 
+#: what an empty stability-term panel says: it is no curve at 0, there is none to draw
+NO_STABILITY_TERM = "no method here learns a latent strategy:\nno stability term to draw"
+
 #: metrics with a range: their seed band is clipped to it (a mean +- std of a fraction can
 #: leave it, which would draw a stability above 1, or a stability term, -d <= 0, above 0)
 METRIC_RANGES = {"true_stability": (0.0, 1.0), "stability_reward": (-np.inf, 0.0)}
@@ -188,6 +191,8 @@ def _draw_curves(
     task_ids = bound_ids(task_rows, str(task_rows["task"].iloc[0]))
     mixed = (task_rows["task_args"] != "").any()  # the bounds hold for some curves only
     for ax, (metric, ylabel) in zip(axes, metrics, strict=True):
+        if metric == "stability_reward" and (task_rows["latent"] == "none").all():
+            ax.text(0.5, 0.5, NO_STABILITY_TERM, transform=ax.transAxes, ha="center", color="0.4")
         draw_bounds(ax, metric, task_ids, " [default task args]" if mixed else "")
         ax.set_ylabel(ylabel)
         ax.set_xlabel("interaction")

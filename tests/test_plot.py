@@ -14,7 +14,13 @@ from matplotlib.colors import to_rgb
 
 from sili_robots.cli import main
 from sili_robots.plot_data import b_sweep_rows, default_smoothing, load_results
-from sili_robots.plotting import METHOD_COLORS, beta_sweep, learning_curves, overview
+from sili_robots.plotting import (
+    METHOD_COLORS,
+    NO_STABILITY_TERM,
+    beta_sweep,
+    learning_curves,
+    overview,
+)
 from sili_robots.sweep import LocalBackend, SweepSpec, run_sweep
 
 
@@ -269,9 +275,14 @@ def test_a_curve_of_one_interaction_is_drawn_as_a_point(tmp_path):
         task_args="",
         true_stability=float("nan"),
     )
-    ax = learning_curves(df, "circle-3").axes[0]
-    (line,) = [ln for ln in ax.get_lines() if ln.get_label() == "SAC"]
+    fig = learning_curves(df, "circle-3")
+    (line,) = [ln for ln in fig.axes[0].get_lines() if ln.get_label() == "SAC"]
     assert line.get_marker() == "o"  # a line of one point draws nothing
+    # SAC has no stability term: its panel says so rather than stand empty
+    panel = {a.get_gid(): a for a in fig.axes}["stability_reward"]
+    assert [t.get_text() for t in panel.texts] == [NO_STABILITY_TERM]
+    reward = {a.get_gid(): a for a in fig.axes}["task_reward"]
+    assert not panel.get_lines() and NO_STABILITY_TERM not in [t.get_text() for t in reward.texts]
 
 
 def test_unfinished_runs_are_left_out_unless_asked(sweep_dir, tmp_path, capsys):
