@@ -72,7 +72,7 @@ from sili_robots.runs import read_config as read_run_config
 from sili_robots.stopping import HeldStops
 from sili_robots.sweep.state import check_not_in_a_sweep, check_not_trained, training_claim
 from sili_robots.tasks import RepeatedInteractionEnv
-from sili_robots.tasks.registry import check_argument_names, is_class_path
+from sili_robots.tasks.registry import check_argument_names, is_class_path, title_arguments
 from sili_robots.training import resume, train
 
 
@@ -272,8 +272,6 @@ class SILI:
         if self._task_env is None or self._done == 0:
             return  # built from the run's record, or recorded from the instance itself
         if not same_task_arguments(self._task_env, self.cfg.env_kwargs):
-            from sili_robots.tasks.registry import title_arguments
-
             given = task_kwargs_of(self._task_env)
             own = title_arguments(self.cfg.task_id or self.cfg.task, self.cfg.env_kwargs)
             raise ConfigError(

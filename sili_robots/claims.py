@@ -158,11 +158,15 @@ def _reward_and_stability(rows: pd.DataFrame) -> str:
     return f"reward {_mean(rows, 'task_reward'):.2f}, stability {_mean(rows, 'stability'):.2f}"
 
 
+#: how a claim's verdict begins while the grid's runs at its budget are missing
+BELOW_BUDGET = "not measured yet (runs at the grid's budget"
+
+
 def _missing(have: dict[str, pd.DataFrame], want: dict[str, int]) -> str | None:
     parts = [f"{m} {len(have[m])}/{n}" for m, n in want.items() if len(have[m]) != n]
     if not parts:
         return None
-    return f"not measured yet (runs at the grid's budget: {', '.join(parts)})"
+    return f"{BELOW_BUDGET}: {', '.join(parts)})"
 
 
 #: each method's block in the grid (SILI: its task's registered profile, ``_sili_runs``)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 from collections.abc import Collection
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
@@ -45,9 +46,10 @@ def load_results(sweep_dir: Path, include_unfinished: bool = False) -> pd.DataFr
             f"{sweep_dir} holds no runs (no {SWEEP_FILE} and no runs/*/config.json); give a "
             "directory written by `sili sweep --out` or `sili collect`"
         )
-    left_out = df.loc[~df["finished"].astype(bool), ["run", "task"]].drop_duplicates()
+    finished = df["finished"].astype(bool)
+    left_out = df.loc[~finished, ["run", "task"]].drop_duplicates()
     if not include_unfinished:
-        df = df[df["finished"].astype(bool)]
+        df = df[finished]
     if df.empty:
         raise ConfigError(
             f"{sweep_dir} has no finished runs yet (`sili runs` shows how far they are; sili "
@@ -136,7 +138,7 @@ def arguments_label(task_args: str) -> str:
     on its own), ``""`` for none."""
     args = json.loads(task_args) if task_args else {}
     args.pop("controller", None)
-    return f" [{', '.join(f'{k}={v}' for k, v in sorted(args.items()))}]" if args else ""
+    return f" [{_listed(args)}]" if args else ""
 
 
 def shared_arguments(rows: pd.DataFrame) -> str:
@@ -146,7 +148,12 @@ def shared_arguments(rows: pd.DataFrame) -> str:
     given = rows["task_args"].unique()
     if len(given) != 1 or not given[0]:
         return ""
-    return f" ({', '.join(f'{k}={v}' for k, v in sorted(json.loads(given[0]).items()))})"
+    return f" ({_listed(json.loads(given[0]))})"
+
+
+def _listed(task_args: dict[str, Any]) -> str:
+    """``controller=osc, horizon=20``: task arguments in name order."""
+    return ", ".join(f"{k}={v}" for k, v in sorted(task_args.items()))
 
 
 def default_smoothing(n_interactions: int) -> int:

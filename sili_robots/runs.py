@@ -483,6 +483,12 @@ def run_differences(
     return [d for d in differences(_as_built(a), _as_built(b)) if d[0] not in ignoring]
 
 
+def shown_value(key: str, value: Any) -> str:
+    """A value of ``run_differences`` as a message names it: a task argument a run was not
+    given is its version's default (recorded as nothing, not None)."""
+    return "its default" if value is None and key.startswith("env_kwargs.") else repr(value)
+
+
 def _as_built(run: dict[str, Any]) -> dict[str, Any]:
     kwargs, task = run.get("env_kwargs"), run.get("task")
     if not (isinstance(kwargs, dict) and kwargs and isinstance(task, str)):

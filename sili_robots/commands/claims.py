@@ -34,7 +34,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from sili_robots.claims import claims_table, markdown, other_dynamics
+    from sili_robots.claims import BELOW_BUDGET, claims_table, markdown, other_dynamics
     from sili_robots.plot_data import load_results
 
     if args.write is not None:
@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
         )
     if args.write is not None:
         _check_keeps_measured(args.write, claims, args.directory)
-    elif all(c.verdict.startswith("not measured yet (runs at the grid's") for c in claims):
+    elif all(c.verdict.startswith(BELOW_BUDGET) for c in claims):
         print(
             f"sili claims: note: {args.directory} measures none of the claims: each judges only "
             "runs finished at the grid's budget (`sili grid --dry-run` lists its runs)",

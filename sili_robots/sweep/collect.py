@@ -36,6 +36,7 @@ from sili_robots.runs import (
     read_json,
     recorded_run,
     run_differences,
+    shown_value,
 )
 from sili_robots.sweep.results import (
     check_none_damaged,
@@ -192,7 +193,8 @@ def _sound(run_dir: Path, length: int) -> bool:
 
 
 def _check_same_run(name: str, there: Path, ident: dict, run_dir: Path, mine: dict) -> None:
-    diffs = [f"{k}: {a!r} there, {b!r} here" for k, a, b in run_differences(ident, mine)]
+    found = run_differences(ident, mine)
+    diffs = [f"{k}: {shown_value(k, a)} there, {shown_value(k, b)} here" for k, a, b in found]
     if diffs:
         more = f" and {len(diffs) - 3} more" if len(diffs) > 3 else ""
         raise ConfigError(

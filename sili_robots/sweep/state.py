@@ -42,6 +42,7 @@ from sili_robots.runs import (
     read_json,
     recorded_run,
     run_differences,
+    shown_value,
 )
 from sili_robots.sweep.spec import PlannedRun, SweepSpec, expand
 
@@ -264,12 +265,6 @@ def _summed_short(run_dir: Path) -> bool:
     return False
 
 
-def _recorded(key: str, value: object) -> str:
-    """A recorded setting as a difference names it; a task argument a run was not given is its
-    version's default (recorded as nothing, not None)."""
-    return "its default" if value is None and key.startswith("env_kwargs.") else repr(value)
-
-
 def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
     """An existing run directory must hold the same run (else resuming it would mix two); how
     often it is saved may differ (it changes no number the run logs, as ``collect`` holds)."""
@@ -279,7 +274,7 @@ def check_existing(sweep_dir: Path, planned: PlannedRun) -> None:
     on_disk = recorded_run(path)
     planned_dict = json.loads(json.dumps(planned.config.to_dict()))
     found = run_differences(on_disk, planned_dict, ("checkpoint_every",))
-    diffs = [f"{k}: {_recorded(k, a)} on disk, {_recorded(k, b)} now" for k, a, b in found]
+    diffs = [f"{k}: {shown_value(k, a)} on disk, {shown_value(k, b)} now" for k, a, b in found]
     held, asked = on_disk.get("interactions"), planned.config.interactions
     only_length = len(diffs) == 1 and isinstance(held, int)
     a_sweep = (Path(sweep_dir) / SWEEP_FILE).is_file()  # a collection has no record to resume
