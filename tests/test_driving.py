@@ -18,6 +18,7 @@ from sili_robots.tasks.driving import (
     CENTRE,
     LEFT,
     MAX_LATERAL_OFFSET,
+    MIN_HORIZON,
     RIGHT,
     DrivingEnv,
     lane_of,
@@ -129,6 +130,15 @@ def test_centre_policy_hits_opponent_and_hazard(env):
     for _, total, partners, _ in runs:
         assert total == -1.0  # one collision per interaction at most is what the reward counts
         assert partners == ("hazard", "opponent")
+
+
+def test_the_shortest_horizon_is_the_first_in_which_the_cars_meet(make_env):
+    """Below ``MIN_HORIZON`` the ego never reaches the opponent: refused, it would score 0."""
+    env = make_env(horizon=MIN_HORIZON)
+    env.reset(seed=0)
+    rewards = [env.step(np.zeros(1, np.float32))[1] for _ in range(MIN_HORIZON)]
+    assert rewards == [0.0] * (MIN_HORIZON - 1) + [-1.0]  # met in the last step, not before
+    assert env.collision_partners == {"opponent"} and env.passed
 
 
 def test_red_line_rule(env):
@@ -264,8 +274,8 @@ def test_a_failed_start_keeps_what_the_next_strategy_is_drawn_from(env, monkeypa
 
 
 def test_bad_arguments_are_named(env):
-    for horizon in (31, 0, 2.5, True):  # one range named, not every task's [1, 10000]
-        with pytest.raises(ConfigError, match=rf"integer from 1 to 30.*got {horizon!r}$"):
+    for horizon in (31, 5, 0, 2.5, True):  # one range named, not every task's [1, 10000]
+        with pytest.raises(ConfigError, match=rf"integer from 6 \(.*\) to 30.*got {horizon!r}$"):
             DrivingEnv(horizon=horizon)
     with pytest.raises(ConfigError, match=r"unknown SUMO backend 'sumo'; allowed: libsumo, traci"):
         DrivingEnv(backend="sumo")

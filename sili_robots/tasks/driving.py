@@ -4,7 +4,8 @@ SUMO simulates a straight three-lane road (lanes 3.2 m wide, 0 = right .. 2 = le
 sublane model, so lateral positions are continuous. Both cars start in the centre lane: the ego
 at 50 m driving 20 m/s, the opponent 60 m ahead at 10 m/s; a stopped hazard blocks the centre
 lane at 230-235 m, so both must leave it. Forward speeds are fixed (speed mode 0: SUMO's car
-following never brakes for anyone). One decision step is 1 s (10 SUMO steps of 0.1 s); H = 10.
+following never brakes for anyone). One decision step is 1 s (10 SUMO steps of 0.1 s); H = 10
+(6 to 30: the ego reaches the opponent in step 6, and the road ends after 30).
 
 - Action: lateral velocity in [-1, 1], times 2 m/s (positive = left), applied every SUMO step
   with ``vehicle.changeSublane``; the ego is kept on the road (|offset| <= 3.9 m).
@@ -60,6 +61,9 @@ RED_LINE = 40.0  # metres past the ego's start: crossed at the end of decision s
 REACTION_GAP = 8.0  # the opponent cuts in when the ego's front is this close behind its front
 POSITION_SCALE = 100.0  # observation x unit (m)
 MAX_HORIZON = 30  # the road is long enough for 30 decision steps
+#: the ego reaches the opponent in decision step 6 (a 60 m gap closing at 10 m/s): in a shorter
+#: interaction it never meets it, so every policy scores 0 and nothing is learned
+MIN_HORIZON = 6
 RIGHT, CENTRE, LEFT = 0, sc.CENTRE_LANE, 2
 TARGET_LANES = (RIGHT, LEFT)  # the opponent's possible strategies
 
@@ -100,11 +104,12 @@ class DrivingEnv(RepeatedInteractionEnv):
         backend: str = "libsumo",
     ) -> None:
         try:  # the base class checks against every task's longest, not this road's
-            check_count("horizon", horizon, 1, MAX_HORIZON)
+            check_count("horizon", horizon, MIN_HORIZON, MAX_HORIZON)
         except ConfigError:
             raise ConfigError(
-                f"horizon must be an integer from 1 to {MAX_HORIZON} for Driving (the road "
-                f"ends), got {horizon!r}"
+                f"horizon must be an integer from {MIN_HORIZON} (the step in which the ego "
+                f"reaches the opponent) to {MAX_HORIZON} (the road ends) for Driving, got "
+                f"{horizon!r}"
             ) from None
         self.target_lane = LEFT
         self.ego_x = self.ego_y = self.opp_x = self.opp_y = 0.0  # metres, see _read_positions
