@@ -171,13 +171,19 @@ def _draw_curves(
     window: int,
     profiled: Collection[str] | None = None,
     palette: dict[Hashable, object] | None = None,
+    name_fewer_seeds: bool = False,
 ) -> None:
     """``profiled`` and ``palette`` (label -> colour, ``_label_palette``) keep one label and one
-    colour per variant across the rows of a multi-task figure."""
+    colour per variant across the rows of a multi-task figure; ``name_fewer_seeds`` labels a
+    curve averaging fewer seeds than the most with its count (a title says only "1-3 seeds")."""
     colors = _colors(_variant_order(task_rows))
     palette = {} if palette is None else palette
+    most = task_rows.groupby(list(CURVE_KEYS), dropna=False)["seed"].nunique().max()
     for variant, label, rows in _labelled_variants(task_rows, profiled):
         color = palette.setdefault(label, colors[variant])
+        seeds = rows["seed"].nunique()
+        if name_fewer_seeds and seeds < most:
+            label = f"{label} ({seeds} seed{'s' if seeds > 1 else ''})"
         style = "--" if variant[0] == "oracle" else "-"
         for ax, (metric, _) in zip(axes, metrics, strict=True):
             if metric == "stability_reward" and variant[LATENT_KEY] == "none":
@@ -228,7 +234,7 @@ def learning_curves(df: pd.DataFrame, task: str, smooth: int | None = None) -> F
     window = smooth or default_smoothing(int(rows["interaction"].max()) + 1)
     fig = Figure(figsize=(14, 4.0), layout="constrained")
     axes = fig.subplots(1, len(CURVE_METRICS), sharex=True)
-    _draw_curves(axes, rows, CURVE_METRICS, window)
+    _draw_curves(axes, rows, CURVE_METRICS, window, name_fewer_seeds=True)
     ids = ", ".join(bound_ids(rows, task))
     if ids and (rows["task_args"] != "").any():
         ids += " (its default task arguments)"

@@ -219,9 +219,12 @@ def test_runs_of_other_settings_are_curves_of_their_own_not_seeds(sweep_dir, tmp
     fig = learning_curves(load_results(copy), "circle-3")
     ax = next(ax for ax in fig.axes if ax.get_gid() == "task_reward")
     sac = sorted(ln.get_label() for ln in ax.get_lines() if ln.get_label().startswith("SAC"))
-    assert sac == [f"SAC [agent.hidden={hidden}]", f"SAC [agent.hidden={hidden + 1}]"]
-    assert "over 1-2 seeds" in fig.get_suptitle()  # SAC's curves have one seed each
-    assert [ln.get_label() for ln in ax.get_lines()].count("SILI b=0.5") == 1  # the others: one
+    assert sac == [
+        f"SAC [agent.hidden={hidden}] (1 seed)",
+        f"SAC [agent.hidden={hidden + 1}] (1 seed)",
+    ]
+    assert "over 1-2 seeds" in fig.get_suptitle()  # SAC's curves have one seed each: named
+    assert [ln.get_label() for ln in ax.get_lines()].count("SILI b=0.5") == 1  # the others: two
 
 
 def test_b_sweep_runs_of_other_settings_are_lines_of_their_own_not_seeds(sweep_dir, tmp_path):
@@ -291,7 +294,7 @@ def test_unfinished_runs_are_left_out_unless_asked(sweep_dir, tmp_path, capsys):
     (copy / "runs" / "circle-3__sac__s1" / "summary.json").unlink()
     df = load_results(copy)
     assert "circle-3__sac__s1" not in set(df["run"])
-    xy = _line(learning_curves(df, "circle-3", smooth=1).axes[0], "SAC").get_xydata()
+    xy = _line(learning_curves(df, "circle-3", smooth=1).axes[0], "SAC (1 seed)").get_xydata()
     only_s0 = df[df.run == "circle-3__sac__s0"].sort_values("interaction")["task_reward"]
     np.testing.assert_allclose(xy[:, 1], only_s0)
     assert "circle-3__sac__s1" in set(load_results(copy, include_unfinished=True)["run"])
