@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import os
 import stat
+import tempfile
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
@@ -68,3 +69,13 @@ def nearest_existing(path: Path) -> Path:
     while not base.exists() and base != base.parent:
         base = base.parent
     return base
+
+
+def check_can_write_in(path: Path) -> None:
+    """``OSError`` unless ``path``, or the nearest ancestor that exists (where a write would
+    create folders from), is a folder a file can be written in: asked before work is done for
+    the write, by writing nothing that stays."""
+    base = nearest_existing(path)
+    if not base.is_dir():
+        raise NotADirectoryError(0, f"{base} is a file")
+    tempfile.TemporaryFile(dir=base).close()

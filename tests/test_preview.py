@@ -6,7 +6,9 @@ import re
 import shutil
 import subprocess
 import sys
+import tempfile
 from collections.abc import Iterator
+from pathlib import Path
 
 import meshcat
 import meshcat.geometry as g
@@ -242,6 +244,19 @@ def test_an_output_under_a_file_or_that_is_a_folder_is_refused_before_the_rollou
     ):
         preview("circle-3", interactions=1, out=tmp_path / "p.html", png=5)
     assert (tmp_path / "afile").read_text() == "mine" and not (tmp_path / "p.html").exists()
+    locked = tmp_path / "locked"  # read-only (root writes anywhere: its refusal is made here)
+    locked.mkdir()
+    made = tempfile.TemporaryFile
+
+    def read_only(*a, dir=None, **kw):
+        if dir is not None and Path(dir) == locked:
+            raise PermissionError(13, "Permission denied")
+        return made(*a, dir=dir, **kw)
+
+    monkeypatch.setattr(tempfile, "TemporaryFile", read_only)
+    for out in (locked / "p.html", locked / "new" / "p.html"):  # found after the rollout before
+        with pytest.raises(ConfigError, match=re.escape(f"{out}: cannot write in {locked} (Perm")):
+            preview("circle-3", interactions=1, out=out)
 
 
 def test_write_html_never_replaces_a_users_file(tmp_path):

@@ -7,13 +7,12 @@ import functools
 import math
 import os
 import re
-import tempfile
 from pathlib import Path
 from typing import Any
 
 from sili_robots.agent.config import LARGEST_INT
 from sili_robots.agent.schedule import Schedule
-from sili_robots.atomic import nearest_existing
+from sili_robots.atomic import check_can_write_in
 from sili_robots.build import canonical_task, is_class_path
 from sili_robots.errors import MAX_SEED, ConfigError, check_seed
 from sili_robots.migrations import setting_path
@@ -65,11 +64,8 @@ def _check_can_create(path: Path, option: str, given: Path, what: str) -> None:
     """ConfigError naming ``given`` unless ``path`` (a directory) exists or can be created:
     the nearest existing ancestor must be a directory a file can be written in. Nothing is
     created, so input found bad later leaves no trace."""
-    base = nearest_existing(path)
     try:
-        if not base.is_dir():
-            raise NotADirectoryError(0, f"{base} is a file")
-        tempfile.TemporaryFile(dir=base).close()
+        check_can_write_in(path)
     except OSError as err:
         raise ConfigError(
             f"{option} {given}: cannot write there ({err.strerror or err}); give {what} that "

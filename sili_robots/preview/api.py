@@ -22,7 +22,7 @@ import gymnasium as gym
 import meshcat
 import numpy as np
 
-from sili_robots.atomic import nearest_existing, write_bytes
+from sili_robots.atomic import check_can_write_in, nearest_existing, write_bytes
 from sili_robots.errors import (
     ConfigError,
     check_choice,
@@ -382,6 +382,13 @@ def check_output(path: str | Path, option: str) -> Path:
     folder = nearest_existing(path.parent)
     if not folder.is_dir():  # checked before the rollout, not at the write after it
         raise ConfigError(f"{option} {path}: {folder} is a file, so no folder can be made there")
+    try:
+        check_can_write_in(folder)
+    except OSError as err:
+        raise ConfigError(
+            f"{option} {path}: cannot write in {folder} ({err.strerror or err}); give a file "
+            "name where one can be written"
+        ) from None
     return path
 
 
