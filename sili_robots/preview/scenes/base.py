@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TypeVar
 
 import meshcat
 import meshcat.transformations as tf
@@ -18,6 +18,9 @@ import numpy as np
 from meshcat.animation import Animation
 
 from sili_robots.preview.recording import Recording
+
+#: a frame index, or an array of them
+IntOrArray = TypeVar("IntOrArray", int, np.ndarray)
 
 #: scale used to hide an animated object (three.js dislikes an exact zero scale)
 HIDDEN = 1e-4
@@ -161,16 +164,16 @@ def animate_pose(
 def change_frames(values: np.ndarray) -> list[int]:
     """Frames where a value differs from its neighbour, plus the ends: enough keys for
     step changes under linear interpolation (the old value is held up to the frame before)."""
+    values = np.asarray(values, float)
     n = len(values)
     if n == 0:
         return []
-    keep = {0, n - 1}
-    for f in range(1, n):
-        if not np.allclose(values[f], values[f - 1]):
-            keep.update((f - 1, f))
-    return sorted(keep)
+    flat = values.reshape(n, -1)  # np.allclose(values[f], values[f - 1]) for all f at once
+    changed = np.flatnonzero(~np.isclose(flat[1:], flat[:-1]).all(axis=1)) + 1
+    return sorted({0, n - 1, *changed.tolist(), *(changed - 1).tolist()})
 
 
-def frame_of(rec: Recording, interaction: int, t: int) -> int:
-    """Frame index of step ``t`` of ``interaction`` (H + 1 frames per interaction)."""
+def frame_of(rec: Recording, interaction: IntOrArray, t: int) -> IntOrArray:
+    """Frame index of step ``t`` of ``interaction`` (H + 1 frames per interaction; an array of
+    interactions gives an array of frames)."""
     return interaction * (rec.horizon + 1) + t

@@ -71,25 +71,22 @@ def draw_trail(
 ) -> None:
     """H dots joined by strips; dot k sits where the ego was after step k of the current
     interaction, strip k joins it to step k - 1. Hidden until the ego gets there."""
+    interaction, t = rec.series("interaction"), rec.series("t")  # per frame
+    height = np.full((len(rec), 1), z)
     for k in range(1, rec.horizon + 1):
         dot, seg = vis[f"trail/dot{k:03d}"], vis[f"trail/seg{k:03d}"]
         dot.set_object(shapes.disc(TRAIL_RADIUS, 16), shapes.flat(TRAIL))
         seg.set_object(shapes.rectangle(1.0, TRAIL_WIDTH), shapes.flat(TRAIL))
-        where = np.empty((len(rec), 3))
-        mid = np.empty((len(rec), 3))
-        quat = np.empty((len(rec), 4))
-        length = np.empty(len(rec))
-        shown = np.zeros(len(rec), bool)
-        for f, fr in enumerate(rec.frames):
-            a = positions[frame_of(rec, fr["interaction"], k - 1)]
-            b = positions[frame_of(rec, fr["interaction"], k)]
-            where[f] = (*b, z)
-            mid[f] = (*(a + b) / 2, z)
-            d = b - a
-            half = math.atan2(d[1], d[0]) / 2
-            quat[f] = (0.0, 0.0, math.sin(half), math.cos(half))  # three.js order x y z w
-            length[f] = float(np.linalg.norm(d))
-            shown[f] = fr["t"] >= k
+        a = positions[frame_of(rec, interaction, k - 1)]  # where each frame's interaction was
+        b = positions[frame_of(rec, interaction, k)]  # before and after step k
+        where = np.hstack([b, height])
+        mid = np.hstack([(a + b) / 2, height])
+        d = b - a
+        half = np.arctan2(d[:, 1], d[:, 0]) / 2
+        zero = np.zeros(len(rec))
+        quat = np.column_stack([zero, zero, np.sin(half), np.cos(half)])  # three.js: x y z w
+        length = np.linalg.norm(d, axis=1)
+        shown = t >= k
         animate_position(anim, dot, where, steps=True)
         animate_visible(anim, dot, shown)
         animate_position(anim, seg, mid, steps=True)
