@@ -10,6 +10,7 @@ import tempfile
 from collections.abc import Iterator
 from pathlib import Path
 
+import gymnasium as gym
 import meshcat
 import meshcat.geometry as g
 import numpy as np
@@ -649,6 +650,37 @@ def test_cli_writes_html(tmp_path):
     again = ["preview", "circle-3", "--interactions", "1", "--out", str(tmp_path / "c.html")]
     assert main(again) == 0  # a preview replaces its own page (only)
     assert (tmp_path / "c.html").read_text() != html
+
+
+def test_a_preview_past_its_frame_limit_is_refused_before_the_rollout(
+    monkeypatch, capsys, tmp_path
+):
+    """``--interactions 100000000`` recorded silently into gigabytes for a page no browser plays."""
+    import sili_robots.preview.api as api
+
+    def began(*_args, **_kwargs):
+        raise AssertionError("the rollout began")
+
+    monkeypatch.setattr(api, "record_rollout", began)
+    assert api.MAX_FRAMES // 51 == 980  # Circle's H = 50: 51 frames an interaction
+    with pytest.raises(SystemExit):
+        main(["preview", "--help"])
+    assert f"at most {api.MAX_FRAMES:,} frames" in " ".join(capsys.readouterr().out.split())
+    out = str(tmp_path / "p.html")
+    assert main(["preview", "circle-3", "--interactions", "981", "--out", out]) == 2
+    err = capsys.readouterr().err
+    limit = "a preview animates at most 50000 frames, 980 interactions of H = 50; give fewer"
+    assert f"interactions 981: {limit}" in err and "Traceback" not in err
+    with make_task("circle-3") as env, pytest.raises(AssertionError, match="the rollout began"):
+        Preview.record(env, scripted_policy(env, "stabilizing"), 980)  # the most: allowed
+
+
+def test_a_preview_is_titled_by_its_tasks_name_when_none_is_given():
+    """It said ``CircleEnv`` (the class of every Circle variant), ``DrivingEnv``."""
+    for env, name in [(gym.make("sili/Circle8-v1"), "circle-8"), (make_task("driving"), "driving")]:
+        with env:
+            prev = Preview.record(env, lambda e, obs: e.action_space.sample() * 0, 1)
+        assert prev.recording.task == name and prev.scene.title(prev.recording).startswith(name)
 
 
 @pytest.fixture(scope="module")

@@ -26,6 +26,7 @@ from sili_robots.commands.common import (
     writable_file,
 )
 from sili_robots.errors import ConfigError
+from sili_robots.tasks.registry import TASKS
 
 if TYPE_CHECKING:
     from sili_robots.preview import Preview, PreviewResult
@@ -45,7 +46,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=functools.partial(
             registered_task, command="preview", why="draws the registered tasks' scenes"
         ),
-        help="task name, e.g. circle-3",
+        help=f"task name: {', '.join(TASKS)}; an earlier version by its own, e.g. circle-3-v0",
     )
     who = p.add_mutually_exclusive_group()
     who.add_argument(
@@ -57,7 +58,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "--checkpoint", type=path_arg, metavar="RUN_DIR", help="play the agent trained in RUN_DIR"
     )
     p.add_argument(
-        "--interactions", type=positive_int, default=3, help="interactions to record (default 3)"
+        "--interactions",
+        type=positive_int,
+        default=3,
+        help="interactions to record (default 3; at most 50,000 frames, H + 1 each)",
     )
     p.add_argument(
         "--seed",
@@ -66,7 +70,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "game it trained in",
     )
     p.add_argument(
-        "--out", type=path_arg, default="preview.html", help="HTML file to write (preview.html)"
+        "--out",
+        type=path_arg,
+        default="preview.html",
+        help="HTML file to write (preview.html): an earlier preview there is replaced, any other "
+        "file never",
     )
     p.add_argument(
         "--png",

@@ -57,6 +57,22 @@ class TeeWindow:
             w.send(command)
 
 
+#: the most frames a preview animates (H + 1 per interaction): about 35 MB of page, past which
+#: a browser plays it slowly and the recording holds gigabytes; ``sili rollout`` has no limit
+MAX_FRAMES = 50_000
+
+
+def task_name_of(env: gym.Env) -> str:
+    """The CLI name of ``env``'s task, for titles: by its gymnasium id (``gym.make``), else its
+    class's one name; a class of several names (Circle's variants) or none by the class."""
+    from sili_robots.tasks.registry import all_versions, current_names_of_class
+
+    made_as = getattr(env.spec, "id", None)
+    names = [s.name for s in all_versions() if s.gym_id == made_as]
+    names = names or current_names_of_class(type(env.unwrapped))
+    return names[0] if len(names) == 1 else type(env.unwrapped).__name__
+
+
 @dataclass
 class Preview:
     """A recorded rollout and its meshcat scene."""
@@ -90,13 +106,20 @@ class Preview:
                 f"policy must be a function policy(env, obs) -> action, got {policy!r}"
             )
         scene = scene_for(env)
+        horizon = env.unwrapped.horizon
+        if interactions * (horizon + 1) > MAX_FRAMES:
+            raise ConfigError(
+                f"interactions {interactions}: a preview animates at most {MAX_FRAMES} frames, "
+                f"{MAX_FRAMES // (horizon + 1)} interactions of H = {horizon}; give fewer "
+                "(sili rollout plays any number, without a scene)"
+            )
         rec = record_rollout(
             env,
             policy,
             scene.snapshot,
             interactions,
             seed=seed,
-            task=task or type(env.unwrapped).__name__,
+            task=task or task_name_of(env),
             policy_name=policy_name,
             static=scene.static,
         )
