@@ -675,6 +675,14 @@ def test_a_preview_past_its_frame_limit_is_refused_before_the_rollout(
         Preview.record(env, scripted_policy(env, "stabilizing"), 980)  # the most: allowed
 
 
+def test_an_unknown_task_argument_is_named_as_the_preview_was_given_it():
+    """It named ``make_task``, a function the caller never called; gymnasium's own arguments
+    (``max_episode_steps``) would cut the interactions the scene draws H + 1 frames of."""
+    for given in ("foo", "max_episode_steps"):
+        with pytest.raises(ConfigError, match=rf"no argument {given} \(env_kwargs\); its arg"):
+            preview("circle-3", env_kwargs={given: 3}, out=None)
+
+
 def test_a_preview_is_titled_by_its_tasks_name_when_none_is_given():
     """It said ``CircleEnv`` (the class of every Circle variant), ``DrivingEnv``."""
     for env, name in [(gym.make("sili/Circle8-v1"), "circle-8"), (make_task("driving"), "driving")]:

@@ -192,11 +192,17 @@ def make_env_and_policy(
     policy trained with one controller, played with another; the horizon stays the run's)."""
     from sili_robots.policies import scripted_policy
     from sili_robots.tasks import make_task, task_spec
-    from sili_robots.tasks.registry import same_argument, task_defaults, title_arguments
+    from sili_robots.tasks.registry import (
+        check_argument_names,
+        same_argument,
+        task_defaults,
+        title_arguments,
+    )
 
     name = task_spec(task).name
     if env_kwargs is not None:
         env_kwargs = check_names("env_kwargs", env_kwargs)
+        check_argument_names(name, env_kwargs, "env_kwargs")  # gymnasium's own: no scene cuts
     if checkpoint is not None and policy is not None:
         raise ConfigError(
             f"policy {policy!r} and checkpoint {str(checkpoint)!r}: a preview plays one of them "
