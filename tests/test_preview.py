@@ -122,6 +122,7 @@ def test_speaker_listener_caption_says_whether_the_code_is_locked():
     assert prev.scene.caption(rec, 0).endswith(", unlocked); return so far 0.00")
     assert ", locked by a visit); return so far" in prev.scene.caption(rec, first_locked)
     assert "unlocked" not in prev.scene.caption(rec, first_locked)
+    assert re.search(r"\); return -?\d", prev.scene.caption(rec, rec.last))  # not "so far"
 
 
 def test_any_policy_callable_is_recorded():
@@ -622,7 +623,8 @@ def test_sawyer_caption_says_whether_the_gripper_is_above_the_height_plane():
     rec = prev.recording
     assert rec.series("ee")[0][2] < rec.static["plane_z"] < rec.series("ee")[-1][2]
     assert "gripper 0.90 m (below the plane)" in prev.scene.caption(rec, 0)
-    assert "(above the plane)" in prev.scene.caption(rec, rec.last)
+    end = prev.scene.caption(rec, rec.last)  # the game's end: no next goal, the return whole
+    assert "(above the plane)" in end and re.search(r"plane\); return -?\d", end), end
 
 
 def test_cli_writes_html(tmp_path):

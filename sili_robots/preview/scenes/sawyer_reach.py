@@ -139,11 +139,12 @@ class SawyerReachScene(TaskScene):
             f"interaction {fr['interaction'] + 1}/{rec.interactions}, step {fr['t']}/"
             f"{rec.horizon}: opponent's goal {fr['goal']}, gripper {z:.2f} m ({side} the plane)"
         )
-        if fr["t"] == rec.horizon and frame + 1 < len(rec):
+        if fr["t"] < rec.horizon:
+            return f"{head}; return so far {fr['interaction_return']:.2f}"
+        if frame + 1 < len(rec):  # the last interaction's next goal was never drawn
             moved = rec.frames[frame + 1]["goal"] != fr["goal"]
-            outcome = "moves" if moved else "stays"
-            return f"{head} → goal {outcome}; return {fr['interaction_return']:.2f}"
-        return f"{head}; return so far {fr['interaction_return']:.2f}"
+            head += f" → goal {'moves' if moved else 'stays'}"
+        return f"{head}; return {fr['interaction_return']:.2f}"
 
     def camera(self, rec: Recording) -> Camera:
         return Camera(position=(1.45, -1.25, 1.9), target=(-0.22, 0.0, 1.0), fov=45.0)

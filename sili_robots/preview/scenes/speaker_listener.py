@@ -133,7 +133,8 @@ class SpeakerListenerScene(TaskScene):
         return (
             f"interaction {fr['interaction'] + 1}/{rec.interactions}, step {fr['t']}/"
             f"{rec.horizon}: true goal {GOAL_NAMES[fr['goal']]}, speaker says {fr['message']} "
-            f"(code {code}, {state}); return so far {fr['interaction_return']:.2f}"
+            f"(code {code}, {state}); return{' so far' if fr['t'] < rec.horizon else ''} "
+            f"{fr['interaction_return']:.2f}"
         )
 
     def camera(self, rec: Recording) -> Camera:
