@@ -423,10 +423,15 @@ def test_cli_rejects_bad_input_with_exit_2(tmp_path, capsys):
         (["--policy", "greedy"], "invalid choice: 'greedy'"),
         (["--policy", "random", "--checkpoint", str(tmp_path)], "not allowed with argument"),
         (["--interactions", "0"], "need an integer >= 1"),
+        (["--size", "479x360"], "'479x360' is not a size: give WIDTHxHEIGHT, e.g. 1280x960, from"),
+        (["--size", "640x480x3"], "is not a size"),
     ]:
         with pytest.raises(SystemExit) as exc:
             main(["preview", "circle-3", *argv])
         assert exc.value.code == 2 and message in capsys.readouterr().err
+    for size in [(480, 359), (4097, 480), (640.0, 480), "640x480"]:  # before the rollout
+        with pytest.raises(ConfigError, match=re.escape(f"size {size!r}: give (width, height)")):
+            preview("circle-3", interactions=10**6, out=None, size=size)
     with pytest.raises(SystemExit):
         main(["preview", "circle-4"])
     assert "unknown task 'circle-4'" in capsys.readouterr().err

@@ -463,3 +463,17 @@ def test_a_picture_that_fails_its_checks_exits_1(monkeypatch, tmp_path):
                "--png", tmp_path / "p.png")  # fmt: skip
     assert "the picture failed its checks:" in res.stderr and "ego not seen" in res.stderr
     assert res.returncode == 1
+
+
+def test_a_picture_is_rendered_and_checked_at_the_size_asked_for(tmp_path, capsys):
+    """A figure for a paper needs more than 640 x 480; the smallest size allowed still leaves
+    Speaker-Listener's scene (the longest caption) in view."""
+    from sili_robots.cli import main
+
+    big = preview("circle-3", interactions=1, out=None, png=tmp_path / "big.png", size=(1280, 720))
+    assert Image.open(big.png).size == (1280, 720) and not big.rendered.problems()
+    small = tmp_path / "small.png"
+    args = ["preview", "speaker-listener", "--interactions", "1", "--out", str(tmp_path / "s.html")]
+    assert main([*args, "--png", str(small), "--size", "480x360"]) == 0
+    assert "picture check: ok" in capsys.readouterr().out
+    assert Image.open(small).size == (480, 360)

@@ -83,6 +83,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         help="also render the picture frame to this PNG: the last, or on Driving the last "
         "interaction's moment the ego draws level with the opponent",
     )
+    p.add_argument(
+        "--size",
+        type=size_arg,
+        default=(640, 480),
+        metavar="WIDTHxHEIGHT",
+        help="the PNG's size in pixels (default 640x480; from 480x360 to 4096x4096)",
+    )
     p.add_argument("--serve", action="store_true", help="serve live on 127.0.0.1 until Ctrl-C")
     add_task_args(p, only="; with --checkpoint: in place of the run's own")
     p.set_defaults(run=run)
@@ -132,11 +139,25 @@ def run(args: argparse.Namespace) -> int:
             serve=args.serve,
             on_ready=serving,
             env_kwargs=env_kwargs,
+            size=args.size,
         )
     except (BrowserError, ServerError) as err:
         print(f"sili preview: error: {err}", file=sys.stderr)
         return 1
     return reported[0] if reported else _report(result)
+
+
+def size_arg(text: str) -> tuple[int, int]:
+    """``WIDTHxHEIGHT``, e.g. 1280x960, in the range ``check_size`` allows."""
+    from sili_robots.preview.api import MAX_SIDE, MIN_SIZE, check_size
+
+    try:
+        return check_size(tuple(int(side) for side in text.lower().split("x")))
+    except (ValueError, ConfigError):
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a size: give WIDTHxHEIGHT, e.g. 1280x960, from "
+            f"{MIN_SIZE[0]}x{MIN_SIZE[1]} to {MAX_SIDE}x{MAX_SIDE}"
+        ) from None
 
 
 def _report(result: PreviewResult) -> int:

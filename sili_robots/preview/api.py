@@ -10,6 +10,7 @@ trained agent (``checkpoint=RUN_DIR``, through ``sili_robots.evaluation.policy_f
 
 from __future__ import annotations
 
+import numbers
 import operator
 import time
 import zlib
@@ -37,7 +38,7 @@ from sili_robots.preview.browser import Browser, find_chromium
 from sili_robots.preview.build import overlay, populate, world_point
 from sili_robots.preview.html import PREVIEW_MARK, SceneRecorder, scene_html, write_html
 from sili_robots.preview.recording import Recording, record_rollout
-from sili_robots.preview.render import Rendered, render_html
+from sili_robots.preview.render import HEIGHT, WIDTH, Rendered, render_html
 from sili_robots.preview.scenes import TaskScene, scene_for
 from sili_robots.preview.scenes.base import Marker
 
@@ -166,11 +167,13 @@ class Preview:
         frame: int | None = None,
         browser: Browser | None = None,
         evaluate: str | None = None,
+        size: tuple[int, int] = (WIDTH, HEIGHT),
     ) -> Rendered:
-        """Screenshot ``frame`` (default: the scene's picture frame) of the written HTML and
-        check it."""
+        """Screenshot ``frame`` (default: the scene's picture frame) of the written HTML at
+        ``size`` (width, height in pixels) and check it."""
         f = self.frame(frame)
-        return render_html(html_path, f, self.markers(f), browser=browser, evaluate=evaluate)
+        width, height = check_size(size)
+        return render_html(html_path, f, self.markers(f), browser, width, height, evaluate=evaluate)
 
     def render_live(
         self, url: str, frame: int | None = None, browser: Browser | None = None
@@ -304,8 +307,10 @@ def preview(
     serve_seconds: float | None = None,
     on_ready: Callable[[PreviewResult], None] | None = None,
     env_kwargs: dict[str, Any] | None = None,
+    size: tuple[int, int] = (WIDTH, HEIGHT),
 ) -> PreviewResult:
-    """Record ``interactions`` interactions of ``task`` and write/render/serve the preview.
+    """Record ``interactions`` interactions of ``task`` and write/render/serve the preview;
+    ``size``: the picture's (width, height) in pixels.
 
     ``seed``: the game's (default 0); none with ``checkpoint``, whose agent goes on with the
     game it trained in. ``png`` renders the scene's picture frame (the last; on Driving the last
@@ -328,6 +333,7 @@ def preview(
         raise ConfigError(f"serve_seconds must be a number >= 0 (or None), got {serve_seconds!r}")
     out = None if out is None else check_output(out, "out")  # "~" expanded, as written
     png = None if png is None else check_output(png, "png")
+    size = check_size(size)
     if png is not None:
         find_chromium()  # before the recording: a missing browser is told before any work
     seconds: dict[str, float] = {}
@@ -356,7 +362,7 @@ def preview(
             seconds["html"] = time.perf_counter() - t1
         if png is not None:
             t2 = time.perf_counter()
-            result.rendered = prev.render(result.html)
+            result.rendered = prev.render(result.html, size=size)
             result.png = Path(png)
             result.png.parent.mkdir(parents=True, exist_ok=True)
             write_bytes(result.png, marked_png(result.rendered.png))
@@ -388,6 +394,27 @@ def marked_png(png: bytes) -> bytes:
     chunk = b"tEXt" + PNG_MARK
     mark = len(PNG_MARK).to_bytes(4, "big") + chunk + zlib.crc32(chunk).to_bytes(4, "big")
     return png[:PNG_HEADER] + mark + png[PNG_HEADER:]
+
+
+#: the smallest picture (width, height) whose title, caption and legend leave the scene in view
+#: (Speaker-Listener's long caption covered a 400 x 300 one), and the largest side rendered
+MIN_SIZE, MAX_SIDE = (480, 360), 4096
+
+
+def check_size(size: Any, option: str = "size") -> tuple[int, int]:
+    """``size`` as (width, height) in pixels, from ``MIN_SIZE`` to ``MAX_SIDE`` a side."""
+    ok = isinstance(size, tuple | list) and len(size) == 2
+    sides = zip(size, MIN_SIZE, strict=True) if ok else ()
+    if not (ok and all(_is_int(v) and lo <= v <= MAX_SIDE for v, lo in sides)):
+        raise ConfigError(
+            f"{option} {size!r}: give (width, height) in pixels, width from {MIN_SIZE[0]} and "
+            f"height from {MIN_SIZE[1]}, each up to {MAX_SIDE}"
+        )
+    return int(size[0]), int(size[1])
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
 
 
 def check_output(path: str | Path, option: str) -> Path:
