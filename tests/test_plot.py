@@ -1,6 +1,7 @@
 """``sili plot``: the figures show exactly the sweep's results table (read back from the figure
 objects), and the command writes readable PNG and PDF files."""
 
+import inspect
 import json
 import shutil
 from pathlib import Path
@@ -205,6 +206,31 @@ def test_plot_window_sets_the_b_sweeps_final_window(sweep_dir, tmp_path, capsys,
     assert main([*args, str(tmp_path / "b"), "--window", "2"]) == 0
     capsys.readouterr()
     assert windows == [100, 2]
+
+
+def test_plot_smooth_sets_every_curves_window(sweep_dir, tmp_path, capsys, monkeypatch):
+    """`sili plot --smooth N` smooths the learning curves and the overview over N interactions
+    (by default a window that suits the run's length)."""
+    from sili_robots import plotting
+
+    asked = []
+
+    def spy(real):
+        def called(*args, **kwargs):
+            smooth = inspect.signature(real).bind(*args, **kwargs).arguments.get("smooth")
+            asked.append((real.__name__, smooth))
+            return real(*args, **kwargs)
+
+        return called
+
+    for name in ("learning_curves", "overview"):
+        monkeypatch.setattr(plotting, name, spy(getattr(plotting, name)))
+    args = ["plot", str(sweep_dir), "--formats", "png", "--out"]
+    assert main([*args, str(tmp_path / "a"), "--tasks", "circle-3"]) == 0
+    assert main([*args, str(tmp_path / "b"), "--smooth", "3"]) == 0
+    capsys.readouterr()
+    assert asked[0] == ("learning_curves", None) and len(asked) > 2  # then every figure's
+    assert set(asked[1:]) == {("learning_curves", 3), ("overview", 3)}, asked
 
 
 def test_runs_of_other_settings_are_curves_of_their_own_not_seeds(sweep_dir, tmp_path):
