@@ -178,6 +178,8 @@ def test_plot_tasks_draws_only_their_figures(sweep_dir, tmp_path, capsys):
     assert "task 'driving' has no runs in" in err and "its tasks: circle-3, speaker-listener" in err
     assert main([*args, "--tasks", ","]) == 2
     assert "--tasks ',' names none" in capsys.readouterr().err
+    assert main([*args, "--tasks", "sili/SpeakerListener-v1"]) == 0  # its gymnasium id, the same
+    assert capsys.readouterr().out.split() == [str(out / "speaker-listener.png")]
 
 
 def test_a_format_named_twice_is_written_and_listed_once(sweep_dir, tmp_path, capsys):

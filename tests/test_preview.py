@@ -818,3 +818,52 @@ def test_a_preview_writes_where_its_tilde_path_names_and_checks_that_file(tmp_pa
     assert result.html == tmp_path / "home" / "p.html" and result.html.is_file()
     assert result.png == tmp_path / "home" / "p.png" and result.png.is_file()
     assert not (tmp_path / "~").exists()
+
+
+def test_a_previews_picture_mark_keeps_the_png_valid(tmp_path):
+    """The mark that lets a later preview replace its own picture goes after the IHDR chunk,
+    which a PNG must begin with: decoders that check (matplotlib's) refused it before."""
+    import io
+
+    import matplotlib.image as mpimg
+    from PIL import Image
+
+    from sili_robots.preview.api import PNG_MARK, check_output, marked_png
+
+    plain = io.BytesIO()
+    Image.new("RGB", (7, 5), (10, 200, 30)).save(plain, format="PNG")
+    marked = marked_png(plain.getvalue())
+    assert marked[12:16] == b"IHDR" and b"tEXt" + PNG_MARK in marked
+    pixels = mpimg.imread(io.BytesIO(marked), format="png")
+    assert pixels.shape == (5, 7, 3) and np.allclose(pixels[0, 0], np.array([10, 200, 30]) / 255)
+    (tmp_path / "mine.png").write_bytes(plain.getvalue())
+    (tmp_path / "ours.png").write_bytes(marked)
+    assert check_output(tmp_path / "ours.png", "png") == tmp_path / "ours.png"  # replaceable
+    with pytest.raises(ConfigError, match="exists and is not a preview"):
+        check_output(tmp_path / "mine.png", "png")
+
+
+def test_a_preview_closes_the_task_it_built_whether_or_not_it_succeeds(tmp_path, monkeypatch):
+    """Left open, a Driving preview would hold the process's one libsumo simulation."""
+    import sili_robots.preview.api as api
+
+    closed = []
+    real = api.make_env_and_policy
+
+    def counted(*args, **kwargs):
+        name, env, policy, label = real(*args, **kwargs)
+        close = env.close
+        monkeypatch.setattr(env, "close", lambda: closed.append(name) or close(), raising=False)
+        return name, env, policy, label
+
+    monkeypatch.setattr(api, "make_env_and_policy", counted)
+    preview("circle-3", interactions=1, out=tmp_path / "p.html")
+    assert closed == ["circle-3"]
+
+    def fails(*_args, **_kwargs):
+        raise RuntimeError("recording failed")
+
+    monkeypatch.setattr(Preview, "record", fails)
+    with pytest.raises(RuntimeError, match="recording failed"):
+        preview("circle-8", interactions=1, out=tmp_path / "q.html")
+    assert closed == ["circle-3", "circle-8"]

@@ -1621,3 +1621,16 @@ def test_a_run_whose_runs_folder_is_yet_to_be_made_is_in_no_sweep(tmp_path):
 
     check_not_in_a_sweep(tmp_path / "runs" / "first", "--out")
     assert not (tmp_path / "runs").exists()
+
+
+def test_starting_the_workers_leaves_the_callers_thread_settings(monkeypatch):
+    """The forkserver starts under one-thread settings (each worker trains on one core); a
+    script that runs a sweep and then trains in-process must keep its own."""
+    from sili_robots.sweep.worker import THREAD_ENV
+
+    unset, own = THREAD_ENV[0], THREAD_ENV[1]
+    monkeypatch.delenv(unset, raising=False)
+    monkeypatch.setenv(own, "3")
+    backend = LocalBackend(workers=1, start_method="forkserver")
+    backend._ensure_forkserver()
+    assert unset not in os.environ and os.environ[own] == "3"
