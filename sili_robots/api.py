@@ -75,6 +75,9 @@ from sili_robots.tasks import RepeatedInteractionEnv
 from sili_robots.tasks.registry import check_argument_names, is_class_path, title_arguments
 from sili_robots.training import resume, train
 
+#: what makes a run the one a model loaded, besides its ``agent`` and ``addons`` settings
+SAME_RUN = ("task_id", "method", "seed", "env_kwargs")
+
 
 class SILI:
     """SILI or one of its baselines (``method``) on one task.
@@ -179,11 +182,15 @@ class SILI:
         self._done = 0 if state is None else int(state["interaction"])
         self._loaded = None if state is None else _stamp(self.run_dir)
 
-    def _reload(self) -> None:
-        """The model as its run's last checkpoint (ConfigError saying why when there is none)."""
+    def _reload(self, same_run: bool = False) -> None:
+        """The model as its run's last checkpoint (ConfigError saying why when there is none);
+        ``same_run``: refused if the folder now holds another run (``_check_same_run``)."""
         state = require_checkpoint(self.run_dir)
+        cfg = read_run_config(self.run_dir)
+        if same_run:
+            self._check_same_run(cfg, int(state["interaction"]))
         self.close()
-        self.cfg = read_run_config(self.run_dir)
+        self.cfg = cfg
         self._setup(state)
 
     def _refresh(self) -> None:
@@ -192,7 +199,22 @@ class SILI:
         global random state stays the caller's (reloading sets the checkpoint's)."""
         if self._done and _stamp(self.run_dir) != self._loaded:
             with torch.random.fork_rng(devices=[]):
-                self._reload()
+                self._reload(same_run=True)
+
+    def _check_same_run(self, cfg: RunConfig, interaction: int) -> None:
+        """A run made anew in this model's folder (``overwrite=True``, ``sili train
+        --overwrite``) is not the model's to go on with: it would become another method's, or
+        count from fewer interactions, without a word."""
+        mine, theirs = self.cfg.to_dict(), cfg.to_dict()
+        why = [f"{k} {theirs[k]!r}, not {mine[k]!r}" for k in SAME_RUN if mine[k] != theirs[k]]
+        why += [f"other {k} settings" for k in ("agent", "addons") if mine[k] != theirs[k]]
+        if interaction < self._done:
+            why.append(f"{interaction} trained, not {self._done} or more")
+        if why:
+            raise ConfigError(
+                f"the run in {self.run_dir} was replaced since this model loaded it "
+                f"({'; '.join(why)}): SILI.load({str(self.run_dir)!r}) takes up the new one"
+            )
 
     @classmethod
     def load(cls, path: str | Path, env: gym.Env | None = None) -> SILI:
@@ -339,13 +361,18 @@ class SILI:
     def _copy_to(self, path: Path, overwrite: bool) -> None:
         if path.exists() and not path.is_dir():
             raise ConfigError(f"cannot save to {path}: it is a file; give a directory")
+        if self.run_dir.resolve() in path.resolve().parents:  # a temporary run's: removed with it
+            raise ConfigError(
+                f"cannot save to {path}: it is inside the model's own run, {self.run_dir}; give "
+                "a directory outside it"
+            )
         if path.resolve() != self.run_dir.resolve():
             # its own earlier save, as it left it (not since replaced or trained on by another)
             replace = overwrite or self._saved.get(path.resolve()) == _stamp(path)
             check_new_run_dir(
                 path,
                 replace,
-                out="save a path",
+                out="save()",
                 replace="save(path, overwrite=True)",
                 resume=f"SILI.load({str(path)!r})",
             )
@@ -389,9 +416,10 @@ class SILI:
 
     @property
     def trained_interactions(self) -> int:
-        """The interactions the model's checkpoint has trained (``config.interactions`` is the
-        target of the last ``learn``, which a Ctrl-C may have stopped short of)."""
-        self._refresh()
+        """The interactions the model holds have trained (``config.interactions`` is the target
+        of the last ``learn``, which a Ctrl-C may have stopped short of). Reading it changes
+        nothing: the run trained further elsewhere is taken up by the next ``learn``, ``save``
+        or ``evaluate``, as ``predict`` and ``model.env`` keep the model's until then."""
         return self._done
 
     def __copy__(self) -> NoReturn:
@@ -401,6 +429,11 @@ class SILI:
         )
 
     def __deepcopy__(self, memo: dict) -> NoReturn:
+        self.__copy__()
+
+    def __reduce_ex__(self, protocol: object) -> NoReturn:
+        """A pickled model is a copy too: unpickled, it shared the run (a temporary one was
+        removed with the first)."""
         self.__copy__()
 
 

@@ -7,6 +7,7 @@ so its latents and the opponent's strategy carry on where training left them.
 from __future__ import annotations
 
 import contextlib
+import warnings
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -93,6 +94,15 @@ class AgentFeedback(gym.Wrapper):
             goes_on = info["interaction"] == self._first_info.get("interaction", -2) + 1
             if not goes_on:  # another game (restart, strategy, seed, restore): no history
                 self.agent.begin_game(info)
+            elif self._steps and len(self._steps) < self.env.unwrapped.horizon:
+                warnings.warn(
+                    f"interaction {self._first_info['interaction']} ended after "
+                    f"{len(self._steps)} of its {self.env.unwrapped.horizon} steps (a TimeLimit "
+                    "or an early reset), so the agent's latent strategy does not follow it: "
+                    "the latent model encodes whole interactions; play them to the end, or "
+                    "give the task a shorter horizon=",
+                    stacklevel=2,
+                )
             elif len(self._steps) == self.env.unwrapped.horizon:
                 o = np.stack([self._first_obs, *[s[0] for s in self._steps]])
                 a = np.stack([s[1] for s in self._steps])

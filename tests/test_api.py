@@ -6,9 +6,11 @@ from __future__ import annotations
 import csv
 import gc
 import json
+import pickle
 import re
 import shutil
 import sys
+import warnings
 
 import numpy as np
 import pytest
@@ -545,6 +547,52 @@ def test_two_models_of_one_run_each_count_from_the_run_as_it_is(tmp_path):
     assert b.agent.buffer.n == 6 and b.cfg.interactions == 6
 
 
+def test_reading_a_models_count_changes_neither_it_nor_the_game_played_on_it(tmp_path):
+    """Read after another model trained the run, ``trained_interactions`` reloaded the agent
+    and reset the interaction being played on ``model.env``; ``learn`` still catches up."""
+    run = tmp_path / "run"
+    SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run).learn(2)
+    a, b = SILI.load(run), SILI.load(run)
+    obs, _ = a.env.reset()
+    obs, *_ = a.env.step(a.predict(obs))
+    agent = a.agent
+    b.learn(1)
+    assert a.trained_interactions == 2 and a.agent is agent  # the model it predicts with
+    a.env.step(a.predict(obs))  # the interaction goes on
+    a.learn(1)
+    assert a.trained_interactions == 4 and a.agent.buffer.n == 4
+
+
+def test_a_model_whose_run_was_replaced_refuses_to_go_on_as_the_new_one(tmp_path):
+    """``overwrite=True`` made another run in the folder: the first model became the new SAC
+    run at its fewer interactions, without a word."""
+    run = tmp_path / "run"
+    first = SILI("circle-3", method="sili", settings=FAST_AGENT, run_dir=run).learn(3)
+    SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run, overwrite=True).learn(2)
+    replaced = f"the run in {run} was replaced since this model loaded it (method 'sac', not "
+    for use in (lambda: first.learn(1), lambda: first.save(tmp_path / "s"), first.evaluate):
+        with pytest.raises(ConfigError, match=re.escape(replaced)) as refused:
+            use()
+        assert "2 trained, not 3 or more" in str(refused.value)
+        assert f"SILI.load('{run}') takes up the new one" in str(refused.value)
+    assert first.config.method == "sili" and first.trained_interactions == 3
+    again = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run, overwrite=True)
+    again.learn(3)  # the same settings again, anew: fewer interactions than the model held
+    other = SILI.load(run)
+    SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run, overwrite=True).learn(1)
+    with pytest.raises(ConfigError, match=r"replaced .* \(1 trained, not 3 or more"):
+        other.learn(1)
+
+
+def test_a_model_is_not_saved_inside_its_own_run(tmp_path):
+    """A save into a temporary run's folder was removed with the model."""
+    model = SILI("circle-3", method="sac", settings=FAST_AGENT).learn(1)
+    inside = model.run_dir / "backup"
+    with pytest.raises(ConfigError, match=re.escape(f"{inside}: it is inside the model's own")):
+        model.save(inside)
+    assert not inside.exists()
+
+
 def test_what_a_run_cannot_record_or_train_on_is_refused(tmp_path):
     import gymnasium as gym
 
@@ -710,6 +758,28 @@ def test_another_game_on_model_env_starts_the_agent_with_no_history(tmp_path):
     obs, info = model.env.reset(seed=7)  # a seed after the first reset: another game
     assert info["interaction"] == 0 and model.agent.buffer.n == 3
     np.testing.assert_array_equal(model.agent.policy_input(obs)[len(obs) :], 0.0)
+
+
+def test_an_interaction_cut_short_on_model_env_is_named_not_silently_left_out(tmp_path):
+    """Under a ``TimeLimit`` the agent's latent stayed frozen without a word: only whole
+    interactions are encoded."""
+    import gymnasium as gym
+
+    model = SILI("circle-3", method="sili", settings=FAST_AGENT, run_dir=tmp_path / "s").learn(2)
+    cut = gym.wrappers.TimeLimit(model.env, 5)
+    obs, _ = cut.reset()
+    while not cut.step(model.predict(obs))[3]:
+        pass
+    with pytest.warns(UserWarning, match=r"interaction 2 ended after 5 of its 50 steps .* does no"):
+        cut.reset()
+    assert model.agent.buffer.n == 2  # not fed
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        obs, _ = model.env.reset()  # nothing played since: nothing to name
+        for _ in range(model.env.unwrapped.horizon):
+            obs = model.env.step(model.predict(obs))[0]
+        model.env.reset()  # a whole one: fed, no warning
+    assert model.agent.buffer.n == 3
 
 
 def test_model_env_passes_gymnasiums_check_env_and_its_spec_makes_the_task():
@@ -997,7 +1067,7 @@ def test_the_api_says_what_the_command_line_notes_and_names_a_runs_files(tmp_pat
         ConfigError, match=f"checkpoint.pt is a file, not a run directory: give {run}$"
     ):
         SILI.load(tmp_path / "r" / "checkpoint.pt")
-    for copied in (copy.copy, copy.deepcopy):
+    for copied in (copy.copy, copy.deepcopy, pickle.dumps):  # unpickled, it shared the run
         with pytest.raises(TypeError, match=r"save it and SILI\.load the saved copy"):
             copied(model)
     shutil.rmtree(tmp_path / "r")
