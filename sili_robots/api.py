@@ -308,6 +308,8 @@ class SILI:
         deterministic = check_flag("deterministic", deterministic)
         if isinstance(obs, tuple) and len(obs) == 2 and isinstance(obs[1], dict):
             raise ConfigError("obs is reset()'s (obs, info) pair; give its obs alone")
+        if isinstance(obs, torch.Tensor):  # one a user's network made: its graph is not ours
+            obs = obs.detach().cpu()
         try:
             obs = np.asarray(obs, np.float32)
         except (TypeError, ValueError) as exc:

@@ -643,6 +643,8 @@ def test_predict_env_and_learn_as_a_user_of_numpy_and_torch_expects(tmp_path):
     for bad in ("abc", [obs[0], "x"], {"obs": obs}):
         with pytest.raises(ConfigError, match=r"obs .* is not an array of numbers"):
             model.predict(bad)
+    made = torch.tensor(obs, dtype=torch.float64, requires_grad=True) * 1.0  # a graph's output
+    np.testing.assert_array_equal(model.predict(made), model.predict(obs))
     for first in ({"restart": False}, None):  # asks for no other game: the trained one goes on
         model = SILI.load(run)
         with pytest.raises(ConfigError, match="unknown strategy 99"):

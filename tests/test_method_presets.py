@@ -43,7 +43,9 @@ def test_latent_option_is_refused_for_methods_without_a_latent():
     assert method_config("sac", task_latent="continuous").latent == "none"  # the task's default
     for method in ("sili", "lili", "stable"):  # the methods defined by a latent need one
         with pytest.raises(ConfigError, match=f"method '{method}' learns a latent .* 'none'"):
-            method_config(method, latent="none")
+            method_config(method, latent="none")  # worded for the API and the CLI alike:
+    with pytest.raises(ConfigError, match=r"partial or true, or method sac for no latent$"):
+        method_config("sili", latent="none")
     with pytest.raises(ConfigError, match=r"method 'lili' learns a latent .* choose discrete"):
         method_config("lili", latent="partial")  # asked for: refused, never swapped silently
     assert method_config("lili", task_latent="partial").latent == "discrete"  # task's default

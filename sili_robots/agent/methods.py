@@ -131,7 +131,7 @@ def method_config(
         raise ConfigError(
             f"method {method!r} learns a latent strategy (its policy and, with b > 0, its reward "
             f"use z); got latent 'none': choose discrete, continuous, partial or true, or "
-            f"--method sac for no latent"
+            "method sac for no latent"
         )
     for path, value in given.items():
         if path in fixed and value != fixed[path][0]:
