@@ -10,6 +10,7 @@ trained agent (``checkpoint=RUN_DIR``, through ``sili_robots.evaluation.policy_f
 
 from __future__ import annotations
 
+import contextlib
 import numbers
 import operator
 import time
@@ -63,14 +64,17 @@ class TeeWindow:
 MAX_FRAMES = 50_000
 
 
-def task_name_of(env: gym.Env) -> str:
-    """The CLI name of ``env``'s task, for titles: by its gymnasium id (``gym.make``), else its
-    class's one name; a class of several names (Circle's variants) or none by the class."""
-    from sili_robots.tasks.registry import all_versions, current_names_of_class
+def _task_title(env: gym.Env) -> str:
+    """The CLI name of ``env``'s task, for a scene's title: by its gymnasium id (``gym.make``),
+    else its class's one name; a class of several names (Circle's variants) or none by the
+    class (``build.task_name_of``, a run's record, gives a class path and refuses wrappers)."""
+    from sili_robots.tasks.registry import current_names_of_class, task_spec
 
-    made_as = getattr(env.spec, "id", None)
-    names = [s.name for s in all_versions() if s.gym_id == made_as]
-    names = names or current_names_of_class(type(env.unwrapped))
+    spec = env.spec or env.unwrapped.spec
+    if spec is not None:
+        with contextlib.suppress(ConfigError):
+            return task_spec(spec.id).name
+    names = current_names_of_class(type(env.unwrapped))
     return names[0] if len(names) == 1 else type(env.unwrapped).__name__
 
 
@@ -120,7 +124,7 @@ class Preview:
             scene.snapshot,
             interactions,
             seed=seed,
-            task=task or task_name_of(env),
+            task=task or _task_title(env),
             policy_name=policy_name,
             static=scene.static,
         )
