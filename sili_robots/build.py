@@ -80,11 +80,16 @@ def check_recordable(env: gym.Env) -> None:
     layer = env
     while isinstance(layer, gym.Wrapper):
         if not isinstance(layer, _NEUTRAL_WRAPPERS):
+            shorter = isinstance(layer, gym.wrappers.TimeLimit)  # max_episode_steps=
             raise ConfigError(
                 f"env is wrapped in {type(layer).__name__}, which a run cannot record (it is "
                 "rebuilt from its task's name and arguments, and each method adds its own "
-                "observation wrappers); give the task itself (env.unwrapped), or a task class "
-                "of your own that does what the wrapper does"
+                "observation wrappers); give the task itself (env.unwrapped), "
+                + (
+                    "built with horizon=N for interactions of N steps"
+                    if shorter
+                    else "or a task class of your own that does what the wrapper does"
+                )
             )
         layer = layer.env
 

@@ -604,6 +604,8 @@ def test_what_a_run_cannot_record_or_train_on_is_refused(tmp_path):
         SILI(scaled, method="sac")
     with pytest.raises(ConfigError, match="env is wrapped in OracleObservation"):
         SILI(OracleObservation(task.unwrapped), method="oracle")  # the method adds its own
+    with pytest.raises(ConfigError, match=r"TimeLimit, .* built with horizon=N for interactions"):
+        SILI(gym.make("sili/Circle3-v1", max_episode_steps=30), method="sac")
     run = tmp_path / "run"
     SILI(task, method="sac", settings=FAST_AGENT, run_dir=run).learn(2)
     with pytest.raises(ConfigError, match=r"env is sili/Circle8-v1; the run in .* was trained on"):
