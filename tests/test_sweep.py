@@ -1634,3 +1634,21 @@ def test_starting_the_workers_leaves_the_callers_thread_settings(monkeypatch):
     backend = LocalBackend(workers=1, start_method="forkserver")
     backend._ensure_forkserver()
     assert unset not in os.environ and os.environ[own] == "3"
+
+
+def test_a_claim_left_by_a_killed_sweep_is_cleared_when_the_sweep_runs_again(tmp_path):
+    """A sweep killed with -9 leaves its workers' claims; the next run of it clears those of
+    dead processes, their runs done or not (a Ray sweep reads a claim as its run started)."""
+    out = tmp_path / "sweep"
+    spec = _spec(methods=["sac"], seeds=[0, 1], interactions=2)
+    assert run_sweep(spec, out, LocalBackend(workers=1), progress=False).ok
+    gone = subprocess.Popen(["true"])
+    gone.wait()
+    stale = json.dumps({"pid": gone.pid, "host": socket.gethostname()})
+    runs = [out / "runs" / f"circle-3__sac__s{seed}" for seed in (0, 1)]
+    for run in runs:
+        (run / "worker.json").write_text(stale)
+    (runs[1] / "summary.json").unlink()  # killed before its end was written: not done
+    report = run_sweep(spec, out, LocalBackend(workers=1), progress=False)
+    assert report.skipped == [runs[0].name] and report.ok
+    assert not any((run / "worker.json").exists() for run in runs)
