@@ -58,6 +58,7 @@ from sili_robots.migrations import setting_path
 from sili_robots.runs import (
     CHECKPOINT,
     CONFIG,
+    MACHINE_SETTINGS,
     SUMMARY,
     RunConfig,
     check_new_run_dir,
@@ -66,7 +67,9 @@ from sili_robots.runs import (
     make_run_dir,
     ready_new_run_dir,
     require_checkpoint,
+    run_differences,
     set_target,
+    shown_value,
 )
 from sili_robots.runs import read_config as read_run_config
 from sili_robots.stopping import HeldStops
@@ -74,9 +77,6 @@ from sili_robots.sweep.state import check_not_in_a_sweep, check_not_trained, tra
 from sili_robots.tasks import RepeatedInteractionEnv
 from sili_robots.tasks.registry import check_argument_names, is_class_path, title_arguments
 from sili_robots.training import resume, train
-
-#: what makes a run the one a model loaded, besides its ``agent`` and ``addons`` settings
-SAME_RUN = ("task_id", "method", "seed", "env_kwargs")
 
 
 class SILI:
@@ -204,16 +204,23 @@ class SILI:
     def _check_same_run(self, cfg: RunConfig, interaction: int) -> None:
         """A run made anew in this model's folder (``overwrite=True``, ``sili train
         --overwrite``) is not the model's to go on with: it would become another method's, or
-        count from fewer interactions, without a word."""
-        mine, theirs = self.cfg.to_dict(), cfg.to_dict()
-        why = [f"{k} {theirs[k]!r}, not {mine[k]!r}" for k in SAME_RUN if mine[k] != theirs[k]]
-        why += [f"other {k} settings" for k in ("agent", "addons") if mine[k] != theirs[k]]
+        count from fewer interactions, without a word. Settings of the machine (kernels,
+        threads) may differ: a run goes on elsewhere with them."""
+        ignoring = {"interactions", *MACHINE_SETTINGS}
+        found = run_differences(cfg.to_dict(), self.cfg.to_dict(), ignoring)
+        found.sort(key=lambda d: d[0].count("."))  # the method before its settings
+        why = [
+            f"{key} {shown_value(key, new)}, not {shown_value(key, old)}" for key, new, old in found
+        ]
+        if len(why) > 3:
+            why[3:] = ["..."]
         if interaction < self._done:
-            why.append(f"{interaction} trained, not {self._done} or more")
+            why.insert(0, f"{interaction} trained, not {self._done} or more")
         if why:
             raise ConfigError(
                 f"the run in {self.run_dir} was replaced since this model loaded it "
-                f"({'; '.join(why)}): SILI.load({str(self.run_dir)!r}) takes up the new one"
+                f"({'; '.join(why)}): "
+                f"SILI.load({str(self.run_dir)!r}) takes up the new one"
             )
 
     @classmethod
@@ -309,10 +316,10 @@ class SILI:
         if isinstance(obs, tuple) and len(obs) == 2 and isinstance(obs[1], dict):
             raise ConfigError("obs is reset()'s (obs, info) pair; give its obs alone")
         if isinstance(obs, torch.Tensor):  # one a user's network made: its graph is not ours
-            obs = obs.detach().cpu()
+            obs = obs.detach().to("cpu", torch.float32)  # (numpy has no bfloat16)
         try:
             obs = np.asarray(obs, np.float32)
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, RuntimeError) as exc:  # torch's: a list of graph tensors
             raise ConfigError(
                 f"obs {obs!r} is not an array of numbers ({exc}); give one observation of model.env"
             ) from None

@@ -27,6 +27,11 @@ class UnreadSettingWarning(UserWarning):
     it."""
 
 
+class CutInteractionWarning(UserWarning):
+    """An interaction played on ``model.env`` ended before its H steps (a ``TimeLimit``, a
+    reset before its end), so the agent's latent strategy does not follow it."""
+
+
 class TrainingDiverged(ConfigError):
     """A loss became infinite or NaN: settings far outside their usual range."""
 

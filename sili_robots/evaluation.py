@@ -27,7 +27,13 @@ from sili_robots.build import (
     task_name_of,
     task_version_of,
 )
-from sili_robots.errors import CheckpointMismatch, ConfigError, check_count, compared
+from sili_robots.errors import (
+    CheckpointMismatch,
+    ConfigError,
+    CutInteractionWarning,
+    check_count,
+    compared,
+)
 from sili_robots.rollout import run_interactions
 from sili_robots.runs import CHECKPOINT, CONFIG, RunConfig, read_config, require_checkpoint
 from sili_robots.tasks.base import RESET_OPTIONS, resume_game
@@ -60,6 +66,7 @@ class AgentFeedback(gym.Wrapper):
         self._first_obs: np.ndarray | None = None
         self._last_obs: np.ndarray | None = None
         self._first_info: dict[str, Any] = {}
+        self._cut_told = False  # CutInteractionWarning given
 
     #: the wrapper made anew in place, as ``__init__`` takes it: a model's ``env`` stays the
     #: object a user holds when training replaces its agent
@@ -94,16 +101,9 @@ class AgentFeedback(gym.Wrapper):
             goes_on = info["interaction"] == self._first_info.get("interaction", -2) + 1
             if not goes_on:  # another game (restart, strategy, seed, restore): no history
                 self.agent.begin_game(info)
-            elif self._steps and len(self._steps) < self.env.unwrapped.horizon:
-                warnings.warn(
-                    f"interaction {self._first_info['interaction']} ended after "
-                    f"{len(self._steps)} of its {self.env.unwrapped.horizon} steps (a TimeLimit "
-                    "or an early reset), so the agent's latent strategy does not follow it: "
-                    "the latent model encodes whole interactions; play them to the end, or "
-                    "give the task a shorter horizon=",
-                    stacklevel=2,
-                )
-            elif len(self._steps) == self.env.unwrapped.horizon:
+            elif len(self._steps) < self.env.unwrapped.horizon:
+                self._warn_cut(len(self._steps))
+            else:
                 o = np.stack([self._first_obs, *[s[0] for s in self._steps]])
                 a = np.stack([s[1] for s in self._steps])
                 r = np.array([s[2] for s in self._steps], np.float32)
@@ -119,6 +119,20 @@ class AgentFeedback(gym.Wrapper):
         self._steps, self._first_obs, self._first_info = [], obs, info
         self._last_obs = obs
         return obs, info
+
+    def _warn_cut(self, steps: int) -> None:
+        """Once per ``model.env``, and only to an agent that acts on a latent strategy."""
+        if self._cut_told or not self.agent.n_latents:
+            return
+        self._cut_told = True
+        warnings.warn(
+            f"an interaction ended after {steps} of its {self.env.unwrapped.horizon} steps (a "
+            "TimeLimit, or a reset before its end), so the agent's latent strategy does not "
+            "follow it: the latent model encodes whole interactions; play each to its end (for "
+            "shorter ones, train on the task built with horizon=N). Said once per model.env",
+            CutInteractionWarning,
+            stacklevel=2,
+        )
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         obs, r, term, trunc, info = self.env.step(action)

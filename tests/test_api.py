@@ -569,19 +569,28 @@ def test_a_model_whose_run_was_replaced_refuses_to_go_on_as_the_new_one(tmp_path
     run = tmp_path / "run"
     first = SILI("circle-3", method="sili", settings=FAST_AGENT, run_dir=run).learn(3)
     SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run, overwrite=True).learn(2)
-    replaced = f"the run in {run} was replaced since this model loaded it (method 'sac', not "
+    replaced = f"the run in {run} was replaced since this model loaded it (2 trained, not 3 or "
+    replaced += "more; method 'sac', not 'sili'; "
     for use in (lambda: first.learn(1), lambda: first.save(tmp_path / "s"), first.evaluate):
         with pytest.raises(ConfigError, match=re.escape(replaced)) as refused:
             use()
-        assert "2 trained, not 3 or more" in str(refused.value)
-        assert f"SILI.load('{run}') takes up the new one" in str(refused.value)
+        assert str(refused.value).endswith(f"; ...): SILI.load('{run}') takes up the new one")
     assert first.config.method == "sili" and first.trained_interactions == 3
     again = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run, overwrite=True)
     again.learn(3)  # the same settings again, anew: fewer interactions than the model held
     other = SILI.load(run)
     SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=run, overwrite=True).learn(1)
-    with pytest.raises(ConfigError, match=r"replaced .* \(1 trained, not 3 or more"):
+    with pytest.raises(
+        ConfigError, match=r"replaced since this model loaded it \(1 trained, not 3 or more\)"
+    ):
         other.learn(1)
+    model = SILI.load(run)  # its kernels changed for another machine: the same run goes on
+    record = json.loads((run / "config.json").read_text())
+    record["run"]["agent"]["matmul"] = "aten" if model.cfg.agent.matmul != "aten" else "onednn"
+    record["run"]["threads"] = 2
+    (run / "config.json").write_text(json.dumps(record))
+    model.learn(1)
+    assert model.trained_interactions == 2
 
 
 def test_a_model_is_not_saved_inside_its_own_run(tmp_path):
@@ -647,6 +656,8 @@ def test_predict_env_and_learn_as_a_user_of_numpy_and_torch_expects(tmp_path):
             model.predict(bad)
     made = torch.tensor(obs, dtype=torch.float64, requires_grad=True) * 1.0  # a graph's output
     np.testing.assert_array_equal(model.predict(made), model.predict(obs))
+    half = torch.tensor(obs, dtype=torch.bfloat16)  # numbers numpy has no type for
+    np.testing.assert_array_equal(model.predict(half), model.predict(half.float().numpy()))
     for first in ({"restart": False}, None):  # asks for no other game: the trained one goes on
         model = SILI.load(run)
         with pytest.raises(ConfigError, match="unknown strategy 99"):
@@ -766,24 +777,38 @@ def test_another_game_on_model_env_starts_the_agent_with_no_history(tmp_path):
 
 def test_an_interaction_cut_short_on_model_env_is_named_not_silently_left_out(tmp_path):
     """Under a ``TimeLimit`` the agent's latent stayed frozen without a word: only whole
-    interactions are encoded."""
+    interactions are encoded. Said once per ``model.env``, and only where a latent is acted on."""
     import gymnasium as gym
+
+    from sili_robots.errors import CutInteractionWarning
+
+    def play(env: gym.Env, model: SILI, steps: int | None = None) -> None:
+        obs, _ = env.reset()
+        for _ in range(steps or model.env.unwrapped.horizon):
+            obs, *_, truncated, _ = env.step(model.predict(obs))
+            if truncated:
+                break
 
     model = SILI("circle-3", method="sili", settings=FAST_AGENT, run_dir=tmp_path / "s").learn(2)
     cut = gym.wrappers.TimeLimit(model.env, 5)
-    obs, _ = cut.reset()
-    while not cut.step(model.predict(obs))[3]:
-        pass
-    with pytest.warns(UserWarning, match=r"interaction 2 ended after 5 of its 50 steps .* does no"):
-        cut.reset()
+    play(cut, model)
+    with pytest.warns(CutInteractionWarning, match=r"ended after 5 of its 50 steps .* does not f"):
+        play(cut, model)  # its reset ends the cut one
     assert model.agent.buffer.n == 2  # not fed
     with warnings.catch_warnings():
-        warnings.simplefilter("error")
-        obs, _ = model.env.reset()  # nothing played since: nothing to name
-        for _ in range(model.env.unwrapped.horizon):
-            obs = model.env.step(model.predict(obs))[0]
-        model.env.reset()  # a whole one: fed, no warning
-    assert model.agent.buffer.n == 3
+        warnings.simplefilter("error", CutInteractionWarning)
+        for _ in range(2):
+            play(cut, model)  # told once
+        play(model.env, model)  # the next reset ends the cut one: not told again
+        play(model.env, model)  # a whole one fed
+        assert model.agent.buffer.n == 3
+        sac = SILI("circle-3", method="sac", settings=FAST_AGENT, run_dir=tmp_path / "sac")
+        play(gym.wrappers.TimeLimit(sac.learn(2).env, 5), sac)
+        play(sac.env, sac)  # SAC acts on no latent: nothing to tell
+    again = SILI.load(tmp_path / "s")
+    again.env.reset()
+    with pytest.warns(CutInteractionWarning, match="ended after 0 of its 50 steps"):
+        again.env.reset()  # the game moved on past an interaction never played
 
 
 def test_model_env_passes_gymnasiums_check_env_and_its_spec_makes_the_task():

@@ -256,7 +256,7 @@ def test_an_output_under_a_file_or_that_is_a_folder_is_refused_before_the_rollou
         return made(*a, dir=dir, **kw)
 
     monkeypatch.setattr(tempfile, "TemporaryFile", read_only)
-    for out in (locked / "p.html", locked / "new" / "p.html"):  # found after the rollout before
+    for out in (locked / "p.html", locked / "new" / "p.html"):  # found before the rollout
         with pytest.raises(ConfigError, match=re.escape(f"{out}: cannot write in {locked} (Perm")):
             preview("circle-3", interactions=1, out=out)
 
@@ -431,7 +431,11 @@ def test_cli_rejects_bad_input_with_exit_2(tmp_path, capsys):
         assert exc.value.code == 2 and message in capsys.readouterr().err
     for size in [(480, 359), (4097, 480), (640.0, 480), "640x480"]:  # before the rollout
         with pytest.raises(ConfigError, match=re.escape(f"size {size!r}: give (width, height)")):
-            preview("circle-3", interactions=10**6, out=None, size=size)
+            preview("circle-3", interactions=10**6, out=None, png=tmp_path / "p.png", size=size)
+    with pytest.raises(ConfigError, match=r"size \(800, 600\) is the picture's: give png too"):
+        preview("circle-3", interactions=10**6, out=None, size=(800, 600))  # nothing to size
+    assert main(["preview", "circle-3", "--size", "800x600"]) == 2
+    assert "--size 800x600 is the PNG's: give --png too" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["preview", "circle-4"])
     assert "unknown task 'circle-4'" in capsys.readouterr().err

@@ -46,7 +46,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=functools.partial(
             registered_task, command="preview", why="draws the registered tasks' scenes"
         ),
-        help=f"task name: {', '.join(TASKS)}; an earlier version by its own, e.g. circle-3-v0",
+        help=f"task name: {', '.join(TASKS)}; an earlier version by its versioned name, e.g. circle-3-v0",
     )
     who = p.add_mutually_exclusive_group()
     who.add_argument(
@@ -86,7 +86,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--size",
         type=size_arg,
-        default=(640, 480),
         metavar="WIDTHxHEIGHT",
         help="the PNG's size in pixels (default 640x480; from 480x360 to 4096x4096)",
     )
@@ -124,6 +123,8 @@ def run(args: argparse.Namespace) -> int:
 
             run_dir = Path(args.checkpoint)
             check_played_horizon(run_dir, read_config(run_dir), env_kwargs, "--env-kwarg")
+    if args.size is not None and args.png is None:
+        raise ConfigError(f"--size {args.size[0]}x{args.size[1]} is the PNG's: give --png too")
     for path, option in ((args.out, "--out"), (args.png, "--png")):
         if path is not None:
             check_output(writable_file(Path(path), option), option)

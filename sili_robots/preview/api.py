@@ -311,10 +311,10 @@ def preview(
     serve_seconds: float | None = None,
     on_ready: Callable[[PreviewResult], None] | None = None,
     env_kwargs: dict[str, Any] | None = None,
-    size: tuple[int, int] = (WIDTH, HEIGHT),
+    size: tuple[int, int] | None = None,
 ) -> PreviewResult:
     """Record ``interactions`` interactions of ``task`` and write/render/serve the preview;
-    ``size``: the picture's (width, height) in pixels.
+    ``size``: the ``png``'s (width, height) in pixels (None: 640 x 480).
 
     ``seed``: the game's (default 0); none with ``checkpoint``, whose agent goes on with the
     game it trained in. ``png`` renders the scene's picture frame (the last; on Driving the last
@@ -337,7 +337,9 @@ def preview(
         raise ConfigError(f"serve_seconds must be a number >= 0 (or None), got {serve_seconds!r}")
     out = None if out is None else check_output(out, "out")  # "~" expanded, as written
     png = None if png is None else check_output(png, "png")
-    size = check_size(size)
+    if size is not None and png is None:
+        raise ConfigError(f"size {size!r} is the picture's: give png too")
+    size = (WIDTH, HEIGHT) if size is None else check_size(size)
     if png is not None:
         find_chromium()  # before the recording: a missing browser is told before any work
     seconds: dict[str, float] = {}
