@@ -46,7 +46,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         type=functools.partial(
             registered_task, command="preview", why="draws the registered tasks' scenes"
         ),
-        help=f"task name: {', '.join(TASKS)}; an earlier version by its versioned name, e.g. circle-3-v0",
+        help=f"task name: {', '.join(TASKS)}; an earlier version by its versioned name, "
+        "e.g. circle-3-v0",
     )
     who = p.add_mutually_exclusive_group()
     who.add_argument(
