@@ -728,6 +728,28 @@ def test_an_animation_keys_the_frame_before_each_change():
     from sili_robots.preview.scenes.base import change_frames
 
     assert change_frames([0, 0, 0, 1, 1, 1]) == [0, 2, 3, 5]
+    assert change_frames(np.empty((0, 3))) == [] and change_frames([7.0]) == [0]
+
+
+def test_the_keyed_frames_are_those_of_a_frame_by_frame_comparison():
+    """The frames are found in array operations (a Python loop per frame made a long
+    interaction's scene take minutes); what they are is the loop's: np.allclose of neighbours,
+    NaN never equal to itself."""
+    from sili_robots.preview.scenes.base import change_frames
+
+    def by_loop(values):
+        keep = {0, len(values) - 1}
+        for f in range(1, len(values)):
+            if not np.allclose(values[f], values[f - 1]):
+                keep.update((f - 1, f))
+        return sorted(keep)
+
+    rng = np.random.default_rng(0)
+    held = np.repeat(rng.normal(size=(12, 3)), rng.integers(1, 5, 12), axis=0)  # steps
+    held[5] += 1e-9  # within allclose's tolerance: no key
+    held[9, 1] = np.nan
+    for values in (held, held[:, 0], held > 0, rng.normal(size=(6, 4, 4)), np.zeros((4, 2))):
+        assert change_frames(values) == by_loop(values)
 
 
 def test_page_data_cannot_close_its_script_and_legend_labels_are_escaped():
