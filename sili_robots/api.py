@@ -181,6 +181,7 @@ class SILI:
         #: the checkpoint's interaction this model holds, and what its run's files were then
         self._done = 0 if state is None else int(state["interaction"])
         self._loaded = None if state is None else _stamp(self.run_dir)
+        self._made = self.cfg.to_dict()  # the settings it holds (``_check_config_unchanged``)
 
     def _reload(self, same_run: bool = False) -> None:
         """The model as its run's last checkpoint (ConfigError saying why when there is none);
@@ -207,7 +208,7 @@ class SILI:
         count from fewer interactions, without a word. Settings of the machine (kernels,
         threads) may differ: a run goes on elsewhere with them."""
         ignoring = {"interactions", *MACHINE_SETTINGS}
-        found = run_differences(cfg.to_dict(), self.cfg.to_dict(), ignoring)
+        found = run_differences(cfg.to_dict(), self._made, ignoring)
         found.sort(key=lambda d: d[0].count("."))  # the method before its settings
         why = [
             f"{key} {shown_value(key, new)}, not {shown_value(key, old)}" for key, new, old in found
@@ -250,6 +251,7 @@ class SILI:
         ``run_dir`` (a loaded run trains where it lies). Stopped (Ctrl-C) or failed, the model
         is its run's last checkpoint, and the next ``learn`` counts from there."""
         progress_bar = check_flag("progress_bar", progress_bar)
+        self._check_config_unchanged()
         self._refresh()
         done = self._done
         interactions = check_count("interactions", interactions, high=LARGEST_INT - done)
@@ -419,8 +421,24 @@ class SILI:
         if self.cfg.interactions == 0 or not (self.run_dir / CHECKPOINT).is_file():
             raise ConfigError(f"nothing to {what} yet: call learn() first")
 
+    def _check_config_unchanged(self) -> None:
+        """``model.config`` changed by hand: its agent was built from the settings it was made
+        with, and a reload put those back, so an edit was used or dropped by chance."""
+        found = run_differences(self.cfg.to_dict(), self._made, {"interactions"})
+        if found:
+            changed = "; ".join(
+                f"{key} {shown_value(key, new)}, not {shown_value(key, old)}"
+                for key, new, old in found[:3]
+            )
+            raise ConfigError(
+                f"model.config was changed since the model was made or loaded ({changed}"
+                f"{'; ...' if len(found) > 3 else ''}): a model's settings are given when it is "
+                "made (SILI(..., settings=...)); make a new model to train with others"
+            )
+
     @property
     def config(self) -> RunConfig:
+        """The run's settings, to read: ``learn`` refuses a config changed by hand."""
         return self.cfg
 
     @property

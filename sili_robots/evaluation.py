@@ -101,9 +101,7 @@ class AgentFeedback(gym.Wrapper):
             goes_on = info["interaction"] == self._first_info.get("interaction", -2) + 1
             if not goes_on:  # another game (restart, strategy, seed, restore): no history
                 self.agent.begin_game(info)
-            elif len(self._steps) < self.env.unwrapped.horizon:
-                self._warn_cut(len(self._steps))
-            else:
+            elif len(self._steps) == self.env.unwrapped.horizon:
                 o = np.stack([self._first_obs, *[s[0] for s in self._steps]])
                 a = np.stack([s[1] for s in self._steps])
                 r = np.array([s[2] for s in self._steps], np.float32)
@@ -116,6 +114,8 @@ class AgentFeedback(gym.Wrapper):
                     info,
                     refresh=False,
                 )
+            elif self._steps:  # cut short (none played: a reset after a reset, which gymnasium's
+                self._warn_cut(len(self._steps))  # check_env makes, is no interaction to tell)
         self._steps, self._first_obs, self._first_info = [], obs, info
         self._last_obs = obs
         return obs, info
