@@ -46,7 +46,6 @@ from sili_robots.plot_data import (
     curve_rows,
     default_smoothing,
     final_values,
-    load_results,
     shared_arguments,
     variant_labels,
     with_profile,
@@ -358,21 +357,6 @@ def save_figure(fig: Figure, stem: Path, formats: Sequence[str] = ("png", "pdf")
     return paths
 
 
-def plot_sweep(
-    sweep_dir: Path,
-    out_dir: Path | None = None,
-    smooth: int | None = None,
-    window: int = 100,
-    formats: Sequence[str] = ("png", "pdf"),
-    include_unfinished: bool = False,
-    tasks: Sequence[str] | None = None,
-) -> list[Path]:
-    """Write every figure of a sweep, or only those of ``tasks`` (no overview then); returns
-    the files written."""
-    df = load_results(sweep_dir, include_unfinished)
-    return plot_results(df, sweep_dir, out_dir, smooth, window, formats, tasks)
-
-
 def plot_results(
     df: pd.DataFrame,
     sweep_dir: Path,
@@ -382,7 +366,8 @@ def plot_results(
     formats: Sequence[str] = ("png", "pdf"),
     tasks: Sequence[str] | None = None,
 ) -> list[Path]:
-    """``plot_sweep`` of the table ``df`` read from ``sweep_dir`` (``load_results``)."""
+    """Write every figure of a sweep's table ``df`` (``load_results`` of ``sweep_dir``), or
+    only those of ``tasks`` (no overview then); returns the files written."""
     out_dir = Path(out_dir) if out_dir is not None else Path(sweep_dir) / FIGURES
     written: list[Path] = []
     present = [t for t in TASK_TITLES if t in set(df["task"])] + sorted(

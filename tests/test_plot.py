@@ -601,7 +601,7 @@ def test_formats_that_name_none_are_bad_input(tmp_path, monkeypatch, capsys):
     from sili_robots import plotting
 
     drawn = []
-    monkeypatch.setattr(plotting, "plot_sweep", lambda *a, **k: drawn.append(k) or [])
+    monkeypatch.setattr(plotting, "plot_results", lambda *a, **k: drawn.append(k) or [])
     for given in (",", " "):
         assert main(["plot", str(tmp_path), "--formats", given]) == 2
         assert f"unknown figure format {given!r}; allowed" in capsys.readouterr().err
