@@ -207,14 +207,7 @@ class SILI:
         --overwrite``) is not the model's to go on with: it would become another method's, or
         count from fewer interactions, without a word. Settings of the machine (kernels,
         threads) may differ: a run goes on elsewhere with them."""
-        ignoring = {"interactions", *MACHINE_SETTINGS}
-        found = run_differences(cfg.to_dict(), self._made, ignoring)
-        found.sort(key=lambda d: d[0].count("."))  # the method before its settings
-        why = [
-            f"{key} {shown_value(key, new)}, not {shown_value(key, old)}" for key, new, old in found
-        ]
-        if len(why) > 3:
-            why[3:] = ["..."]
+        why = _changes(cfg.to_dict(), self._made, {"interactions", *MACHINE_SETTINGS})
         if interaction < self._done:
             why.insert(0, f"{interaction} trained, not {self._done} or more")
         if why:
@@ -424,16 +417,12 @@ class SILI:
     def _check_config_unchanged(self) -> None:
         """``model.config`` changed by hand: its agent was built from the settings it was made
         with, and a reload put those back, so an edit was used or dropped by chance."""
-        found = run_differences(self.cfg.to_dict(), self._made, {"interactions"})
-        if found:
-            changed = "; ".join(
-                f"{key} {shown_value(key, new)}, not {shown_value(key, old)}"
-                for key, new, old in found[:3]
-            )
+        changed = _changes(self.cfg.to_dict(), self._made, {"interactions"})
+        if changed:
             raise ConfigError(
-                f"model.config was changed since the model was made or loaded ({changed}"
-                f"{'; ...' if len(found) > 3 else ''}): a model's settings are given when it is "
-                "made (SILI(..., settings=...)); make a new model to train with others"
+                f"model.config was changed since the model was made or loaded "
+                f"({'; '.join(changed)}): a model's settings are given when it is made "
+                "(SILI(..., settings=...)); make a new model to train with others"
             )
 
     @property
@@ -462,6 +451,14 @@ class SILI:
         """A pickled model is a copy too: unpickled, it shared the run (a temporary one was
         removed with the first)."""
         self.__copy__()
+
+
+def _changes(now: dict[str, Any], made: dict[str, Any], ignoring: set[str]) -> list[str]:
+    """``key now, not made`` for the first 3 settings (the method before its settings) in which
+    the config ``now`` differs from the one a model was ``made`` with, "..." for the rest."""
+    found = sorted(run_differences(now, made, ignoring), key=lambda d: d[0].count("."))
+    why = [f"{key} {shown_value(key, a)}, not {shown_value(key, b)}" for key, a, b in found]
+    return [*why[:3], "..."] if len(why) > 3 else why
 
 
 #: temporary run directories of live models, removed with their model
