@@ -11,7 +11,6 @@ trained agent (``checkpoint=RUN_DIR``, through ``sili_robots.evaluation.policy_f
 from __future__ import annotations
 
 import contextlib
-import numbers
 import operator
 import time
 import zlib
@@ -407,20 +406,21 @@ def marked_png(png: bytes) -> bytes:
 MIN_SIZE, MAX_SIDE = (480, 360), 4096
 
 
-def check_size(size: Any, option: str = "size") -> tuple[int, int]:
+def check_size(size: Any) -> tuple[int, int]:
     """``size`` as (width, height) in pixels, from ``MIN_SIZE`` to ``MAX_SIDE`` a side."""
-    ok = isinstance(size, tuple | list) and len(size) == 2
-    sides = zip(size, MIN_SIZE, strict=True) if ok else ()
-    if not (ok and all(_is_int(v) and lo <= v <= MAX_SIDE for v, lo in sides)):
-        raise ConfigError(
-            f"{option} {size!r}: give (width, height) in pixels, width from {MIN_SIZE[0]} and "
-            f"height from {MIN_SIZE[1]}, each up to {MAX_SIDE}"
+    bad = ConfigError(
+        f"size {size!r}: give (width, height) in pixels, width from {MIN_SIZE[0]} and height "
+        f"from {MIN_SIZE[1]}, each up to {MAX_SIDE}"
+    )
+    if not (isinstance(size, tuple | list) and len(size) == 2):
+        raise bad
+    try:
+        return (
+            check_count("width", size[0], MIN_SIZE[0], MAX_SIDE),
+            check_count("height", size[1], MIN_SIZE[1], MAX_SIDE),
         )
-    return int(size[0]), int(size[1])
-
-
-def _is_int(value: object) -> bool:
-    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+    except ConfigError:
+        raise bad from None
 
 
 def check_output(path: str | Path, option: str) -> Path:
