@@ -66,6 +66,8 @@ MAX_HORIZON = 30  # the road is long enough for 30 decision steps
 MIN_HORIZON = 6
 RIGHT, CENTRE, LEFT = 0, sc.CENTRE_LANE, 2
 TARGET_LANES = (RIGHT, LEFT)  # the opponent's possible strategies
+#: what a closed environment says when it is used again
+CLOSED = "this Driving environment was closed; make a new one"
 
 
 def lane_of(offset: float) -> int:
@@ -126,7 +128,7 @@ class DrivingEnv(RepeatedInteractionEnv):
     def _start_simulation(self) -> SumoSession:
         """Start SUMO (first reset only), step once to insert the cars, save that state."""
         if self._closed:
-            raise RuntimeError("this Driving environment was closed; make a new one")
+            raise RuntimeError(CLOSED)
         session = SumoSession(sc.scenario_files(), self.backend)
         api = session.api
         with session.guard("preparing the scenario"):
@@ -198,7 +200,7 @@ class DrivingEnv(RepeatedInteractionEnv):
 
     def _live_session(self) -> SumoSession:
         if self.session is None:
-            raise RuntimeError("this Driving environment was closed; make a new one")
+            raise RuntimeError(CLOSED)
         return self.session
 
     def _read_positions(self) -> None:
@@ -279,7 +281,7 @@ class DrivingEnv(RepeatedInteractionEnv):
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if self._closed:  # said first: the base's checks would point to a reset, refused too
-            raise RuntimeError("this Driving environment was closed; make a new one")
+            raise RuntimeError(CLOSED)
         return super().step(action)
 
     def close(self) -> None:
